@@ -1,0 +1,44 @@
+"""Error types shared by every stage.
+
+A :class:`UserError` is an expected failure caused by the user's input (a bad file, a bad option,
+a missing device). The command line prints its message as one line and exits with status 2.
+"""
+
+from __future__ import annotations
+
+import enum
+
+
+class UserError(ValueError):
+    """A user-facing error: the message names the thing, what was expected and what was found."""
+
+
+class SessionFormatError(UserError):
+    """A session folder or one of its files does not follow the session format."""
+
+
+class DeviceErrorReason(enum.Enum):
+    """Machine-readable reason for a device failure, so a GUI can suggest a fix."""
+
+    NOT_FOUND = "not found"
+    BUSY = "busy"
+    PERMISSION = "permission denied"
+    TIMEOUT = "timeout"
+    NO_KEY = "no network key"
+    OTHER = "other"
+
+
+class DeviceError(UserError):
+    """A device (serial port, camera, ANT stick) could not be opened or used.
+
+    Parameters
+    ----------
+    message : str
+        One line naming the device, what was expected and what was found.
+    reason : DeviceErrorReason
+        Machine-readable cause.
+    """
+
+    def __init__(self, message: str, reason: DeviceErrorReason = DeviceErrorReason.OTHER) -> None:
+        super().__init__(message)
+        self.reason = reason

@@ -1,0 +1,164 @@
+"""Sans-I/O heart-rate strap decoders: fed bytes in any chunking, they return samples and counters.
+
+Every decoder knows nothing of ports or threads (the pyserial ``threaded`` pattern): the serial
+link, replay and the ``decode`` command all call :meth:`Decoder.feed` with whatever bytes arrived and
+the host time of their arrival. A decoder resyncs after garbage, bad checksums, padding, implausible
+lengths and a truncated last frame, and counts what it dropped in :attr:`Decoder.stats`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+from typing import ClassVar
+
+from capture_tool.errors import UserError
+
+#: protocol name -> module in this package that defines ``DECODER`` (a Decoder subclass)
+PROTOCOLS: dict[str, str] = {
+    "ant": "capture_tool.protocols.ant",
+    "hxm": "capture_tool.protocols.hxm",
+    "hrmi": "capture_tool.protocols.hrmi",
+    "lines": "capture_tool.protocols.lines",
+}
+
+
+@dataclasses.dataclass(frozen=True)
+class HrSample:
+    """One decoded heart-rate observation, one row of ``heart_rate.csv``.
+
+    Attributes
+    ----------
+    t_s : float
+        Host arrival time of the bytes that completed this sample (session seconds).
+    hr_bpm : float or None
+        Heart rate; None when the strap reports no contact (then ``valid`` is False).
+    rr_ms : tuple of float
+        R-R intervals first observed in this sample, oldest first (may be empty).
+    beat_count : int or None
+        The strap's own beat counter (ANT beat count, HxM heartbeat number), if it has one.
+    device : str
+        Device identifier (e.g. ``"ant:3425"``, ``"hxm"``).
+    valid : bool
+        False on contact loss or an invalid (0) HR; such rows are kept, never written as 0 bpm.
+    """
+
+    t_s: float
+    hr_bpm: float | None
+    rr_ms: tuple[float, ...] = ()
+    beat_count: int | None = None
+    device: str = ""
+    valid: bool = True
+
+
+@dataclasses.dataclass(frozen=True)
+class DeviceEvent:
+    """A change in the link to the strap (searching, tracking, lost, closed...), for ``events.csv``."""
+
+    t_s: float
+    kind: str
+    label: str
+    value: str = ""
+
+
+@dataclasses.dataclass
+class DecoderStats:
+    """Counters a decoder keeps; ``frames_bad`` + ``bytes_dropped`` say what resync threw away."""
+
+    bytes_in: int = 0
+    frames_ok: int = 0
+    frames_bad: int = 0
+    bytes_dropped: int = 0
+    samples: int = 0
+    invalid_samples: int = 0
+    detail: dict[str, int] = dataclasses.field(default_factory=dict)
+
+    def count(self, key: str, n: int = 1) -> None:
+        """Add ``n`` to a named detail counter (e.g. ``"bad_checksum"``)."""
+        self.detail[key] = self.detail.get(key, 0) + n
+
+    def as_dict(self) -> dict[str, int]:
+        """Flat dict of every counter, for logs and ``session.json``."""
+        out = dataclasses.asdict(self)
+        out.pop("detail")
+        out.update(self.detail)
+        return out
+
+
+class Decoder:
+    """Base class of the sans-I/O decoders.
+
+    Subclasses implement :meth:`_consume`, which takes bytes from ``self._buf`` and returns the
+    samples completed; they never block and never do I/O.
+    """
+
+    name: ClassVar[str] = ""
+    #: bytes the link writes to the device once after opening (e.g. an HRMI poll, nothing for HxM)
+    startup_bytes: ClassVar[bytes] = b""
+    #: bytes the link writes every ``poll_interval_s`` (polled protocols only)
+    poll_bytes: ClassVar[bytes] = b""
+    poll_interval_s: ClassVar[float] = 0.0
+
+    def __init__(self) -> None:
+        self._buf = bytearray()
+        self._t_s = 0.0
+        self.stats = DecoderStats()
+        self._events: list[DeviceEvent] = []
+
+    def feed(self, data: bytes, t_s: float = 0.0) -> list[HrSample]:
+        """Decode ``data`` that arrived at host time ``t_s``; return the samples it completed."""
+        self._t_s = t_s
+        self.stats.bytes_in += len(data)
+        self._buf += data
+        samples = self._consume()
+        self.stats.samples += len(samples)
+        self.stats.invalid_samples += sum(not s.valid for s in samples)
+        return samples
+
+    def finish(self) -> list[HrSample]:
+        """End of stream: count a truncated trailing frame as dropped and return any last samples."""
+        if self._buf:
+            self.stats.count("truncated_tail")
+            self.stats.bytes_dropped += len(self._buf)
+            self._buf.clear()
+        return []
+
+    def pop_events(self) -> list[DeviceEvent]:
+        """Return and clear the link events (state changes) seen since the last call."""
+        events, self._events = self._events, []
+        return events
+
+    def _emit_event(self, kind: str, label: str, value: str = "") -> None:
+        self._events.append(DeviceEvent(self._t_s, kind, label, value))
+
+    def _drop(self, n: int, reason: str) -> None:
+        """Discard ``n`` bytes from the front of the buffer and count why."""
+        del self._buf[:n]
+        self.stats.bytes_dropped += n
+        self.stats.count(reason, 1)
+
+    def _consume(self) -> list[HrSample]:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+def get_decoder(protocol: str, **options: object) -> Decoder:
+    """Return a fresh decoder for ``protocol``.
+
+    Parameters
+    ----------
+    protocol : str
+        One of :data:`PROTOCOLS`.
+    **options
+        Passed to the decoder class (e.g. ``device_type`` for ANT).
+
+    Raises
+    ------
+    UserError
+        If the protocol is unknown.
+    """
+    if protocol not in PROTOCOLS:
+        raise UserError(
+            f"--protocol: expected one of {', '.join(sorted(PROTOCOLS))}, found {protocol!r}"
+        )
+    module = importlib.import_module(PROTOCOLS[protocol])
+    return module.DECODER(**options)

@@ -1,0 +1,5 @@
+import sys
+
+from effortface.cli import main
+
+sys.exit(main())

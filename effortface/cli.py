@@ -1,0 +1,77 @@
+"""The ``effortface`` command line (a contract: see DESIGN.md and the README).
+
+Each sub-command lives in its own module exposing ``add_arguments(parser)`` and ``run(args) -> int``;
+only the chosen one is imported, so ``effortface decode`` never pays for Qt or scikit-learn.
+A :class:`~capture_tool.errors.UserError` becomes one line on stderr and exit status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from capture_tool.errors import UserError
+
+#: sub-command -> (module, one-line help)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "app": ("effortface.commands.app", "the Qt application, opened on DIR (default: sample_sessions)"),
+    "ports": ("capture_tool.commands.ports", "serial ports and cameras found"),
+    "capture": ("capture_tool.commands.capture", "record a strap (and video) into a session folder"),
+    "replay": ("capture_tool.commands.replay", "open a simulated port, print its path, replay LOG"),
+    "decode": ("capture_tool.commands.decode", "raw bytes or .serlog -> heart-rate CSV on stdout"),
+    "recover": ("capture_tool.commands.recover", "finish a session that a crash left incomplete"),
+    "agreement": ("annotate.commands.agreement", "inter-rater agreement report"),
+    "train": ("train.commands.train", "fit the heart-rate and face models, export a bundle"),
+    "evaluate": ("train.commands.evaluate", "re-score a model bundle on sessions or a table"),
+    "synth": ("train.commands.synth", "synthesize face curves from a motion clip"),
+    "demo": ("effortface.commands.demo", "the whole pipeline on sample_sessions"),
+}
+
+
+class _Parser(argparse.ArgumentParser):
+    """An ArgumentParser whose errors are one line and exit status 2 (no usage dump)."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def _top_parser() -> argparse.ArgumentParser:
+    epilog = "\n".join(f"  {name:<10} {text}" for name, (_, text) in COMMANDS.items())
+    parser = _Parser(
+        prog="effortface",
+        description="Facial expressions of physical effort: capture, annotate, train, synthesize.",
+        epilog="commands:\n" + epilog + "\n\nRun 'effortface COMMAND --help' for a command's options.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=_version())
+    return parser
+
+
+def _version() -> str:
+    from effortface import __version__
+
+    return f"effortface {__version__}"
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the ``effortface`` command line; return the exit status."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    if args and args[0] in ("-h", "--help", "--version"):
+        _top_parser().parse_args(args)
+        return 0
+    command = args[0] if args and args[0] in COMMANDS else "app"
+    rest = args[1:] if args and args[0] in COMMANDS else args
+    module = importlib.import_module(COMMANDS[command][0])
+    parser = _Parser(prog=f"effortface {command}", description=COMMANDS[command][1])
+    module.add_arguments(parser)
+    ns = parser.parse_args(rest)
+    try:
+        return int(module.run(ns) or 0)
+    except UserError as exc:
+        print(f"effortface {command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"effortface {command}: interrupted", file=sys.stderr)
+        return 130

@@ -1,0 +1,34 @@
+"""Shared test set-up: offscreen Qt before any QApplication exists, paths to the real data."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED_DATA = ROOT.parent / "shared" / "data"
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption("--hr-port", default=None, help="a real strap's serial port, e.g. /dev/ttyUSB0")
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    """The real captures, clips and recordings in ../shared/data (skip if absent)."""
+    if not SHARED_DATA.is_dir():
+        pytest.skip(f"real data folder not found: {SHARED_DATA}")
+    return SHARED_DATA
+
+
+@pytest.fixture
+def hr_port(request: pytest.FixtureRequest) -> str:
+    """A real strap's port; hardware tests skip unless --hr-port is given."""
+    port = request.config.getoption("--hr-port")
+    if not port:
+        pytest.skip("needs a real strap: run pytest --hr-port=/dev/ttyUSB0")
+    return port

@@ -1,0 +1,1 @@
+"""Stage 3, train: motion, energies, physiology, datasets, fitting, evaluation, export, runtime."""
