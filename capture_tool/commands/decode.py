@@ -1,0 +1,81 @@
+"""``effortface decode --protocol P FILE``: recorded strap bytes -> heart-rate CSV on stdout.
+
+FILE is a ``.serlog``, a ``.pcap`` or a raw capture (see :mod:`capture_tool.captures`); its chunks
+are fed to the decoder with their recorded arrival times, so ``t_s`` is seconds since the first
+chunk. The CSV is ``heart_rate.csv``'s format; a one-line summary of the decoder's counters goes
+to stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from collections.abc import Iterable
+from typing import TextIO
+
+from capture_tool.captures import read_timed_capture
+from capture_tool.errors import UserError
+from capture_tool.hr_csv import HR_CSV_HEADER, format_hr_row
+from capture_tool.protocols import PROTOCOLS, Decoder, HrSample, get_decoder
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Declare the options of ``effortface decode``."""
+    parser.add_argument("--protocol", required=True, metavar="P",
+                        help=f"strap protocol: {', '.join(sorted(PROTOCOLS))}")
+    parser.add_argument("--device-type", type=int, default=None, metavar="N",
+                        help="ANT only: device type that yields heart rate (default 120)")
+    parser.add_argument("file", metavar="FILE", help=".serlog, .pcap or raw capture")
+
+
+def decode_chunks(decoder: Decoder, chunks: Iterable[tuple[float, bytes]]) -> list[HrSample]:
+    """Feed ``(t_s, bytes)`` chunks to ``decoder`` and finish it; return every sample.
+
+    Parameters
+    ----------
+    decoder : Decoder
+        A fresh decoder.
+    chunks : iterable of (float, bytes)
+        Arrival time and bytes of each read.
+
+    Returns
+    -------
+    list of HrSample
+    """
+    out: list[HrSample] = []
+    for t_s, data in chunks:
+        out += decoder.feed(data, t_s)
+    return out + decoder.finish()
+
+
+def summary_line(decoder: Decoder) -> str:
+    """The decoder's counters as one line of ``name=value`` pairs."""
+    counters = decoder.stats.as_dict()
+    return f"{decoder.name}: " + " ".join(f"{k}={v}" for k, v in counters.items())
+
+
+def _make_decoder(args: argparse.Namespace) -> Decoder:
+    if args.device_type is None:
+        return get_decoder(args.protocol)
+    if args.protocol != "ant":
+        raise UserError(f"--device-type: expected only with --protocol ant, found --protocol {args.protocol}")
+    if not 0 < args.device_type < 128:
+        raise UserError(f"--device-type: expected an ANT device type 1..127, found {args.device_type}")
+    return get_decoder("ant", device_type=args.device_type)
+
+
+def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
+    """Decode FILE and print the CSV; return 0."""
+    decoder = _make_decoder(args)
+    chunks = read_timed_capture(args.file)
+    samples = decode_chunks(decoder, chunks)
+    out = sys.stdout if out is None else out
+    try:
+        out.write(HR_CSV_HEADER + "\n")
+        out.writelines(format_hr_row(s) + "\n" for s in samples)
+        out.flush()
+    except BrokenPipeError:  # e.g. piped into head: the reader has all it wanted
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    print(summary_line(decoder), file=sys.stderr)
+    return 0
