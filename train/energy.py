@@ -1,0 +1,579 @@
+"""Segment energies, mechanical work w and power p (W/kg) from motion (SCIENCE.md section 2).
+
+For every segment s and frame k::
+
+    E_s(k) = m_s g z_s + 1/2 m_s |v_s|^2 + 1/2 omega_s^T I_s omega_s,
+    I_s = m_s L_s^2 diag(r_sag^2, r_trans^2, r_long^2) in the segment frame.
+
+* w(k): sum over segments of |E_s(j) - E_s(j-1)| over the frames j of the last ``window_s``
+  (1 s), divided by the body mass M and the window length: no energy transfer between segments.
+* p(k): the same sum over the last ``power_window_s`` (0.25 s), an instantaneous rate smoothed
+  over a short window.
+
+Choices (named parameters):
+
+* Joint positions (and the rotation matrices of the segments' frames) are low-pass filtered with
+  a 2nd-order Butterworth at ``cutoff_hz`` = 6 Hz: zero-phase (forward-backward) for files,
+  causal for streams. Both start from the steady state of the first frame.
+* Velocities are backward differences (causal). Angular velocity comes from consecutive segment
+  rotations, ``log(R(k) R(k-1)^T) / dt``; without rotations (plain positions) it comes from the turn
+  of the segment's long axis, so spin about the long axis is not seen.
+* Segment frame: long axis from the proximal to the distal end; sagittal (antero-posterior) axis is
+  the body's forward direction (from the hip joints and the vertical) made orthogonal to the long
+  axis (the vertical when the segment points forward, as a foot does); transverse completes it.
+* The first two frames contribute no work (the first has no velocity).
+* Loads: point masses at the hand CMs, and on the back :data:`~train.segments.BACK_LOAD_OFFSET_M`
+  behind the trunk CM, added to that segment's energy. M stays the character's own mass.
+
+Paths: :func:`work_and_power` for a whole clip (zero-phase or causal), :class:`EnergyStream` one
+frame at a time (equal to the causal whole-clip path), :class:`EnergyCrowd` for N characters at once.
+numpy and scipy only (the runtime imports this module).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+
+import numpy as np
+from scipy import signal
+
+from capture_tool.errors import UserError
+from train.motion import Motion
+from train.segments import BACK_LOAD_OFFSET_M, BodyModel, stack_bodies
+
+#: Gravitational acceleration, m/s^2.
+G_M_PER_S2 = 9.81
+_EZ = np.array([0.0, 0.0, 1.0])
+
+
+@dataclasses.dataclass(frozen=True)
+class SegmentEnergies:
+    """Per-frame, per-segment energies in joules, shape (T, S) each (loads included)."""
+
+    t_s: np.ndarray
+    potential_j: np.ndarray
+    translational_j: np.ndarray
+    rotational_j: np.ndarray
+    segment_names: tuple[str, ...]
+
+    @property
+    def total_j(self) -> np.ndarray:
+        """E_s(k), shape (T, S)."""
+        return self.potential_j + self.translational_j + self.rotational_j
+
+
+@dataclasses.dataclass(frozen=True)
+class EnergyCurves:
+    """Work and power per frame.
+
+    Attributes
+    ----------
+    t_s : ndarray, shape (T,)
+    w_per_kg : ndarray, shape (T,)
+        Work over the last window, W/kg.
+    p_per_kg : ndarray, shape (T,)
+        Power over the last short window, W/kg.
+    rate_j_per_kg : ndarray, shape (T,)
+        Per-frame sum over segments of |dE_s| / M (J/kg), the quantity both windows sum.
+    """
+
+    t_s: np.ndarray
+    w_per_kg: np.ndarray
+    p_per_kg: np.ndarray
+    rate_j_per_kg: np.ndarray
+
+
+# --------------------------------------------------------------------------------------------
+# filtering
+
+
+def butterworth_sos(cutoff_hz: float, fps: float, order: int = 2) -> np.ndarray:
+    """Second-order sections of a low-pass Butterworth filter.
+
+    Parameters
+    ----------
+    cutoff_hz : float
+        Cut-off frequency, below the Nyquist frequency fps / 2.
+    fps : float
+        Sampling rate (frames per second).
+    order : int
+        Filter order (2 by default).
+
+    Returns
+    -------
+    ndarray, shape (n_sections, 6)
+
+    Raises
+    ------
+    UserError
+        If the cut-off is not between 0 and fps / 2.
+    """
+    if not 0 < cutoff_hz < fps / 2:
+        raise UserError(
+            f"cutoff_hz: expected a value between 0 and fps/2 = {fps / 2:g} Hz, got {cutoff_hz!r}")
+    return signal.butter(order, cutoff_hz, btype="low", fs=fps, output="sos")
+
+
+def filter_frames(x: np.ndarray, sos: np.ndarray, *, zero_phase: bool) -> np.ndarray:
+    """Low-pass filter along axis 0 (frames), starting from the first frame's steady state.
+
+    Parameters
+    ----------
+    x : ndarray, shape (T, ...)
+    sos : ndarray
+        Second-order sections (see :func:`butterworth_sos`).
+    zero_phase : bool
+        Forward-backward (files) or causal (streams; identical to :class:`EnergyStream`).
+
+    Returns
+    -------
+    ndarray, same shape as ``x``
+    """
+    # channels-first and contiguous: scipy filters the last axis much faster
+    flat = np.ascontiguousarray(x.reshape(x.shape[0], -1).T)
+    padlen = max(min(3 * (2 * len(sos) + 1), flat.shape[1] - 1), 0)
+    if len(sos) == 1:  # one section: lfilter runs the same recursion about twice as fast
+        b, a = sos[0, :3], sos[0, 3:]
+        if zero_phase:
+            out = signal.filtfilt(b, a, flat, axis=-1, padlen=padlen)
+        else:
+            out, _ = signal.lfilter(b, a, flat, axis=-1, zi=signal.lfilter_zi(b, a)[None, :] * flat[:, :1])
+    elif zero_phase:
+        out = signal.sosfiltfilt(sos, flat, axis=-1, padlen=padlen)
+    else:
+        zi = signal.sosfilt_zi(sos)[:, None, :] * flat[:, :1]
+        out, _ = signal.sosfilt(sos, flat, axis=-1, zi=zi)
+    return out.T.reshape(x.shape)
+
+
+# --------------------------------------------------------------------------------------------
+# kinematics -> energies (shared by the whole-clip path and the stream)
+
+
+def _unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit vectors along the last axis and the norms (zero vectors stay zero)."""
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return np.divide(v, n, out=np.zeros_like(v), where=n > 1e-12), n[..., 0]
+
+
+def _rotation_vector(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Rotation vector (rad) of ``b @ a^T`` for rotation matrices a (previous) and b, shape (..., 3)."""
+
+    def rel(i: int, k: int) -> np.ndarray:  # (b @ a^T)[i, k], without a slow batched 3x3 matmul
+        return np.sum(b[..., i, :] * a[..., k, :], axis=-1)
+
+    vee = 0.5 * np.stack([rel(2, 1) - rel(1, 2), rel(0, 2) - rel(2, 0), rel(1, 0) - rel(0, 1)], axis=-1)
+    axis, sin_angle = _unit(vee)
+    cos_angle = 0.5 * (np.sum(b * a, axis=(-2, -1)) - 1.0)
+    return axis * np.arctan2(sin_angle, cos_angle)[..., None]
+
+
+def _axis_turn(u_prev: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Rotation vector (rad) turning unit vector u_prev onto u (no spin about the axis)."""
+    axis, sin_angle = _unit(np.cross(u_prev, u))
+    return axis * np.arctan2(sin_angle, np.sum(u_prev * u, axis=-1))[..., None]
+
+
+def _backward_diff(x: np.ndarray, dt_s: float) -> np.ndarray:
+    """(x[k] - x[k-1]) / dt along axis 0, with zero for the first frame."""
+    d = np.zeros_like(x)
+    d[1:] = (x[1:] - x[:-1]) / dt_s
+    return d
+
+
+def _forward_axes(pos: np.ndarray, body: BodyModel) -> np.ndarray:
+    """Body forward direction per frame, shape (T, 3): hip line x vertical (x axis if degenerate)."""
+    left, right = body.hip_joints
+    fwd, norm = _unit(np.cross(pos[..., left, :] - pos[..., right, :], _EZ))
+    fwd[norm < 1e-9] = (1.0, 0.0, 0.0)
+    return fwd
+
+
+def _segment_axes(u: np.ndarray, fwd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sagittal and transverse unit axes (T, S, 3) for long axes u (T, S, 3)."""
+    a = fwd[..., None, :] - np.sum(fwd[..., None, :] * u, axis=-1, keepdims=True) * u
+    up = _EZ - u[..., 2:3] * u
+    a, norm = _unit(a)
+    a = np.where((norm < 0.3)[..., None], _unit(up)[0], a)
+    return a, np.cross(u, a)
+
+
+def kinematic_energies(
+    pos_m: np.ndarray, frame_rot: np.ndarray | None, dt_s: float, body: BodyModel
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Potential, translational and rotational energy (J), each (T, S), of filtered kinematics.
+
+    Parameters
+    ----------
+    pos_m : ndarray, shape (T, J, 3) or (T, N, J, 3)
+        Filtered joint positions, metres, Z up (N characters with a stacked body).
+    frame_rot : ndarray, shape (T, [N,] S, 3, 3), or None
+        Filtered rotation of each segment's frame joint, or None (long-axis turn only).
+    dt_s : float
+        Frame interval in seconds.
+    body : BodyModel
+        One body, or N bodies stacked by :func:`~train.segments.stack_bodies`.
+
+    Returns
+    -------
+    potential_j, translational_j, rotational_j : ndarray, shape (T, [N,] S)
+        Frame 0 has zero velocities. Loads are included in their segment's energy.
+    """
+    m, ml = body.segment_mass_kg, body.load_kg
+    com = body.com_weights @ pos_m
+    v = _backward_diff(com, dt_s)
+    pot = (m + ml) * G_M_PER_S2 * com[..., 2]
+    trans = 0.5 * (m + ml) * np.sum(v * v, axis=-1)
+    u, _ = _unit((body.distal_weights - body.proximal_weights) @ pos_m)
+    omega = np.zeros_like(u)
+    if frame_rot is not None:
+        omega[1:] = _rotation_vector(frame_rot[:-1], frame_rot[1:]) / dt_s
+    else:
+        omega[1:] = _axis_turn(u[:-1], u[1:]) / dt_s
+    sag, tra = _segment_axes(u, _forward_axes(pos_m, body))
+    w_seg = np.stack([np.sum(omega * e, axis=-1) for e in (sag, tra, u)], axis=-1)
+    inertia = m[..., None] * (body.length_m[..., None] * body.radii) ** 2
+    rot = 0.5 * np.sum(inertia * w_seg**2, axis=-1)
+    if np.any(body.back_load_kg > 0) and body.trunk_index >= 0:
+        _add_back_load(pot, trans, com, pos_m, dt_s, body)
+    return pot, trans, rot
+
+
+def _add_back_load(pot: np.ndarray, trans: np.ndarray, com: np.ndarray, pos_m: np.ndarray,
+                   dt_s: float, body: BodyModel) -> None:
+    """Add the back load (a point BACK_LOAD_OFFSET_M behind the trunk CM) to the trunk's energy."""
+    k = body.trunk_index
+    point = com[..., k, :] - BACK_LOAD_OFFSET_M * _forward_axes(pos_m, body)
+    v = _backward_diff(point, dt_s)
+    pot[..., k] += body.back_load_kg * G_M_PER_S2 * point[..., 2]
+    trans[..., k] += 0.5 * body.back_load_kg * np.sum(v * v, axis=-1)
+
+
+def _filtered_kinematics(
+    motion: Motion, body: BodyModel, cutoff_hz: float, zero_phase: bool, use_rotations: bool
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Filtered joint positions and filtered frame-joint rotations (or None)."""
+    sos = butterworth_sos(cutoff_hz, motion.fps)
+    used = _used_joints(body)  # other joints do not enter the energies: copy them unfiltered
+    pos = motion.positions_m.copy()
+    pos[:, used] = filter_frames(motion.positions_m[:, used], sos, zero_phase=zero_phase)
+    if motion.rotations is None or not use_rotations:
+        return pos, None
+    return pos, filter_frames(motion.rotations[:, body.frame_joint], sos, zero_phase=zero_phase)
+
+
+def _used_joints(body: BodyModel) -> np.ndarray:
+    """Indices of the joints that segment end points and the hip axis use."""
+    used = np.any(body.proximal_weights != 0, axis=0) | np.any(body.distal_weights != 0, axis=0)
+    used[list(body.hip_joints)] = True
+    return np.flatnonzero(used)
+
+
+def segment_energies(
+    motion: Motion,
+    body: BodyModel,
+    *,
+    cutoff_hz: float = 6.0,
+    zero_phase: bool = True,
+    use_rotations: bool = True,
+) -> SegmentEnergies:
+    """Per-frame potential, translational and rotational energy of every segment.
+
+    Parameters
+    ----------
+    motion : Motion
+    body : BodyModel
+        Built for this motion's skeleton.
+    cutoff_hz : float
+        Butterworth cut-off for joint positions (6 Hz).
+    zero_phase : bool
+        Forward-backward filter (files) or causal (streams).
+    use_rotations : bool
+        Use the motion's joint rotations for angular velocity when it has them.
+
+    Returns
+    -------
+    SegmentEnergies
+    """
+    _check_body(motion, body)
+    pos, rot = _filtered_kinematics(motion, body, cutoff_hz, zero_phase, use_rotations)
+    pot, trans, rot_e = kinematic_energies(pos, rot, 1.0 / motion.fps, body)
+    return SegmentEnergies(motion.t_s, pot, trans, rot_e, body.segment_names)
+
+
+def _check_body(motion: Motion, body: BodyModel) -> None:
+    """Raise UserError if the motion is empty or the body was built for another skeleton."""
+    if motion.n_frames < 1:
+        raise UserError(f"motion: expected at least one frame, got none ({motion.source})")
+    if body.proximal_weights.shape[1] != len(motion.joint_names):
+        raise UserError(
+            f"body: expected a body built for this skeleton's {len(motion.joint_names)} joints, "
+            f"got one for {body.proximal_weights.shape[1]}"
+        )
+
+
+# --------------------------------------------------------------------------------------------
+# work and power
+
+
+def window_frames(window_s: float, fps: float, name: str) -> int:
+    """Number of frames in a window (at least 1); raise UserError naming ``name`` if not > 0."""
+    if not window_s > 0:
+        raise UserError(f"{name}: expected a window above 0 s, got {window_s!r}")
+    return max(1, int(round(window_s * fps)))
+
+
+def _trailing_sum(x: np.ndarray, n: int) -> np.ndarray:
+    """Sum of the last n values (fewer at the start) at every index of a 1-D array."""
+    c = np.cumsum(x)
+    out = c.copy()
+    out[n:] = c[n:] - c[:-n]
+    return out
+
+
+def work_and_power(
+    motion: Motion,
+    body: BodyModel,
+    *,
+    window_s: float = 1.0,
+    power_window_s: float = 0.25,
+    cutoff_hz: float = 6.0,
+    zero_phase: bool = True,
+    use_rotations: bool = True,
+) -> EnergyCurves:
+    """Work w and power p (W/kg) at every frame of a clip.
+
+    Parameters
+    ----------
+    motion : Motion
+    body : BodyModel
+        Built for this motion's skeleton; ``body.mass_kg`` is the divisor M.
+    window_s : float
+        Work window (1 s): w(k) = sum of |dE_s| over the frames of the last window / (M window).
+    power_window_s : float
+        Power window (0.25 s), same sum over a shorter window.
+    cutoff_hz : float
+        Butterworth cut-off on joint positions (6 Hz).
+    zero_phase : bool
+        Zero-phase filter (files, default) or causal (equals :class:`EnergyStream` frame by frame).
+    use_rotations : bool
+        Use joint rotations for angular velocity when the motion has them.
+
+    Returns
+    -------
+    EnergyCurves
+
+    Raises
+    ------
+    UserError
+        Bad windows or cut-off (named), or a body built for another skeleton.
+    """
+    n_w = window_frames(window_s, motion.fps, "window_s")
+    n_p = window_frames(power_window_s, motion.fps, "power_window_s")
+    energies = segment_energies(motion, body, cutoff_hz=cutoff_hz, zero_phase=zero_phase,
+                                use_rotations=use_rotations)
+    rate = frame_rates(energies.total_j, body.mass_kg)
+    return EnergyCurves(
+        motion.t_s,
+        _trailing_sum(rate, n_w) * motion.fps / n_w,
+        _trailing_sum(rate, n_p) * motion.fps / n_p,
+        rate,
+    )
+
+
+def frame_rates(total_j: np.ndarray, mass_kg: float) -> np.ndarray:
+    """Per-frame sum over segments of |E_s(k) - E_s(k-1)| / M, zero for frames 0 and 1."""
+    rate = np.zeros(total_j.shape[0])
+    if total_j.shape[0] > 2:
+        rate[2:] = np.sum(np.abs(np.diff(total_j[1:], axis=0)), axis=1) / mass_kg
+    return rate
+
+
+# --------------------------------------------------------------------------------------------
+# streaming
+
+
+class EnergyStream:
+    """Causal, frame-by-frame work and power for a live skeleton (O(1) per frame).
+
+    Gives the same numbers as ``work_and_power(..., zero_phase=False)`` on the same frames:
+    the same filter recursion (started at the first frame's steady state), the same energy
+    formulas on the previous and current frame, and a ring buffer over the last window.
+
+    Parameters
+    ----------
+    body : BodyModel
+    fps : float
+        Nominal frame rate: sets the filter and the window lengths in frames.
+    window_s, power_window_s, cutoff_hz : float
+        As in :func:`work_and_power`.
+
+    Raises
+    ------
+    UserError
+        Bad fps, windows or cut-off (named).
+
+    Examples
+    --------
+    >>> stream = EnergyStream(body, fps=60)                          # doctest: +SKIP
+    >>> w_per_kg, p_per_kg = stream.step(joint_positions_m, 1 / 60)  # doctest: +SKIP
+    """
+
+    def __init__(self, body: BodyModel, fps: float, *, window_s: float = 1.0,
+                 power_window_s: float = 0.25, cutoff_hz: float = 6.0) -> None:
+        if not fps > 0:
+            raise UserError(f"fps: expected a positive frame rate, got {fps!r}")
+        self.body = body
+        self.fps = float(fps)
+        self._sos = butterworth_sos(cutoff_hz, self.fps)
+        self._n_w = window_frames(window_s, self.fps, "window_s")
+        self._n_p = window_frames(power_window_s, self.fps, "power_window_s")
+        self._batch = np.shape(body.mass_kg)  # () for one character, (N,) for a crowd
+        self._ring = np.zeros((max(self._n_w, self._n_p), *self._batch))
+        self._frame = 0
+        self._sum_w = np.zeros(self._batch)
+        self._sum_p = np.zeros(self._batch)
+        self._zi: np.ndarray | None = None
+        self._with_rotations: bool | None = None
+        self._prev: tuple[np.ndarray, np.ndarray | None] | None = None
+        self._prev_e: np.ndarray | None = None
+
+    def step(self, joint_positions_m: np.ndarray, dt_s: float,
+             rotations: np.ndarray | None = None) -> tuple[float, float]:
+        """Advance one frame.
+
+        Parameters
+        ----------
+        joint_positions_m : ndarray, shape (J, 3)
+            World joint positions, metres, Z up.
+        dt_s : float
+            Time since the previous frame, seconds (> 0; used for velocities).
+        rotations : ndarray, shape (J, 3, 3), optional
+            World joint rotations; without them spin about a segment's long axis is not seen.
+            Give them on every frame or on none.
+
+        Returns
+        -------
+        w_per_kg, p_per_kg : float
+
+        Raises
+        ------
+        UserError
+            Wrong shapes, dt_s <= 0, or rotations given on some frames only.
+        """
+        w, p = self._advance(joint_positions_m, dt_s, rotations)
+        return float(w), float(p)
+
+    def _advance(self, joint_positions_m: np.ndarray, dt_s: float,
+                 rotations: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """One frame for one character or a crowd: filter, energies, window sums."""
+        pos, rot = self._check_frame(joint_positions_m, dt_s, rotations)
+        parts = [pos.reshape(*self._batch, -1)]
+        if rot is not None:
+            parts.append(rot[..., self.body.frame_joint, :, :].reshape(*self._batch, -1))
+        flat = self._filter(np.concatenate(parts, axis=-1))
+        n_pos = parts[0].shape[-1]
+        cur = (flat[..., :n_pos].reshape(pos.shape),
+               None if rot is None else flat[..., n_pos:].reshape(*self._batch, -1, 3, 3))
+        energy = self._energy(cur, dt_s)
+        rate = np.zeros(self._batch)
+        if self._frame >= 2:
+            rate = np.sum(np.abs(energy - self._prev_e), axis=-1) / self.body.mass_kg
+        self._prev, self._prev_e = cur, energy
+        return self._push(rate)
+
+    def _check_frame(self, joint_positions_m: np.ndarray, dt_s: float,
+                     rotations: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+        """Validate one frame's inputs; return them as float arrays."""
+        n_joints = self.body.proximal_weights.shape[1]
+        pos = np.asarray(joint_positions_m, dtype=float)
+        if pos.shape != (*self._batch, n_joints, 3):
+            raise UserError(
+                f"joint_positions_m: expected shape {(*self._batch, n_joints, 3)}, got {pos.shape}")
+        if not dt_s > 0:
+            raise UserError(f"dt_s: expected a positive frame interval in seconds, got {dt_s!r}")
+        with_rot = rotations is not None
+        if self._with_rotations is not None and with_rot != self._with_rotations:
+            raise UserError("rotations: expected on every frame or on none, got them on some frames only")
+        self._with_rotations = with_rot
+        if rotations is None:
+            return pos, None
+        rot = np.asarray(rotations, dtype=float)
+        if rot.shape != (*self._batch, n_joints, 3, 3):
+            raise UserError(f"rotations: expected shape {(*self._batch, n_joints, 3, 3)}, got {rot.shape}")
+        return pos, rot
+
+    def _filter(self, x: np.ndarray) -> np.ndarray:
+        """One causal filter step for all channels (direct form II transposed, as sosfilt)."""
+        if self._zi is None:
+            self._zi = signal.sosfilt_zi(self._sos).reshape(len(self._sos), 2, *([1] * x.ndim)) * x
+        y = x
+        for s, (b0, b1, b2, _, a1, a2) in enumerate(self._sos):
+            z = self._zi[s]
+            out = b0 * y + z[0]
+            z[0] = b1 * y - a1 * out + z[1]
+            z[1] = b2 * y - a2 * out
+            y = out
+        return y
+
+    def _energy(self, cur: tuple[np.ndarray, np.ndarray | None], dt_s: float) -> np.ndarray:
+        """Total energy per segment ([N,] S) at this frame, from the previous and current states."""
+        prev = self._prev if self._prev is not None else cur
+        pos = np.stack([prev[0], cur[0]])
+        rot = None if cur[1] is None or prev[1] is None else np.stack([prev[1], cur[1]])
+        pot, trans, rot_e = kinematic_energies(pos, rot, dt_s, self.body)
+        k = 0 if self._prev is None else 1
+        return pot[k] + trans[k] + rot_e[k]
+
+    def _push(self, rate: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Put one frame's rate in the ring buffer and update both window sums."""
+        k, size = self._frame, self._ring.shape[0]
+        self._sum_w = self._sum_w + rate - (self._ring[(k - self._n_w) % size] if k >= self._n_w else 0.0)
+        self._sum_p = self._sum_p + rate - (self._ring[(k - self._n_p) % size] if k >= self._n_p else 0.0)
+        self._ring[k % size] = rate
+        self._frame += 1
+        if self._frame % size == 0:  # re-sum once per buffer length so rounding cannot drift
+            self._sum_w = np.sum(self._ring[size - self._n_w:], axis=0)
+            self._sum_p = np.sum(self._ring[size - self._n_p:], axis=0)
+        return self._sum_w * self.fps / self._n_w, self._sum_p * self.fps / self._n_p
+
+
+class EnergyCrowd(EnergyStream):
+    """Causal work and power for N characters on one skeleton, vectorised over characters.
+
+    Each character keeps its own body (mass, bone lengths, loads); every frame costs about what
+    one :class:`EnergyStream` step costs, whatever N. Character i gets exactly the numbers of its
+    own ``EnergyStream``.
+
+    Parameters
+    ----------
+    bodies : sequence of BodyModel
+        One body per character, all built on the same skeleton and mapping.
+    fps, window_s, power_window_s, cutoff_hz : float
+        As in :class:`EnergyStream`.
+    """
+
+    def __init__(self, bodies: Sequence[BodyModel], fps: float, *, window_s: float = 1.0,
+                 power_window_s: float = 0.25, cutoff_hz: float = 6.0) -> None:
+        super().__init__(stack_bodies(bodies), fps, window_s=window_s, power_window_s=power_window_s,
+                         cutoff_hz=cutoff_hz)
+
+    def step(self, joint_positions_m: np.ndarray, dt_s: float,  # type: ignore[override]
+             rotations: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Advance every character one frame.
+
+        Parameters
+        ----------
+        joint_positions_m : ndarray, shape (N, J, 3)
+            World joint positions of every character, metres, Z up.
+        dt_s : float
+            Time since the previous frame, seconds.
+        rotations : ndarray, shape (N, J, 3, 3), optional
+            World joint rotations (every frame or none).
+
+        Returns
+        -------
+        w_per_kg, p_per_kg : ndarray, shape (N,)
+        """
+        return self._advance(joint_positions_m, dt_s, rotations)

@@ -1,0 +1,670 @@
+"""Motion input: BVH, retargeted ``.npz`` clips and plain joint positions, as one :class:`Motion`.
+
+Every reader returns world joint positions in **metres with Z up** (and, when the source has them,
+the world rotation of every joint's frame), so segments and energies never see file conventions.
+
+This module imports numpy only (besides the standard library and the project's own error types):
+``train/runtime.py`` loads motion through it, and the runtime may use numpy and scipy only. That is
+why the BVH reader is hand-written instead of using a third-party BVH package.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from capture_tool.errors import UserError
+
+#: CMU cgspeed ("MotionBuilder-friendly") BVH length unit: 1 unit = 1/0.45 inch = 0.05644 m.
+CMU_UNIT_M = 0.05644
+
+#: Candidate BVH length units, tried in this order by :func:`detect_bvh_unit_m`.
+BVH_UNITS_M: tuple[tuple[str, float], ...] = (
+    ("metre", 1.0),
+    ("CMU cgspeed unit", CMU_UNIT_M),
+    ("inch", 0.0254),
+    ("centimetre", 0.01),
+    ("millimetre", 0.001),
+)
+
+#: Rest-pose height range (m) that a unit must produce to be chosen. The ranges in units do not
+#: overlap for the candidates above (CMU 19.5-40.8, inch 43.3-90.6, cm 110-230 ...).
+STATURE_RANGE_M = (1.1, 2.3)
+
+#: End sites added to the AMP humanoid bodies (offset in the body's frame, metres), taken from the
+#: geoms of ``amp_humanoid.xml``: head sphere top (0.175 + 0.095), hand = de Leva wrist-to-MET3
+#: length, foot box heel and toe at the box's mid-height.
+AMP_END_SITES_M: dict[str, tuple[tuple[str, tuple[float, float, float]], ...]] = {
+    "head": (("head_end", (0.0, 0.0, 0.27)),),
+    "left_hand": (("left_hand_end", (0.0, 0.0, -0.086)),),
+    "right_hand": (("right_hand_end", (0.0, 0.0, -0.086)),),
+    "left_foot": (("left_foot_heel", (-0.0435, 0.0, -0.0225)), ("left_foot_toe", (0.1335, 0.0, -0.0225))),
+    "right_foot": (
+        ("right_foot_heel", (-0.0435, 0.0, -0.0225)),
+        ("right_foot_toe", (0.1335, 0.0, -0.0225)),
+    ),
+}
+
+#: Y-up (BVH) to Z-up: x' = z, y' = x, z' = y (a proper rotation, so handedness is kept).
+_Y_UP_TO_Z_UP = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+
+
+class MotionFormatError(UserError):
+    """A motion file does not follow its format; the message names the file (and line)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Motion:
+    """A skeleton's motion in world coordinates (metres, Z up).
+
+    Parameters
+    ----------
+    joint_names : tuple of str
+        One name per joint (BVH end sites are named ``<parent>_end``).
+    parents : ndarray, shape (J,)
+        Index of each joint's parent, -1 for the root. Parents come before children.
+    positions_m : ndarray, shape (T, J, 3)
+        World joint positions in metres, Z up.
+    rotations : ndarray, shape (T, J, 3, 3), or None
+        World rotation of each joint's frame (columns are the frame's axes), when the source has them.
+    fps : float
+        Frames per second.
+    source : str
+        Where the motion came from (a file path or a description).
+    """
+
+    joint_names: tuple[str, ...]
+    parents: np.ndarray
+    positions_m: np.ndarray
+    rotations: np.ndarray | None
+    fps: float
+    source: str = ""
+
+    @property
+    def t_s(self) -> np.ndarray:
+        """Time of every frame in seconds from the first frame, shape (T,)."""
+        return np.arange(self.n_frames) / self.fps
+
+    @property
+    def n_frames(self) -> int:
+        """Number of frames T."""
+        return int(self.positions_m.shape[0])
+
+    def decimate(self, factor: int) -> Motion:
+        """Keep every ``factor``-th frame (frames 0, factor, 2 factor, ...); fps is divided by it.
+
+        Parameters
+        ----------
+        factor : int
+            Positive integer decimation factor.
+
+        Returns
+        -------
+        Motion
+            The decimated motion (no anti-alias filter: energies low-pass the joints anyway).
+        """
+        if int(factor) != factor or factor < 1:
+            raise UserError(f"decimation factor: expected a positive integer, got {factor!r}")
+        rot = None if self.rotations is None else self.rotations[::factor]
+        return dataclasses.replace(
+            self, positions_m=self.positions_m[::factor], rotations=rot, fps=self.fps / factor
+        )
+
+    def slice_s(self, start_s: float, stop_s: float) -> Motion:
+        """The frames with ``start_s <= t_s < stop_s`` (times from this motion's first frame)."""
+        keep = slice(int(math.ceil(start_s * self.fps - 1e-9)), int(math.ceil(stop_s * self.fps - 1e-9)))
+        rot = None if self.rotations is None else self.rotations[keep]
+        return dataclasses.replace(self, positions_m=self.positions_m[keep], rotations=rot)
+
+
+# --------------------------------------------------------------------------------------------
+# plain positions and dispatch
+
+
+def motion_from_positions(
+    positions_m: np.ndarray,
+    joint_names: Sequence[str],
+    parents: Sequence[int] | np.ndarray,
+    fps: float,
+    *,
+    source: str = "positions",
+) -> Motion:
+    """Wrap plain joint positions (metres, Z up) as a :class:`Motion` without rotations.
+
+    Parameters
+    ----------
+    positions_m : array_like, shape (T, J, 3)
+        World joint positions in metres with Z up.
+    joint_names : sequence of str
+        J joint names.
+    parents : sequence of int
+        J parent indices, -1 for the root.
+    fps : float
+        Frames per second (> 0).
+    source : str
+        Description kept in :attr:`Motion.source`.
+
+    Returns
+    -------
+    Motion
+
+    Raises
+    ------
+    UserError
+        If the shapes disagree or fps is not positive.
+    """
+    pos = np.asarray(positions_m, dtype=float)
+    names = tuple(str(n) for n in joint_names)
+    par = np.asarray(parents, dtype=int)
+    if pos.ndim != 3 or pos.shape[0] < 1 or pos.shape[2] != 3 or pos.shape[1] != len(names) \
+            or par.shape != (len(names),):
+        raise UserError(
+            f"positions_m: expected shape (T >= 1, {len(names)}, 3) with {len(names)} parents, "
+            f"got {pos.shape} and {par.shape[0]} parents"
+        )
+    if not fps > 0:
+        raise UserError(f"fps: expected a positive number, got {fps!r}")
+    return Motion(names, par, pos, None, float(fps), source)
+
+
+def read_motion(path: str | Path, *, unit_m: float | None = None) -> Motion:
+    """Read a motion file, choosing the reader by suffix (``.bvh`` or ``.npz``).
+
+    Parameters
+    ----------
+    path : str or Path
+        The motion file.
+    unit_m : float, optional
+        BVH length unit in metres (see :func:`read_bvh`); ignored for ``.npz`` (already metres).
+
+    Returns
+    -------
+    Motion
+
+    Raises
+    ------
+    MotionFormatError
+        Unknown suffix, missing file or malformed content.
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".bvh":
+        return read_bvh(path, unit_m=unit_m)
+    if suffix == ".npz":
+        return read_npz_motion(path)
+    raise MotionFormatError(f"{path}: expected a motion file ending in .bvh or .npz, got suffix {suffix!r}")
+
+
+# --------------------------------------------------------------------------------------------
+# rotations
+
+
+def axis_rotations(axis: str, angle_rad: np.ndarray) -> np.ndarray:
+    """Rotation matrices about ``axis`` ('X', 'Y' or 'Z') for an array of angles, shape (..., 3, 3)."""
+    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    one, zero = np.ones_like(c), np.zeros_like(c)
+    rows = {
+        "X": ((one, zero, zero), (zero, c, -s), (zero, s, c)),
+        "Y": ((c, zero, s), (zero, one, zero), (-s, zero, c)),
+        "Z": ((c, -s, zero), (s, c, zero), (zero, zero, one)),
+    }[axis]
+    return np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
+
+
+def quaternions_xyzw_to_matrices(q: np.ndarray) -> np.ndarray:
+    """Unit quaternions (x, y, z, w), shape (..., 4), to rotation matrices, shape (..., 3, 3)."""
+    q = np.asarray(q, dtype=float)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    x, y, z, w = np.moveaxis(q, -1, 0)
+    rows = (
+        (1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)),
+        (2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)),
+        (2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)),
+    )
+    return np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
+
+
+def forward_kinematics(
+    parents: np.ndarray,
+    offsets: np.ndarray,
+    local_rotations: np.ndarray,
+    root_positions: np.ndarray,
+    local_translations: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """World positions and rotations from local ones, vectorised over frames.
+
+    Parameters
+    ----------
+    parents : ndarray, shape (J,)
+        Parent indices, parents before children, -1 for the root(s).
+    offsets : ndarray, shape (J, 3)
+        Each joint's offset in its parent's frame.
+    local_rotations : ndarray, shape (T, J, 3, 3)
+        Each joint's rotation relative to its parent's frame.
+    root_positions : ndarray, shape (T, 3)
+        World position of the root(s).
+    local_translations : ndarray, shape (T, J, 3), optional
+        Per-frame translations added to the offsets (BVH position channels of non-root joints).
+
+    Returns
+    -------
+    positions : ndarray, shape (T, J, 3)
+    rotations : ndarray, shape (T, J, 3, 3)
+    """
+    n_frames, n_joints = local_rotations.shape[:2]
+    pos = np.empty((n_frames, n_joints, 3))
+    rot = np.empty((n_frames, n_joints, 3, 3))
+    for j, p in enumerate(parents):
+        if p < 0:
+            pos[:, j] = root_positions
+            rot[:, j] = local_rotations[:, j]
+            continue
+        off = offsets[j] if local_translations is None else offsets[j] + local_translations[:, j]
+        pos[:, j] = pos[:, p] + np.einsum("tij,...j->ti", rot[:, p], off)
+        rot[:, j] = rot[:, p] @ local_rotations[:, j]
+    return pos, rot
+
+
+# --------------------------------------------------------------------------------------------
+# BVH
+
+
+@dataclasses.dataclass
+class _BvhJoint:
+    name: str
+    parent: int
+    offset: np.ndarray
+    channels: list[str]
+    first_channel: int
+
+
+class _Tokens:
+    """Whitespace tokens of a text file with their 1-based line numbers."""
+
+    def __init__(self, path: Path, lines: list[str]) -> None:
+        self.path = path
+        self.items = [(tok, n) for n, line in enumerate(lines, 1) for tok in line.split()]
+        self.i = 0
+
+    def line(self) -> int:
+        """Line of the next token (or the last line at the end)."""
+        return self.items[min(self.i, len(self.items) - 1)][1] if self.items else 1
+
+    def error(self, expected: str, found: str | None = None) -> MotionFormatError:
+        """A MotionFormatError naming the file, the line, what was expected and what was found."""
+        if found is None:
+            found = repr(self.items[self.i][0]) if self.i < len(self.items) else "end of file"
+        return MotionFormatError(f"{self.path}: line {self.line()}: expected {expected}, found {found}")
+
+    def next(self, expected: str) -> str:
+        """The next token; raise naming ``expected`` at the end of the file."""
+        if self.i >= len(self.items):
+            raise self.error(expected)
+        tok = self.items[self.i][0]
+        self.i += 1
+        return tok
+
+    def expect(self, word: str) -> None:
+        """Consume ``word`` (case-insensitive) or raise."""
+        if self.i >= len(self.items) or self.items[self.i][0].upper() != word.upper():
+            raise self.error(repr(word))
+        self.i += 1
+
+    def number(self, expected: str) -> float:
+        """The next token as a float or raise."""
+        if self.i < len(self.items):
+            try:
+                value = float(self.items[self.i][0])
+            except ValueError:
+                raise self.error(expected) from None
+            self.i += 1
+            return value
+        raise self.error(expected)
+
+
+_CHANNELS = {f"{a}{kind}" for a in "XYZ" for kind in ("position", "rotation")}
+
+
+def _parse_joint(tok: _Tokens, joints: list[_BvhJoint], parent: int, n_channels: int) -> int:
+    """Parse ``name { OFFSET .. CHANNELS .. children }`` after ROOT/JOINT; return channel count."""
+    name = tok.next("a joint name")
+    tok.expect("{")
+    tok.expect("OFFSET")
+    offset = np.array([tok.number("an OFFSET number") for _ in range(3)])
+    tok.expect("CHANNELS")
+    count = tok.number("a channel count")
+    if count != int(count) or not 0 <= count <= 9:
+        raise tok.error("a channel count from 0 to 9", repr(count))
+    channels = []
+    for _ in range(int(count)):
+        ch = tok.next("a channel name").capitalize()  # 'XROTATION' -> 'Xrotation'
+        if ch not in _CHANNELS:
+            tok.i -= 1
+            raise tok.error("a channel name such as Zrotation or Xposition")
+        channels.append(ch)
+    index = len(joints)
+    joints.append(_BvhJoint(name, parent, offset, channels, n_channels))
+    n_channels += len(channels)
+    return _parse_children(tok, joints, index, n_channels)
+
+
+def _parse_children(tok: _Tokens, joints: list[_BvhJoint], index: int, n_channels: int) -> int:
+    """Parse the JOINT / End Site children of joint ``index`` up to its closing brace."""
+    while True:
+        word = tok.next("JOINT, End Site or '}'")
+        if word == "}":
+            return n_channels
+        if word.upper() == "JOINT":
+            n_channels = _parse_joint(tok, joints, index, n_channels)
+        elif word.upper() == "END":
+            tok.expect("Site")
+            tok.expect("{")
+            tok.expect("OFFSET")
+            offset = np.array([tok.number("an End Site OFFSET number") for _ in range(3)])
+            tok.expect("}")
+            joints.append(_BvhJoint(f"{joints[index].name}_end", index, offset, [], n_channels))
+        else:
+            tok.i -= 1
+            raise tok.error("JOINT, End Site or '}'")
+
+
+def _parse_hierarchy(path: Path, lines: list[str]) -> tuple[list[_BvhJoint], int, int]:
+    """Parse the HIERARCHY section; return the joints, the channel count and the MOTION line index."""
+    motion_at = next((i for i, line in enumerate(lines) if line.strip().upper() == "MOTION"), None)
+    if motion_at is None:
+        raise MotionFormatError(f"{path}: line {len(lines)}: expected a MOTION section, found end of file")
+    tok = _Tokens(path, lines[:motion_at])
+    tok.expect("HIERARCHY")
+    joints: list[_BvhJoint] = []
+    n_channels = 0
+    while tok.i < len(tok.items):
+        tok.expect("ROOT")
+        n_channels = _parse_joint(tok, joints, -1, n_channels)
+    if not joints:
+        raise tok.error("a ROOT joint")
+    return joints, n_channels, motion_at
+
+
+def _parse_header_value(path: Path, lines: list[str], i: int, label: str) -> float:
+    """The number after ``label`` on line ``i`` (0-based) or raise naming the line."""
+    line = lines[i] if i < len(lines) else ""
+    head, _, value = line.partition(":")
+    try:
+        if " ".join(head.split()).lower() != label.lower():
+            raise ValueError
+        return float(value)
+    except ValueError:
+        raise MotionFormatError(
+            f"{path}: line {i + 1}: expected '{label}: <number>', found {line.strip()!r}"
+        ) from None
+
+
+def _parse_frames(path: Path, lines: list[str], motion_at: int, n_channels: int) -> tuple[np.ndarray, float]:
+    """Parse the MOTION section: the (T, channels) array and the frame time in seconds."""
+    n_frames = _parse_header_value(path, lines, motion_at + 1, "Frames")
+    frame_time_s = _parse_header_value(path, lines, motion_at + 2, "Frame Time")
+    if n_frames != int(n_frames) or n_frames < 1:
+        raise MotionFormatError(
+            f"{path}: line {motion_at + 2}: expected a positive frame count, found {n_frames}")
+    if not frame_time_s > 0:
+        raise MotionFormatError(
+            f"{path}: line {motion_at + 3}: expected a positive frame time, found {frame_time_s}")
+    first = motion_at + 3
+    rows = lines[first:]
+    while rows and not rows[-1].strip():
+        rows.pop()
+    if len(rows) != int(n_frames):
+        raise MotionFormatError(
+            f"{path}: line {first + len(rows)}: expected {int(n_frames)} frame lines (Frames:), "
+            f"found {len(rows)}"
+        )
+    try:
+        values = np.array(" ".join(rows).split(), dtype=float)
+    except ValueError:
+        values = None
+    if values is None or values.size != len(rows) * n_channels:
+        _raise_bad_frame(path, rows, first, n_channels)
+    return values.reshape(len(rows), n_channels), frame_time_s  # type: ignore[union-attr]
+
+
+def _raise_bad_frame(path: Path, rows: list[str], first: int, n_channels: int) -> None:
+    """Find the first frame line that is not ``n_channels`` numbers and raise naming it."""
+    for k, row in enumerate(rows):
+        fields = row.split()
+        try:
+            [float(f) for f in fields]
+        except ValueError:
+            bad = next(f for f in fields if not _is_number(f))
+            raise MotionFormatError(
+                f"{path}: line {first + k + 1}: expected {n_channels} numbers, found {bad!r}"
+            ) from None
+        if len(fields) != n_channels:
+            raise MotionFormatError(
+                f"{path}: line {first + k + 1}: expected {n_channels} numbers, found {len(fields)}"
+            )
+    raise MotionFormatError(f"{path}: expected {n_channels} numbers per frame")  # pragma: no cover
+
+
+def _is_number(text: str) -> bool:
+    """True if ``text`` parses as a float."""
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _local_rotations(
+    joints: list[_BvhJoint], frames: np.ndarray
+) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+    """Local rotations (T, J, 3, 3), non-root position channels (T, J, 3) or None, root ones (T, 3)."""
+    n_frames = frames.shape[0]
+    rot = np.broadcast_to(np.eye(3), (n_frames, len(joints), 3, 3)).copy()
+    trans = np.zeros((n_frames, len(joints), 3))
+    has_trans = False
+    for j, joint in enumerate(joints):
+        for k, ch in enumerate(joint.channels):
+            column = frames[:, joint.first_channel + k]
+            if ch.endswith("rotation"):
+                # BVH: rotations apply in the order listed, so R = R_first @ R_second @ ...
+                rot[:, j] = rot[:, j] @ axis_rotations(ch[0], np.radians(column))
+            else:
+                trans[:, j, "XYZ".index(ch[0])] = column
+                has_trans = has_trans or joint.parent >= 0
+    return rot, (trans if has_trans else None), trans[:, 0]
+
+
+def detect_bvh_unit_m(rest_height_units: float) -> tuple[str, float]:
+    """Choose a BVH length unit from the rest-pose height in file units.
+
+    The rule: the first unit of :data:`BVH_UNITS_M` (metre, CMU cgspeed 0.05644 m, inch,
+    centimetre, millimetre) that makes the rest-pose height (all joints and end sites, zero
+    rotations, along the up axis) fall in :data:`STATURE_RANGE_M` (1.1-2.3 m). The ranges do not
+    overlap, so a CMU cgspeed skeleton (about 30 units tall) is recognised as such.
+
+    Parameters
+    ----------
+    rest_height_units : float
+        Height of the skeleton in its rest pose, in file units.
+
+    Returns
+    -------
+    name : str
+    unit_m : float
+
+    Raises
+    ------
+    UserError
+        If no candidate gives a human height (pass ``unit_m`` explicitly then).
+    """
+    lo, hi = STATURE_RANGE_M
+    for name, unit_m in BVH_UNITS_M:
+        if lo <= rest_height_units * unit_m <= hi:
+            return name, unit_m
+    raise UserError(
+        f"unit_m: cannot tell the BVH length unit from a rest-pose height of {rest_height_units:.4g} units "
+        f"(no unit among {', '.join(n for n, _ in BVH_UNITS_M)} gives {lo}-{hi} m); pass unit_m explicitly"
+    )
+
+
+def read_bvh(path: str | Path, *, unit_m: float | None = None, up_axis: str = "y") -> Motion:
+    """Read a BVH file into a :class:`Motion` (metres, Z up), any joint names and channel orders.
+
+    A hand-written parser (numpy only, so the numpy/scipy-only runtime can read BVH). End sites
+    become joints named ``<parent>_end``. Forward kinematics is vectorised over frames.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.bvh`` file.
+    unit_m : float, optional
+        Length of one file unit in metres. When omitted it is detected from the rest-pose height
+        by :func:`detect_bvh_unit_m` (CMU cgspeed files: 0.05644 m per unit).
+    up_axis : {'y', 'z'}
+        The file's up axis: BVH is Y-up by convention; Y-up is converted to Z-up.
+
+    Returns
+    -------
+    Motion
+
+    Raises
+    ------
+    MotionFormatError
+        Missing file or malformed content; the message names the file and the line number.
+    UserError
+        Bad ``unit_m`` / ``up_axis``, or a unit that cannot be detected.
+    """
+    path = Path(path)
+    try:
+        lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
+    except OSError as exc:
+        raise MotionFormatError(f"{path}: expected a readable BVH file, got {exc.strerror}") from None
+    if up_axis not in ("y", "z"):
+        raise UserError(f"up_axis: expected 'y' or 'z', got {up_axis!r}")
+    joints, n_channels, motion_at = _parse_hierarchy(path, lines)
+    frames, frame_time_s = _parse_frames(path, lines, motion_at, n_channels)
+    parents = np.array([j.parent for j in joints])
+    offsets = np.array([j.offset for j in joints])
+    local_rot, local_trans, root_trans = _local_rotations(joints, frames)
+    pos, rot = forward_kinematics(parents, offsets, local_rot, offsets[0] + root_trans, local_trans)
+    scale = _bvh_scale(offsets, parents, up_axis, unit_m)
+    pos = pos * scale
+    if up_axis == "y":
+        pos = pos @ _Y_UP_TO_Z_UP.T
+        rot = _Y_UP_TO_Z_UP @ rot
+    names = tuple(j.name for j in joints)
+    return Motion(names, parents, pos, rot, _fps_from_frame_time(frame_time_s), str(path))
+
+
+def _fps_from_frame_time(frame_time_s: float) -> float:
+    """1 / frame time, snapped to the nearest integer when within 0.01 % (``.0083333`` -> 120)."""
+    fps = 1.0 / frame_time_s
+    return float(round(fps)) if abs(fps - round(fps)) < 1e-4 * fps else fps
+
+
+def _bvh_scale(offsets: np.ndarray, parents: np.ndarray, up_axis: str, unit_m: float | None) -> float:
+    """Metres per file unit: ``unit_m`` if given (checked), else detected from the rest pose."""
+    if unit_m is not None:
+        if not unit_m > 0:
+            raise UserError(f"unit_m: expected a positive length in metres, got {unit_m!r}")
+        return float(unit_m)
+    rest = np.zeros_like(offsets)
+    for j, p in enumerate(parents):
+        rest[j] = offsets[j] + (rest[p] if p >= 0 else 0.0)
+    up = rest[:, 1 if up_axis == "y" else 2]
+    return detect_bvh_unit_m(float(up.max() - up.min()))[1]
+
+
+# --------------------------------------------------------------------------------------------
+# npz (retargeted AMP clips)
+
+_NPZ_KEYS = ("fps", "node_names", "parent_indices", "local_translation", "rotation_xyzw_local",
+             "root_translation")
+
+
+def read_npz_motion(
+    path: str | Path,
+    *,
+    end_sites_m: Mapping[str, Sequence[tuple[str, Sequence[float]]]] | None = None,
+) -> Motion:
+    """Read a retargeted skeleton-motion ``.npz`` (the AMP humanoid clips): metres, Z up.
+
+    Keys (see ``motion_and_physiology_PROVENANCE.md``): ``fps``, ``node_names`` (J,),
+    ``parent_indices`` (J,), ``local_translation`` (J, 3) m, ``rotation_xyzw_local`` (T, J, 4)
+    local quaternions x, y, z, w, ``root_translation`` (T, 3) m.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.npz`` file (loaded with ``allow_pickle=False``).
+    end_sites_m : mapping, optional
+        ``body -> ((end_name, (x, y, z)), ...)``: extra end points fixed in a body's frame, added as
+        joints so terminal segments (head, hands, feet) have a distal end. Defaults to
+        :data:`AMP_END_SITES_M`; bodies not present are ignored.
+
+    Returns
+    -------
+    Motion
+
+    Raises
+    ------
+    MotionFormatError
+        Unreadable file, missing key or inconsistent shapes (named in the message).
+    """
+    path = Path(path)
+    data = _load_npz(path)
+    names = [str(n) for n in data["node_names"]]
+    parents = np.asarray(data["parent_indices"], dtype=int)
+    offsets = np.asarray(data["local_translation"], dtype=float)
+    quats = np.asarray(data["rotation_xyzw_local"], dtype=float)
+    root = np.asarray(data["root_translation"], dtype=float)
+    n_joints = len(names)
+    if parents.shape != (n_joints,) or offsets.shape != (n_joints, 3) or quats.shape[1:] != (n_joints, 4) \
+            or root.shape != (quats.shape[0], 3):
+        raise MotionFormatError(
+            f"{path}: expected parent_indices ({n_joints},), local_translation ({n_joints}, 3), "
+            f"rotation_xyzw_local (T, {n_joints}, 4) and root_translation (T, 3), got {parents.shape}, "
+            f"{offsets.shape}, {quats.shape}, {root.shape}"
+        )
+    names, parents, offsets, local_rot = _add_end_sites(
+        names, parents, offsets, quaternions_xyzw_to_matrices(quats),
+        AMP_END_SITES_M if end_sites_m is None else end_sites_m,
+    )
+    pos, rot = forward_kinematics(parents, offsets, local_rot, root)
+    return Motion(tuple(names), parents, pos, rot, float(data["fps"]), str(path))
+
+
+def _load_npz(path: Path) -> dict[str, np.ndarray]:
+    """Load the npz arrays (no pickle) and check the keys are present."""
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            data = {k: npz[k] for k in npz.files}
+    except (OSError, ValueError) as exc:
+        raise MotionFormatError(f"{path}: expected a readable .npz motion file, got {exc}") from None
+    missing = [k for k in _NPZ_KEYS if k not in data]
+    if missing:
+        raise MotionFormatError(f"{path}: expected keys {', '.join(_NPZ_KEYS)}; missing {', '.join(missing)}")
+    return data
+
+
+def _add_end_sites(
+    names: list[str],
+    parents: np.ndarray,
+    offsets: np.ndarray,
+    local_rot: np.ndarray,
+    end_sites_m: Mapping[str, Sequence[tuple[str, Sequence[float]]]],
+) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray]:
+    """Append fixed end points (identity local rotation) as joints after all existing ones."""
+    extra = [(names.index(body), end, off)
+             for body, ends in end_sites_m.items() if body in names for end, off in ends]
+    if not extra:
+        return names, parents, offsets, local_rot
+    names = names + [end for _, end, _ in extra]
+    parents = np.concatenate([parents, [p for p, _, _ in extra]])
+    offsets = np.concatenate([offsets, np.array([off for _, _, off in extra], dtype=float)])
+    eye = np.broadcast_to(np.eye(3), (local_rot.shape[0], len(extra), 3, 3))
+    return names, parents, offsets, np.concatenate([local_rot, eye], axis=1)
