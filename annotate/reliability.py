@@ -1,0 +1,172 @@
+"""The reliability round's files: the pose set and the blind ratings (pure Python + numpy).
+
+- ``poses.csv``: ``pose_id,session_id,frame,t_s`` - the representative frames every rater keys;
+- ``ratings.csv``: long format ``pose_id,rater,blendshape,weight`` (the ``--ratings`` format of
+  ``effortface agreement``).
+
+:func:`mean_abs_disagreement_pct` is the paper's agreement figure (11 % for 3 raters, 18 poses):
+the mean, over poses, blendshapes and rater pairs, of ``|w_a - w_b|`` in % of the weight range
+[0, 1]. The full statistics (ICC, Krippendorff's alpha) belong to the agreement module.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import itertools
+import math
+import os
+from collections.abc import Iterable
+from pathlib import Path
+
+from capture_tool.errors import SessionFormatError
+
+POSES_HEADER = ("pose_id", "session_id", "frame", "t_s")
+RATINGS_HEADER = ("pose_id", "rater", "blendshape", "weight")
+
+
+@dataclasses.dataclass(frozen=True)
+class Pose:
+    """One representative frame: ``pose_id``, its ``session_id``, video ``frame`` and time ``t_s``."""
+
+    pose_id: str
+    session_id: str
+    frame: int
+    t_s: float
+
+
+@dataclasses.dataclass(frozen=True)
+class Rating:
+    """One rater's weight in [0, 1] for one blendshape of one pose."""
+
+    pose_id: str
+    rater: str
+    blendshape: str
+    weight: float
+
+
+def _write_csv(path: Path, header: tuple[str, ...], rows: Iterable[tuple], overwrite: bool) -> Path:
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path}: file exists; refusing to overwrite")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", encoding="utf-8", newline="") as fh:
+        writer = csv.writer(fh, lineterminator="\n")
+        writer.writerow(header)
+        writer.writerows(rows)
+    return path
+
+
+def _read_csv(path: Path, header: tuple[str, ...]) -> list[dict[str, str]]:
+    """Rows of a CSV whose header must hold ``header``; SessionFormatError otherwise."""
+    try:
+        with open(path, encoding="utf-8", newline="") as fh:
+            reader = csv.DictReader(fh)
+            found = tuple(reader.fieldnames or ())
+            if not set(header) <= set(found):
+                raise SessionFormatError(
+                    f"{path}: expected columns {','.join(header)}, found {','.join(found) or 'none'}"
+                )
+            return list(reader)
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SessionFormatError(f"{path}: expected a readable CSV file, found {exc}") from None
+
+
+def write_poses(path: str | os.PathLike, poses: Iterable[Pose], *, overwrite: bool = False) -> Path:
+    """Write ``poses.csv``; FileExistsError if it exists and ``overwrite`` is False."""
+    rows = ((p.pose_id, p.session_id, p.frame, f"{p.t_s:.6f}") for p in poses)
+    return _write_csv(Path(path), POSES_HEADER, rows, overwrite)
+
+
+def read_poses(path: str | os.PathLike) -> list[Pose]:
+    """Read ``poses.csv``.
+
+    Raises
+    ------
+    SessionFormatError
+        On missing columns, a non-integer frame, a non-numeric time or a duplicated pose id; the
+        message names the file and the line.
+    """
+    path = Path(path)
+    poses: list[Pose] = []
+    for line, row in enumerate(_read_csv(path, POSES_HEADER), start=2):
+        try:
+            pose = Pose(row["pose_id"], row["session_id"], int(row["frame"]), float(row["t_s"]))
+        except (TypeError, ValueError):
+            raise SessionFormatError(
+                f"{path}:{line}: expected pose_id,session_id,<int frame>,<float t_s>, found {row}"
+            ) from None
+        if not pose.pose_id or pose.frame < 0 or any(p.pose_id == pose.pose_id for p in poses):
+            raise SessionFormatError(
+                f"{path}:{line}: expected a unique pose_id and frame >= 0, found {pose}"
+            )
+        poses.append(pose)
+    return poses
+
+
+def write_ratings(path: str | os.PathLike, ratings: Iterable[Rating], *,
+                  overwrite: bool = False) -> Path:
+    """Write long-format ``ratings.csv``; FileExistsError if it exists and ``overwrite`` is False."""
+    rows = ((r.pose_id, r.rater, r.blendshape, f"{r.weight:.4f}") for r in ratings)
+    return _write_csv(Path(path), RATINGS_HEADER, rows, overwrite)
+
+
+def read_ratings(path: str | os.PathLike) -> list[Rating]:
+    """Read long-format ratings ``pose_id,rater,blendshape,weight``.
+
+    Raises
+    ------
+    SessionFormatError
+        On missing columns, a weight that is not a number in [0, 1], or the same
+        (pose, rater, blendshape) twice; the message names the file and the line.
+    """
+    path = Path(path)
+    out: list[Rating] = []
+    seen: set[tuple[str, str, str]] = set()
+    for line, row in enumerate(_read_csv(path, RATINGS_HEADER), start=2):
+        try:
+            weight = float(row["weight"])
+        except (TypeError, ValueError):
+            weight = math.nan
+        if not 0.0 <= weight <= 1.0:
+            raise SessionFormatError(f"{path}:{line}: expected a weight in [0, 1], found {row['weight']!r}")
+        key = (row["pose_id"], row["rater"], row["blendshape"])
+        if key in seen or not all(key):
+            raise SessionFormatError(
+                f"{path}:{line}: expected one non-empty pose_id,rater,blendshape, found {key} again"
+            )
+        seen.add(key)
+        out.append(Rating(*key, weight))
+    return out
+
+
+def mean_abs_disagreement_pct(ratings: Iterable[Rating]) -> float:
+    """Mean absolute pairwise difference between raters, in % of the weight range [0, 1].
+
+    For every (pose, blendshape) rated by two or more raters, average ``|w_a - w_b|`` over all rater
+    pairs; then average over those items (each item weighs the same).
+
+    Parameters
+    ----------
+    ratings : iterable of Rating
+
+    Returns
+    -------
+    float
+        Disagreement in percent (0 = identical ratings, 100 = always opposite ends).
+
+    Raises
+    ------
+    ValueError
+        If no pose and blendshape has at least two raters.
+    """
+    items: dict[tuple[str, str], list[float]] = {}
+    for r in ratings:
+        items.setdefault((r.pose_id, r.blendshape), []).append(r.weight)
+    per_item = [
+        sum(abs(a - b) for a, b in pairs) / len(pairs)
+        for weights in items.values()
+        if (pairs := list(itertools.combinations(weights, 2)))
+    ]
+    if not per_item:
+        raise ValueError("ratings: expected at least one pose and blendshape rated by two raters, found none")
+    return 100.0 * sum(per_item) / len(per_item)

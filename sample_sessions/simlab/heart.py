@@ -1,0 +1,108 @@
+"""An independent heart-rate simulation (deliberately NOT the paper's NHR recursion).
+
+First-order kinetics towards a work-dependent steady state, with a slow component, then beats:
+
+    HR_ss(w)   = HR_rest + 0.95 (HR_max - HR_rest) (1 - exp(-w / w_scale))
+    dHR/dt     = (HR_ss + S - HR) / tau        tau = tau_on_s when rising, tau_off_s when falling
+    dS/dt      = (a_slow (HR_max - HR_rest) max(0, f(w) - 0.5) - S) / tau_slow_s
+
+Beats follow the instantaneous rate with beat-to-beat variability: respiratory sinus arrhythmia
+(amplitude falling with effort, at the breathing rate) and AR(1) noise. Fitting the paper's model
+on these data is therefore a real test, not a round trip.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from sample_sessions.simlab.lab import Person, SessionPlan, work_at
+from train.physiology import hr_max_bpm, hr_rest_bpm
+
+DT_S = 0.1  # integration step
+
+
+@dataclasses.dataclass(frozen=True)
+class HeartParams:
+    """One participant's true heart (recorded in the ground truth)."""
+
+    hr_rest_bpm: float
+    hr_max_bpm: float
+    w_scale_w_per_kg: float
+    tau_on_s: float
+    tau_off_s: float
+    slow_amp: float
+    tau_slow_s: float
+    rsa_frac: float
+    ar_sd_frac: float
+
+
+def heart_params(person: Person, rng: np.random.Generator) -> HeartParams:
+    """Draw a participant's heart around the charts: fitter means lower HR and faster recovery."""
+    tl = person.training_level
+    return HeartParams(
+        hr_rest_bpm=round(hr_rest_bpm(person.age, person.sex, tl) + rng.normal(0, 2.5), 1),
+        hr_max_bpm=round(hr_max_bpm(person.age) + rng.normal(0, 4.0), 1),
+        w_scale_w_per_kg=round(9.0 + 1.1 * tl + rng.normal(0, 0.6), 2),
+        tau_on_s=round(22.0 + rng.uniform(-4, 6), 1),
+        tau_off_s=round(70.0 - 5.0 * tl + rng.uniform(-6, 6), 1),
+        slow_amp=round(0.10 - 0.008 * tl + rng.uniform(0, 0.03), 3),
+        tau_slow_s=round(150.0 + rng.uniform(-30, 30), 1),
+        rsa_frac=round(0.03 + rng.uniform(0, 0.02), 3),
+        ar_sd_frac=round(0.012 + rng.uniform(0, 0.006), 4),
+    )
+
+
+def simulate_hr(plan: SessionPlan, hp: HeartParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """True HR on a ``DT_S`` grid: returns ``(t_s, drive_w_per_kg, hr_bpm)`` (drive: see lab.Phase)."""
+    t = np.arange(0.0, plan.duration_s + 5.0, DT_S)
+    w = first_order_lag(work_at(plan, t, drive=True), 2.0)
+    hrr = hp.hr_max_bpm - hp.hr_rest_bpm
+    frac = 1.0 - np.exp(-w / hp.w_scale_w_per_kg)
+    target = hp.hr_rest_bpm + 0.95 * hrr * frac
+    hr = np.empty_like(t)
+    hr[0], slow = hp.hr_rest_bpm + 3.0, 0.0
+    for k in range(1, t.size):
+        slow += DT_S * (hp.slow_amp * hrr * max(0.0, frac[k] - 0.5) - slow) / hp.tau_slow_s
+        goal = min(target[k] + slow, hp.hr_max_bpm)
+        tau = hp.tau_on_s if goal > hr[k - 1] else hp.tau_off_s
+        hr[k] = hr[k - 1] + DT_S * (goal - hr[k - 1]) / tau
+    return t, w, hr
+
+
+def first_order_lag(x: np.ndarray, tau_s: float) -> np.ndarray:
+    """``x`` on the ``DT_S`` grid through a first-order lag of ``tau_s`` (a treadmill or a person
+    does not change pace instantly)."""
+    out = np.empty_like(x)
+    out[0] = x[0]
+    alpha = DT_S / tau_s
+    for k in range(1, x.size):
+        out[k] = out[k - 1] + alpha * (x[k] - out[k - 1])
+    return out
+
+
+def normalised(hr: np.ndarray, hp: HeartParams) -> np.ndarray:
+    """NHR = (HR - rest) / (max - rest), clipped to [0, 1]."""
+    return np.clip((hr - hp.hr_rest_bpm) / (hp.hr_max_bpm - hp.hr_rest_bpm), 0.0, 1.0)
+
+
+def breathing_rate_per_min(nhr: np.ndarray) -> np.ndarray:
+    """Breaths per minute from 14 at rest to 45 at maximum."""
+    return 14.0 + 31.0 * nhr
+
+
+def beat_times(t: np.ndarray, hr: np.ndarray, hp: HeartParams, rng: np.random.Generator,
+               ) -> np.ndarray:
+    """R-wave times (s) following the true rate with RSA and AR(1) beat-to-beat noise."""
+    nhr = normalised(hr, hp)
+    resp_phase = 2 * np.pi * np.cumsum(breathing_rate_per_min(nhr) / 60.0) * DT_S
+    beats = [float(rng.uniform(0.0, 0.8))]
+    ar = 0.0
+    while beats[-1] < t[-1] - 2.0:
+        k = min(int(beats[-1] / DT_S), t.size - 1)
+        calm = 1.0 - 0.8 * nhr[k]  # variability shrinks with effort
+        ar = 0.6 * ar + rng.normal(0.0, hp.ar_sd_frac * calm)
+        rsa = hp.rsa_frac * calm * np.sin(resp_phase[k])
+        beats.append(beats[-1] + 60.0 / hr[k] * (1.0 + rsa + ar))
+    return np.array(beats)

@@ -1,0 +1,288 @@
+"""The shipped sample lab (sample_sessions/): variety, every stage's reader, the serial path end to
+end, raters against the ground truth, the reliability round, size and deterministic regeneration.
+"""
+
+from __future__ import annotations
+
+import filecmp
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from annotate.keyframes import read_annotations
+from annotate.reliability import mean_abs_disagreement_pct, read_poses, read_ratings
+from capture_tool.hr_csv import format_hr_row, read_hr_csv
+from capture_tool.protocols import get_decoder
+from capture_tool.recorder import decode_serlog
+from capture_tool.serlog import read_serlog
+from capture_tool.session import list_sessions, read_session, validate_session
+
+from .capture_tool.capture_helpers import content, effortface, start_replay
+
+ROOT = Path(__file__).resolve().parents[1]
+LAB = ROOT / "sample_sessions"
+TRUTH = LAB / "_ground_truth"
+GENERATE = LAB / "generate.py"
+SESSIONS = list_sessions(LAB) if LAB.is_dir() else []
+RATERS = ("R1", "R2", "R3")
+MAX_BYTES = 25 * 1024 * 1024
+
+
+def _lab_truth() -> dict:
+    return json.loads((TRUTH / "lab.json").read_text())
+
+
+def _true_weights(session: Path) -> tuple[np.ndarray, np.ndarray]:
+    """Frames and true weights (n, 4) of a session, from the ground truth."""
+    t = np.genfromtxt(TRUTH / session.name / "blendshapes.csv", delimiter=",", names=True)
+    names = ("mouth_stretch", "mouth_open", "eye_squint", "brow_lower")
+    return t["frame"], np.column_stack([t[n] for n in names])
+
+
+def _ids(paths: list[Path]) -> list[str]:
+    return [p.name.split("_")[0] for p in paths]
+
+
+# ----------------------------------------------------------------------------- the lab itself
+def test_the_lab_has_the_papers_variety() -> None:
+    assert 6 <= len(SESSIONS) <= 8
+    people = [read_session(s).participant for s in SESSIONS]
+    assert {p.sex for p in people} == {"female", "male"}
+    ages = [p.age for p in people]
+    assert 20 <= min(ages) and max(ages) <= 46 and max(ages) - min(ages) >= 20
+    tls = [p.training_level for p in people]
+    assert min(tls) <= 1.0 and max(tls) >= 7.0 and all(0 <= t <= 7.5 for t in tls)
+    expressiveness = [max(v["expressiveness"]) for v in _lab_truth()["participants"].values()]
+    assert min(expressiveness) <= 0.35 and max(expressiveness) >= 0.95  # neutral ... pronounced
+    kinds = [read_session(s).info.extra["simulated"]["kind"] for s in SESSIONS]
+    assert set(kinds) == {"cardio", "strength"}
+    protocols = {read_session(s).devices["heart_rate"]["protocol"] for s in SESSIONS}
+    assert protocols == {"ant", "hxm", "hrmi", "lines"}
+
+
+@pytest.mark.parametrize("session", SESSIONS, ids=_ids(SESSIONS))
+def test_session_validates_and_opens_in_every_reader(session: Path) -> None:
+    assert validate_session(session) == []
+    s = read_session(session)
+    assert 180 <= s.frame_times_s[-1] <= 360  # 3 to 6 minutes
+    assert read_hr_csv(session / "heart_rate.csv") == s.heart_rate
+    for rater in RATERS:
+        ann = read_annotations(session / "annotations" / f"{rater}.json")
+        assert ann.session_id == session.name and all(len(t) > 10 for t in ann.tracks.values())
+    work = np.genfromtxt(session / "work.csv", delimiter=",", names=True)
+    assert work.dtype.names == ("t_s", "w_per_kg", "p_per_kg") and np.all(np.diff(work["t_s"]) > 0)
+    phases = [e for e in s.events if e.kind == "phase_start"]
+    assert len(phases) >= 5 and {e.label for e in phases} & {"rest"}  # bouts with recovery
+    log = read_serlog(s.serlog_paths()[0])
+    assert log.header["protocol"] == s.devices["heart_rate"]["protocol"]
+
+
+def test_motion_clip_opens_in_the_motion_reader_and_agrees_with_work_csv() -> None:
+    """The assembled squats clip sits in its squat set, and train.energy's w of it (with the
+    participant's mass and back load) agrees with work.csv over that set within 25 %."""
+    from train.energy import work_and_power
+    from train.motion import read_motion
+    from train.segments import Loads, build_body
+
+    with_motion = [s for s in SESSIONS if (s / "motion").is_dir()]
+    assert with_motion, "expected one strength session with motion/"
+    for session in with_motion:
+        s = read_session(session)
+        meta = json.loads((session / "motion" / "motion.json").read_text())
+        for item in meta["files"]:
+            motion = read_motion(session / "motion" / item["path"])
+            starts = {e.t_s: e.label for e in s.events if e.kind == "phase_start"}
+            assert starts[item["offset_s"]] == "squats"
+            duration_s = motion.n_frames / motion.fps
+            assert duration_s == pytest.approx(35, abs=1)
+            body = build_body(motion.joint_names, motion.parents, s.participant.mass_kg, s.participant.sex,
+                              loads=Loads(back_kg=item["load_back_kg"]), reference_positions_m=motion.positions_m)
+            w_clip = work_and_power(motion, body).w_per_kg.mean()
+            work = np.genfromtxt(session / "work.csv", delimiter=",", names=True)
+            inside = (work["t_s"] >= item["offset_s"] + 3) & (work["t_s"] < item["offset_s"] + duration_s)
+            assert w_clip == pytest.approx(work["w_per_kg"][inside].mean(), rel=0.25)
+
+
+# ------------------------------------------------------------------------- the serial path
+@pytest.mark.parametrize("session", SESSIONS, ids=_ids(SESSIONS))
+def test_heart_rate_csv_is_the_serlog_decoded_by_the_project(session: Path) -> None:
+    serlog = read_session(session).serlog_paths()[0]
+    rows = (session / "heart_rate.csv").read_text().splitlines()[1:]
+    assert rows == [format_hr_row(s) for s in decode_serlog(serlog)]
+    log = read_serlog(serlog)
+    decoder = get_decoder(log.header["protocol"])
+    for t_s, data in log.data_chunks():
+        decoder.feed(data, t_s)
+    decoder.finish()
+    assert decoder.stats.frames_bad >= 3  # the corrupted bytes were seen and dropped
+
+
+@pytest.mark.parametrize("session", SESSIONS, ids=_ids(SESSIONS))
+def test_decoded_heart_rate_follows_the_true_heart_and_shows_the_contact_loss(session: Path) -> None:
+    hr = read_session(session).heart_rate
+    truth = json.loads((TRUTH / session.name / "session_truth.json").read_text())
+    phys = np.genfromtxt(TRUTH / session.name / "physiology.csv", delimiter=",", names=True)
+    valid = [(h.t_s, h.hr_bpm) for h in hr if h.valid]
+    t, bpm = np.array(valid).T
+    err = bpm - np.interp(t, phys["t_s"], phys["hr_bpm"])
+    assert np.median(np.abs(err)) < 3.0
+    a, b = truth["faults"]["contact_loss_s"]
+    assert any(not h.valid and a <= h.t_s <= b + 1 for h in hr)
+    assert not any(h.valid and a + 2.5 <= h.t_s < b for h in hr)
+
+
+def test_replaying_a_serlog_into_capture_reproduces_heart_rate_csv(tmp_path) -> None:
+    """The ANT session's serlog through a pseudo-terminal into ``effortface capture``, 25x."""
+    session = next(s for s in SESSIONS if read_session(s).devices["heart_rate"]["protocol"] == "ant")
+    expected = read_session(session).heart_rate
+    replay, pty = start_replay(read_session(session).serlog_paths()[0], "--speed", "25")
+    cap = subprocess.Popen(effortface("capture", "--port", pty, "--protocol", "ant", "--participant", "P01",
+                                      "--no-video", "--out", tmp_path), stdout=subprocess.PIPE,
+                           stderr=subprocess.PIPE, text=True)
+    out = Path(cap.stdout.readline().strip())
+    deadline = time.monotonic() + 60
+    while _rows(out) < len(expected) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    cap.send_signal(signal.SIGTERM)
+    assert cap.wait(20) == 0, cap.stderr.read()
+    replay.wait(10)
+    got = read_session(out).heart_rate
+    assert content(got) == content(expected)
+    assert np.allclose([g.t_s * 25 for g in got][-1], expected[-1].t_s, atol=25 * 1.0)
+
+
+def _rows(folder: Path) -> int:
+    f = folder / "heart_rate.csv"
+    return max(0, len(f.read_text().splitlines()) - 1) if f.exists() else 0
+
+
+# ------------------------------------------------------------------------- video
+@pytest.mark.parametrize("session", SESSIONS[:2], ids=_ids(SESSIONS[:2]))
+def test_video_has_one_frame_per_timestamp_never_a_nominal_rate(session: Path) -> None:
+    from capture_tool.camera import index_video, read_frame
+
+    s = read_session(session)
+    assert index_video(s.video_path) == len(s.frame_times_s)
+    img = read_frame(s.video_path, len(s.frame_times_s) - 1)
+    cam = s.devices["camera"]
+    assert img.shape == (cam["height"], cam["width"], 3)
+    dt_s = np.diff(s.frame_times_s)
+    assert dt_s.std() > 0.002 and dt_s.max() > 1.3 / cam["fps"]  # jitter and late frames
+    assert abs(np.median(dt_s) * cam["fps"] - 1) < 0.02
+
+
+def test_video_shows_the_true_mouth_opening() -> None:
+    """Frames whose true mouth_open is highest show far more open mouth than the lowest ones."""
+    from capture_tool.camera import read_frame
+
+    session = max(SESSIONS, key=lambda s: _true_weights(s)[1][:, 1].max())
+    frames, truth = _true_weights(session)
+    order = np.argsort(truth[:, 1])
+    video = read_session(session).video_path
+
+    def dark_mouth_px(k: int) -> int:
+        img = read_frame(video, int(frames[k])).astype(int)
+        lower = img[int(0.6 * img.shape[0]):]
+        return int((np.abs(lower - np.array([40, 30, 110])).max(axis=2) <= 35).sum())
+
+    low = [dark_mouth_px(k) for k in order[:15]]
+    high = [dark_mouth_px(k) for k in order[-15:]]
+    assert truth[order[-15:], 1].min() > 0.3
+    assert np.mean(high) > 3 * max(np.mean(low), 1.0) and np.mean(high) - np.mean(low) > 30
+
+
+# ------------------------------------------------------------------------- annotations
+def test_raters_match_the_truth_within_the_designed_error() -> None:
+    design = _lab_truth()["raters"]
+    signed: dict[str, list[np.ndarray]] = {r: [] for r in RATERS}
+    for session in SESSIONS:
+        frames, truth = _true_weights(session)
+        for rater in RATERS:
+            w = read_annotations(session / "annotations" / f"{rater}.json").weights(frames)
+            mae = np.abs(w - truth).mean(axis=0)
+            assert np.all(mae <= design[rater]["designed_mae"]), (session.name, rater, mae)
+            assert np.all(mae >= 0.005), "a rater is not the truth"
+            inside = (truth > 0.15) & (truth < 0.85)  # away from the clipping at 0 and 1
+            signed[rater].append(np.where(inside, w - truth, np.nan))
+    for rater in RATERS:
+        bias = np.nanmean(np.vstack(signed[rater]), axis=0)
+        np.testing.assert_allclose(bias, design[rater]["bias"], atol=0.02)
+
+
+def test_reliability_round_disagreement_is_near_the_papers() -> None:
+    poses = read_poses(LAB / "reliability" / "poses.csv")
+    ratings = read_ratings(LAB / "reliability" / "ratings.csv")
+    assert len(poses) == 18 and len(ratings) == 18 * 3 * 4
+    assert {r.rater for r in ratings} == set(RATERS)
+    assert 8.0 <= mean_abs_disagreement_pct(ratings) <= 14.0
+    by_id = {s.name: read_session(s).frame_times_s for s in SESSIONS}
+    for pose in poses:
+        assert by_id[pose.session_id][pose.frame] == pytest.approx(pose.t_s, abs=1e-4)
+
+
+def test_training_stage_builds_its_table_from_the_lab() -> None:
+    from train.dataset import sessions_table
+
+    table = sessions_table([LAB])
+    assert table["participant"].nunique() == len(SESSIONS)
+    assert table["hr_bpm"].notna().mean() > 0.9 and table["mouth_open"].notna().mean() > 0.9
+
+
+# ------------------------------------------------------------------------- size, regeneration
+def test_committed_size_is_at_most_25_mb() -> None:
+    size = sum(p.stat().st_size for p in LAB.rglob("*") if p.is_file() and "__pycache__" not in p.parts)
+    print(f"sample_sessions: {size / 1e6:.1f} MB")
+    assert size <= MAX_BYTES
+
+
+def _generate(*args: object) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, str(GENERATE), *map(str, args)], capture_output=True,
+                          text=True, timeout=120)
+
+
+def test_regenerating_a_session_is_byte_identical(tmp_path) -> None:
+    """The shortest session regenerated alone equals the committed one, file for file.
+
+    Video tolerance: none needed with the same OpenCV/libjpeg build (JPEG encoding is
+    deterministic); another libjpeg may round differently, so a differing ``video.avi`` is
+    accepted only if every decoded frame is within 3 grey levels on average.
+    """
+    session = min(SESSIONS, key=lambda s: read_session(s).frame_times_s[-1])
+    done = _generate("--only", session.name, "--out", tmp_path)
+    assert done.returncode == 0, done.stderr
+    for ours, theirs in ((session, tmp_path / session.name), (TRUTH / session.name, tmp_path / "_ground_truth" / session.name)):
+        files = sorted(p.relative_to(ours) for p in ours.rglob("*") if p.is_file())
+        assert files == sorted(p.relative_to(theirs) for p in theirs.rglob("*") if p.is_file())
+        for rel in files:
+            if not filecmp.cmp(ours / rel, theirs / rel, shallow=False):
+                assert rel.suffix == ".avi", f"{rel} differs"
+                _assert_videos_close(ours / rel, theirs / rel)
+
+
+def _assert_videos_close(a: Path, b: Path) -> None:
+    import cv2
+
+    ca, cb = cv2.VideoCapture(str(a)), cv2.VideoCapture(str(b))
+    while True:
+        oka, fa = ca.read()
+        okb, fb = cb.read()
+        assert oka == okb
+        if not oka:
+            return
+        assert np.abs(fa.astype(int) - fb.astype(int)).mean() < 3
+
+
+def test_generator_refuses_to_overwrite_and_names_bad_options(tmp_path) -> None:
+    (tmp_path / SESSIONS[0].name).mkdir()
+    (tmp_path / SESSIONS[0].name / "keep.txt").write_text("mine")
+    done = _generate("--only", SESSIONS[0].name, "--out", tmp_path)
+    assert done.returncode == 2 and "refusing to overwrite (use --force)" in done.stderr
+    assert SESSIONS[0].name in done.stderr and (tmp_path / SESSIONS[0].name / "keep.txt").exists()
+    done = _generate("--only", "P99_20260101-000000", "--out", tmp_path)
+    assert done.returncode == 2 and "--only: expected one of" in done.stderr
