@@ -1,0 +1,125 @@
+"""Model bundle: write -> read round trip, refusal to overwrite, and a table of bad bundles."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from sklearn.preprocessing import StandardScaler
+from sklearn.svm import SVR
+
+from annotate.blendshapes import DEFAULT_SET
+from capture_tool.errors import UserError
+from train.bundle import BundleFormatError, ModelBundle, read_bundle, write_bundle
+from train.face import SvrModel
+from train.physiology import NhrParams, NhrRegression
+
+
+def make_bundle(seed: int = 0, n: int = 200) -> ModelBundle:
+    """A bundle from real scikit-learn fits on random data (also used by the runtime tests)."""
+    rng = np.random.default_rng(seed)
+    x = np.column_stack([rng.uniform(0, 25, n), rng.uniform(0, 40, n), rng.uniform(0, 1, n),
+                         rng.uniform(0, 1, n)])
+    scaler = StandardScaler().fit(x)
+    z = scaler.transform(x)
+    svrs = [SVR(C=10.0, gamma=0.5, epsilon=0.05).fit(z, np.clip(z @ rng.normal(size=4) / 4 + 0.5,
+                                                                0, 1)) for _ in DEFAULT_SET.names]
+    model = SvrModel.from_estimators(svrs, scaler.mean_, scaler.scale_)
+    return ModelBundle(
+        blendshapes=DEFAULT_SET, scaler_mean=scaler.mean_, scaler_scale=scaler.scale_,
+        nhr_coefficients=NhrParams(8.0, 0.004, 0.001), nhr_regression=NhrRegression(),
+        svr_hyperparameters=[{"C": 10.0, "gamma": 0.5, "epsilon": 0.05} for _ in svrs],
+        support_vectors=model.support_vectors, dual_coef=model.dual_coef,
+        intercept=model.intercept, metrics={"r_mean": 0.8}, provenance={"data": "random"})
+
+
+def test_round_trip(tmp_path: Path) -> None:
+    bundle = make_bundle()
+    write_bundle(bundle, tmp_path / "m")
+    back = read_bundle(tmp_path / "m")
+    assert back.blendshapes == DEFAULT_SET
+    assert back.nhr_regression == NhrRegression()
+    assert back.nhr_coefficients == NhrParams(8.0, 0.004, 0.001)
+    assert back.metrics == {"r_mean": 0.8} and back.provenance == {"data": "random"}
+    assert back.physiology == bundle.physiology
+    x = np.random.default_rng(1).uniform(0, 1, (50, 4)) * [20, 30, 1, 1]
+    np.testing.assert_array_equal(back.face_model().predict(x), bundle.face_model().predict(x))
+    doc = json.loads((tmp_path / "m" / "model.json").read_text())
+    assert [f["name"] for f in doc["features"]] == ["w_per_kg", "p_per_kg", "nhr", "epoc_norm"]
+    assert doc["blendshapes"][1]["arkit"] == ["jawOpen"]
+    assert doc["svr"][0]["gamma"] == 0.5
+
+
+def test_refuses_to_overwrite_but_tolerates_extra_files(tmp_path: Path) -> None:
+    folder = write_bundle(make_bundle(), tmp_path / "m")
+    (folder / "face.onnx").write_bytes(b"onnx")
+    (folder / "MODEL_CARD.md").write_text("# card\n")
+    read_bundle(folder)  # extra files are ignored
+    with pytest.raises(FileExistsError, match="not empty"):
+        write_bundle(make_bundle(1), folder)
+    write_bundle(make_bundle(1), folder, overwrite=True)
+    assert (folder / "face.onnx").read_bytes() == b"onnx"
+    assert not list(folder.glob("*.tmp"))
+
+
+def _edit_json(folder: Path, edit) -> None:
+    doc = json.loads((folder / "model.json").read_text())
+    edit(doc)
+    (folder / "model.json").write_text(json.dumps(doc))
+
+
+def _edit_npz(folder: Path, edit) -> None:
+    with np.load(folder / "svr.npz") as npz:
+        arrays = dict(npz)
+    edit(arrays)
+    np.savez(folder / "svr.npz", **arrays)
+
+
+BAD = {
+    r"model.json: expected a model file, found none":
+        lambda f: (f / "model.json").unlink(),
+    r"model.json: expected JSON":
+        lambda f: (f / "model.json").write_text("{not json"),
+    r"model.json: schema_version: expected 1, found 7":
+        lambda f: _edit_json(f, lambda d: d.update(schema_version=7)),
+    r"model.json.features: expected \['w_per_kg'":
+        lambda f: _edit_json(f, lambda d: d["features"].reverse()),
+    r"model.json.scaler.mean: expected 4 finite numbers":
+        lambda f: _edit_json(f, lambda d: d["scaler"].update(mean=[0, 1])),
+    r"model.json.nhr.tl_regression.c_inc: expected field 'slope'":
+        lambda f: _edit_json(f, lambda d: d["nhr"]["tl_regression"]["c_inc"].pop("slope")),
+    r"model.json.svr\[2\].gamma: expected a positive finite number, found -1":
+        lambda f: _edit_json(f, lambda d: d["svr"][2].update(gamma=-1)),
+    r"model.json.svr\[0\].gamma: expected int or float, found str 'scale'":
+        lambda f: _edit_json(f, lambda d: d["svr"][0].update(gamma="scale")),
+    r"model.json.physiology.hr_max_formula: expected one of tanaka":
+        lambda f: _edit_json(f, lambda d: d["physiology"].update(hr_max_formula="karvonen")),
+    r"model.json.svr: expected one entry per blendshape":
+        lambda f: _edit_json(f, lambda d: d["svr"].pop()),
+    r"svr.npz: expected the SVR arrays file, found none":
+        lambda f: (f / "svr.npz").unlink(),
+    r"svr.npz: expected arrays dual_coef_eye_squint":
+        lambda f: _edit_npz(f, lambda a: a.pop("dual_coef_eye_squint")),
+    r"svr.npz: expected a numpy .npz without pickles":
+        lambda f: _edit_npz(f, lambda a: a.update(intercept=np.array([{"x": 1}], dtype=object))),
+    r"svr.npz: SVR 1: expected one dual coefficient per support vector":
+        lambda f: _edit_npz(f, lambda a: a.update(dual_coef_mouth_open=np.ones(1))),
+    r"svr.npz: support_vectors: expected shape \(n, 4\)":
+        lambda f: _edit_npz(f, lambda a: a.update(support_vectors_brow_lower=np.ones((2, 3)))),
+}
+
+
+@pytest.mark.parametrize(("message", "corrupt"), BAD.items(), ids=list(BAD))
+def test_bad_bundles_name_file_and_field(tmp_path: Path, message: str, corrupt) -> None:
+    folder = write_bundle(make_bundle(), tmp_path / "m")
+    corrupt(folder)
+    with pytest.raises(BundleFormatError, match=message) as info:
+        read_bundle(folder)
+    assert isinstance(info.value, UserError) and "\n" not in str(info.value)
+
+
+def test_missing_folder(tmp_path: Path) -> None:
+    with pytest.raises(BundleFormatError, match="expected a model folder"):
+        read_bundle(tmp_path / "nowhere")

@@ -1,0 +1,173 @@
+"""The runtime API: Character validation, whole-clip synthesis, streams, crowds, bundles."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from capture_tool.errors import UserError
+from tests.train.test_bundle import make_bundle
+from train.bundle import write_bundle
+from train.motion import motion_from_positions, read_motion
+from train.runtime import CURVE_COLUMNS, Character, load_model
+
+ROOT = Path(__file__).resolve().parents[2]
+JJ = "motion/cmu_13_29_jumping_jacks_120fps.bvh"
+
+
+@pytest.fixture(scope="module")
+def jumping_jacks(shared_data: Path):
+    return read_motion(shared_data / JJ)
+
+
+BAD_CHARACTERS = {
+    r"mass_kg: expected a body mass above 0 kg, got -75": dict(mass_kg=-75),
+    r"training_level: expected a number from 0 to 10, found 11": dict(training_level=11),
+    r"training_level: expected a number from 0 to 10, found -1": dict(training_level=-1),
+    r"sex: expected 'male' or 'female', found 'robot'": dict(sex="robot"),
+    r"age: expected a number from 10 to 100 years, found 300": dict(age=300),
+    r"height_m: expected a number from 0.5 to 2.6 m, found 178": dict(height_m=178),
+    r"expressiveness: expected numbers >= 0, found \(1, -1, 1, 1\)": dict(expressiveness=(1, -1, 1, 1)),
+    r"expressiveness: expected a sequence of numbers, found 'big'": dict(expressiveness="big"),
+    r"load_left_kg: expected a load of 0 kg or more, found -3": dict(load_left_kg=-3),
+    r"hr_max_bpm: expected a number from 25 to 250 bpm, found 900": dict(hr_max_bpm=900),
+}
+
+
+@pytest.mark.parametrize(("message", "fields"), BAD_CHARACTERS.items(), ids=list(BAD_CHARACTERS))
+def test_bad_characters(message: str, fields: dict) -> None:
+    with pytest.raises(UserError, match=message) as info:
+        Character(**fields)
+    assert "\n" not in str(info.value)
+
+
+def test_expressiveness_length_is_checked_against_the_model(jumping_jacks) -> None:
+    model = load_model("default")
+    with pytest.raises(UserError, match=r"expressiveness: expected 4 values \(mouth_stretch, "
+                                        r"mouth_open, eye_squint, brow_lower\), found 3"):
+        model.synthesize(jumping_jacks, Character(expressiveness=(1, 1, 1)))
+    with pytest.raises(UserError, match="expected 4 values"):
+        model.stream(Character(expressiveness=(1,) * 5), jumping_jacks)
+
+
+def test_synthesize_a_real_clip(shared_data: Path) -> None:
+    model = load_model("default")
+    hero = Character()
+    curves = model.synthesize(shared_data / JJ, hero)
+    assert tuple(curves) == CURVE_COLUMNS + ("mouth_stretch", "mouth_open", "eye_squint",
+                                             "brow_lower")
+    assert {len(v) for v in curves.values()} == {439}
+    params = model.physiology_params(hero)
+    assert params.hr_rest_bpm <= curves["hr_bpm"].min() <= curves["hr_bpm"].max() <= params.hr_max_bpm
+    weights = np.column_stack([curves[n] for n in model.blendshapes.names])
+    assert weights.min() >= 0 and weights.max() <= 1
+    assert curves["eye_squint"].max() > 0.3  # jumping jacks show exertion
+    assert 6 < np.median(curves["w_per_kg"][120:]) < 12
+
+
+def test_expressiveness_and_loads_change_the_face(jumping_jacks) -> None:
+    model = load_model("default")
+    base = model.synthesize(jumping_jacks, Character())
+    soft = model.synthesize(jumping_jacks, Character(expressiveness=(0.5, 1, 1, 0)))
+    np.testing.assert_allclose(soft["mouth_stretch"], 0.5 * base["mouth_stretch"])
+    assert soft["brow_lower"].max() == 0
+    loaded = model.synthesize(jumping_jacks, Character(load_left_kg=10, load_right_kg=10))
+    assert loaded["w_per_kg"][120:].mean() > base["w_per_kg"][120:].mean()
+    assert loaded["mouth_stretch"][120:].mean() > base["mouth_stretch"][120:].mean()
+
+
+def test_training_level_slows_the_heart_rate(jumping_jacks) -> None:
+    tiled = dataclasses.replace(jumping_jacks,
+                                positions_m=np.tile(jumping_jacks.positions_m[1:], (30, 1, 1)),
+                                rotations=None)  # about 110 s of jumping jacks
+    model = load_model("default")
+    unfit = model.synthesize(tiled, Character(training_level=0))["nhr"][-1]
+    athlete = model.synthesize(tiled, Character(training_level=10))["nhr"][-1]
+    assert unfit > 0.3 and athlete < unfit
+
+
+def _stream_curves(model, character, motion, causal_rotations: bool) -> dict[str, np.ndarray]:
+    live = model.stream(character, motion)
+    rows = []
+    for k, frame in enumerate(motion.positions_m):
+        rot = motion.rotations[k] if causal_rotations else None
+        live.step(frame, 1 / motion.fps, rot)
+        rows.append(live.last)
+    return {key: np.array([r[key] for r in rows]) for key in rows[0]}
+
+
+@pytest.mark.parametrize("model_name", ["default", "bundle"])
+def test_streaming_equals_whole_clip(jumping_jacks, tmp_path: Path, model_name: str) -> None:
+    path = "default" if model_name == "default" else write_bundle(make_bundle(), tmp_path / "m")
+    model = load_model(path)
+    hero = Character(training_level=2, expressiveness=(1, 0.8, 1.2, 1))
+    whole = model.synthesize(jumping_jacks, hero, causal=True)
+    streamed = _stream_curves(model, hero, jumping_jacks, causal_rotations=True)
+    assert list(streamed) == list(whole)
+    for key in whole:
+        np.testing.assert_allclose(streamed[key], whole[key], rtol=1e-9, atol=1e-9, err_msg=key)
+
+
+def test_crowd_equals_single_streams(jumping_jacks, tmp_path: Path) -> None:
+    model = load_model(write_bundle(make_bundle(), tmp_path / "m"))
+    crowd_chars = [Character(training_level=tl, mass_kg=m, expressiveness=(1, 1, e, 1))
+                   for tl, m, e in [(0, 60, 1), (5, 80, 0.5), (10, 100, 1.5)]]
+    skeleton = motion_from_positions(jumping_jacks.positions_m[:2], jumping_jacks.joint_names,
+                                     jumping_jacks.parents, jumping_jacks.fps)
+    crowd = model.stream_batch(crowd_chars, skeleton)
+    singles = [model.stream(c, skeleton) for c in crowd_chars]
+    frames = jumping_jacks.positions_m[:200]
+    for k, frame in enumerate(frames):
+        # each character a few frames out of phase
+        positions = np.stack([frames[(k + 7 * i) % len(frames)] for i in range(3)])
+        together = crowd.step(positions, 1 / 120)
+        apart = np.stack([s.step(p, 1 / 120) for s, p in zip(singles, positions)])
+        np.testing.assert_allclose(together, apart, rtol=0, atol=1e-10)
+    with pytest.raises(UserError, match=r"positions_m: expected shape \(3, J, 3\)"):
+        crowd.step(frames[:2], 1 / 120)
+
+
+def test_bundle_model_uses_its_svr(jumping_jacks, tmp_path: Path) -> None:
+    bundle = make_bundle(3)
+    model = load_model(write_bundle(bundle, tmp_path / "m"))
+    curves = model.synthesize(jumping_jacks, Character())
+    x = np.column_stack([curves["w_per_kg"], curves["p_per_kg"], curves["nhr"],
+                         curves["epoc"] / bundle.epoc_params().scale_ml_per_kg])
+    expected = np.clip(bundle.face_model().predict(x), 0, 1)
+    np.testing.assert_allclose(np.column_stack([curves[n] for n in model.blendshapes.names]),
+                               expected, atol=1e-10)
+
+
+def test_load_model_errors(tmp_path: Path) -> None:
+    with pytest.raises(UserError, match="nowhere: expected a model folder"):
+        load_model(tmp_path / "nowhere")
+
+
+def test_runtime_imports_numpy_and_scipy_only() -> None:
+    """What numpy and scipy pull in themselves is theirs; the runtime adds only project modules."""
+    code = ("import sys, json, numpy, scipy, scipy.signal; before = set(sys.modules);"
+            "import train.runtime;"
+            "new = {m.split('.')[0] for m in set(sys.modules) - before};"
+            "print(json.dumps(sorted(m for m in new if m not in sys.stdlib_module_names)))")
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True,
+                         check=True)
+    added = set(json.loads(out.stdout.strip().splitlines()[-1]))
+    assert added <= {"train", "annotate", "capture_tool"}, sorted(added)
+
+
+def test_rule_face_orders_the_real_clips(shared_data: Path) -> None:
+    """Default model: squats and walking < jumping jacks < running (mean over the clip's last 3/4)."""
+    model = load_model("default")
+    clips = ["cmu_13_29_squats_120fps.bvh", "amp_humanoid_walk.npz",
+             "cmu_13_29_jumping_jacks_120fps.bvh", "amp_humanoid_run.npz"]
+    squint = []
+    for name in clips:
+        curves = model.synthesize(shared_data / "motion" / name, Character(training_level=0))
+        squint.append(curves["eye_squint"][len(curves["t_s"]) // 4:].mean())
+    assert max(squint[:2]) < 0.2 < squint[2] < squint[3]

@@ -1,0 +1,174 @@
+"""``effortface synth``: CSV and Live Link Face output on a real clip, refusals, bad input (exit 2)."""
+
+from __future__ import annotations
+
+import csv
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from effortface.cli import main
+from tests.train.test_bundle import make_bundle
+from train.bundle import write_bundle
+from train.commands.synth import LIVELINK_BLENDSHAPES, livelink_timecode
+
+ROOT = Path(__file__).resolve().parents[2]
+JJ = "motion/cmu_13_29_jumping_jacks_120fps.bvh"
+COLUMNS = ["t_s", "w_per_kg", "p_per_kg", "nhr", "hr_bpm", "vo2", "resp_rate", "epoc",
+           "mouth_stretch", "mouth_open", "eye_squint", "brow_lower"]
+
+
+def _rows(path: Path) -> list[dict[str, str]]:
+    with path.open(newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def test_synth_default_model_end_to_end(shared_data: Path, tmp_path: Path) -> None:
+    """The documented command, run as a real process."""
+    out = tmp_path / "x.csv"
+    done = subprocess.run([sys.executable, "-m", "effortface", "synth", "default",
+                           str(shared_data / JJ), "--out", str(out)],
+                          cwd=ROOT, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    rows = _rows(out)
+    assert list(rows[0]) == COLUMNS and len(rows) == 439
+    t = np.array([float(r["t_s"]) for r in rows])
+    np.testing.assert_allclose(np.diff(t), 1 / 120, atol=1e-8)
+    assert max(float(r["eye_squint"]) for r in rows) > 0.3
+
+
+def test_synth_character_options_and_bundle(shared_data: Path, tmp_path: Path) -> None:
+    model_dir = write_bundle(make_bundle(), tmp_path / "model")
+    plain, loaded = tmp_path / "plain.csv", tmp_path / "loaded.csv"
+    common = ["synth", str(model_dir), str(shared_data / JJ), "--age", "45", "--sex", "female",
+              "--height", "1.65", "--mass", "60", "--training-level", "2"]
+    assert main(common + ["--out", str(plain)]) == 0
+    assert main(common + ["--out", str(loaded), "--load-left", "10", "--load-right", "10",
+                          "--expressiveness", "1,1,0,1"]) == 0
+    a, b = _rows(plain), _rows(loaded)
+    assert float(b[-1]["w_per_kg"]) > float(a[-1]["w_per_kg"])
+    assert all(float(r["eye_squint"]) == 0 for r in b)
+    assert float(a[0]["hr_bpm"]) == pytest.approx(78.2)  # chart: female 36-45, TL 2: 3/5 of
+    # the way from below average (79-84, mid 81.5) to average (74-78, mid 76) = 78.2 bpm
+
+
+def test_livelink_output(shared_data: Path, tmp_path: Path) -> None:
+    out = tmp_path / "take.csv"
+    assert main(["synth", "default", str(shared_data / JJ), "--out", str(out),
+                 "--format", "livelink"]) == 0
+    with out.open(newline="") as f:
+        reader = csv.reader(f)
+        header = next(reader)
+        rows = list(reader)
+    assert header[:4] == ["Timecode", "BlendShapeCount", "EyeBlinkLeft", "EyeLookDownLeft"]
+    assert len(LIVELINK_BLENDSHAPES) == 52 and header[2:54] == list(LIVELINK_BLENDSHAPES)
+    assert header[54:] == ["HeadYaw", "HeadPitch", "HeadRoll", "LeftEyeYaw", "LeftEyePitch",
+                           "LeftEyeRoll", "RightEyeYaw", "RightEyePitch", "RightEyeRoll"]
+    assert len(rows) == 439 and all(r[1] == "61" and len(r) == 63 for r in rows)
+    values = {name: np.array([float(r[i]) for r in rows]) for i, name in enumerate(header) if i > 1}
+    plain = tmp_path / "plain.csv"
+    main(["synth", "default", str(shared_data / JJ), "--out", str(plain)])
+    squint = np.array([float(r["eye_squint"]) for r in _rows(plain)])
+    np.testing.assert_allclose(values["EyeSquintLeft"], squint, atol=1e-6)
+    np.testing.assert_allclose(values["EyeSquintRight"], squint, atol=1e-6)
+    assert values["JawOpen"].max() >= 0 and values["EyeBlinkLeft"].max() == 0
+    assert rows[0][0] == "00:00:00:00.000" and rows[1][0] == "00:00:00:00.500"
+
+
+def test_timecode() -> None:
+    assert livelink_timecode(0.0) == "00:00:00:00.000"
+    assert livelink_timecode(1 / 60) == "00:00:00:01.000"
+    assert livelink_timecode(3725.5) == "01:02:05:30.000"
+
+
+def test_refuses_to_overwrite(shared_data: Path, tmp_path: Path, capsys) -> None:
+    out = tmp_path / "x.csv"
+    out.write_text("keep me\n")
+    assert main(["synth", "default", str(shared_data / JJ), "--out", str(out)]) == 2
+    assert "use --force" in capsys.readouterr().err
+    assert out.read_text() == "keep me\n"
+    assert main(["synth", "default", str(shared_data / JJ), "--out", str(out), "--force"]) == 0
+    assert out.read_text().startswith("t_s,")
+
+
+def _malformed_bvh(shared_data: Path, tmp_path: Path) -> Path:
+    lines = (shared_data / JJ).read_text().splitlines()
+    lines[190] = lines[190].replace(lines[190].split()[3], "1.2.3", 1)  # file line 191
+    bad = tmp_path / "bad.bvh"
+    bad.write_text("\n".join(lines) + "\n")
+    return bad
+
+
+def _unknown_joints_bvh(shared_data: Path, tmp_path: Path) -> Path:
+    text = (shared_data / JJ).read_text()
+    for old in ("LeftUpLeg", "LeftLeg", "LeftFoot"):
+        text = text.replace(f"JOINT {old}\n", f"JOINT Bone_{old.lower()}_x\n")
+    bad = tmp_path / "odd.bvh"
+    bad.write_text(text)
+    return bad
+
+
+BAD_CLI = {
+    r"bad\.bvh.*line 191": lambda d, t: [str(_malformed_bvh(d, t))],
+    r"skeleton joints: .*unmapped segments: .*left_thigh": lambda d, t: [str(_unknown_joints_bvh(d, t))],
+    r"character options: mass_kg: expected a body mass above 0 kg": lambda d, t: [str(d / JJ), "--mass", "-75"],
+    r"character options: training_level: expected a number from 0 to 10, found 12":
+        lambda d, t: [str(d / JJ), "--training-level", "12"],
+    r"character options: expressiveness: expected 4 values": lambda d, t: [str(d / JJ), "--expressiveness", "1,1,1"],
+    r"--expressiveness: expected 4 comma-separated numbers, found 'a,b'":
+        lambda d, t: [str(d / JJ), "--expressiveness", "a,b"],
+    r"character options: sex: expected 'male' or 'female'": lambda d, t: [str(d / JJ), "--sex", "x"],
+    r"character options: load_back_kg: expected a load of 0 kg or more":
+        lambda d, t: [str(d / JJ), "--load-back", "-1"],
+    r"clip\.txt: expected a motion file ending in \.bvh or \.npz":
+        lambda d, t: [str(t / "clip.txt")],
+}
+
+
+@pytest.mark.parametrize(("message", "extra"), BAD_CLI.items(), ids=list(BAD_CLI))
+def test_bad_input_is_one_line_exit_2(shared_data: Path, tmp_path: Path, capsys, message: str,
+                                      extra) -> None:
+    (tmp_path / "clip.txt").write_text("not motion\n")
+    out = tmp_path / "out.csv"
+    status = main(["synth", "default", *extra(shared_data, tmp_path), "--out", str(out)])
+    err = capsys.readouterr().err
+    assert status == 2
+    assert err.count("\n") == 1 and err.startswith("effortface synth: error: "), err
+    assert re.search(message, err), err
+    assert not out.exists()
+
+
+def test_bad_model_dir(shared_data: Path, tmp_path: Path, capsys) -> None:
+    status = main(["synth", str(tmp_path / "nomodel"), str(shared_data / JJ), "--out",
+                   str(tmp_path / "o.csv")])
+    assert status == 2 and "nomodel: expected a model folder" in capsys.readouterr().err
+
+
+def test_user_mapping_file_maps_unknown_joints(shared_data: Path, tmp_path: Path) -> None:
+    """The renamed skeleton that fails above works with a mapping file, giving the same curves."""
+    import json
+
+    from train.segments import CONVENTIONS
+
+    renamed = {"LeftUpLeg": "Bone_leftupleg_x", "LeftLeg": "Bone_leftleg_x",
+               "LeftFoot": "Bone_leftfoot_x"}
+
+    def rename(end):
+        if isinstance(end, str):
+            return "|".join(renamed.get(j, j) for j in end.split("|"))
+        return [rename(e) for e in end]
+
+    mapping = {seg: [rename(p), rename(d)] for seg, (p, d) in CONVENTIONS["CMU"].items()}
+    (tmp_path / "map.json").write_text(json.dumps(mapping))
+    odd = _unknown_joints_bvh(shared_data, tmp_path)
+    assert main(["synth", "default", str(odd), "--out", str(tmp_path / "odd.csv"),
+                 "--mapping", str(tmp_path / "map.json")]) == 0
+    assert main(["synth", "default", str(shared_data / JJ), "--out", str(tmp_path / "jj.csv")]) == 0
+    a, b = _rows(tmp_path / "odd.csv"), _rows(tmp_path / "jj.csv")
+    for key in ("w_per_kg", "hr_bpm", "eye_squint"):
+        np.testing.assert_allclose([float(r[key]) for r in a], [float(r[key]) for r in b],
+                                   rtol=1e-8, err_msg=key)

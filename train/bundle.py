@@ -1,0 +1,343 @@
+"""The model bundle (DESIGN.md "Model bundle"): ``model.json`` + ``svr.npz``, never a pickle.
+
+``model.json`` holds everything small and readable: schema version, the blendshape set with its
+ARKit mapping, feature names and units, the scaler, the NHR coefficients and their training-level
+regressions, the physiology choices, per-blendshape SVR hyper-parameters (gamma as a number),
+metrics and provenance. ``svr.npz`` holds the arrays: ``support_vectors_<b>``, ``dual_coef_<b>``
+for each blendshape name ``b``, and ``intercept`` (B,). It is read with ``allow_pickle=False``.
+
+The training stage adds ``face.onnx`` and ``MODEL_CARD.md`` beside them with its own code;
+:func:`read_bundle` ignores other files. numpy only (the runtime imports this module).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import zipfile
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from annotate.blendshapes import BlendshapeSet
+from capture_tool.errors import UserError
+from train.face import FEATURE_NAMES, FEATURE_UNITS, SvrModel
+from train.physiology import HR_MAX_FORMULAS, EpocParams, NhrParams, NhrRegression
+
+SCHEMA_VERSION = 1
+MODEL_JSON = "model.json"
+SVR_NPZ = "svr.npz"
+
+
+class BundleFormatError(UserError):
+    """A model bundle folder or one of its files does not follow the bundle format."""
+
+
+@dataclasses.dataclass
+class ModelBundle:
+    """A trained model, as exported by the training stage.
+
+    Attributes
+    ----------
+    blendshapes : BlendshapeSet
+        Output blendshapes in order, with their ARKit names.
+    scaler_mean, scaler_scale : ndarray, shape (4,)
+        Feature standardisation for [w_per_kg, p_per_kg, nhr, epoc_norm].
+    nhr_coefficients : NhrParams
+        Pooled NHR coefficients (t_root, c_inc, c_dec), for reference.
+    nhr_regression : NhrRegression
+        (intercept, slope) of t_root, c_inc and c_dec against training level: what the runtime uses.
+    svr_hyperparameters : list of dict
+        Per blendshape ``{"C", "gamma", "epsilon"}``; gamma is a number.
+    support_vectors, dual_coef : list of ndarray
+        Per blendshape, shapes (S_b, 4) and (S_b,).
+    intercept : ndarray, shape (B,)
+        SVR intercepts.
+    physiology : dict
+        Choices: ``hr_max_formula``, ``update_period_s``, ``epoc`` {k_up, tau_s, threshold,
+        scale_ml_per_kg}.
+    metrics, provenance : dict
+        Free-form JSON (scores like the paper's; data, software and date of the fit).
+    """
+
+    blendshapes: BlendshapeSet
+    scaler_mean: np.ndarray
+    scaler_scale: np.ndarray
+    nhr_coefficients: NhrParams
+    nhr_regression: NhrRegression
+    svr_hyperparameters: list[dict[str, float]]
+    support_vectors: list[np.ndarray]
+    dual_coef: list[np.ndarray]
+    intercept: np.ndarray
+    physiology: dict[str, Any] = dataclasses.field(default_factory=lambda: default_physiology())
+    metrics: dict[str, Any] = dataclasses.field(default_factory=dict)
+    provenance: dict[str, Any] = dataclasses.field(default_factory=dict)
+    schema_version: int = SCHEMA_VERSION
+    feature_names: tuple[str, ...] = FEATURE_NAMES
+    feature_units: tuple[str, ...] = FEATURE_UNITS
+
+    def face_model(self) -> SvrModel:
+        """The numpy SVR face model of this bundle."""
+        gammas = [h["gamma"] for h in self.svr_hyperparameters]
+        return SvrModel(self.support_vectors, self.dual_coef, self.intercept, gammas,
+                        self.scaler_mean, self.scaler_scale)
+
+    def epoc_params(self) -> EpocParams:
+        """The EPOC recursion constants recorded in the bundle."""
+        return EpocParams(**self.physiology["epoc"])
+
+
+def default_physiology() -> dict[str, Any]:
+    """The physiology choices of SCIENCE.md (Tanaka HR_max, 1 s updates, default EPOC)."""
+    return {"hr_max_formula": "tanaka", "update_period_s": 1.0,
+            "epoc": dataclasses.asdict(EpocParams())}
+
+
+# --------------------------------------------------------------------------- writing
+
+def _to_json(bundle: ModelBundle) -> dict[str, Any]:
+    reg = bundle.nhr_regression
+    return {
+        "schema_version": bundle.schema_version,
+        "blendshapes": bundle.blendshapes.to_dict(),
+        "features": [{"name": n, "unit": u} for n, u in zip(bundle.feature_names,
+                                                             bundle.feature_units)],
+        "scaler": {"mean": np.asarray(bundle.scaler_mean, float).tolist(),
+                   "scale": np.asarray(bundle.scaler_scale, float).tolist()},
+        "nhr": {"coefficients": {k: float(v) for k, v in
+                                 dataclasses.asdict(bundle.nhr_coefficients).items()},
+                "tl_regression": {k: {"intercept": float(a), "slope": float(b)}
+                                  for k, (a, b) in dataclasses.asdict(reg).items()}},
+        "physiology": bundle.physiology,
+        "svr": [dict(h, blendshape=n, n_support=int(len(a)))
+                for n, h, a in zip(bundle.blendshapes.names, bundle.svr_hyperparameters,
+                                   bundle.dual_coef)],
+        "metrics": bundle.metrics,
+        "provenance": bundle.provenance,
+    }
+
+
+def write_bundle(bundle: ModelBundle, directory: str | os.PathLike, *,
+                 overwrite: bool = False) -> Path:
+    """Write ``model.json`` and ``svr.npz`` into ``directory``.
+
+    Parameters
+    ----------
+    bundle : ModelBundle
+        The model.
+    directory : path
+        Target folder (created if needed).
+    overwrite : bool
+        Replace model.json and svr.npz in an existing non-empty folder (other files are kept).
+
+    Returns
+    -------
+    Path
+        The folder.
+
+    Raises
+    ------
+    FileExistsError
+        If the folder exists and is not empty and ``overwrite`` is False.
+    """
+    directory = Path(directory)
+    if directory.is_dir() and any(directory.iterdir()) and not overwrite:
+        raise FileExistsError(f"{directory}: model folder exists and is not empty "
+                              "(pass overwrite=True to replace it)")
+    directory.mkdir(parents=True, exist_ok=True)
+    text = json.dumps(_to_json(bundle), indent=2, allow_nan=False)
+    _atomic_write(directory / MODEL_JSON, lambda f: f.write(text.encode("utf-8")))
+    arrays = {"intercept": np.asarray(bundle.intercept, float)}
+    for name, sv, coef in zip(bundle.blendshapes.names, bundle.support_vectors, bundle.dual_coef):
+        arrays[f"support_vectors_{name}"] = np.asarray(sv, float)
+        arrays[f"dual_coef_{name}"] = np.asarray(coef, float).ravel()
+    _atomic_write(directory / SVR_NPZ, lambda f: np.savez(f, **arrays))  # type: ignore[arg-type]
+    return directory
+
+
+def _atomic_write(path: Path, write: Any) -> None:
+    """Write through a temporary file and rename, so a crash never leaves half a file."""
+    tmp = path.with_name(path.name + ".tmp")
+    with tmp.open("wb") as f:
+        write(f)
+    os.replace(tmp, path)
+
+
+# --------------------------------------------------------------------------- reading
+
+def _get(d: Mapping[str, Any], key: str, where: str, kind: type | tuple[type, ...]) -> Any:
+    if not isinstance(d, Mapping) or key not in d:
+        raise BundleFormatError(f"{where}: expected field '{key}', found it missing")
+    if not isinstance(d[key], kind):
+        raise BundleFormatError(f"{where}.{key}: expected {_kind_name(kind)}, "
+                                f"found {type(d[key]).__name__} {d[key]!r:.60}")
+    return d[key]
+
+
+def _kind_name(kind: type | tuple[type, ...]) -> str:
+    kinds = kind if isinstance(kind, tuple) else (kind,)
+    return " or ".join(k.__name__ for k in kinds)
+
+
+def _number(d: Mapping[str, Any], key: str, where: str, *, positive: bool = False) -> float:
+    value = _get(d, key, where, (int, float))
+    if isinstance(value, bool) or not np.isfinite(value) or (positive and value <= 0):
+        raise BundleFormatError(f"{where}.{key}: expected a {'positive ' if positive else ''}"
+                                f"finite number, found {value!r}")
+    return float(value)
+
+
+def _vector(d: Mapping[str, Any], key: str, where: str, n: int) -> np.ndarray:
+    values = _get(d, key, where, list)
+    try:
+        arr = np.asarray(values, dtype=float)
+    except (TypeError, ValueError):
+        arr = np.empty(0)
+    if arr.shape != (n,) or not np.all(np.isfinite(arr)):
+        raise BundleFormatError(f"{where}.{key}: expected {n} finite numbers, found {values!r:.80}")
+    return arr
+
+
+def _read_json(path: Path) -> dict[str, Any]:
+    if not path.is_file():
+        raise BundleFormatError(f"{path}: expected a model file, found none "
+                                "(give a model folder or 'default')")
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise BundleFormatError(f"{path}: expected JSON, found {exc}") from None
+    if not isinstance(doc, dict):
+        raise BundleFormatError(f"{path}: expected a JSON object, found {type(doc).__name__}")
+    version = _get(doc, "schema_version", str(path), int)
+    if version != SCHEMA_VERSION:
+        raise BundleFormatError(f"{path}: schema_version: expected {SCHEMA_VERSION}, found {version}")
+    return doc
+
+
+def _read_blendshapes(doc: dict[str, Any], where: str) -> BlendshapeSet:
+    items = _get(doc, "blendshapes", where, list)
+    try:
+        shapes = BlendshapeSet.from_dict(items)
+    except (KeyError, TypeError, AttributeError) as exc:
+        raise BundleFormatError(f"{where}.blendshapes: expected a list of {{name, arkit}}, "
+                                f"found {exc!r}") from None
+    if not shapes.names or len(set(shapes.names)) != len(shapes.names):
+        raise BundleFormatError(f"{where}.blendshapes: expected unique names, found {shapes.names}")
+    return shapes
+
+
+def _read_features(doc: dict[str, Any], where: str) -> None:
+    feats = _get(doc, "features", where, list)
+    names = tuple(f.get("name") if isinstance(f, dict) else f for f in feats)
+    if names != FEATURE_NAMES:
+        raise BundleFormatError(f"{where}.features: expected {list(FEATURE_NAMES)}, "
+                                f"found {list(names)}")
+
+
+def _read_nhr(doc: dict[str, Any], where: str) -> tuple[NhrParams, NhrRegression]:
+    nhr = _get(doc, "nhr", where, dict)
+    coef = _get(nhr, "coefficients", f"{where}.nhr", dict)
+    reg = _get(nhr, "tl_regression", f"{where}.nhr", dict)
+    keys = ("t_root", "c_inc", "c_dec")
+    params = NhrParams(*(_number(coef, k, f"{where}.nhr.coefficients") for k in keys))
+    lines = [_get(reg, k, f"{where}.nhr.tl_regression", dict) for k in keys]
+    pairs = [(_number(d, "intercept", f"{where}.nhr.tl_regression.{k}"),
+              _number(d, "slope", f"{where}.nhr.tl_regression.{k}")) for k, d in zip(keys, lines)]
+    return params, NhrRegression(*pairs)
+
+
+def _read_physiology(doc: dict[str, Any], where: str) -> dict[str, Any]:
+    phys = _get(doc, "physiology", where, dict)
+    formula = _get(phys, "hr_max_formula", f"{where}.physiology", str)
+    if formula not in HR_MAX_FORMULAS:
+        raise BundleFormatError(f"{where}.physiology.hr_max_formula: expected one of "
+                                f"{', '.join(HR_MAX_FORMULAS)}, found {formula!r}")
+    period = _number(phys, "update_period_s", f"{where}.physiology", positive=True)
+    epoc = _get(phys, "epoc", f"{where}.physiology", dict)
+    fields = [f.name for f in dataclasses.fields(EpocParams)]
+    epoc_vals = {k: _number(epoc, k, f"{where}.physiology.epoc", positive=k != "threshold")
+                 for k in fields}
+    return {"hr_max_formula": formula, "update_period_s": period, "epoc": epoc_vals}
+
+
+def _read_svr_json(doc: dict[str, Any], where: str, names: tuple[str, ...]) -> list[dict[str, float]]:
+    items = _get(doc, "svr", where, list)
+    if [d.get("blendshape") if isinstance(d, dict) else None for d in items] != list(names):
+        raise BundleFormatError(f"{where}.svr: expected one entry per blendshape {list(names)}, "
+                                f"found {len(items)} entries")
+    return [{k: _number(d, k, f"{where}.svr[{i}]", positive=True) for k in ("C", "gamma", "epsilon")}
+            for i, d in enumerate(items)]
+
+
+def _read_npz(path: Path, names: tuple[str, ...]) -> tuple[list, list, np.ndarray]:
+    if not path.is_file():
+        raise BundleFormatError(f"{path}: expected the SVR arrays file, found none")
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            arrays = {k: npz[k] for k in npz.files}
+    except (OSError, ValueError, zipfile.BadZipFile) as exc:
+        raise BundleFormatError(f"{path}: expected a numpy .npz without pickles, found {exc}") from None
+    wanted = ["intercept"] + [f"{p}_{n}" for n in names for p in ("support_vectors", "dual_coef")]
+    missing = [k for k in wanted if k not in arrays]
+    if missing:
+        raise BundleFormatError(f"{path}: expected arrays {', '.join(missing)}, found "
+                                f"{', '.join(sorted(arrays)) or 'none'}")
+    bad = [k for k in wanted if arrays[k].dtype.kind not in "fi" or not np.all(np.isfinite(arrays[k]))]
+    if bad:
+        raise BundleFormatError(f"{path}: {bad[0]}: expected finite numbers, found dtype "
+                                f"{arrays[bad[0]].dtype}")
+    shapes = [arrays[f"support_vectors_{n}"].shape for n in names]
+    if any(len(sh) != 2 or sh[1] != len(FEATURE_NAMES) for sh in shapes):
+        raise BundleFormatError(f"{path}: support_vectors: expected shape (n, {len(FEATURE_NAMES)}) "
+                                f"per blendshape, found {shapes}")
+    return ([arrays[f"support_vectors_{n}"] for n in names],
+            [arrays[f"dual_coef_{n}"] for n in names], arrays["intercept"])
+
+
+def read_bundle(directory: str | os.PathLike) -> ModelBundle:
+    """Read and validate a model bundle folder.
+
+    Parameters
+    ----------
+    directory : path
+        A folder with ``model.json`` and ``svr.npz`` (other files are ignored).
+
+    Returns
+    -------
+    ModelBundle
+        The model; its arrays are checked against each other.
+
+    Raises
+    ------
+    BundleFormatError
+        A :class:`UserError` naming the file and the field that is missing or wrong.
+    """
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise BundleFormatError(f"{directory}: expected a model folder (model.json, svr.npz) or "
+                                "'default', found no such folder")
+    json_path = directory / MODEL_JSON
+    doc = _read_json(json_path)
+    where = str(json_path)
+    shapes = _read_blendshapes(doc, where)
+    _read_features(doc, where)
+    scaler = _get(doc, "scaler", where, dict)
+    nhr_coef, nhr_reg = _read_nhr(doc, where)
+    bundle = ModelBundle(
+        blendshapes=shapes, scaler_mean=_vector(scaler, "mean", f"{where}.scaler", 4),
+        scaler_scale=_vector(scaler, "scale", f"{where}.scaler", 4),
+        nhr_coefficients=nhr_coef, nhr_regression=nhr_reg,
+        svr_hyperparameters=_read_svr_json(doc, where, shapes.names),
+        support_vectors=[], dual_coef=[], intercept=np.empty(0),
+        physiology=_read_physiology(doc, where),
+        metrics=_get(doc, "metrics", where, dict), provenance=_get(doc, "provenance", where, dict))
+    bundle.support_vectors, bundle.dual_coef, bundle.intercept = _read_npz(directory / SVR_NPZ,
+                                                                           shapes.names)
+    try:
+        bundle.face_model()
+    except UserError as exc:
+        raise BundleFormatError(f"{directory / SVR_NPZ}: {exc}") from None
+    return bundle

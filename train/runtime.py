@@ -1,0 +1,371 @@
+"""The runtime API (DESIGN.md): what game code and animation tools load. numpy and scipy only.
+
+::
+
+    from train.runtime import load_model, Character
+    model = load_model("models/default")           # a bundle folder, or "default" (rule model)
+    hero = Character(age=30, sex="male", height_m=1.78, mass_kg=75, training_level=5,
+                     expressiveness=(1, 1, 1, 1))
+    curves = model.synthesize("clip.bvh", hero)     # whole clip: dict of per-frame arrays
+    live = model.stream(hero, skeleton)             # game loop: one step per frame
+    weights = live.step(joint_positions_m, dt_s)    # (B,) blendshape weights in [0, 1]
+    crowd = model.stream_batch(characters, skeleton)
+    weights = crowd.step(positions_m, dt_s)         # (N, J, 3) -> (N, B), SVR vectorised over N
+
+Per frame: joint positions -> work w and power p (train.energy) -> physiology (NHR once per
+simulated second, train.physiology) -> face model on [w, p, NHR, EPOC_norm] (train.face) ->
+x expressiveness. ``synthesize(..., causal=True)`` uses the streaming (causal) energy filter, and
+then gives the same curves as stepping a stream over the same frames (tested); the default
+zero-phase filter is better for files.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import numbers
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from annotate.blendshapes import DEFAULT_SET, BlendshapeSet
+from capture_tool.errors import UserError
+from train.bundle import default_physiology, read_bundle
+from train.energy import EnergyCrowd, EnergyStream, work_and_power
+from train.face import RuleFaceModel, SvrModel, apply_expressiveness
+from train.motion import Motion, read_motion
+from train.physiology import (PAPER_REGRESSION, EpocParams, NhrRegression, PhysiologyParams,
+                              PhysiologyState, simulate)
+from train.segments import BodyModel, Loads, build_body, check_mass
+
+#: Training levels accepted (choice): the paper's participants span 0-7.5 (the resting-HR chart's
+#: range, clamped above 7.5) and its Fig. 5 animates TL 10; at TL 10 the paper's c_inc is still
+#: positive (0.0013), beyond about 13 it would turn negative.
+TRAINING_LEVEL_RANGE = (0.0, 10.0)
+AGE_RANGE = (10.0, 100.0)
+HEIGHT_RANGE_M = (0.5, 2.6)
+SEXES = ("male", "female")
+#: Frames used for bone lengths (a median over frames; more adds time, not accuracy).
+REFERENCE_FRAMES = 600
+#: Per-frame columns of :meth:`FaceModel.synthesize`, before one column per blendshape.
+CURVE_COLUMNS = ("t_s", "w_per_kg", "p_per_kg", "nhr", "hr_bpm", "vo2", "resp_rate", "epoc")
+
+
+def _in_range(name: str, value: Any, lo: float, hi: float, unit: str = "") -> float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not lo <= float(value) <= hi:
+        raise UserError(f"{name}: expected a number from {lo:g} to {hi:g}{unit}, found {value!r}")
+    return float(value)
+
+
+@dataclasses.dataclass(frozen=True)
+class Character:
+    """A character's body, fitness, loads and expressiveness (validated on creation).
+
+    Parameters
+    ----------
+    age : float
+        Years (10-100).
+    sex : {"male", "female"}
+        Selects the de Leva table, the resting-HR chart row and the VO2max model.
+    height_m : float
+        Height in metres (0.5-2.6).
+    mass_kg : float
+        Body mass in kg (> 0): the divisor of w and p.
+    training_level : float
+        0 (sedentary) to 10, see :data:`TRAINING_LEVEL_RANGE`.
+    expressiveness : sequence of float
+        One factor >= 0 per blendshape of the model (< 1 softens, > 1 exaggerates).
+    load_left_kg, load_right_kg, load_back_kg : float
+        Carried loads (>= 0).
+    hr_rest_bpm, hr_max_bpm : float, optional
+        Measured values; they override the charts.
+
+    Raises
+    ------
+    UserError
+        One line naming the bad field, the expected form and the value found.
+    """
+
+    age: float = 30
+    sex: str = "male"
+    height_m: float = 1.78
+    mass_kg: float = 75
+    training_level: float = 5
+    expressiveness: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0)
+    load_left_kg: float = 0.0
+    load_right_kg: float = 0.0
+    load_back_kg: float = 0.0
+    hr_rest_bpm: float | None = None
+    hr_max_bpm: float | None = None
+
+    def __post_init__(self) -> None:
+        _in_range("age", self.age, *AGE_RANGE, " years")
+        if self.sex not in SEXES:
+            raise UserError(f"sex: expected 'male' or 'female', found {self.sex!r}")
+        _in_range("height_m", self.height_m, *HEIGHT_RANGE_M, " m")
+        check_mass(self.mass_kg)
+        _in_range("training_level", self.training_level, *TRAINING_LEVEL_RANGE)
+        object.__setattr__(self, "expressiveness", _expressiveness(self.expressiveness))
+        for name in ("load_left_kg", "load_right_kg", "load_back_kg"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, numbers.Real) \
+                    or not (math.isfinite(value) and float(value) >= 0):
+                raise UserError(f"{name}: expected a load of 0 kg or more, found {value!r}")
+        for name in ("hr_rest_bpm", "hr_max_bpm"):
+            if getattr(self, name) is not None:
+                _in_range(name, getattr(self, name), 25.0, 250.0, " bpm")
+
+    def loads(self) -> Loads:
+        """The carried loads as :class:`train.segments.Loads`."""
+        return Loads(self.load_left_kg, self.load_right_kg, self.load_back_kg)
+
+
+def _expressiveness(values: Any) -> tuple[float, ...]:
+    try:
+        out = tuple(float(v) for v in values)
+    except (TypeError, ValueError):
+        raise UserError(f"expressiveness: expected a sequence of numbers, found {values!r}") from None
+    if not all(math.isfinite(v) and v >= 0 for v in out):
+        raise UserError(f"expressiveness: expected numbers >= 0, found {values!r}")
+    return out
+
+
+# --------------------------------------------------------------------------- the model
+
+class FaceModel:
+    """A loaded model: NHR regression + physiology choices + face model + blendshape set.
+
+    Use :func:`load_model` to get one.
+    """
+
+    def __init__(self, face: SvrModel | RuleFaceModel, blendshapes: BlendshapeSet,
+                 nhr_regression: NhrRegression = PAPER_REGRESSION,
+                 physiology: dict[str, Any] | None = None, name: str = "default") -> None:
+        self.face = face
+        self.blendshapes = blendshapes
+        self.nhr_regression = nhr_regression
+        self.physiology = physiology or default_physiology()
+        self.name = name
+
+    @property
+    def columns(self) -> tuple[str, ...]:
+        """Curve names returned by :meth:`synthesize`, in order."""
+        return CURVE_COLUMNS + self.blendshapes.names
+
+    def expressiveness(self, character: Character) -> np.ndarray:
+        """The character's expressiveness vector, checked against this model's blendshapes."""
+        e = character.expressiveness
+        if len(e) != len(self.blendshapes):
+            raise UserError(f"expressiveness: expected {len(self.blendshapes)} values "
+                            f"({', '.join(self.blendshapes.names)}), found {len(e)}")
+        return np.asarray(e, dtype=float)
+
+    def physiology_params(self, character: Character) -> PhysiologyParams:
+        """Physiology parameters of a character under this model's choices."""
+        return PhysiologyParams.from_character(
+            character, hr_max_formula=self.physiology["hr_max_formula"],
+            regression=self.nhr_regression, epoc=EpocParams(**self.physiology["epoc"]),
+            update_period_s=self.physiology["update_period_s"])
+
+    def body(self, character: Character, skeleton: Motion, mapping: Any = None) -> BodyModel:
+        """The character's segments on a skeleton (its own bone lengths, the character's mass).
+
+        Bone lengths are medians over at most :data:`REFERENCE_FRAMES` evenly spaced frames.
+        """
+        step = max(1, skeleton.n_frames // REFERENCE_FRAMES)
+        return build_body(skeleton.joint_names, skeleton.parents, character.mass_kg, character.sex,
+                          loads=character.loads(), mapping=mapping,
+                          reference_positions_m=skeleton.positions_m[::step])
+
+    def synthesize(self, motion: str | os.PathLike | Motion, character: Character, *,
+                   mapping: Any = None, causal: bool = False) -> dict[str, np.ndarray]:
+        """Per-frame curves for a whole clip.
+
+        Parameters
+        ----------
+        motion : path or Motion
+            A ``.bvh`` / ``.npz`` file or a :class:`train.motion.Motion`.
+        character : Character
+            Who moves.
+        mapping : dict or path, optional
+            A user joint-to-segment mapping (built-in conventions otherwise).
+        causal : bool
+            Use the streaming (causal) energy filter instead of the zero-phase one, to match
+            :meth:`stream` frame for frame.
+
+        Returns
+        -------
+        dict of ndarray, each (T,)
+            :data:`CURVE_COLUMNS` then one weight curve per blendshape.
+        """
+        e = self.expressiveness(character)
+        motion = motion if isinstance(motion, Motion) else read_motion(Path(motion))
+        body = self.body(character, motion, mapping)
+        energy = work_and_power(motion, body, zero_phase=not causal)
+        return self.curves_from_work(motion.t_s, energy.w_per_kg, energy.p_per_kg,
+                                     1.0 / motion.fps, character, e)
+
+    def curves_from_work(self, t_s: Any, w_per_kg: Any, p_per_kg: Any, dt_s: float,
+                         character: Character, e: np.ndarray | None = None
+                         ) -> dict[str, np.ndarray]:
+        """Physiology and face curves from work and power curves (e.g. a session's work.csv)."""
+        e = self.expressiveness(character) if e is None else e
+        phys = simulate(w_per_kg, dt_s, self.physiology_params(character))
+        features = np.column_stack([w_per_kg, p_per_kg, phys["nhr"], phys["epoc_norm"]])
+        weights = apply_expressiveness(self.face.predict(features), e)
+        curves = {"t_s": np.asarray(t_s, float), "w_per_kg": np.asarray(w_per_kg, float),
+                  "p_per_kg": np.asarray(p_per_kg, float)}
+        curves.update({k: phys[k] for k in CURVE_COLUMNS[3:]})
+        curves.update({n: weights[:, i] for i, n in enumerate(self.blendshapes.names)})
+        return curves
+
+    def stream(self, character: Character, skeleton: Motion, *, mapping: Any = None,
+               fps: float | None = None) -> CharacterStream:
+        """A live stream for one character on a skeleton.
+
+        Parameters
+        ----------
+        character : Character
+        skeleton : Motion
+            Joint names, parents and reference positions (e.g. a rest pose built with
+            :func:`train.motion.motion_from_positions`); its fps is the stream's nominal rate.
+        mapping : dict or path, optional
+            A user joint-to-segment mapping.
+        fps : float, optional
+            Nominal frame rate for the causal filter (default: the skeleton's).
+        """
+        return CharacterStream(self, character, skeleton, mapping=mapping, fps=fps)
+
+    def stream_batch(self, characters: Sequence[Character], skeleton: Motion, *,
+                     mapping: Any = None, fps: float | None = None,
+                     single_precision: bool = False) -> CrowdStream:
+        """A live stream for N characters on one skeleton layout (see :class:`CrowdStream`)."""
+        return CrowdStream(self, characters, skeleton, mapping=mapping, fps=fps,
+                           single_precision=single_precision)
+
+
+# --------------------------------------------------------------------------- streams
+
+class CharacterStream:
+    """One character, one frame at a time (a game loop). Use :meth:`FaceModel.stream`.
+
+    Attributes
+    ----------
+    last : dict
+        The latest values of every curve (:data:`CURVE_COLUMNS` and the blendshape weights).
+    """
+
+    def __init__(self, model: FaceModel, character: Character, skeleton: Motion, *,
+                 mapping: Any = None, fps: float | None = None) -> None:
+        self.model = model
+        self._e = model.expressiveness(character)
+        self._energy = EnergyStream(model.body(character, skeleton, mapping), fps or skeleton.fps)
+        self._state = PhysiologyState(model.physiology_params(character))
+        self.t_s = 0.0
+        self._frames = 0
+        self.last: dict[str, float] = {}
+
+    def step(self, joint_positions_m: Any, dt_s: float, rotations: Any = None) -> np.ndarray:
+        """Advance by one frame: joint positions (J, 3) in metres, Z up, and the time step.
+
+        ``rotations`` (J, 3, 3), the joints' world rotations, are optional (give them on every
+        frame or on none): without them spin about a segment's long axis is not seen.
+
+        Returns
+        -------
+        ndarray, shape (B,)
+            Blendshape weights in [0, 1].
+        """
+        w, p = self._energy.step(np.asarray(joint_positions_m, dtype=float), dt_s, rotations)
+        return self.step_work(w, p, dt_s)
+
+    def step_work(self, w_per_kg: float, p_per_kg: float, dt_s: float) -> np.ndarray:
+        """Advance by one frame from work and power computed elsewhere (W/kg)."""
+        if self._frames:
+            self.t_s += float(dt_s)
+        self._frames += 1
+        phys = self._state.step(w_per_kg, dt_s)
+        x = np.array([[w_per_kg, p_per_kg, phys["nhr"], phys["epoc_norm"]]], dtype=float)
+        weights = apply_expressiveness(self.model.face.predict(x)[0], self._e)
+        self.last = {"t_s": self.t_s, "w_per_kg": float(w_per_kg), "p_per_kg": float(p_per_kg),
+                     **{k: float(phys[k]) for k in CURVE_COLUMNS[3:]},
+                     **dict(zip(self.model.blendshapes.names, weights.tolist()))}
+        return weights
+
+
+class CrowdStream:
+    """N characters stepped together: physiology and the face model are vectorised over N.
+
+    Energies use one causal :class:`~train.energy.EnergyCrowd` vectorised over the characters
+    (each keeps its own body: mass, bone lengths, loads). Engines that compute work themselves call :meth:`step_work`. ``single_precision``
+    evaluates an SVR face model in float32 (faster for big crowds, see
+    :meth:`train.face.SvrModel.predict`).
+    """
+
+    def __init__(self, model: FaceModel, characters: Sequence[Character], skeleton: Motion, *,
+                 mapping: Any = None, fps: float | None = None,
+                 single_precision: bool = False) -> None:
+        if not characters:
+            raise UserError("characters: expected at least one character, found none")
+        self.model = model
+        self._e = np.array([model.expressiveness(c) for c in characters])
+        self._n = len(characters)
+        self._energy = EnergyCrowd([model.body(c, skeleton, mapping) for c in characters],
+                                   fps or skeleton.fps)
+        params = PhysiologyParams.stack([model.physiology_params(c) for c in characters])
+        self._state = PhysiologyState(params)
+        self._predict_kw = ({"single_precision": True}
+                            if single_precision and isinstance(model.face, SvrModel) else {})
+        self.last: dict[str, np.ndarray] = {}
+
+    def __len__(self) -> int:
+        return self._n
+
+    def step(self, positions_m: Any, dt_s: float) -> np.ndarray:
+        """Advance all characters: positions (N, J, 3) in metres -> weights (N, B)."""
+        pos = np.asarray(positions_m, dtype=float)
+        if pos.ndim != 3 or pos.shape[0] != len(self):
+            raise UserError(f"positions_m: expected shape ({len(self)}, J, 3), found {pos.shape}")
+        w_per_kg, p_per_kg = self._energy.step(pos, dt_s)
+        return self.step_work(w_per_kg, p_per_kg, dt_s)
+
+    def step_work(self, w_per_kg: Any, p_per_kg: Any, dt_s: float) -> np.ndarray:
+        """Advance all characters from work and power (N,) computed elsewhere -> weights (N, B)."""
+        phys = self._state.step(w_per_kg, dt_s)
+        x = np.column_stack([w_per_kg, p_per_kg, phys["nhr"], phys["epoc_norm"]])
+        weights = apply_expressiveness(self.model.face.predict(x, **self._predict_kw), self._e)
+        self.last = dict(phys, w_per_kg=np.asarray(w_per_kg), p_per_kg=np.asarray(p_per_kg))
+        return weights
+
+
+# --------------------------------------------------------------------------- loading
+
+def load_model(path: str | os.PathLike | None = "default") -> FaceModel:
+    """Load a model bundle folder, or the built-in rule model for ``"default"`` / None.
+
+    Parameters
+    ----------
+    path : path, "default" or None
+        A folder with ``model.json`` and ``svr.npz`` (see :mod:`train.bundle`).
+
+    Returns
+    -------
+    FaceModel
+
+    Raises
+    ------
+    UserError
+        A missing or malformed bundle (the message names the file and field).
+    """
+    if path is None or str(path) == "default":
+        return FaceModel(RuleFaceModel(DEFAULT_SET), DEFAULT_SET, name="default (rule model)")
+    bundle = read_bundle(Path(path))
+    return FaceModel(bundle.face_model(), bundle.blendshapes, bundle.nhr_regression,
+                     bundle.physiology, name=str(path))
+
+
+__all__ = ["Character", "CharacterStream", "CrowdStream", "FaceModel", "load_model",
+           "CURVE_COLUMNS", "TRAINING_LEVEL_RANGE"]
