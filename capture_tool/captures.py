@@ -53,7 +53,8 @@ def read_timed_capture(path: str | os.PathLike) -> list[Chunk]:
     Returns
     -------
     list of (float, bytes)
-        Chunks with their arrival time in seconds since the first chunk.
+        Chunks with their arrival time in seconds: session time for a ``.serlog`` (so decoding a
+        session's log gives the times of its ``heart_rate.csv``), else since the first chunk.
 
     Raises
     ------
@@ -69,8 +70,8 @@ def read_timed_capture(path: str | os.PathLike) -> list[Chunk]:
     except OSError as exc:
         raise UserError(f"{path}: expected a readable capture file, found {exc.strerror or exc}") from None
     if head.startswith(SERLOG_MAGIC):
-        chunks = list(read_serlog(path).data_chunks())
-    elif head[:4] in _PCAP_MAGICS:
+        return list(read_serlog(path).data_chunks())
+    if head[:4] in _PCAP_MAGICS:
         chunks = _read_pcap(path)
     elif head[:4] == _PCAPNG_MAGIC:
         raise UserError(f"{path}: expected a libpcap file, found pcapng (convert: editcap -F pcap)")

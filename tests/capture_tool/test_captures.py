@@ -58,7 +58,7 @@ def test_serlog_round_trip(tmp_path):
         log.write(10.5, b"\x02\x26")
         log.write_event(10.7, "gap", "unplugged")
         log.write(11.0, b"\x37")
-    assert read_timed_capture(path) == [(0.0, b"\x02\x26"), (0.5, b"\x37")]
+    assert read_timed_capture(path) == [(10.5, b"\x02\x26"), (11.0, b"\x37")]  # session time kept
 
 
 def test_raw_file_without_timing_is_one_chunk(tmp_path):

@@ -6,6 +6,7 @@ import argparse
 import io
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -14,7 +15,7 @@ from capture_tool.commands import decode as cmd
 from capture_tool.errors import SessionFormatError
 from capture_tool.hr_csv import HR_CSV_COLUMNS, format_hr_row, read_hr_csv
 from capture_tool.protocols import HrSample
-from capture_tool.serlog import SerlogWriter
+from capture_tool.serlog import SerlogWriter, read_serlog
 from effortface.cli import main
 
 HXM = "serial/zephyr-bt/120-second-bt-stream-hxm.dat"
@@ -42,7 +43,7 @@ def test_serlog_decodes_like_the_raw_capture(shared_data, tmp_path, capsys):
     log = tmp_path / "hxm.serlog"
     with SerlogWriter(log, {"device": "hxm", "protocol": "hxm"}) as writer:
         for t_s, data in read_timed_capture(shared_data / HXM):
-            writer.write(100.0 + t_s, data)
+            writer.write(t_s, data)
     assert main(["decode", "--protocol", "hxm", str(log)]) == 0
     from_log = capsys.readouterr().out
     assert main(["decode", "--protocol", "hxm", str(shared_data / HXM)]) == 0
@@ -119,3 +120,17 @@ def test_run_writes_to_a_given_stream(shared_data):
     args = argparse.Namespace(protocol="hxm", device_type=None, file=str(shared_data / HXM))
     assert cmd.run(args, out=buf) == 0
     assert len(buf.getvalue().splitlines()) == 143
+
+
+ROOT_SAMPLES = Path(__file__).resolve().parents[2] / "sample_sessions"
+
+
+@pytest.mark.parametrize("session", sorted(
+    p.name for p in ROOT_SAMPLES.glob("P*_*") if (p / "session.json").exists()))
+def test_decode_of_a_session_serlog_is_its_heart_rate_csv(session, capsys):
+    """`effortface decode` keeps a .serlog's session times: it reproduces heart_rate.csv exactly."""
+    folder = ROOT_SAMPLES / session
+    (serlog,) = sorted((folder / "serial").glob("*.serlog"))
+    protocol = read_serlog(serlog).header["protocol"]
+    assert main(["decode", "--protocol", protocol, str(serlog)]) == 0
+    assert capsys.readouterr().out == (folder / "heart_rate.csv").read_text()

@@ -1,0 +1,46 @@
+"""``effortface replay LOG [--speed X] [--unplug-after S]``: a simulated serial port.
+
+The first stdout line is the pseudo-terminal path (flushed at once, so a script can read it);
+replay starts when a program opens that path and ends when the recording has been played and the
+reader closes the port (or ``--unplug-after`` pulls it, or Ctrl-C / SIGTERM).
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+
+from capture_tool.errors import UserError
+from capture_tool.replay import open_pty_replay
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """LOG, --speed, --unplug-after, --wait."""
+    parser.add_argument("log", metavar="LOG", help=".serlog, or a raw capture with its -timing.csv")
+    parser.add_argument("--speed", type=float, default=1.0, help="replay speed factor (default 1: recorded timing)")
+    parser.add_argument("--unplug-after", type=float, default=None, metavar="S",
+                        help="close the port after S seconds of the recording, as if the stick was pulled")
+    parser.add_argument("--wait", type=float, default=60.0, metavar="S",
+                        help="seconds to wait for a program to open the port (default 60)")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Open the pseudo-terminal, print its path, replay, close."""
+    if args.unplug_after is not None and args.unplug_after < 0:
+        raise UserError(f"--unplug-after: expected seconds >= 0, found {args.unplug_after}")
+    replay = open_pty_replay(args.log, speed=args.speed, unplug_after_s=args.unplug_after)
+    signal.signal(signal.SIGTERM, lambda *_: replay.stop())
+    print(replay.path, flush=True)
+    try:
+        if not replay.wait_for_reader(args.wait):
+            print(f"effortface replay: no program opened {replay.path} within {args.wait:g} s", file=sys.stderr)
+            return 1
+        n = replay.play()
+        print(f"replayed {n} bytes", file=sys.stderr, flush=True)
+        replay.hold()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        replay.close()
+    return 0

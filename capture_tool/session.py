@@ -1,0 +1,576 @@
+"""The session folder (schema version 1): the one reader and writer every stage uses.
+
+A session is a folder named ``<participant-code>_<YYYYmmdd-HHMMSS>[_<label>]`` holding::
+
+    session.json              schema_version, session_id, complete, created_utc, participant,
+                              devices, software, optional recovered / stats
+    heart_rate.csv            t_s,hr_bpm,rr_ms,beat_count,device,valid   (capture_tool.hr_csv)
+    events.csv                t_s,kind,label,value
+    serial/<device>.serlog    every raw byte received (capture_tool.serlog)
+    video.avi                 MJPG video
+    video_frames.csv          frame,t_s
+
+All ``t_s`` are seconds since the session start on the host's monotonic clock. This module is
+pandas-free on purpose: annotate, train and the sample-lab generator import it cheaply.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import datetime as _dt
+import json
+import os
+import re
+import tempfile
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any, TextIO
+
+from capture_tool.errors import SessionFormatError, UserError
+from capture_tool.hr_csv import HR_CSV_HEADER, format_hr_row, read_hr_csv
+from capture_tool.protocols import HrSample
+
+SCHEMA_VERSION = 1
+SESSION_JSON = "session.json"
+HEART_RATE_CSV = "heart_rate.csv"
+EVENTS_CSV = "events.csv"
+VIDEO_AVI = "video.avi"
+VIDEO_FRAMES_CSV = "video_frames.csv"
+SERIAL_DIR = "serial"
+EVENTS_HEADER = "t_s,kind,label,value"
+FRAMES_HEADER = "frame,t_s"
+
+#: participant codes: a capital letter, then capitals / digits / '-', 2-16 characters, with a digit
+CODE_RULE = "a capital letter then capitals, digits or '-' (2-16 characters, at least one digit), e.g. P01"
+_CODE_RE = re.compile(r"^[A-Z][A-Z0-9-]{1,15}$")
+_LABEL_RE = re.compile(r"^[A-Za-z0-9-]{1,32}$")
+_ID_RE = re.compile(r"^(?P<code>[A-Z][A-Z0-9-]{1,15})_(?P<stamp>\d{8}-\d{6})(?:_(?P<label>[A-Za-z0-9-]{1,32}))?$")
+_STAMP_FMT = "%Y%m%d-%H%M%S"
+SEXES = ("female", "male")
+_SEX_ALIASES = {"f": "female", "m": "male", "female": "female", "male": "male"}
+
+
+# ----------------------------------------------------------------------------------- participant
+@dataclasses.dataclass(frozen=True)
+class Participant:
+    """Who was recorded: a code (never a name) and the body data the models need.
+
+    Attributes
+    ----------
+    code : str
+        Pseudonymous code, see :data:`CODE_RULE` (``P01``, ``LAB2-07``).
+    sex : str or None
+        ``"female"`` or ``"male"`` (``"f"``/``"m"`` accepted), None if not recorded.
+    age : float or None
+        Years, 5-120.
+    height_m, mass_kg : float or None
+        Body height (0.5-2.5 m) and mass (15-300 kg).
+    training_level : float or None
+        Training level TL, 0 (poor) to 10.
+    hr_rest_bpm, hr_max_bpm : float or None
+        Measured resting / maximal heart rate; they override the charts when given.
+    """
+
+    code: str
+    sex: str | None = None
+    age: float | None = None
+    height_m: float | None = None
+    mass_kg: float | None = None
+    training_level: float | None = None
+    hr_rest_bpm: float | None = None
+    hr_max_bpm: float | None = None
+
+    def __post_init__(self) -> None:
+        check_participant_code(self.code)
+        if self.sex is not None:
+            sex = _SEX_ALIASES.get(str(self.sex).strip().lower())
+            if sex is None:
+                raise UserError(f"participant sex: expected one of {', '.join(SEXES)}, found {self.sex!r}")
+            object.__setattr__(self, "sex", sex)
+        for name, (lo, hi) in _RANGES.items():
+            _check_range(name, getattr(self, name), lo, hi)
+        if self.hr_rest_bpm is not None and self.hr_max_bpm is not None and self.hr_rest_bpm >= self.hr_max_bpm:
+            raise UserError(
+                f"participant hr_rest_bpm: expected below hr_max_bpm ({self.hr_max_bpm}), found {self.hr_rest_bpm}"
+            )
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict (optional measured HR keys only when set)."""
+        out = dataclasses.asdict(self)
+        for key in ("hr_rest_bpm", "hr_max_bpm"):
+            if out[key] is None:
+                del out[key]
+        return out
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Participant:
+        """Build from a ``session.json`` ``participant`` dict (unknown keys are an error)."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = set(data) - names
+        if unknown:
+            raise UserError(f"participant: expected keys among {sorted(names)}, found {sorted(unknown)}")
+        return cls(**data)
+
+
+_RANGES = {
+    "age": (5, 120),
+    "height_m": (0.5, 2.5),
+    "mass_kg": (15, 300),
+    "training_level": (0, 10),
+    "hr_rest_bpm": (25, 120),
+    "hr_max_bpm": (100, 240),
+}
+
+
+def _check_range(name: str, value: float | None, lo: float, hi: float) -> None:
+    """Raise UserError unless ``value`` is None or a number in [lo, hi]."""
+    if value is None:
+        return
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not lo <= value <= hi:
+        raise UserError(f"participant {name}: expected a number from {lo} to {hi}, found {value!r}")
+
+
+def check_participant_code(code: str) -> str:
+    """Return ``code`` if it is a valid participant code, else raise.
+
+    Parameters
+    ----------
+    code : str
+        Candidate code.
+
+    Raises
+    ------
+    UserError
+        If it does not follow :data:`CODE_RULE` (names such as ``"Jane Doe"`` or ``"jane"`` fail:
+        they have spaces, lower case letters or no digit).
+    """
+    if not isinstance(code, str) or not _CODE_RE.match(code) or not any(c.isdigit() for c in code):
+        raise UserError(f"participant code: expected {CODE_RULE} (codes, never names), found {code!r}")
+    return code
+
+
+# ------------------------------------------------------------------------------------ session id
+def make_session_id(code: str, when: _dt.datetime, label: str | None = None) -> str:
+    """Return ``<code>_<YYYYmmdd-HHMMSS>[_<label>]``.
+
+    Parameters
+    ----------
+    code : str
+        Participant code.
+    when : datetime
+        Session start (local wall-clock time of the lab).
+    label : str, optional
+        Letters, digits and '-' only (e.g. ``treadmill``).
+    """
+    check_participant_code(code)
+    sid = f"{code}_{when.strftime(_STAMP_FMT)}"
+    if label:
+        if not _LABEL_RE.match(label):
+            raise UserError(f"session label: expected 1-32 letters, digits or '-', found {label!r}")
+        sid += f"_{label}"
+    return sid
+
+
+def parse_session_id(session_id: str) -> tuple[str, _dt.datetime, str | None]:
+    """Split a session id into ``(code, start time, label or None)``; UserError if malformed."""
+    m = _ID_RE.match(session_id)
+    if not m:
+        raise UserError(
+            f"session id: expected <code>_<YYYYmmdd-HHMMSS>[_<label>], found {session_id!r}"
+        )
+    return m["code"], _dt.datetime.strptime(m["stamp"], _STAMP_FMT), m["label"]
+
+
+# ---------------------------------------------------------------------------------- session.json
+@dataclasses.dataclass
+class SessionInfo:
+    """The content of ``session.json``.
+
+    Attributes
+    ----------
+    session_id : str
+        Folder name, see :func:`make_session_id`.
+    participant : Participant
+    devices : dict
+        ``{"heart_rate": {protocol, port, settings...}, "camera": {source, width, height, fps, codec}}``.
+    complete : bool
+        False until a clean stop (or :func:`capture_tool.recorder.recover_session`).
+    created_utc : str
+        ISO 8601 UTC time of creation.
+    software : dict
+        ``{"name": "effortface", "version": ...}``.
+    extra : dict
+        Other top-level keys (``stats``, ``recovered``...), kept on a round trip.
+    """
+
+    session_id: str
+    participant: Participant
+    devices: dict[str, Any] = dataclasses.field(default_factory=dict)
+    complete: bool = False
+    created_utc: str = ""
+    software: dict[str, Any] = dataclasses.field(default_factory=dict)
+    extra: dict[str, Any] = dataclasses.field(default_factory=dict)
+    schema_version: int = SCHEMA_VERSION
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict in the order of DESIGN.md."""
+        out: dict[str, Any] = {
+            "schema_version": self.schema_version,
+            "session_id": self.session_id,
+            "complete": self.complete,
+            "created_utc": self.created_utc,
+            "participant": self.participant.to_dict(),
+            "devices": self.devices,
+            "software": self.software,
+        }
+        out.update(self.extra)
+        return out
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], source: str | os.PathLike = SESSION_JSON) -> SessionInfo:
+        """Build from a parsed ``session.json``; SessionFormatError naming ``source`` if invalid."""
+        missing = [k for k in ("schema_version", "session_id", "complete", "participant") if k not in data]
+        if missing:
+            raise SessionFormatError(f"{source}: expected keys {missing}, found {sorted(data)}")
+        if data["schema_version"] != SCHEMA_VERSION:
+            raise SessionFormatError(
+                f"{source}: expected schema_version {SCHEMA_VERSION}, found {data['schema_version']!r}"
+            )
+        try:
+            participant = Participant.from_dict(dict(data["participant"]))
+        except (UserError, TypeError, ValueError) as exc:
+            raise SessionFormatError(f"{source}: {exc}") from None
+        known = {"schema_version", "session_id", "complete", "created_utc", "participant", "devices", "software"}
+        return cls(
+            session_id=str(data["session_id"]),
+            participant=participant,
+            devices=dict(data.get("devices") or {}),
+            complete=bool(data["complete"]),
+            created_utc=str(data.get("created_utc", "")),
+            software=dict(data.get("software") or {}),
+            extra={k: v for k, v in data.items() if k not in known},
+        )
+
+    def save(self, folder: str | os.PathLike, *, overwrite: bool = False) -> Path:
+        """Write ``folder/session.json`` atomically (temp file + ``os.replace``).
+
+        Parameters
+        ----------
+        folder : path-like
+            The session folder.
+        overwrite : bool
+            Replace an existing ``session.json`` (the recorder does, to update ``complete``).
+
+        Raises
+        ------
+        FileExistsError
+            If the file exists and ``overwrite`` is False.
+        """
+        path = Path(folder) / SESSION_JSON
+        if path.exists() and not overwrite:
+            raise FileExistsError(f"{path}: session.json exists; refusing to overwrite")
+        write_json_atomic(path, self.to_dict())
+        return path
+
+
+def write_json_atomic(path: str | os.PathLike, data: Any) -> None:
+    """Write JSON to ``path`` through a temp file in the same folder, fsync, then ``os.replace``."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            json.dump(data, fh, indent=2, sort_keys=False)
+            fh.write("\n")
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def read_session_info(folder: str | os.PathLike) -> SessionInfo:
+    """Read ``folder/session.json``.
+
+    Raises
+    ------
+    SessionFormatError
+        If the file is missing, not JSON, or does not follow schema version 1.
+    """
+    path = Path(folder) / SESSION_JSON
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise SessionFormatError(f"{path}: expected a session.json in the session folder, found none") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise SessionFormatError(f"{path}: expected JSON, found invalid text ({exc})") from None
+    if not isinstance(data, dict):
+        raise SessionFormatError(f"{path}: expected a JSON object, found {type(data).__name__}")
+    return SessionInfo.from_dict(data, path)
+
+
+def create_session(out_dir: str | os.PathLike, info: SessionInfo) -> Path:
+    """Create the session folder ``out_dir/<session_id>`` with its ``session.json`` and ``serial/``.
+
+    Raises
+    ------
+    FileExistsError
+        If the folder exists already: a session folder is never reused.
+    """
+    folder = Path(out_dir) / info.session_id
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    folder.mkdir(exist_ok=False)
+    (folder / SERIAL_DIR).mkdir()
+    info.save(folder)
+    return folder
+
+
+# ------------------------------------------------------------------------------------ csv files
+@dataclasses.dataclass(frozen=True)
+class Event:
+    """One row of ``events.csv``: time, kind (``phase_start``, ``marker``, ``gap``...), label, value."""
+
+    t_s: float
+    kind: str
+    label: str = ""
+    value: str = ""
+
+
+class _LineWriter:
+    """Append-only CSV-ish text writer that refuses to overwrite and can flush on demand."""
+
+    def __init__(self, path: str | os.PathLike, header: str, *, append: bool = False) -> None:
+        self.path = Path(path)
+        exists = self.path.exists() and self.path.stat().st_size > 0
+        if exists and not append:
+            raise FileExistsError(f"{self.path}: exists; refusing to overwrite")
+        self._fh: TextIO = open(self.path, "a", encoding="utf-8", newline="")
+        if not exists:
+            self._fh.write(header + "\n")
+        self.rows = 0
+
+    def write_line(self, line: str) -> None:
+        """Append one line (no newline in ``line``)."""
+        self._fh.write(line + "\n")
+        self.rows += 1
+
+    def flush(self) -> None:
+        """Hand buffered lines to the OS (survives a ``kill -9``)."""
+        self._fh.flush()
+
+    def close(self) -> None:
+        """Flush and close (idempotent)."""
+        if not self._fh.closed:
+            self._fh.close()
+
+
+class EventWriter(_LineWriter):
+    """Writer of ``events.csv`` (``t_s,kind,label,value``)."""
+
+    def __init__(self, path: str | os.PathLike, *, append: bool = False) -> None:
+        super().__init__(path, EVENTS_HEADER, append=append)
+
+    def write(self, event: Event) -> None:
+        """Append one event (fields are CSV-quoted when needed)."""
+        self.write_line(_csv_line([f"{event.t_s:.4f}", event.kind, event.label, event.value]))
+
+
+class FrameTimeWriter(_LineWriter):
+    """Writer of ``video_frames.csv`` (``frame,t_s``)."""
+
+    def __init__(self, path: str | os.PathLike, *, append: bool = False) -> None:
+        super().__init__(path, FRAMES_HEADER, append=append)
+
+    def write(self, frame: int, t_s: float) -> None:
+        """Append the arrival time of frame number ``frame``."""
+        self.write_line(f"{frame},{t_s:.4f}")
+
+
+class HrWriter(_LineWriter):
+    """Writer of ``heart_rate.csv`` rows in the :mod:`capture_tool.hr_csv` format."""
+
+    def __init__(self, path: str | os.PathLike, *, append: bool = False) -> None:
+        super().__init__(path, HR_CSV_HEADER, append=append)
+
+    def write(self, sample: HrSample) -> None:
+        """Append one sample."""
+        self.write_line(format_hr_row(sample))
+
+
+def _csv_line(fields: Iterable[str]) -> str:
+    """One CSV line with minimal quoting."""
+    out = []
+    for f in fields:
+        f = str(f)
+        out.append('"' + f.replace('"', '""') + '"' if any(c in f for c in ',"\n\r') else f)
+    return ",".join(out)
+
+
+def _read_csv_rows(path: Path, header: str) -> list[tuple[int, list[str]]]:
+    """Data rows of a CSV as ``(line number, fields)`` after checking its header line."""
+    with open(path, newline="", encoding="utf-8") as fh:
+        reader = csv.reader(fh)
+        first = next(reader, None)
+        if first is None or ",".join(first) != header:
+            raise SessionFormatError(f"{path}: expected header {header!r}, found {','.join(first or [])!r}")
+        return [(reader.line_num, row) for row in reader if row]
+
+
+def read_events(path: str | os.PathLike) -> list[Event]:
+    """Read ``events.csv``; SessionFormatError naming the file and line on a bad row."""
+    path = Path(path)
+    out = []
+    for line, row in _read_csv_rows(path, EVENTS_HEADER):
+        try:
+            t_s, kind, label, value = row
+            out.append(Event(float(t_s), kind, label, value))
+        except ValueError:
+            raise SessionFormatError(f"{path}: line {line}: expected t_s,kind,label,value, found {row!r}") from None
+    return out
+
+
+def read_video_frames(path: str | os.PathLike) -> list[float]:
+    """Read ``video_frames.csv``; return ``t_s`` of frames 0, 1, 2... (frames must be consecutive)."""
+    path = Path(path)
+    out: list[float] = []
+    for line, row in _read_csv_rows(path, FRAMES_HEADER):
+        try:
+            frame, t_s = int(row[0]), float(row[1])
+        except (ValueError, IndexError):
+            raise SessionFormatError(f"{path}: line {line}: expected frame,t_s, found {row!r}") from None
+        if frame != len(out):
+            raise SessionFormatError(f"{path}: line {line}: expected frame {len(out)}, found {frame}")
+        out.append(t_s)
+    return out
+
+
+# ------------------------------------------------------------------------------- whole sessions
+@dataclasses.dataclass
+class Session:
+    """A read session folder.
+
+    Attributes
+    ----------
+    path : Path
+        The folder.
+    info : SessionInfo
+        ``session.json``.
+    heart_rate : list of HrSample
+        ``heart_rate.csv`` rows (empty if the file is absent).
+    events : list of Event
+        ``events.csv`` rows.
+    frame_times_s : list of float
+        Arrival time of each video frame (``video_frames.csv``); empty without video.
+    """
+
+    path: Path
+    info: SessionInfo
+    heart_rate: list[HrSample]
+    events: list[Event]
+    frame_times_s: list[float]
+
+    @property
+    def participant(self) -> Participant:
+        """The participant record."""
+        return self.info.participant
+
+    @property
+    def devices(self) -> dict[str, Any]:
+        """The ``devices`` dict of session.json."""
+        return self.info.devices
+
+    @property
+    def video_path(self) -> Path | None:
+        """``video.avi`` if the session has one."""
+        p = self.path / VIDEO_AVI
+        return p if p.exists() else None
+
+    def serlog_paths(self) -> list[Path]:
+        """The raw serial logs, sorted."""
+        return sorted((self.path / SERIAL_DIR).glob("*.serlog"))
+
+
+def read_session(path: str | os.PathLike) -> Session:
+    """Read a session folder (complete or not).
+
+    Parameters
+    ----------
+    path : path-like
+        The session folder.
+
+    Returns
+    -------
+    Session
+
+    Raises
+    ------
+    SessionFormatError
+        If the folder or one of its files does not follow the session format (names the file).
+    """
+    folder = Path(path)
+    if not folder.is_dir():
+        raise SessionFormatError(f"{folder}: expected a session folder, found {'a file' if folder.exists() else 'nothing'}")
+    info = read_session_info(folder)
+    hr = folder / HEART_RATE_CSV
+    ev = folder / EVENTS_CSV
+    fr = folder / VIDEO_FRAMES_CSV
+    return Session(
+        path=folder,
+        info=info,
+        heart_rate=read_hr_csv(hr) if hr.exists() else [],
+        events=read_events(ev) if ev.exists() else [],
+        frame_times_s=read_video_frames(fr) if fr.exists() else [],
+    )
+
+
+def validate_session(path: str | os.PathLike) -> list[str]:
+    """List the problems of a session folder (empty list: valid and complete).
+
+    Checks: readable files, folder name equals ``session_id``, ``complete`` true, the heart-rate
+    and frame times non-decreasing, no invalid row carrying a heart rate, video and frame table
+    present together.
+    """
+    folder = Path(path)
+    try:
+        s = read_session(folder)
+    except SessionFormatError as exc:
+        return [str(exc)]
+    problems = []
+    if s.info.session_id != folder.name:
+        problems.append(f"{folder}: folder name differs from session_id {s.info.session_id!r}")
+    if not s.info.complete:
+        problems.append(f"{folder / SESSION_JSON}: complete is false (run 'effortface recover {folder}')")
+    problems += _monotonic_problems(folder / HEART_RATE_CSV, [h.t_s for h in s.heart_rate])
+    problems += _monotonic_problems(folder / VIDEO_FRAMES_CSV, s.frame_times_s)
+    bad = [h for h in s.heart_rate if (h.valid and h.hr_bpm is None) or (h.hr_bpm is not None and h.hr_bpm <= 0)]
+    if bad:
+        problems.append(f"{folder / HEART_RATE_CSV}: {len(bad)} rows with a missing or non-positive hr_bpm")
+    if (folder / VIDEO_AVI).exists() != (folder / VIDEO_FRAMES_CSV).exists():
+        problems.append(f"{folder}: video.avi and video_frames.csv must be present together")
+    return problems
+
+
+def _monotonic_problems(path: Path, times: list[float]) -> list[str]:
+    """One problem line if ``times`` ever decreases."""
+    back = sum(b < a for a, b in zip(times, times[1:]))
+    return [f"{path}: t_s decreases {back} times"] if back else []
+
+
+def list_sessions(directory: str | os.PathLike) -> list[Path]:
+    """Session folders (those with a ``session.json``) directly inside ``directory``, sorted by name.
+
+    Raises
+    ------
+    UserError
+        If ``directory`` is not a folder.
+    """
+    d = Path(directory)
+    if not d.is_dir():
+        raise UserError(f"{d}: expected a folder of sessions, found {'a file' if d.exists() else 'nothing'}")
+    return sorted(p for p in d.iterdir() if p.is_dir() and (p / SESSION_JSON).is_file())
+
+
+def utc_now_iso() -> str:
+    """Current UTC time, ISO 8601 with seconds and ``Z``."""
+    return _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
