@@ -1,0 +1,505 @@
+"""The reliability report: how well raters agree on the blind pose ratings (pure Python + numpy).
+
+Statistics, each per blendshape (poses x raters) and overall (pose-blendshape items x raters):
+
+- **mean absolute disagreement** in % of the weight range [0, 1] (the paper's 11 % figure), per pose,
+  per blendshape and overall: :func:`annotate.reliability.mean_abs_disagreement_pct`;
+- **ICC(A,1)** (absolute agreement) and **ICC(C,1)** (consistency), single rater, two-way model,
+  McGraw & Wong 1996 (Shrout & Fleiss 1979 ICC(2,1) and ICC(3,1)), from the ANOVA mean squares;
+- **Krippendorff's alpha**, interval metric, from the ``krippendorff`` package (missing ratings allowed);
+- **Bland-Altman** per rater pair over all items: bias (mean of a - b) and 95 % limits of agreement
+  (bias +- 1.96 sd of the differences).
+
+Poses whose mean absolute disagreement exceeds a threshold (default :data:`FLAG_PCT`) are flagged for
+review. Gathering ratings (``effortface agreement SESSION | DIR | --ratings CSV``):
+
+- ``--ratings CSV``: those ratings;
+- a folder with ``reliability/ratings.csv`` (plus any per-rater ``reliability/ratings_<rater>.csv``
+  written by the Annotate stage's blind round): the lab's blind round;
+- otherwise (a session, or a folder without ratings): every rater's key-frame curves
+  (``annotations/<rater>.json``) evaluated at the pose frames, the poses being the session's rows of
+  ``reliability/poses.csv`` next to it, or else poses proposed from its heart-rate and phase extremes
+  (:func:`propose_poses`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+import os
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from annotate.blendshapes import DEFAULT_SET, BlendshapeSet
+from annotate.keyframes import read_annotations
+from annotate.reliability import (Pose, Rating, mean_abs_disagreement_pct, read_poses, read_ratings)
+from annotate.video_index import FrameTimes
+from capture_tool.errors import UserError
+from capture_tool.session import Session, list_sessions, read_session
+
+#: poses whose mean absolute disagreement is above this (% of the weight range) are flagged
+FLAG_PCT = 15.0
+#: default size of a reliability round (the paper's 18 poses)
+N_POSES = 18
+RELIABILITY_DIR = "reliability"
+LOA_Z = 1.96
+
+
+# ------------------------------------------------------------------------------------ statistics
+@dataclasses.dataclass(frozen=True)
+class AnovaTwoWay:
+    """Mean squares of a two-way ANOVA without replication (subjects x raters).
+
+    Attributes
+    ----------
+    ms_rows : float
+        Between subjects (Shrout & Fleiss BMS).
+    ms_cols : float
+        Between raters (JMS).
+    ms_error : float
+        Residual (EMS).
+    n, k : int
+        Subjects and raters.
+    """
+
+    ms_rows: float
+    ms_cols: float
+    ms_error: float
+    n: int
+    k: int
+
+
+def anova_two_way(x: np.ndarray) -> AnovaTwoWay:
+    """Mean squares of a complete ``(n subjects, k raters)`` table.
+
+    Raises
+    ------
+    ValueError
+        If the table has missing values or fewer than 2 subjects or raters.
+    """
+    x = np.asarray(x, dtype=float)
+    if x.ndim != 2 or min(x.shape) < 2 or not np.all(np.isfinite(x)):
+        raise ValueError(f"ratings table: expected a complete table of >= 2 subjects x >= 2 raters, found shape {x.shape}")
+    n, k = x.shape
+    grand = x.mean()
+    ss_rows = k * np.sum((x.mean(axis=1) - grand) ** 2)
+    ss_cols = n * np.sum((x.mean(axis=0) - grand) ** 2)
+    ss_error = np.sum((x - grand) ** 2) - ss_rows - ss_cols
+    return AnovaTwoWay(ss_rows / (n - 1), ss_cols / (k - 1), ss_error / ((n - 1) * (k - 1)), n, k)
+
+
+def icc_a1(x: np.ndarray) -> float:
+    """ICC(A,1): absolute agreement of single ratings, two-way model (McGraw & Wong 1996 case 2A/3A).
+
+    ``(MSR - MSE) / (MSR + (k - 1) MSE + k / n (MSC - MSE))``; NaN when the denominator is 0.
+    """
+    a = anova_two_way(x)
+    den = a.ms_rows + (a.k - 1) * a.ms_error + a.k / a.n * (a.ms_cols - a.ms_error)
+    return float((a.ms_rows - a.ms_error) / den) if den > 0 else math.nan
+
+
+def icc_c1(x: np.ndarray) -> float:
+    """ICC(C,1): consistency of single ratings, two-way model: ``(MSR - MSE) / (MSR + (k - 1) MSE)``."""
+    a = anova_two_way(x)
+    den = a.ms_rows + (a.k - 1) * a.ms_error
+    return float((a.ms_rows - a.ms_error) / den) if den > 0 else math.nan
+
+
+def krippendorff_alpha_interval(x: np.ndarray) -> float:
+    """Krippendorff's alpha (interval) of a ``(units, raters)`` table, NaN for missing ratings."""
+    import krippendorff
+
+    data = np.asarray(x, dtype=float).T  # the package wants raters x units
+    if np.unique(data[np.isfinite(data)]).size < 2:
+        return math.nan  # alpha is undefined when every rating is the same value
+    return float(krippendorff.alpha(reliability_data=data, level_of_measurement="interval"))
+
+
+@dataclasses.dataclass(frozen=True)
+class BlandAltman:
+    """Bland-Altman statistics of rater ``a`` minus rater ``b`` over paired items.
+
+    Attributes
+    ----------
+    rater_a, rater_b : str
+    n : int
+        Paired items.
+    bias : float
+        Mean difference (weight units).
+    sd : float
+        Standard deviation of the differences (ddof 1).
+    loa_low, loa_high : float
+        ``bias -+ 1.96 sd``.
+    means, diffs : numpy.ndarray
+        Per item ``(a + b) / 2`` and ``a - b`` (the plot's points).
+    """
+
+    rater_a: str
+    rater_b: str
+    n: int
+    bias: float
+    sd: float
+    loa_low: float
+    loa_high: float
+    means: np.ndarray = dataclasses.field(repr=False, compare=False)
+    diffs: np.ndarray = dataclasses.field(repr=False, compare=False)
+
+
+def bland_altman(a: np.ndarray, b: np.ndarray, rater_a: str = "a", rater_b: str = "b") -> BlandAltman:
+    """Bland-Altman statistics of paired ratings (pairs with a NaN are left out).
+
+    Raises
+    ------
+    ValueError
+        If fewer than 2 complete pairs remain.
+    """
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    ok = np.isfinite(a) & np.isfinite(b)
+    if ok.sum() < 2:
+        raise ValueError(f"raters {rater_a}, {rater_b}: expected at least 2 paired ratings, found {int(ok.sum())}")
+    d, m = a[ok] - b[ok], (a[ok] + b[ok]) / 2
+    bias, sd = float(d.mean()), float(d.std(ddof=1))
+    return BlandAltman(rater_a, rater_b, int(ok.sum()), bias, sd, bias - LOA_Z * sd, bias + LOA_Z * sd, m, d)
+
+
+# ---------------------------------------------------------------------------------------- report
+@dataclasses.dataclass(frozen=True)
+class ItemStats:
+    """Agreement over one group of items (a blendshape, or everything)."""
+
+    name: str
+    n_items: int
+    disagreement_pct: float
+    icc_a1: float
+    icc_c1: float
+    alpha: float
+
+
+@dataclasses.dataclass
+class AgreementReport:
+    """The whole report; see the module docstring.
+
+    Attributes
+    ----------
+    raters, poses, blendshapes : list of str
+        What was rated (poses in input order, blendshapes in set order).
+    per_pose_pct : dict of str to float
+        Mean absolute disagreement of each pose, % of the weight range.
+    per_blendshape : list of ItemStats
+    overall : ItemStats
+    pairs : list of BlandAltman
+    flag_pct : float
+    flagged : list of str
+        Poses above ``flag_pct``.
+    incomplete : list of str
+        Poses left out of the ICCs because a rater did not rate every blendshape.
+    source : str
+        Where the ratings came from.
+    """
+
+    raters: list[str]
+    poses: list[str]
+    blendshapes: list[str]
+    per_pose_pct: dict[str, float]
+    per_blendshape: list[ItemStats]
+    overall: ItemStats
+    pairs: list[BlandAltman]
+    flag_pct: float
+    flagged: list[str]
+    incomplete: list[str]
+    source: str = ""
+
+
+def ratings_cube(ratings: Sequence[Rating], blendshapes: Sequence[str] | None = None
+                 ) -> tuple[np.ndarray, list[str], list[str], list[str]]:
+    """Ratings as an array ``(poses, blendshapes, raters)`` with NaN where a rating is missing.
+
+    Returns
+    -------
+    cube, poses, blendshapes, raters
+    """
+    poses = list(dict.fromkeys(r.pose_id for r in ratings))
+    names = list(blendshapes) if blendshapes else list(dict.fromkeys(r.blendshape for r in ratings))
+    raters = sorted({r.rater for r in ratings})
+    cube = np.full((len(poses), len(names), len(raters)), np.nan)
+    p_i, b_i, r_i = ({v: i for i, v in enumerate(seq)} for seq in (poses, names, raters))
+    for r in ratings:
+        if r.blendshape in b_i:
+            cube[p_i[r.pose_id], b_i[r.blendshape], r_i[r.rater]] = r.weight
+    return cube, poses, names, raters
+
+
+def _item_stats(name: str, table: np.ndarray, ratings: Iterable[Rating]) -> ItemStats:
+    """Statistics of one ``(items, raters)`` table; ICCs on its complete rows only."""
+    complete = table[np.all(np.isfinite(table), axis=1)]
+    icc_a = icc_a1(complete) if complete.shape[0] >= 2 else math.nan
+    icc_c = icc_c1(complete) if complete.shape[0] >= 2 else math.nan
+    return ItemStats(name, int(table.shape[0]), mean_abs_disagreement_pct(ratings), icc_a, icc_c,
+                     krippendorff_alpha_interval(table))
+
+
+def agreement_report(ratings: Sequence[Rating], *, flag_pct: float = FLAG_PCT,
+                     blendshapes: BlendshapeSet | None = DEFAULT_SET, source: str = "") -> AgreementReport:
+    """Compute the reliability report of blind pose ratings.
+
+    Parameters
+    ----------
+    ratings : sequence of Rating
+        Long-format ratings (``pose_id, rater, blendshape, weight``).
+    flag_pct : float
+        Flag poses whose mean absolute disagreement (% of [0, 1]) is above this.
+    blendshapes : BlendshapeSet or None
+        Order of the blendshapes in the report; None keeps the order of first appearance.
+        Blendshapes outside the set are an error.
+    source : str
+        Where the ratings came from (printed in the report).
+
+    Returns
+    -------
+    AgreementReport
+
+    Raises
+    ------
+    UserError
+        If fewer than two raters, or fewer than two poses rated by two raters, are found.
+    """
+    ratings = list(ratings)
+    if blendshapes is not None:
+        for r in ratings:
+            blendshapes.index(r.blendshape)  # UserError for a name outside the set
+    names = [n for n in blendshapes.names if any(r.blendshape == n for r in ratings)] if blendshapes else None
+    cube, poses, names, raters = ratings_cube(ratings, names)
+    if len(raters) < 2 or len(poses) < 2:
+        raise UserError(f"ratings{f' ({source})' if source else ''}: expected at least 2 raters and 2 poses, "
+                        f"found {len(raters)} raters and {len(poses)} poses")
+    per_pose = {p: pct for p in poses if not math.isnan(pct := _pose_pct(ratings, p))}
+    per_shape = [_item_stats(n, cube[:, j, :], [r for r in ratings if r.blendshape == n])
+                 for j, n in enumerate(names)]
+    overall = _item_stats("all", cube.reshape(-1, len(raters)), ratings)
+    flat = cube.reshape(-1, len(raters))
+    pairs = [bland_altman(flat[:, i], flat[:, j], raters[i], raters[j])
+             for i, j in itertools.combinations(range(len(raters)), 2)]
+    incomplete = [p for i, p in enumerate(poses) if not np.all(np.isfinite(cube[i]))]
+    flagged = [p for p, pct in per_pose.items() if pct > flag_pct]
+    return AgreementReport(raters, poses, names, per_pose, per_shape, overall, pairs, flag_pct,
+                           flagged, incomplete, source)
+
+
+def _pose_pct(ratings: Sequence[Rating], pose: str) -> float:
+    """Mean absolute disagreement of one pose, NaN if no blendshape of it has two raters."""
+    try:
+        return mean_abs_disagreement_pct([r for r in ratings if r.pose_id == pose])
+    except ValueError:
+        return math.nan
+
+
+def format_report(report: AgreementReport) -> str:
+    """The report as plain text (what ``effortface agreement`` prints)."""
+    lines = [f"Inter-rater agreement{f' ({report.source})' if report.source else ''}",
+             f"raters: {', '.join(report.raters)}   poses: {len(report.poses)}   "
+             f"blendshapes: {', '.join(report.blendshapes)}", ""]
+    lines += ["Per pose (mean |difference|, % of the weight range):"]
+    for pose, pct in report.per_pose_pct.items():
+        flag = "  FLAGGED for review" if pose in report.flagged else ""
+        lines.append(f"  {pose:<12} {pct:6.1f} %{flag}")
+    lines += ["", f"  {'blendshape':<14} {'items':>5} {'diff %':>7} {'ICC(A,1)':>9} {'ICC(C,1)':>9} {'alpha':>7}"]
+    for s in [*report.per_blendshape, report.overall]:
+        lines.append(f"  {s.name:<14} {s.n_items:>5} {s.disagreement_pct:7.1f} {s.icc_a1:9.3f} "
+                     f"{s.icc_c1:9.3f} {s.alpha:7.3f}")
+    lines += ["", "Bland-Altman per rater pair (weight units, a - b):"]
+    for p in report.pairs:
+        lines.append(f"  {p.rater_a}-{p.rater_b}  n={p.n:<4} bias {p.bias:+.3f}   "
+                     f"limits of agreement {p.loa_low:+.3f} .. {p.loa_high:+.3f}")
+    lines += ["", f"Flagged poses (over {report.flag_pct:g} %): {', '.join(report.flagged) or 'none'}"]
+    if report.incomplete:
+        lines.append(f"Poses missing a rating (left out of the ICCs): {', '.join(report.incomplete)}")
+    return "\n".join(lines) + "\n"
+
+
+def save_bland_altman_png(report: AgreementReport, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
+    """Draw the Bland-Altman plot of every rater pair into a PNG (matplotlib, Agg backend).
+
+    Raises
+    ------
+    FileExistsError
+        If ``path`` exists and ``overwrite`` is False.
+    UserError
+        If matplotlib is not installed.
+    """
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path}: file exists; refusing to overwrite")
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        from matplotlib import pyplot as plt
+    except ImportError:
+        raise UserError(f"--plot {path}: expected matplotlib installed (pip install matplotlib), found none") from None
+    fig, axes = plt.subplots(1, len(report.pairs), figsize=(4.2 * len(report.pairs), 3.6), squeeze=False)
+    for ax, p in zip(axes[0], report.pairs):
+        ax.scatter(p.means, p.diffs, s=10, alpha=0.6)
+        for y, style in ((p.bias, "-"), (p.loa_low, "--"), (p.loa_high, "--")):
+            ax.axhline(y, color="k", linestyle=style, linewidth=1)
+        ax.set(title=f"{p.rater_a} - {p.rater_b}", xlabel="mean weight", ylabel="difference",
+               xlim=(0, 1), ylim=(-1, 1))
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+# --------------------------------------------------------------------------- gathering ratings
+def propose_poses(session: Session, n: int = N_POSES, *, min_gap_s: float = 5.0,
+                  first_id: int = 1) -> list[Pose]:
+    """Propose representative frames of a session from its heart-rate and phase extremes.
+
+    Candidates, in priority order: the highest and lowest valid heart rate, then for each exercise
+    phase its end (accumulated effort), its heart-rate peak and its start; then evenly spaced times.
+    A candidate closer than ``min_gap_s`` to an accepted one is skipped.
+
+    Parameters
+    ----------
+    session : Session
+        A session with video (``video_frames.csv``).
+    n : int
+        Poses wanted.
+    min_gap_s : float
+        Minimum time between two poses.
+    first_id : int
+        Number of the first ``poseNN`` id.
+
+    Raises
+    ------
+    UserError
+        If the session has no video frames.
+    """
+    if not session.frame_times_s:
+        raise UserError(f"{session.path}: expected a session with video_frames.csv, found no video frames")
+    clock = FrameTimes(session.frame_times_s)
+    chosen: list[float] = []
+    for t in _pose_candidates(session, clock, n):
+        if len(chosen) >= n:
+            break
+        if all(abs(t - c) >= min_gap_s for c in chosen):
+            chosen.append(t)
+    frames = sorted({clock.frame_at(t) for t in chosen})
+    return [Pose(f"pose{first_id + i:02d}", session.info.session_id, f, clock.t_at(f))
+            for i, f in enumerate(frames)]
+
+
+def _pose_candidates(session: Session, clock: FrameTimes, n: int) -> list[float]:
+    """Candidate pose times in priority order (see :func:`propose_poses`)."""
+    hr = [(h.t_s, h.hr_bpm) for h in session.heart_rate if h.valid and h.hr_bpm]
+    out: list[float] = []
+    if hr:
+        t, bpm = np.array(hr).T
+        out += [float(t[np.argmax(bpm)]), float(t[np.argmin(bpm)])]
+    starts = {e.label: e.t_s for e in session.events if e.kind == "phase_start"}
+    for e in session.events:
+        if e.kind == "phase_end" and e.label in starts:
+            t0, t1 = starts[e.label], e.t_s
+            inside = [(t, b) for t, b in hr if t0 <= t <= t1]
+            peak = [max(inside, key=lambda tb: tb[1])[0]] if inside else []
+            out += [t1 - 0.5, *peak, t0 + 2.0]
+    out += list(np.linspace(clock.t_s[0], clock.duration_s, max(n, 2) * 2))
+    return [min(max(t, clock.t_s[0]), clock.duration_s) for t in out]
+
+
+def ratings_from_keyframes(folder: str | os.PathLike, poses: Sequence[Pose]) -> list[Rating]:
+    """Every rater's key-frame curves of a session evaluated at the pose frames.
+
+    Parameters
+    ----------
+    folder : path-like
+        A session folder with ``annotations/<rater>.json``.
+    poses : sequence of Pose
+        Poses of this session (others are ignored).
+
+    Returns
+    -------
+    list of Rating
+        Blendshapes a rater has not keyed are left out (missing, not zero).
+    """
+    folder = Path(folder)
+    sid = read_session(folder).info.session_id
+    mine = [p for p in poses if p.session_id == sid]
+    out: list[Rating] = []
+    for path in sorted((folder / "annotations").glob("*.json")):
+        ann = read_annotations(path)
+        frames = np.array([p.frame for p in mine], dtype=float)
+        for name in ann.blendshapes.names:
+            values = ann.tracks[name].evaluate(frames)
+            out += [Rating(p.pose_id, ann.rater, name, float(round(w, 4)))
+                    for p, w in zip(mine, values) if np.isfinite(w)]
+    return out
+
+
+def read_round(folder: str | os.PathLike) -> list[Rating]:
+    """The blind round's ratings of a lab folder: ``reliability/ratings.csv`` plus ``ratings_<rater>.csv``.
+
+    Raises
+    ------
+    UserError
+        If a rater's rating appears twice across the files (names the file).
+    """
+    rel = Path(folder) / RELIABILITY_DIR
+    files = [p for p in [rel / "ratings.csv", *sorted(rel.glob("ratings_*.csv"))] if p.is_file()]
+    out: list[Rating] = []
+    seen: set[tuple[str, str, str]] = set()
+    for path in files:
+        for r in read_ratings(path):
+            key = (r.pose_id, r.rater, r.blendshape)
+            if key in seen:
+                raise UserError(f"{path}: expected each pose, rater and blendshape once, found {key} again")
+            seen.add(key)
+            out.append(r)
+    return out
+
+
+def gather_ratings(target: str | os.PathLike, *, n_poses: int = N_POSES) -> tuple[list[Rating], str]:
+    """Ratings for ``effortface agreement SESSION | DIR`` (see the module docstring).
+
+    Returns
+    -------
+    ratings : list of Rating
+    source : str
+        A one-line description of where they came from.
+
+    Raises
+    ------
+    UserError
+        If ``target`` is neither a session folder nor a folder of sessions, or holds no ratings.
+    """
+    target = Path(target)
+    if not target.is_dir():
+        raise UserError(f"{target}: expected a session folder or a folder of sessions, "
+                        f"found {'a file' if target.exists() else 'nothing'}")
+    if (target / RELIABILITY_DIR / "ratings.csv").is_file() or list((target / RELIABILITY_DIR).glob("ratings_*.csv")):
+        return read_round(target), f"blind round in {target / RELIABILITY_DIR}"
+    sessions = [target] if (target / "session.json").is_file() else list_sessions(target)
+    if not sessions:
+        raise UserError(f"{target}: expected a session folder or a folder of sessions, found neither")
+    poses = _poses_for(target, sessions, n_poses)
+    ratings = [r for s in sessions for r in ratings_from_keyframes(s, poses)]
+    if not ratings:
+        raise UserError(f"{target}: expected annotations/<rater>.json files, found none")
+    return ratings, f"raters' key-frames at {len(poses)} pose frames in {target}"
+
+
+def _poses_for(target: Path, sessions: list[Path], n_poses: int) -> list[Pose]:
+    """Poses from a nearby ``reliability/poses.csv``, else proposed across the sessions."""
+    for rel in (target / RELIABILITY_DIR, target.parent / RELIABILITY_DIR):
+        if (rel / "poses.csv").is_file():
+            ids = {read_session(s).info.session_id for s in sessions}
+            poses = [p for p in read_poses(rel / "poses.csv") if p.session_id in ids]
+            if poses:
+                return poses
+    per_session = max(1, math.ceil(n_poses / len(sessions)))
+    poses: list[Pose] = []
+    for s in sessions:
+        poses += propose_poses(read_session(s), per_session, first_id=len(poses) + 1)
+    return poses[:n_poses]

@@ -1,0 +1,53 @@
+"""``effortface agreement (SESSION | DIR | --ratings CSV)``: the inter-rater reliability report.
+
+Where the ratings come from (see :mod:`annotate.agreement`): ``--ratings CSV`` as given; a folder
+with ``reliability/ratings.csv`` (the lab's blind round); otherwise every rater's key-frame curves at
+the pose frames (``reliability/poses.csv`` when present, else poses proposed from HR and phase
+extremes). Prints per pose, per blendshape and overall: mean absolute disagreement in % of the
+weight range, ICC(A,1), ICC(C,1), Krippendorff's alpha (interval), Bland-Altman per rater pair,
+flagged poses. ``--plot PNG`` also draws the Bland-Altman plot.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from annotate.agreement import FLAG_PCT, agreement_report, format_report, gather_ratings, save_bland_altman_png
+from annotate.reliability import read_ratings
+from capture_tool.errors import UserError
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """SESSION | DIR | --ratings CSV, --threshold, --plot."""
+    parser.add_argument("target", nargs="?", metavar="SESSION|DIR",
+                        help="a session folder or a folder of sessions")
+    parser.add_argument("--ratings", metavar="CSV", help="long-format ratings pose_id,rater,blendshape,weight")
+    parser.add_argument("--threshold", type=float, default=FLAG_PCT, metavar="PCT",
+                        help=f"flag poses whose mean |difference| exceeds PCT %% of the weight range (default {FLAG_PCT:g})")
+    parser.add_argument("--plot", metavar="PNG", help="also write the Bland-Altman plot to PNG (never overwrites)")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Gather the ratings, print the report, optionally draw the plot."""
+    if (args.target is None) == (args.ratings is None):
+        raise UserError("arguments: expected exactly one of SESSION|DIR or --ratings CSV, "
+                        f"found {'both' if args.target else 'neither'}")
+    if not 0.0 <= args.threshold <= 100.0:
+        raise UserError(f"--threshold: expected a percentage from 0 to 100, found {args.threshold}")
+    if args.ratings is not None:
+        path = Path(args.ratings)
+        if not path.is_file():
+            raise UserError(f"--ratings {path}: expected a CSV file, found {'a folder' if path.exists() else 'nothing'}")
+        ratings, source = read_ratings(path), str(path)
+    else:
+        ratings, source = gather_ratings(args.target)
+    report = agreement_report(ratings, flag_pct=args.threshold, source=source)
+    print(format_report(report), end="")
+    if args.plot:
+        try:
+            save_bland_altman_png(report, args.plot)
+        except FileExistsError as exc:
+            raise UserError(f"--plot {args.plot}: expected a new file, found one exists (not overwritten)") from exc
+        print(f"Bland-Altman plot: {args.plot}")
+    return 0

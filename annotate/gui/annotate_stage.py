@@ -1,0 +1,475 @@
+"""The Annotate stage: key-frame the blendshape weights from the video, check inter-rater agreement.
+
+:class:`QtAnnotateStage` (hosted by the main window, or run alone with ``python -m annotate.gui``)
+holds the session browser, the rater code, the key-frame editor of the open session and the
+reliability round. :class:`QtKeyframeEditor` views one
+:class:`~annotate.session_model.AnnotationSession` (Qt-free: frame, blendshape, the rater's tracks,
+undo history, autosave) and a :class:`~annotate.video_index.VideoIndex` (frame-exact decode cache
+with prefetch): video and face preview side by side, the protocol panel, transport controls, heart
+rate and the curve editor on the session's time axis. Keyboard first: see
+:data:`~annotate.gui.protocol_panel.HELP_TEXT`. Every edit is saved at once (atomic write), so
+closing never asks and a crash loses nothing.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from PySide6 import QtCore, QtGui, QtWidgets
+
+from annotate.export import write_keyframes_json, write_weights_csv
+from annotate.face import render_face
+from annotate.gui.image_view import QtImageView
+from annotate.gui.protocol_panel import HELP_TEXT, QtProtocolPanel
+from annotate.gui.qt_compat import guard_none_refcount
+from annotate.gui.reliability_panel import QtReliabilityPanel
+from annotate.gui.timeline import QtTimeline
+from annotate.session_model import AnnotationSession, check_rater
+from annotate.video_index import VideoIndex
+from capture_tool.errors import UserError
+from capture_tool.session import list_sessions, read_session_info
+
+SPEEDS = (0.25, 0.5, 1.0, 2.0, 4.0)
+PLAY_TICK_MS = 15
+WEIGHT_NUDGE = 0.05
+_ERROR_STYLE = "color:#842029;"
+_INFO_STYLE = "color:#305030;"
+
+
+class QtKeyframeEditor(QtWidgets.QWidget):
+    """Video, face preview, protocol panel, transport and timeline of one annotation session.
+
+    Parameters
+    ----------
+    model : AnnotationSession
+        The rater's session (the editor writes back only through its methods).
+    video : VideoIndex
+        The session video (owned by the editor from now on: closed by :meth:`shutdown`).
+    report : callable, optional
+        ``report(message, is_error)`` shows a one-line message (the stage's status line).
+    """
+
+    def __init__(self, model: AnnotationSession, video: VideoIndex,
+                 report: Callable[[str, bool], None] | None = None,
+                 parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.model, self.video = model, video
+        self.report = report or (lambda message, is_error: None)
+        self._face_weights: tuple[float, ...] | None = None
+        self._play_timer = QtCore.QTimer(self, interval=PLAY_TICK_MS, timerType=QtCore.Qt.TimerType.PreciseTimer)
+        self._play_timer.timeout.connect(self._play_tick)
+        self._play_from: tuple[float, float] = (0.0, 0.0)
+        self._build()
+        self._add_shortcuts()
+        model.connect("frame_changed", self._show_frame)
+        model.connect("keys_changed", lambda *_: self._show_face())
+        model.connect("saved", lambda path: self.saved_label.setText(
+            f"\u2714 all keys saved to {path.name} at {time.strftime('%H:%M:%S')}"))
+        model.connect("pass_done", lambda name: self.report(
+            f"pass on {name} done: press N for {model.next_blendshape}" if model.next_blendshape
+            else f"pass on {name} done: every blendshape keyed", False))
+        self._show_frame(model.frame)
+
+    # ---------------------------------------------------------------------------------- layout
+    def _build(self) -> None:
+        self.video_view = QtImageView("video", (320, 240))
+        self.video_view.setFocusPolicy(QtCore.Qt.FocusPolicy.StrongFocus)
+        self.face_view = QtImageView("face preview", (240, 180))
+        self.face_view.setToolTip("The parametric face drawn from the four current weights: match it to the participant")
+        self.protocol = QtProtocolPanel(self.model)
+        self.timeline = QtTimeline(self.model)
+        pictures = QtWidgets.QHBoxLayout()
+        pictures.addLayout(self._captioned(self.video_view, "Video"), 4)
+        pictures.addLayout(self._captioned(self.face_view, "Face from the current weights"), 3)
+        pictures.addWidget(self.protocol, 0)
+        help_label = QtWidgets.QLabel(HELP_TEXT, wordWrap=True)
+        help_label.setStyleSheet("color:#505050;")
+        layout = QtWidgets.QVBoxLayout(self)
+        layout.setContentsMargins(0, 0, 0, 0)
+        layout.addLayout(pictures, 5)
+        layout.addLayout(self._build_transport())
+        layout.addWidget(self.timeline, 5)
+        layout.addWidget(help_label)
+
+    @staticmethod
+    def _captioned(widget: QtWidgets.QWidget, caption: str) -> QtWidgets.QVBoxLayout:
+        box = QtWidgets.QVBoxLayout()
+        box.addWidget(QtWidgets.QLabel(f"<b>{caption}</b>"))
+        box.addWidget(widget, 1)
+        return box
+
+    def _build_transport(self) -> QtWidgets.QHBoxLayout:
+        row = QtWidgets.QHBoxLayout()
+        steps = (("|\u25c0", "first frame (Home)", lambda: self.model.set_frame(0)),
+                 ("\u25c0\u25c0", "10 frames back (Shift+\u2190)", lambda: self.model.step(-10)),
+                 ("\u25c0", "one frame back (\u2190)", lambda: self.model.step(-1)),
+                 ("\u25b6", "one frame on (\u2192)", lambda: self.model.step(1)),
+                 ("\u25b6\u25b6", "10 frames on (Shift+\u2192)", lambda: self.model.step(10)),
+                 ("\u25b6|", "last frame (End)", lambda: self.model.set_frame(self.model.n_frames - 1)))
+        self.play_button = QtWidgets.QPushButton("Play (Space)")
+        self.play_button.setCheckable(True)
+        self.play_button.toggled.connect(self.set_playing)
+        for i, (text, tip, slot) in enumerate(steps):
+            if i == 3:
+                row.addWidget(self.play_button)
+            button = QtWidgets.QToolButton(text=text, toolTip=tip, autoRepeat=True)
+            button.setFocusPolicy(QtCore.Qt.FocusPolicy.NoFocus)
+            button.clicked.connect(slot)
+            row.addWidget(button)
+        self.speed = QtWidgets.QComboBox()
+        self.speed.addItems([f"{s:g}x" for s in SPEEDS])
+        self.speed.setCurrentIndex(SPEEDS.index(1.0))
+        self.speed.setFocusPolicy(QtCore.Qt.FocusPolicy.NoFocus)
+        self.speed.currentIndexChanged.connect(lambda *_: self._restart_clock())
+        self.frame_box = QtWidgets.QSpinBox(minimum=0, maximum=self.model.n_frames - 1, keyboardTracking=False)
+        self.frame_box.editingFinished.connect(lambda: self._go(lambda: self.model.set_frame(self.frame_box.value())))
+        self.time_box = QtWidgets.QDoubleSpinBox(minimum=0.0, maximum=self.model.times.duration_s, decimals=3,
+                                                 suffix=" s", keyboardTracking=False)
+        self.time_box.editingFinished.connect(lambda: self._go(lambda: self.model.go_to_time(self.time_box.value())))
+        self.position = QtWidgets.QLabel()
+        for label, widget in (("speed", self.speed), ("frame", self.frame_box), ("time", self.time_box)):
+            row.addSpacing(8)
+            row.addWidget(QtWidgets.QLabel(label))
+            row.addWidget(widget)
+        row.addSpacing(8)
+        row.addWidget(self.position, 1)
+        self.saved_label = QtWidgets.QLabel("no edit yet")
+        self.saved_label.setStyleSheet(_INFO_STYLE)
+        row.addWidget(self.saved_label)
+        return row
+
+    def _add_shortcuts(self) -> None:
+        m = self.model
+        Key = QtCore.Qt.Key
+        bindings: list[tuple[Any, Callable[[], Any]]] = [
+            (Key.Key_Right, lambda: m.step(1)), (Key.Key_Left, lambda: m.step(-1)),
+            ("Shift+Right", lambda: m.step(10)), ("Shift+Left", lambda: m.step(-10)),
+            (Key.Key_Home, lambda: m.set_frame(0)), (Key.Key_End, lambda: m.set_frame(m.n_frames - 1)),
+            (Key.Key_K, lambda: m.set_key(self.protocol.number.value())),
+            (Key.Key_M, lambda: m.set_key(1.0)),
+            (Key.Key_Up, lambda: self.nudge(WEIGHT_NUDGE)), (Key.Key_Down, lambda: self.nudge(-WEIGHT_NUDGE)),
+            (Key.Key_Delete, self.delete_key), (Key.Key_Backspace, self.delete_key),
+            (Key.Key_Space, lambda: self.play_button.toggle()),
+            (Key.Key_N, m.start_next_pass),
+            (QtGui.QKeySequence.StandardKey.Undo, m.undo), ("Ctrl+Shift+Z", m.redo), ("Ctrl+Y", m.redo),
+            (QtGui.QKeySequence.StandardKey.Copy, self.copy_key), (QtGui.QKeySequence.StandardKey.Paste, self.paste),
+            ("Ctrl+G", lambda: (self.frame_box.setFocus(), self.frame_box.selectAll())),
+        ]
+        bindings += [(getattr(Key, f"Key_{d}"), (lambda w=d / 10: m.set_key(w))) for d in range(10)]
+        for seq, slot in bindings:
+            action = QtGui.QAction(self)
+            action.setShortcut(QtGui.QKeySequence(seq))
+            action.setShortcutContext(QtCore.Qt.ShortcutContext.WidgetWithChildrenShortcut)
+            action.triggered.connect(lambda *_, s=slot: self._guarded(s))
+            self.addAction(action)
+
+    # ------------------------------------------------------------------------------- actions
+    def _guarded(self, slot: Callable[[], Any]) -> None:
+        """Run a user action; show an expected error in the status line and keep the state (E4)."""
+        try:
+            slot()
+        except (UserError, FileExistsError, KeyError) as exc:
+            self.report(str(exc).strip("'\""), True)
+
+    def _go(self, slot: Callable[[], Any]) -> None:
+        self._guarded(slot)
+        self.video_view.setFocus()
+
+    def nudge(self, delta: float) -> None:
+        """Key the current frame at its weight + ``delta`` (clipped to [0, 1])."""
+        w = self.model.weight()
+        self.model.set_key(min(max((0.0 if math.isnan(w) else w) + delta, 0.0), 1.0))
+
+    def delete_key(self) -> None:
+        """Delete the key selected in the curve editor, else the key on the current frame."""
+        frame = self.timeline.selected if self.timeline.selected is not None else self.model.frame
+        if self.model.delete_key(frame) is None:
+            self.report(f"no {self.model.blendshape} key on frame {frame} to delete", True)
+
+    def copy_key(self) -> None:
+        """Copy the selected key (else the current frame's key) of the current blendshape."""
+        frame = self.timeline.selected if self.timeline.selected is not None else self.model.frame
+        n = self.model.copy(frame)
+        self.report(f"copied {n} key{'s' * (n != 1)} of {self.model.blendshape}", n == 0)
+
+    def paste(self) -> None:
+        """Paste the copied keys at the current frame."""
+        n = self.model.paste()
+        self.report(f"pasted {n} key{'s' * (n != 1)} at frame {self.model.frame}", n == 0)
+
+    # ------------------------------------------------------------------------------- playback
+    @property
+    def playing(self) -> bool:
+        """Whether the video is playing."""
+        return self._play_timer.isActive()
+
+    def set_playing(self, on: bool) -> None:
+        """Start or stop playback at the chosen speed (real session time, frames from the timestamps)."""
+        if on and self.model.frame >= self.model.n_frames - 1:
+            self.model.set_frame(0)
+        if on:
+            self._restart_clock()
+            self._play_timer.start()
+        else:
+            self._play_timer.stop()
+        if self.play_button.isChecked() != on:
+            self.play_button.setChecked(on)
+        self.play_button.setText("Pause (Space)" if on else "Play (Space)")
+
+    def _restart_clock(self) -> None:
+        self._play_from = (self.model.t_s, time.perf_counter())
+
+    def _play_tick(self) -> None:
+        t0_s, wall0 = self._play_from
+        speed = SPEEDS[self.speed.currentIndex()]
+        self.model.go_to_time(t0_s + speed * (time.perf_counter() - wall0))
+        if self.model.frame >= self.model.n_frames - 1:
+            self.set_playing(False)
+
+    # ------------------------------------------------------------------------------- display
+    def _show_frame(self, frame: int) -> None:
+        try:
+            self.video_view.set_image(self.video.get(frame))
+        except UserError as exc:
+            self.video_view.setText(str(exc))
+        for box, value in ((self.frame_box, frame), (self.time_box, self.model.t_s)):
+            if not box.hasFocus():
+                box.blockSignals(True)
+                box.setValue(value)
+                box.blockSignals(False)
+        self.position.setText(f"frame {frame} / {self.model.n_frames - 1}   t = {self.model.t_s:.3f} s")
+        self._show_face()
+
+    def _show_face(self) -> None:
+        weights = tuple(0.0 if math.isnan(w) else w for w in self.model.weights().values())
+        if weights == self._face_weights:
+            return
+        self._face_weights = weights
+        self.face_view.set_image(render_face(weights, (320, 240)))
+
+    def shutdown(self) -> None:
+        """Stop playback, forget the model's listeners and close the video."""
+        self._play_timer.stop()
+        self.model.disconnect_all()
+        self.video.close()
+
+
+class QtAnnotateStage(QtWidgets.QWidget):
+    """The Annotate stage: session browser, rater, key-frame editor and reliability round.
+
+    Parameters
+    ----------
+    sessions_dir : Path
+        The lab's folder of sessions.
+    settings : QSettings, optional
+        Remembers the rater code (``annotate/rater``).
+    cache_frames : int
+        Decoded frames the video cache keeps.
+    """
+
+    def __init__(self, sessions_dir: str | os.PathLike, settings: QtCore.QSettings | None = None,
+                 cache_frames: int = 256, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        guard_none_refcount()  # PySide6 6.12.0 on CPython 3.11 leaks references to None: see qt_compat
+        self.sessions_dir = Path(sessions_dir)
+        self.settings = settings
+        self.cache_frames = cache_frames
+        self.editor: QtKeyframeEditor | None = None
+        self._build()
+        self.refresh_sessions()
+
+    # ---------------------------------------------------------------------------------- layout
+    def _build(self) -> None:
+        self.sessions = QtWidgets.QListWidget()
+        self.sessions.itemDoubleClicked.connect(lambda *_: self.open_selected())
+        rater = str(self.settings.value("annotate/rater", "")) if self.settings is not None else ""
+        self.rater = QtWidgets.QLineEdit(rater, placeholderText="your code, e.g. R1", maxLength=32)
+        self.rater.returnPressed.connect(self.open_selected)
+        self.open_button = QtWidgets.QPushButton("Open session")
+        self.open_button.clicked.connect(self.open_selected)
+        self.status = QtWidgets.QLabel(wordWrap=True)
+        self.status.setMinimumHeight(36)
+        left = QtWidgets.QVBoxLayout()
+        left.addWidget(QtWidgets.QLabel("<b>Sessions</b>"))
+        left.addWidget(self.sessions, 1)
+        left.addWidget(QtWidgets.QLabel("<b>Rater</b> (you see only your own keys)"))
+        left.addWidget(self.rater)
+        left.addWidget(self.open_button)
+        left.addWidget(self._build_toolbar())
+        left.addWidget(self.status)
+        side = QtWidgets.QWidget()
+        side.setLayout(left)
+        side.setFixedWidth(250)
+        self.editor_host = QtWidgets.QStackedWidget()
+        self.placeholder = QtWidgets.QLabel("Choose a session, type your rater code and press Open session.",
+                                            alignment=QtCore.Qt.AlignmentFlag.AlignCenter)
+        self.editor_host.addWidget(self.placeholder)
+        self.reliability: QtReliabilityPanel | None = None
+        self.reliability_host = QtWidgets.QStackedWidget()
+        self.reliability_host.addWidget(QtWidgets.QLabel("Type your rater code to join the reliability round.",
+                                                         alignment=QtCore.Qt.AlignmentFlag.AlignCenter))
+        self.tabs = QtWidgets.QTabWidget()
+        self.tabs.addTab(self.editor_host, "Key-frames")
+        self.tabs.addTab(self.reliability_host, "Reliability round")
+        self.tabs.currentChanged.connect(lambda i: self.open_reliability() if i == 1 else None)
+        layout = QtWidgets.QHBoxLayout(self)
+        layout.addWidget(side)
+        layout.addWidget(self.tabs, 1)
+
+    def _build_toolbar(self) -> QtWidgets.QWidget:
+        bar = QtWidgets.QToolBar()
+        bar.setToolButtonStyle(QtCore.Qt.ToolButtonStyle.ToolButtonTextOnly)
+        self.undo_action = bar.addAction("Undo", lambda: self._on_editor(lambda e: e.model.undo()))
+        self.redo_action = bar.addAction("Redo", lambda: self._on_editor(lambda e: e.model.redo()))
+        export = QtWidgets.QMenu("Export", self)
+        self.export_weights_action = export.addAction("Per-frame weights CSV\u2026", lambda: self.export_weights())
+        self.export_keys_action = export.addAction("Key-frames JSON\u2026", lambda: self.export_keyframes())
+        button = QtWidgets.QToolButton(text="Export \u25be", popupMode=QtWidgets.QToolButton.ToolButtonPopupMode.InstantPopup)
+        button.setMenu(export)
+        bar.addWidget(button)
+        self.export_menu = export
+        return bar
+
+    def _on_editor(self, fn: Callable[[QtKeyframeEditor], Any]) -> None:
+        if self.editor is None:
+            self.show_message("open a session first", True)
+        else:
+            fn(self.editor)
+
+    def show_message(self, message: str, is_error: bool = False) -> None:
+        """One line in the status area (errors in red)."""
+        self.status.setStyleSheet(_ERROR_STYLE if is_error else _INFO_STYLE)
+        self.status.setText(message)
+
+    # -------------------------------------------------------------------------------- sessions
+    def refresh_sessions(self) -> None:
+        """List the session folders that have video."""
+        self.sessions.clear()
+        try:
+            folders = list_sessions(self.sessions_dir)
+        except UserError as exc:
+            self.show_message(str(exc), True)
+            return
+        for folder in folders:
+            if not (folder / "video_frames.csv").is_file():
+                continue
+            item = QtWidgets.QListWidgetItem(self._describe(folder))
+            item.setData(QtCore.Qt.ItemDataRole.UserRole, str(folder))
+            self.sessions.addItem(item)
+        if self.sessions.count():
+            self.sessions.setCurrentRow(0)
+
+    @staticmethod
+    def _describe(folder: Path) -> str:
+        try:
+            info = read_session_info(folder)
+            p = info.participant
+            who = f"{p.sex or '?'}, {p.age:g} y" if p.age else (p.sex or "")
+        except UserError:
+            who = "unreadable session.json"
+        return f"{folder.name}\n   {who}"
+
+    def open_selected(self) -> None:
+        """Open the selected session for the typed rater."""
+        item = self.sessions.currentItem()
+        if item is None:
+            self.show_message("choose a session first", True)
+            return
+        self.open_session(Path(item.data(QtCore.Qt.ItemDataRole.UserRole)), self.rater.text().strip())
+
+    def open_session(self, folder: str | os.PathLike, rater: str) -> QtKeyframeEditor | None:
+        """Open ``folder`` for ``rater`` (their file only); an expected error is shown, not raised."""
+        try:
+            check_rater(rater)
+            model = AnnotationSession(folder, rater)
+            video = VideoIndex.from_session(folder, cache_frames=self.cache_frames)
+        except UserError as exc:
+            self.show_message(str(exc), True)
+            return None
+        self.close_session()
+        self._select_listed(Path(folder))
+        self.editor = QtKeyframeEditor(model, video, self.show_message)
+        self.editor_host.addWidget(self.editor)
+        self.editor_host.setCurrentWidget(self.editor)
+        self.tabs.setCurrentIndex(0)
+        self.editor.video_view.setFocus()
+        if self.settings is not None:
+            self.settings.setValue("annotate/rater", rater)
+        keys = sum(len(t) for t in model.annotations.tracks.values())
+        self.show_message(f"{model.session.info.session_id}: rater {rater}, {keys} keys "
+                          f"({'file ' + model.path.name if model.path.exists() else 'new file on first key'})")
+        return self.editor
+
+    def _select_listed(self, folder: Path) -> None:
+        """Highlight ``folder`` in the session list (when it is listed)."""
+        for row in range(self.sessions.count()):
+            if Path(self.sessions.item(row).data(QtCore.Qt.ItemDataRole.UserRole)) == folder:
+                self.sessions.setCurrentRow(row)
+
+    def close_session(self) -> None:
+        """Close the open session (nothing to save: every edit is already on disk)."""
+        if self.editor is not None:
+            self.editor.shutdown()
+            self.editor_host.removeWidget(self.editor)
+            self.editor.deleteLater()
+            self.editor = None
+
+    def open_reliability(self) -> QtReliabilityPanel | None:
+        """Show the reliability round for the typed rater."""
+        rater = self.rater.text().strip()
+        try:
+            check_rater(rater)
+        except UserError as exc:
+            self.show_message(str(exc), True)
+            return None
+        if self.reliability is None:
+            self.reliability = QtReliabilityPanel(self.sessions_dir, rater)
+            self.reliability_host.addWidget(self.reliability)
+        elif self.reliability.rater != rater:
+            self.reliability.set_rater(rater)
+        self.reliability_host.setCurrentWidget(self.reliability)
+        return self.reliability
+
+    # ---------------------------------------------------------------------------------- export
+    def export_weights(self, path: str | os.PathLike | None = None, *, overwrite: bool = False) -> Path | None:
+        """Write the open session's per-frame weights CSV (asks for a file name when ``path`` is None)."""
+        return self._export("weights.csv", "CSV (*.csv)", path, overwrite,
+                            lambda e, p, o: write_weights_csv(e.model.annotations, e.model.times, p, overwrite=o))
+
+    def export_keyframes(self, path: str | os.PathLike | None = None, *, overwrite: bool = False) -> Path | None:
+        """Write the open session's key-frame JSON (asks for a file name when ``path`` is None)."""
+        return self._export("keyframes.json", "JSON (*.json)", path, overwrite,
+                            lambda e, p, o: write_keyframes_json(e.model.annotations, p, overwrite=o))
+
+    def _export(self, suffix: str, filter_: str, path: str | os.PathLike | None, overwrite: bool,
+                write: Callable[[QtKeyframeEditor, Path, bool], Path]) -> Path | None:
+        if self.editor is None:
+            self.show_message("open a session first", True)
+            return None
+        if path is None:  # the dialog asks before replacing a file: that is the explicit choice
+            default = self.editor.model.session.path / f"{self.editor.model.rater}_{suffix}"
+            chosen, _ = QtWidgets.QFileDialog.getSaveFileName(self, "Export", str(default), filter_)
+            if not chosen:
+                return None
+            path, overwrite = chosen, True
+        try:
+            out = write(self.editor, Path(path), overwrite)
+        except (FileExistsError, OSError, UserError) as exc:
+            self.show_message(str(exc), True)
+            return None
+        self.show_message(f"exported {out}")
+        return out
+
+    # ------------------------------------------------------------------------------ lifecycle
+    def may_close(self) -> bool:
+        """Always: every key is saved when it is set."""
+        return True
+
+    def shutdown(self) -> None:
+        """Stop playback and the video prefetch thread."""
+        self.close_session()

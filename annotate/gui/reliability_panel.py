@@ -1,0 +1,295 @@
+"""The reliability round: rate the pose set blind, then see the agreement report.
+
+:class:`QtReliabilityPanel` views a :class:`~annotate.session_model.BlindRound` (one rater's blind
+ratings of ``reliability/poses.csv``) and the lab's :class:`~annotate.agreement.AgreementReport`:
+per-pose and per-blendshape tables (mean absolute difference in % of the weight range, ICC(A,1),
+ICC(C,1), Krippendorff's alpha), flagged poses in red and the Bland-Altman plot of every rater
+pair. The report appears only once this rater has rated every pose, so nobody sees the others'
+ratings before giving their own. A lab without a pose set can propose one from HR and phase
+extremes (written to ``reliability/poses.csv``, never over an existing one).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pyqtgraph as pg
+from PySide6 import QtCore, QtGui, QtWidgets
+
+from annotate.agreement import FLAG_PCT, N_POSES, AgreementReport, agreement_report, gather_ratings, propose_poses
+from annotate.gui.image_view import QtImageView
+from annotate.reliability import write_poses
+from annotate.session_model import BlindRound
+from capture_tool.camera import read_frame
+from capture_tool.errors import UserError
+from capture_tool.session import list_sessions, read_session
+
+_PAIR_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#8c564b", "#e377c2")
+_FLAG_BRUSH = QtGui.QBrush(QtGui.QColor("#f8d7da"))
+
+
+def _table(headers: list[str]) -> QtWidgets.QTableWidget:
+    table = QtWidgets.QTableWidget(0, len(headers))
+    table.setHorizontalHeaderLabels(headers)
+    table.verticalHeader().setVisible(False)
+    table.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
+    table.setSelectionBehavior(QtWidgets.QAbstractItemView.SelectionBehavior.SelectRows)
+    table.horizontalHeader().setSectionResizeMode(QtWidgets.QHeaderView.ResizeMode.ResizeToContents)
+    table.horizontalHeader().setStretchLastSection(True)
+    return table
+
+
+def _fill(table: QtWidgets.QTableWidget, rows: list[list[str]], flagged: set[int] = frozenset()) -> None:
+    table.setRowCount(len(rows))
+    for r, row in enumerate(rows):
+        for c, text in enumerate(row):
+            item = QtWidgets.QTableWidgetItem(text)
+            if r in flagged:
+                item.setBackground(_FLAG_BRUSH)
+            table.setItem(r, c, item)
+
+
+class QtReliabilityPanel(QtWidgets.QWidget):
+    """Blind pose ratings and the agreement report of a lab folder (see the module docstring).
+
+    Parameters
+    ----------
+    lab_dir : Path
+        The folder of sessions (with ``reliability/``).
+    rater : str
+        The rater rating the poses.
+    """
+
+    def __init__(self, lab_dir: Path, rater: str, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.lab_dir = Path(lab_dir)
+        self.rater = rater
+        self.round: BlindRound | None = None
+        self.report: AgreementReport | None = None
+        self._build()
+        self.reload()
+
+    # ---------------------------------------------------------------------------------- layout
+    def _build(self) -> None:
+        self.status = QtWidgets.QLabel(wordWrap=True)
+        self.propose_button = QtWidgets.QPushButton(f"Propose {N_POSES} poses from HR and phase extremes")
+        self.propose_button.clicked.connect(self.propose)
+        self.poses = _table(["pose", "session", "frame", "rated"])
+        self.poses.currentCellChanged.connect(lambda row, *_: self._show_pose(row))
+        self.image = QtImageView("pose frame", (200, 150))
+        self.image.setMaximumHeight(180)
+        self.spins: dict[str, QtWidgets.QDoubleSpinBox] = {}
+        form = QtWidgets.QFormLayout()
+        self.save_button = QtWidgets.QPushButton("Save my rating of this pose")
+        self.save_button.clicked.connect(self.save_pose)
+        rate_box = QtWidgets.QGroupBox("Rate the selected pose (blind)")
+        rate_layout = QtWidgets.QVBoxLayout(rate_box)
+        rate_layout.addWidget(self.image)
+        rate_layout.addLayout(form)
+        rate_layout.addWidget(self.save_button)
+        self._form = form
+        left = QtWidgets.QVBoxLayout()
+        left.addWidget(self.propose_button)
+        left.addWidget(self.poses, 1)
+        left.addWidget(rate_box)
+        left_widget = QtWidgets.QWidget()
+        left_widget.setLayout(left)
+        left_widget.setFixedWidth(300)
+        row = QtWidgets.QHBoxLayout()
+        row.addWidget(left_widget)
+        row.addWidget(self._build_report(), 1)
+        layout = QtWidgets.QVBoxLayout(self)
+        layout.addWidget(self.status)
+        layout.addLayout(row, 1)
+
+    def _build_report(self) -> QtWidgets.QWidget:
+        box = QtWidgets.QGroupBox("Agreement report")
+        self.threshold = QtWidgets.QDoubleSpinBox(minimum=0.0, maximum=100.0, value=FLAG_PCT, suffix=" %",
+                                                  decimals=1, singleStep=1.0)
+        self.threshold.valueChanged.connect(lambda *_: self.refresh_report())
+        self.report_note = QtWidgets.QLabel(wordWrap=True)
+        self.per_pose = _table(["pose", "mean |diff| %", "review"])  # sorted worst first
+        self.per_shape = _table(["blendshape", "items", "diff %", "ICC(A,1)", "ICC(C,1)", "alpha"])
+        self.pairs = QtWidgets.QLabel(wordWrap=True)
+        self.ba_plot = pg.PlotWidget(background="w", title="Bland-Altman: rater a - rater b")
+        self.ba_plot.setLabel("bottom", "mean weight of the pair")
+        self.ba_plot.setLabel("left", "difference")
+        self.ba_plot.addLegend(offset=(-5, 5))
+        self.ba_plot.setMinimumHeight(200)
+        for axis in ("left", "bottom"):
+            self.ba_plot.getAxis(axis).enableAutoSIPrefix(False)
+        threshold_row = QtWidgets.QHBoxLayout()
+        threshold_row.addWidget(QtWidgets.QLabel("Flag poses over"))
+        threshold_row.addWidget(self.threshold)
+        threshold_row.addStretch(1)
+        tables = QtWidgets.QHBoxLayout()
+        self.per_pose.setMinimumWidth(200)
+        tables.addWidget(self.per_pose, 3)
+        tables.addWidget(self.per_shape, 5)
+        results = QtWidgets.QWidget()
+        inner = QtWidgets.QVBoxLayout(results)
+        inner.setContentsMargins(0, 0, 0, 0)
+        inner.addLayout(tables, 2)
+        inner.addWidget(self.pairs)
+        inner.addWidget(self.ba_plot, 3)
+        self.hidden_note = QtWidgets.QLabel(alignment=QtCore.Qt.AlignmentFlag.AlignCenter, wordWrap=True)
+        self.hidden_note.setStyleSheet("color:#505050; font-size:14px;")
+        self.results = QtWidgets.QStackedWidget()
+        self.results.addWidget(self.hidden_note)
+        self.results.addWidget(results)
+        layout = QtWidgets.QVBoxLayout(box)
+        layout.addLayout(threshold_row)
+        layout.addWidget(self.report_note)
+        layout.addWidget(self.results, 1)
+        return box
+
+    # ----------------------------------------------------------------------------------- data
+    def set_rater(self, rater: str) -> None:
+        """Switch to another rater's blind round."""
+        self.rater = rater
+        self.reload()
+
+    def reload(self) -> None:
+        """Re-read the pose set and this rater's ratings; show or hide the report."""
+        try:
+            self.round = BlindRound(self.lab_dir, self.rater)
+        except UserError as exc:
+            self.round = None
+            self.status.setText(str(exc))
+        self.propose_button.setVisible(self.round is None)
+        self._rebuild_spins()
+        self._fill_poses()
+        self.refresh_report()
+
+    def _rebuild_spins(self) -> None:
+        while self._form.rowCount():
+            self._form.removeRow(0)
+        self.spins = {}
+        names = self.round.blendshapes.names if self.round else ()
+        for name in names:
+            spin = QtWidgets.QDoubleSpinBox(minimum=0.0, maximum=1.0, singleStep=0.05, decimals=2)
+            self.spins[name] = spin
+            self._form.addRow(name, spin)
+        self.save_button.setEnabled(bool(names))
+
+    def _fill_poses(self) -> None:
+        if self.round is None:
+            _fill(self.poses, [])
+            return
+        done = sum(self.round.is_done(p.pose_id) for p in self.round.poses)
+        n = len(self.round.poses)
+        self.status.setText(f"Rater {self.rater}: {done} of {n} poses rated " + (
+            "(round done: the agreement report is shown)" if done == n
+            else "(blind: other raters' ratings stay hidden until you finish)"))
+        _fill(self.poses, [[p.pose_id, p.session_id.split("_")[0], str(p.frame),
+                            "\u2713" if self.round.is_done(p.pose_id) else ""] for p in self.round.poses])
+        if self.poses.currentRow() < 0 and self.round.poses:
+            self.poses.setCurrentCell(0, 0)
+
+    def _show_pose(self, row: int) -> None:
+        if self.round is None or not 0 <= row < len(self.round.poses):
+            return
+        pose = self.round.poses[row]
+        try:
+            self.image.set_image(read_frame(self.lab_dir / pose.session_id / "video.avi", pose.frame))
+        except UserError as exc:
+            self.image.setText(str(exc))
+        locked = any((pose.pose_id, n) in self.round.locked for n in self.spins)
+        for name, spin in self.spins.items():
+            value = self.round.rating(pose.pose_id, name)
+            spin.setValue(0.0 if value is None else value)
+            spin.setEnabled(not locked)
+        self.save_button.setEnabled(not locked)
+        self.save_button.setText("Rated in the lab's ratings.csv" if locked else "Save my rating of this pose")
+
+    def save_pose(self) -> None:
+        """Save this rater's weights for the selected pose (atomic write of their ratings file)."""
+        row = self.poses.currentRow()
+        if self.round is None or row < 0:
+            return
+        pose = self.round.poses[row]
+        try:
+            for name, spin in self.spins.items():
+                self.round.set_rating(pose.pose_id, name, spin.value())
+        except UserError as exc:
+            self.status.setText(str(exc))
+            return
+        self._fill_poses()
+        self.poses.setCurrentCell(min(row + 1, len(self.round.poses) - 1), 0)
+        self.refresh_report()
+
+    def propose(self) -> None:
+        """Propose the pose set from the sessions' HR and phase extremes into ``reliability/poses.csv``."""
+        try:
+            sessions = [read_session(p) for p in list_sessions(self.lab_dir)]
+            sessions = [s for s in sessions if s.frame_times_s]
+            if not sessions:
+                raise UserError(f"{self.lab_dir}: expected sessions with video, found none")
+            per = -(-N_POSES // len(sessions))
+            poses = []
+            for s in sessions:
+                poses += propose_poses(s, per, first_id=len(poses) + 1)
+            write_poses(self.lab_dir / "reliability" / "poses.csv", poses[:N_POSES])
+        except (UserError, FileExistsError) as exc:
+            self.status.setText(str(exc))
+            return
+        self.reload()
+
+    # --------------------------------------------------------------------------------- report
+    def refresh_report(self) -> None:
+        """Compute and show the report if this rater has finished the round."""
+        self.report = None
+        if self.round is None or not self.round.complete:
+            n = len(self.round.poses) if self.round else 0
+            self.report_note.setText("")
+            self.hidden_note.setText(
+                f"The agreement report (tables and Bland-Altman plot) appears once you have rated all {n} "
+                "poses.\n\nUntil then the other raters' ratings stay hidden, so your ratings are blind."
+                if self.round else "No pose set yet: propose one (left) or ask the lab for reliability/poses.csv.")
+            self._show_report()
+            return
+        try:
+            ratings, source = gather_ratings(self.lab_dir)
+            self.report = agreement_report(ratings, flag_pct=self.threshold.value(), source=source)
+        except UserError as exc:
+            self.report_note.setText(str(exc))
+        else:
+            o = self.report.overall
+            self.report_note.setText(
+                f"{len(self.report.raters)} raters, {len(self.report.poses)} poses: mean |difference| "
+                f"<b>{o.disagreement_pct:.1f} %</b> of the weight range (paper: 11 %), ICC(A,1) {o.icc_a1:.2f}, "
+                f"alpha {o.alpha:.2f}. Flagged for review: {', '.join(self.report.flagged) or 'none'}.")
+        self._show_report()
+
+    def _show_report(self) -> None:
+        rep = self.report
+        self.results.setCurrentIndex(0 if rep is None else 1)
+        if rep is None:
+            _fill(self.per_pose, [])
+            _fill(self.per_shape, [])
+            self.pairs.setText("")
+            self.ba_plot.clear()
+            return
+        poses = sorted(rep.per_pose_pct.items(), key=lambda pv: -pv[1])  # worst first: flagged on top
+        _fill(self.per_pose, [[p, f"{v:.1f}", "FLAG" if p in rep.flagged else ""] for p, v in poses],
+              {i for i, (p, _) in enumerate(poses) if p in rep.flagged})
+        _fill(self.per_shape, [[s.name, str(s.n_items), f"{s.disagreement_pct:.1f}", f"{s.icc_a1:.3f}",
+                                f"{s.icc_c1:.3f}", f"{s.alpha:.3f}"] for s in [*rep.per_blendshape, rep.overall]])
+        self.pairs.setText("   ".join(f"{p.rater_a}-{p.rater_b}: bias {p.bias:+.3f}, limits "
+                                      f"{p.loa_low:+.3f} .. {p.loa_high:+.3f}" for p in rep.pairs))
+        self._plot_bland_altman(rep)
+
+    def _plot_bland_altman(self, rep: AgreementReport) -> None:
+        plot = self.ba_plot
+        plot.clear()
+        for i, p in enumerate(rep.pairs):
+            colour = _PAIR_COLOURS[i % len(_PAIR_COLOURS)]
+            plot.plot(p.means, p.diffs, pen=None, symbol="o", symbolSize=6, symbolPen=None,
+                      symbolBrush=pg.mkColor(colour), name=f"{p.rater_a}-{p.rater_b}")
+            for y, style in ((p.bias, QtCore.Qt.PenStyle.SolidLine), (p.loa_low, QtCore.Qt.PenStyle.DashLine),
+                             (p.loa_high, QtCore.Qt.PenStyle.DashLine)):
+                plot.addItem(pg.InfiniteLine(y, angle=0, pen=pg.mkPen(colour, style=style)))
+        spread = max(0.3, float(np.max([np.max(np.abs(p.diffs)) for p in rep.pairs])) * 1.15)
+        plot.setXRange(0, 1, padding=0.02)
+        plot.setYRange(-spread, spread, padding=0)

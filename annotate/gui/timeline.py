@@ -1,0 +1,247 @@
+"""Heart rate, phases and the curve editor under the video, on one session-time axis (pyqtgraph).
+
+:class:`QtTimeline` views an :class:`~annotate.session_model.AnnotationSession`:
+
+- top plot: heart rate (valid samples; gaps where the strap lost contact) with the exercise
+  phases shaded and named;
+- bottom plot, the curve editor: the rater's own curve of the current blendshape (their other
+  blendshapes faint), its key-frames as points. Click a key to select it (and go to its frame),
+  drag it to move it in time and weight (one undo step, snapped to a recorded frame), click empty
+  space to go to that time, double-click to add a key there; Delete removes the selected key;
+- a cursor line at the current frame's time in both plots; dragging it scrubs the video.
+
+Everything is written back through the model's methods (STYLE.md L3); the widget keeps only the
+selection and the drag preview.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import pyqtgraph as pg
+from PySide6 import QtCore, QtWidgets
+
+from annotate.session_model import AnnotationSession
+
+_CURRENT_PEN = pg.mkPen("#1f5fbf", width=2)
+_OTHER_PEN = pg.mkPen((120, 120, 120, 110), width=1)
+_KEY_BRUSH = pg.mkBrush("#1f5fbf")
+_SELECTED_BRUSH = pg.mkBrush("#e07000")
+_PHASE_BRUSHES = (pg.mkBrush(90, 140, 220, 40), pg.mkBrush(230, 150, 60, 40))
+
+
+class _ClickViewBox(pg.ViewBox):
+    """A ViewBox that reports left clicks and double-clicks on empty space in data coordinates."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.on_click: Callable[[float, float], None] | None = None
+        self.on_double_click: Callable[[float, float], None] | None = None
+
+    def mouseClickEvent(self, ev) -> None:  # noqa: N802 - pyqtgraph override
+        if ev.button() != QtCore.Qt.MouseButton.LeftButton:
+            super().mouseClickEvent(ev)
+            return
+        ev.accept()
+        p = self.mapSceneToView(ev.scenePos())
+        handler = self.on_double_click if ev.double() else self.on_click
+        if handler is not None:
+            handler(p.x(), p.y())
+
+
+class _KeyPoints(pg.ScatterPlotItem):
+    """Key-frame points that can be clicked (select) and dragged (move); data of a point = its frame."""
+
+    def __init__(self) -> None:
+        super().__init__(size=11, pen=pg.mkPen("w", width=1.5), brush=_KEY_BRUSH, hoverable=True,
+                         hoverSize=14)
+        self.on_select: Callable[[int], None] | None = None
+        self.on_drop: Callable[[int, float, float], None] | None = None
+        self.dragging: int | None = None
+
+    def mouseClickEvent(self, ev) -> None:  # noqa: N802 - pyqtgraph override
+        points = self.pointsAt(ev.pos()) if ev.button() == QtCore.Qt.MouseButton.LeftButton else []
+        if len(points) == 0:
+            ev.ignore()
+            return
+        ev.accept()
+        if self.on_select is not None:
+            self.on_select(int(points[0].data()))
+
+    def mouseDragEvent(self, ev) -> None:  # noqa: N802 - pyqtgraph override
+        if ev.button() != QtCore.Qt.MouseButton.LeftButton:
+            ev.ignore()
+            return
+        if ev.isStart():
+            points = self.pointsAt(ev.buttonDownPos())
+            if len(points) == 0:
+                ev.ignore()
+                return
+            self.dragging = int(points[0].data())
+        elif self.dragging is None:
+            ev.ignore()
+            return
+        ev.accept()
+        x, y = ev.pos().x(), min(max(ev.pos().y(), 0.0), 1.0)
+        if ev.isFinish():
+            frame, self.dragging = self.dragging, None
+            if self.on_drop is not None:
+                self.on_drop(frame, x, y)
+        else:
+            self._preview(x, y)
+
+    def _preview(self, x: float, y: float) -> None:
+        """Draw the dragged point at the pointer (widget state only; the model changes on drop)."""
+        data = self.data
+        i = int(np.flatnonzero(data["data"] == self.dragging)[0])
+        xs, ys = data["x"].copy(), data["y"].copy()
+        xs[i], ys[i] = x, y
+        self.setData(x=xs, y=ys, data=data["data"].copy(), brush=[_SELECTED_BRUSH if k == i else _KEY_BRUSH
+                                                                  for k in range(len(xs))])
+
+
+class QtTimeline(pg.GraphicsLayoutWidget):
+    """Heart rate + phases and the curve editor of an annotation session (see the module docstring).
+
+    Parameters
+    ----------
+    model : AnnotationSession
+        The rater's session.
+    """
+
+    def __init__(self, model: AnnotationSession, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.setBackground("w")
+        self.model = model
+        self.selected: int | None = None
+        self.t_s = model.times.t_s
+        self.hr_plot = self.addPlot(row=0, col=0)
+        self._curve_box = _ClickViewBox()
+        self.curve_plot = self.addPlot(row=1, col=0, viewBox=self._curve_box)
+        self.ci.layout.setRowStretchFactor(0, 2)
+        self.ci.layout.setRowStretchFactor(1, 3)
+        self._build_hr()
+        self._build_curves()
+        self.cursors = [self._cursor(self.hr_plot, movable=True), self._cursor(self.curve_plot, movable=False)]
+        self.cursors[0].sigDragged.connect(lambda line: model.go_to_time(line.value()))
+        self.setMinimumHeight(260)
+        model.connect("frame_changed", self._on_frame)
+        model.connect("keys_changed", lambda *_: self.refresh_curves())
+        model.connect("blendshape_changed", self._on_blendshape)
+        self.refresh_curves()
+        self._on_frame(model.frame)
+
+    # -------------------------------------------------------------------------------- building
+    def _build_hr(self) -> None:
+        plot = self.hr_plot
+        plot.setLabel("left", "heart rate", units="bpm")
+        plot.showGrid(x=True, y=True, alpha=0.2)
+        plot.setMouseEnabled(x=True, y=False)
+        hr = self.model.session.heart_rate
+        t = np.array([h.t_s for h in hr], dtype=float)
+        bpm = np.array([h.hr_bpm if (h.valid and h.hr_bpm) else np.nan for h in hr], dtype=float)
+        plot.plot(t, bpm, pen=pg.mkPen("#c0002a", width=1.5), connect="finite")
+        if np.isfinite(bpm).any():
+            plot.setYRange(np.nanmin(bpm) - 5, np.nanmax(bpm) + 12, padding=0)
+        self._add_phases(plot)
+        plot.setXRange(self.t_s[0], self.t_s[-1], padding=0.01)
+
+    def _add_phases(self, plot: pg.PlotItem) -> None:
+        """Shade each phase between its start and end events and name it."""
+        starts: dict[str, float] = {}
+        for i, e in enumerate(ev for ev in self.model.session.events if ev.kind in ("phase_start", "phase_end")):
+            if e.kind == "phase_start":
+                starts[e.label] = e.t_s
+            elif e.label in starts:
+                region = pg.LinearRegionItem((starts.pop(e.label), e.t_s), movable=False,
+                                             brush=_PHASE_BRUSHES[i // 2 % 2], pen=pg.mkPen(None))
+                region.setZValue(-10)
+                plot.addItem(region)
+                pg.InfLineLabel(region.lines[0], e.label, position=0.93, anchors=[(0, 0), (0, 0)],
+                                color="#404040")
+
+    def _build_curves(self) -> None:
+        plot = self.curve_plot
+        plot.setLabel("left", "weight")
+        plot.setLabel("bottom", "session time", units="s")
+        plot.showGrid(x=True, y=True, alpha=0.2)
+        plot.setMouseEnabled(x=True, y=False)
+        plot.setYRange(-0.05, 1.05, padding=0)
+        plot.setXLink(self.hr_plot)
+        self.hr_plot.getAxis("bottom").setStyle(showValues=False)
+        self.others = {n: plot.plot(pen=_OTHER_PEN) for n in self.model.blendshape_names}
+        self.current_curve = plot.plot(pen=_CURRENT_PEN)
+        self.keys = _KeyPoints()
+        plot.addItem(self.keys)
+        self.keys.on_select = self.select_key
+        self.keys.on_drop = self._on_drop
+        self._curve_box.on_click = lambda x, y: self.model.go_to_time(x)
+        self._curve_box.on_double_click = self._on_double_click
+        self.title = pg.TextItem(color="#1f5fbf", anchor=(0, 0))
+        plot.addItem(self.title, ignoreBounds=True)
+
+    def _cursor(self, plot: pg.PlotItem, movable: bool) -> pg.InfiniteLine:
+        line = pg.InfiniteLine(angle=90, movable=movable, pen=pg.mkPen("#00a040", width=2),
+                               hoverPen=pg.mkPen("#00d060", width=3))
+        plot.addItem(line, ignoreBounds=True)
+        return line
+
+    # ------------------------------------------------------------------------------- updates
+    def refresh_curves(self) -> None:
+        """Redraw the rater's curves and the current blendshape's keys from the model."""
+        frames = np.arange(self.model.n_frames)
+        for name, item in self.others.items():
+            values = self.model.annotations.tracks[name].evaluate(frames)
+            item.setData(self.t_s, values, connect="finite")
+            item.setVisible(name != self.model.blendshape)
+        self.current_curve.setData(self.t_s, self.model.track.evaluate(frames), connect="finite")
+        kf, kw, _ = self.model.track.arrays()
+        if self.selected is not None and self.selected not in set(kf.tolist()):
+            self.selected = None
+        brushes = [_SELECTED_BRUSH if f == self.selected else _KEY_BRUSH for f in kf]
+        self.keys.setData(x=self.t_s[kf], y=kw, data=kf, brush=brushes)
+        self.title.setText(f"{self.model.blendshape} ({self.model.rater}): {len(kf)} keys")
+        self.title.setPos(self.t_s[0], 1.05)
+
+    def _on_frame(self, frame: int) -> None:
+        t = float(self.t_s[frame])
+        for line in self.cursors:
+            if line.value() != t:
+                line.blockSignals(True)
+                line.setValue(t)
+                line.blockSignals(False)
+
+    def _on_blendshape(self, _name: str) -> None:
+        self.selected = None
+        self.refresh_curves()
+
+    def select_key(self, frame: int | None) -> None:
+        """Select the current track's key on ``frame`` (None: clear) and go to its frame."""
+        self.selected = frame
+        if frame is not None:
+            self.model.set_frame(frame)
+        self.refresh_curves()
+
+    def _on_drop(self, frame: int, x: float, y: float) -> None:
+        new_frame = self.model.times.frame_at(x)
+        try:
+            key = self.model.move_key(frame, new_frame, y)
+        except ValueError:  # another key sits there: keep the old position
+            self.refresh_curves()
+            return
+        self.select_key(key.frame)
+
+    def _on_double_click(self, x: float, y: float) -> None:
+        frame = self.model.times.frame_at(x)
+        self.model.set_frame(frame)
+        self.model.set_key(min(max(y, 0.0), 1.0), frame)
+        self.select_key(frame)
+
+    def key_point_scene_pos(self, frame: int) -> QtCore.QPointF:
+        """Scene position of the key on ``frame`` (for tests and tooltips)."""
+        return self._curve_box.mapViewToScene(QtCore.QPointF(self.t_s[frame], self.model.track.get(frame).weight))
+
+    def time_scene_pos(self, t_s: float, weight: float) -> QtCore.QPointF:
+        """Scene position of a point of the curve editor."""
+        return self._curve_box.mapViewToScene(QtCore.QPointF(t_s, weight))

@@ -1,0 +1,391 @@
+"""The annotation session model: one rater keying one session (Qt-free, plain callbacks).
+
+It holds what the Annotate stage's widgets show and edit: the current frame, the current blendshape
+(the paper's protocol: one blendshape at a time, always in the set's order, the next one offered
+after a pass over the video), the rater's own key-frame tracks (never another rater's: a rater keys
+blind), the clipboard and an undo/redo history of whole-annotation snapshots. Every edit is saved at
+once with an atomic write (:meth:`RaterAnnotations.save`: temp file + rename), so a crash or a
+``kill -9`` loses no key that was set.
+
+Widgets subscribe with :meth:`AnnotationSession.connect` to events ``frame_changed``,
+``blendshape_changed``, ``keys_changed``, ``saved`` and ``pass_done``, and write back only through the
+methods (STYLE.md L3).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from annotate.blendshapes import DEFAULT_SET, BlendshapeSet
+from annotate.keyframes import INTERPOLATIONS, Keyframe, KeyframeTrack, RaterAnnotations, read_annotations
+from annotate.video_index import FrameTimes
+from capture_tool.errors import UserError
+from capture_tool.session import Session, read_session
+
+EVENTS = ("frame_changed", "blendshape_changed", "keys_changed", "saved", "pass_done")
+ANNOTATIONS_DIR = "annotations"
+_RATER_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,31}$")
+#: snapshots kept for undo
+UNDO_LIMIT = 500
+
+
+def check_rater(rater: str) -> str:
+    """Return ``rater`` if it is a valid rater code (it names a file), else raise UserError."""
+    if not isinstance(rater, str) or not _RATER_RE.match(rater):
+        raise UserError(f"rater: expected a code of 1-32 letters, digits, '_' or '-' (e.g. R1), found {rater!r}")
+    return rater
+
+
+def annotation_path(session_folder: str | os.PathLike, rater: str) -> Path:
+    """``<session>/annotations/<rater>.json``."""
+    return Path(session_folder) / ANNOTATIONS_DIR / f"{check_rater(rater)}.json"
+
+
+class AnnotationSession:
+    """One rater's key-framing of one session.
+
+    Parameters
+    ----------
+    session_folder : path-like
+        A session with video (``video_frames.csv``).
+    rater : str
+        Rater code; the file is ``annotations/<rater>.json`` (loaded if it exists).
+    blendshapes : BlendshapeSet
+        Used for a new file; an existing file keeps its own set.
+    autosave : bool
+        Save after every edit (the default; False for tests of the pure logic).
+
+    Raises
+    ------
+    UserError
+        If the session has no video frames, the rater code is invalid, or the file is malformed.
+    """
+
+    def __init__(self, session_folder: str | os.PathLike, rater: str, *,
+                 blendshapes: BlendshapeSet = DEFAULT_SET, autosave: bool = True) -> None:
+        self.session: Session = read_session(session_folder)
+        if not self.session.frame_times_s:
+            raise UserError(f"{self.session.path}: expected a session with video_frames.csv, found no video frames")
+        self.times = FrameTimes(self.session.frame_times_s)
+        self.path = annotation_path(self.session.path, rater)
+        self._file_is_ours = self.path.exists()  # a new file is created once, never over another's
+        self.annotations = (read_annotations(self.path) if self._file_is_ours
+                            else RaterAnnotations(rater, self.session.info.session_id, blendshapes))
+        self.autosave = autosave
+        self.frame = 0
+        self.blendshape = self.annotations.blendshapes.names[0]
+        self.interp = "linear"
+        self.passes_done: set[str] = set()
+        self._undo: list[RaterAnnotations] = []
+        self._redo: list[RaterAnnotations] = []
+        self._clipboard: list[tuple[int, float, str]] = []
+        self._listeners: dict[str, list[Callable[..., Any]]] = {e: [] for e in EVENTS}
+
+    # ------------------------------------------------------------------------------- events
+    def connect(self, event: str, callback: Callable[..., Any]) -> None:
+        """Call ``callback`` on ``event`` (one of :data:`EVENTS`)."""
+        if event not in self._listeners:
+            raise ValueError(f"event: expected one of {', '.join(EVENTS)}, found {event!r}")
+        self._listeners[event].append(callback)
+
+    def disconnect_all(self) -> None:
+        """Forget every listener (a view that goes away)."""
+        for callbacks in self._listeners.values():
+            callbacks.clear()
+
+    def _emit(self, event: str, *args: Any) -> None:
+        for callback in list(self._listeners[event]):
+            callback(*args)
+
+    # ------------------------------------------------------------------------------ navigation
+    @property
+    def rater(self) -> str:
+        """The rater code."""
+        return self.annotations.rater
+
+    @property
+    def n_frames(self) -> int:
+        """Frames in the session video."""
+        return len(self.times)
+
+    @property
+    def t_s(self) -> float:
+        """Session time of the current frame."""
+        return self.times.t_at(self.frame)
+
+    def set_frame(self, frame: int) -> None:
+        """Go to ``frame`` (clamped to the video); a pass is done on reaching the last frame."""
+        frame = self.times.clamp(frame)
+        if frame == self.frame:
+            return
+        self.frame = frame
+        self._emit("frame_changed", frame)
+        if frame == self.n_frames - 1 and len(self.track) and self.blendshape not in self.passes_done:
+            self.passes_done.add(self.blendshape)
+            self._emit("pass_done", self.blendshape)
+
+    def step(self, n_frames: int) -> None:
+        """Move by ``n_frames`` (negative: back)."""
+        self.set_frame(self.frame + int(n_frames))
+
+    def go_to_time(self, t_s: float) -> None:
+        """Go to the frame on screen at session time ``t_s``."""
+        self.set_frame(self.times.frame_at(t_s))
+
+    # -------------------------------------------------------------------------- the protocol
+    @property
+    def blendshape_names(self) -> tuple[str, ...]:
+        """Blendshapes in the fixed annotation order."""
+        return self.annotations.blendshapes.names
+
+    @property
+    def track(self) -> KeyframeTrack:
+        """The current blendshape's track."""
+        return self.annotations.tracks[self.blendshape]
+
+    def set_blendshape(self, name: str) -> None:
+        """Make ``name`` the blendshape being keyed (UserError if not in the set)."""
+        self.annotations.blendshapes.index(name)
+        if name != self.blendshape:
+            self.blendshape = name
+            self._emit("blendshape_changed", name)
+
+    @property
+    def next_blendshape(self) -> str | None:
+        """The blendshape after the current one in the fixed order, None after the last."""
+        names = self.blendshape_names
+        i = names.index(self.blendshape)
+        return names[i + 1] if i + 1 < len(names) else None
+
+    def start_next_pass(self) -> str | None:
+        """Move to the next blendshape and back to frame 0; return it (None if this was the last)."""
+        nxt = self.next_blendshape
+        if nxt is not None:
+            self.set_blendshape(nxt)
+            self.set_frame(0)
+        return nxt
+
+    def weight(self, frame: int | None = None, name: str | None = None) -> float:
+        """Curve value of ``name`` (default current) at ``frame`` (default current); NaN if not keyed."""
+        track = self.annotations.tracks[name or self.blendshape]
+        return float(track.evaluate(self.frame if frame is None else frame))
+
+    def weights(self, frame: int | None = None) -> dict[str, float]:
+        """All blendshape weights at ``frame`` (NaN where a track has no key)."""
+        return {n: self.weight(frame, n) for n in self.blendshape_names}
+
+    def key_at(self, frame: int | None = None) -> Keyframe | None:
+        """The current track's key on ``frame`` (default current), or None."""
+        return self.track.get(self.frame if frame is None else frame)
+
+    # ------------------------------------------------------------------------------- editing
+    def _edit(self, change: Callable[[], Any]) -> Any:
+        """Snapshot for undo, apply ``change``, save, notify; restore the snapshot if either raises.
+
+        So the keys shown are always the keys on disk: an edit that cannot be saved is undone.
+        """
+        before = self.annotations.copy()
+        try:
+            result = change()
+            if self.autosave:
+                self.save()
+        except BaseException:
+            self.annotations = before
+            raise
+        self._undo.append(before)
+        del self._undo[:-UNDO_LIMIT]
+        self._redo.clear()
+        self._emit("keys_changed", self.blendshape)
+        return result
+
+    def _swap(self, source: list[RaterAnnotations], target: list[RaterAnnotations]) -> bool:
+        """Undo / redo: move the current state to ``target`` and restore the top of ``source``."""
+        if not source:
+            return False
+        current, self.annotations = self.annotations, source[-1]
+        try:
+            if self.autosave:
+                self.save()
+        except BaseException:
+            self.annotations = current
+            raise
+        source.pop()
+        target.append(current)
+        self._emit("keys_changed", self.blendshape)
+        return True
+
+    def set_key(self, weight: float, frame: int | None = None, interp: str | None = None) -> Keyframe:
+        """Key the current blendshape at ``frame`` (default current) with ``weight`` in [0, 1].
+
+        ``interp`` defaults to the key already there, else :attr:`interp`. Raises UserError for a
+        weight outside [0, 1] or an unknown interpolation.
+        """
+        frame = self.times.check(self.frame if frame is None else frame)
+        old = self.track.get(frame)
+        interp = interp or (old.interp if old else self.interp)
+        return self._edit(lambda: self.track.add(frame, round(float(weight), 4), interp))
+
+    def delete_key(self, frame: int | None = None) -> Keyframe | None:
+        """Remove the current track's key on ``frame`` (default current); None if there was none."""
+        frame = self.frame if frame is None else int(frame)
+        if self.track.get(frame) is None:
+            return None
+        return self._edit(lambda: self.track.delete(frame))
+
+    def move_key(self, frame: int, new_frame: int, weight: float | None = None) -> Keyframe:
+        """Move the current track's key on ``frame`` to ``new_frame`` (clamped), optionally re-weighted.
+
+        Raises KeyError if there is no key on ``frame``, ValueError if ``new_frame`` is keyed.
+        """
+        new_frame = self.times.clamp(new_frame)
+        if weight is not None:
+            weight = round(min(max(float(weight), 0.0), 1.0), 4)
+        return self._edit(lambda: self.track.move(frame, new_frame, weight))
+
+    def set_interp(self, interp: str, frame: int | None = None) -> None:
+        """Set the default interpolation, and that of the key on ``frame`` (default current) if any."""
+        if interp not in INTERPOLATIONS:
+            raise UserError(f"interpolation: expected one of {', '.join(INTERPOLATIONS)}, found {interp!r}")
+        self.interp = interp
+        key = self.key_at(frame)
+        if key is not None and key.interp != interp:
+            self._edit(lambda: self.track.add(key.frame, key.weight, interp))
+
+    # ----------------------------------------------------------------------- copy and paste
+    def copy(self, first: int | None = None, last: int | None = None) -> int:
+        """Copy the current track's keys in ``first .. last`` (default: the current frame); return how many."""
+        first = self.frame if first is None else int(first)
+        last = first if last is None else int(last)
+        keys = [k for k in self.track.keys if first <= k.frame <= last]
+        self._clipboard = [(k.frame - first, k.weight, k.interp) for k in keys]
+        return len(keys)
+
+    def paste(self, frame: int | None = None) -> int:
+        """Paste the copied keys into the current track from ``frame`` (default current); one undo step."""
+        at = self.frame if frame is None else int(frame)
+        keys = [(at + off, w, i) for off, w, i in self._clipboard if 0 <= at + off < self.n_frames]
+        if keys:
+            self._edit(lambda: [self.track.add(f, w, i) for f, w, i in keys])
+        return len(keys)
+
+    # ---------------------------------------------------------------------------------- undo
+    @property
+    def can_undo(self) -> bool:
+        """Whether there is an edit to undo."""
+        return bool(self._undo)
+
+    @property
+    def can_redo(self) -> bool:
+        """Whether there is an undone edit to redo."""
+        return bool(self._redo)
+
+    def undo(self) -> bool:
+        """Undo the last edit (and save); False if there was none."""
+        return self._swap(self._undo, self._redo)
+
+    def redo(self) -> bool:
+        """Redo the last undone edit (and save); False if there was none."""
+        return self._swap(self._redo, self._undo)
+
+    # ---------------------------------------------------------------------------------- files
+    def save(self) -> Path:
+        """Write ``annotations/<rater>.json`` atomically.
+
+        Raises
+        ------
+        FileExistsError
+            If this session started without a file and one has appeared since (another program or
+            window): it is never silently overwritten.
+        """
+        path = self.annotations.save(self.path, overwrite=self._file_is_ours)
+        self._file_is_ours = True
+        self._emit("saved", path)
+        return path
+
+    def keyed_frames(self, name: str | None = None) -> np.ndarray:
+        """Frames of the keys of ``name`` (default current), sorted."""
+        return self.annotations.tracks[name or self.blendshape].arrays()[0]
+
+
+class BlindRound:
+    """One rater's blind ratings of the reliability pose set of a lab folder (Qt-free).
+
+    The rater sees only their own ratings; they are saved atomically to
+    ``reliability/ratings_<rater>.csv`` after every change. Ratings the lab already holds for this
+    rater in ``reliability/ratings.csv`` count as done and cannot be changed here.
+
+    Parameters
+    ----------
+    lab_dir : path-like
+        Folder of sessions with ``reliability/poses.csv``.
+    rater : str
+        Rater code.
+    blendshapes : BlendshapeSet
+        What is rated, in order.
+
+    Raises
+    ------
+    UserError
+        If the folder has no ``reliability/poses.csv`` or a file is malformed.
+    """
+
+    def __init__(self, lab_dir: str | os.PathLike, rater: str, blendshapes: BlendshapeSet = DEFAULT_SET) -> None:
+        from annotate.reliability import read_poses, read_ratings
+
+        self.lab_dir = Path(lab_dir)
+        self.rater = check_rater(rater)
+        self.blendshapes = blendshapes
+        rel = self.lab_dir / "reliability"
+        if not (rel / "poses.csv").is_file():
+            raise UserError(f"{rel / 'poses.csv'}: expected the reliability pose set, found nothing "
+                            "(propose one from HR and phase extremes first)")
+        self.poses = read_poses(rel / "poses.csv")
+        self.path = rel / f"ratings_{rater}.csv"
+        lab_file = rel / "ratings.csv"
+        self.locked = {(r.pose_id, r.blendshape): r.weight for r in
+                       (read_ratings(lab_file) if lab_file.is_file() else []) if r.rater == rater}
+        mine = read_ratings(self.path) if self.path.is_file() else []
+        self.ratings = dict(self.locked) | {(r.pose_id, r.blendshape): r.weight for r in mine}
+
+    def rating(self, pose_id: str, name: str) -> float | None:
+        """This rater's weight for a pose and blendshape, None if not rated yet."""
+        return self.ratings.get((pose_id, name))
+
+    def is_done(self, pose_id: str) -> bool:
+        """Whether every blendshape of the pose is rated."""
+        return all((pose_id, n) in self.ratings for n in self.blendshapes.names)
+
+    @property
+    def complete(self) -> bool:
+        """Whether the rater has rated every pose (the report is shown only then: blind round)."""
+        return all(self.is_done(p.pose_id) for p in self.poses)
+
+    def set_rating(self, pose_id: str, name: str, weight: float) -> None:
+        """Rate one blendshape of one pose and save.
+
+        Raises
+        ------
+        UserError
+            For an unknown pose or blendshape, a weight outside [0, 1], or a rating the lab file
+            already holds.
+        """
+        from annotate.reliability import Rating, write_ratings
+
+        if pose_id not in {p.pose_id for p in self.poses}:
+            raise UserError(f"pose: expected one of the pose set, found {pose_id!r}")
+        self.blendshapes.index(name)
+        if not 0.0 <= float(weight) <= 1.0:
+            raise UserError(f"weight: expected a number in [0, 1], found {weight!r}")
+        if (pose_id, name) in self.locked:
+            raise UserError(f"{pose_id} {name}: already rated by {self.rater} in reliability/ratings.csv")
+        self.ratings[(pose_id, name)] = round(float(weight), 4)
+        mine = [Rating(p, self.rater, n, w) for (p, n), w in self.ratings.items() if (p, n) not in self.locked]
+        tmp = self.path.with_name(f".{self.path.name}.tmp")
+        write_ratings(tmp, mine, overwrite=True)
+        os.replace(tmp, self.path)

@@ -1,0 +1,82 @@
+"""``effortface agreement``: the same report as the library, one-line errors with exit status 2."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from annotate.agreement import agreement_report, format_report, gather_ratings
+from annotate.reliability import read_ratings
+from effortface.cli import main
+
+ROOT = Path(__file__).resolve().parents[2]
+SAMPLES = ROOT / "sample_sessions"
+RATINGS = SAMPLES / "reliability" / "ratings.csv"
+
+
+def test_cli_prints_the_library_report_for_the_sample_raters() -> None:
+    done = subprocess.run([sys.executable, "-m", "effortface", "agreement", "--ratings", str(RATINGS)],
+                          capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert done.returncode == 0, done.stderr
+    expected = format_report(agreement_report(read_ratings(RATINGS), source=str(RATINGS)))
+    assert done.stdout == expected
+    assert "pose13" in done.stdout.split("Flagged poses")[1]  # 16.3 % > 15 %
+
+
+def test_dir_and_ratings_give_the_same_statistics(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["agreement", str(SAMPLES)]) == 0
+    by_dir = capsys.readouterr().out
+    assert main(["agreement", "--ratings", str(RATINGS)]) == 0
+    by_csv = capsys.readouterr().out
+    assert by_dir.splitlines()[1:] == by_csv.splitlines()[1:]  # only the source line differs
+
+
+def test_session_report_uses_the_raters_key_frames(capsys: pytest.CaptureFixture[str]) -> None:
+    session = SAMPLES / "P05_20260114-095800_cardio"
+    assert main(["agreement", str(session), "--threshold", "5"]) == 0
+    out = capsys.readouterr().out
+    ratings, source = gather_ratings(session)
+    assert out == format_report(agreement_report(ratings, flag_pct=5.0, source=source))
+
+
+def test_plot_option_writes_a_png_and_never_overwrites(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("matplotlib")
+    png = tmp_path / "ba.png"
+    assert main(["agreement", "--ratings", str(RATINGS), "--plot", str(png)]) == 0
+    assert png.read_bytes()[:4] == b"\x89PNG"
+    assert main(["agreement", "--ratings", str(RATINGS), "--plot", str(png)]) == 2
+    assert "--plot" in capsys.readouterr().err
+
+
+def _bad_ratings(tmp_path: Path) -> str:
+    p = tmp_path / "bad.csv"
+    p.write_text("pose_id,rater,blendshape,weight\np1,R1,mouth_open,1.7\n")
+    return str(p)
+
+
+def _one_rater(tmp_path: Path) -> str:
+    p = tmp_path / "one.csv"
+    p.write_text("pose_id,rater,blendshape,weight\np1,R1,mouth_open,0.1\np2,R1,mouth_open,0.3\n")
+    return str(p)
+
+
+@pytest.mark.parametrize(("message", "argv"), [
+    (r"expected exactly one of SESSION\|DIR or --ratings CSV, found neither", lambda t: []),
+    (r"expected exactly one of SESSION\|DIR or --ratings CSV, found both", lambda t: [str(SAMPLES), "--ratings", str(RATINGS)]),
+    (r"--ratings .*nope.csv: expected a CSV file, found nothing", lambda t: ["--ratings", str(t / "nope.csv")]),
+    (r"bad.csv:2: expected a weight in \[0, 1\], found '1.7'", lambda t: ["--ratings", _bad_ratings(t)]),
+    (r"expected at least 2 raters and 2 poses, found 1 raters", lambda t: ["--ratings", _one_rater(t)]),
+    (r"expected a session folder or a folder of sessions, found nothing", lambda t: [str(t / "missing")]),
+    (r"expected a session folder or a folder of sessions, found neither", lambda t: [str(t)]),
+    (r"--threshold: expected a percentage from 0 to 100, found 150", lambda t: ["--ratings", str(RATINGS), "--threshold", "150"]),
+])
+def test_bad_input_is_one_line_and_status_2(message: str, argv, tmp_path: Path,
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["agreement", *argv(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1
+    assert re.search(message, err), err

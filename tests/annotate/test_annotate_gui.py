@@ -1,0 +1,320 @@
+"""The Annotate stage offscreen: key a sample session with keyboard and mouse, save, reopen, undo;
+blind raters; a killed annotator loses no saved key; the reliability round; export."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PySide6 import QtCore
+from PySide6.QtTest import QTest
+
+from annotate.agreement import agreement_report, gather_ratings
+from annotate.gui.annotate_stage import QtAnnotateStage
+from annotate.keyframes import read_annotations
+from annotate.reliability import read_ratings
+
+pytestmark = pytest.mark.qt_log_ignore("This plugin does not support propagateSizeHints")
+
+ROOT = Path(__file__).resolve().parents[2]
+SAMPLES = ROOT / "sample_sessions"
+SESSION = "P01_20260112-093000_cardio"
+Key = QtCore.Qt.Key
+Left = QtCore.Qt.MouseButton.LeftButton
+
+
+@pytest.fixture
+def lab(tmp_path: Path) -> Path:
+    """A copy of one sample session (with the three sample raters' files) and the reliability round."""
+    dst = tmp_path / "lab"
+    shutil.copytree(SAMPLES / SESSION, dst / SESSION, ignore=shutil.ignore_patterns("serial", "work.csv"))
+    shutil.copytree(SAMPLES / "reliability", dst / "reliability")
+    return dst
+
+
+@pytest.fixture
+def stage(qtbot, lab: Path) -> QtAnnotateStage:
+    widget = QtAnnotateStage(lab, cache_frames=64)
+    qtbot.addWidget(widget)
+    widget.resize(1400, 900)
+    widget.show()
+    qtbot.waitExposed(widget)
+    yield widget
+    widget.shutdown()
+
+
+def _open_by_mouse(qtbot, stage: QtAnnotateStage, rater: str):
+    rect = stage.sessions.visualItemRect(stage.sessions.item(0))
+    QTest.mouseClick(stage.sessions.viewport(), Left, pos=rect.center())
+    stage.rater.clear()
+    qtbot.keyClicks(stage.rater, rater)
+    qtbot.mouseClick(stage.open_button, Left)
+    assert stage.editor is not None, stage.status.text()
+    return stage.editor
+
+
+def _press(widget, key, modifier=QtCore.Qt.KeyboardModifier.NoModifier, times: int = 1) -> None:
+    for _ in range(times):
+        QTest.keyClick(widget, key, modifier)
+
+
+def _view_point(timeline, scene_pos: QtCore.QPointF) -> QtCore.QPoint:
+    return timeline.mapFromScene(scene_pos)
+
+
+def _clicked_time(timeline, point: QtCore.QPoint) -> float:
+    """The session time under a widget pixel (what a click there means)."""
+    return timeline._curve_box.mapSceneToView(timeline.mapToScene(point)).x()
+
+
+def _double_click(widget, pos: QtCore.QPoint) -> None:
+    """Press, release, double-click, release: what Qt sends a widget for a double click."""
+    from PySide6 import QtGui, QtWidgets
+
+    QTest.mouseClick(widget, Left, pos=pos)
+    event = QtGui.QMouseEvent(QtCore.QEvent.Type.MouseButtonDblClick, QtCore.QPointF(pos),
+                              QtCore.QPointF(widget.mapToGlobal(pos)), Left, Left,
+                              QtCore.Qt.KeyboardModifier.NoModifier)
+    QtWidgets.QApplication.sendEvent(widget, event)
+    QTest.mouseRelease(widget, Left, pos=pos)
+
+
+def _drag(timeline, start: QtCore.QPointF, end: QtCore.QPointF) -> None:
+    viewport = timeline.viewport()
+    a, b = _view_point(timeline, start), _view_point(timeline, end)
+    QTest.mousePress(viewport, Left, pos=a)
+    for f in np.linspace(0.1, 1.0, 8):
+        QTest.mouseMove(viewport, QtCore.QPoint(round(a.x() + f * (b.x() - a.x())), round(a.y() + f * (b.y() - a.y()))))
+    QTest.mouseRelease(viewport, Left, pos=b)
+
+
+def _on_disk(editor) -> dict:
+    return read_annotations(editor.model.path).to_dict()
+
+
+def test_key_a_session_end_to_end(qtbot, stage: QtAnnotateStage, lab: Path) -> None:
+    r1_before = (lab / SESSION / "annotations" / "R1.json").read_bytes()
+    editor = _open_by_mouse(qtbot, stage, "R9")
+    m, view = editor.model, editor.video_view
+    # blind: the other raters' files are there, but nothing of theirs is loaded or drawn
+    assert all(len(t) == 0 for t in m.annotations.tracks.values())
+    assert len(editor.timeline.keys.data) == 0
+    view.setFocus()
+    # keyboard: digits key the current frame, arrows step exactly, Shift steps ten
+    _press(view, Key.Key_3)
+    _press(view, Key.Key_Right, times=5)
+    _press(view, Key.Key_Right, QtCore.Qt.KeyboardModifier.ShiftModifier)
+    assert m.frame == 15
+    _press(view, Key.Key_7)
+    _press(view, Key.Key_Up)  # 0.7 + 0.05
+    assert [(k.frame, k.weight) for k in m.track.keys] == [(0, 0.3), (15, 0.75)]
+    assert editor.protocol.number.value() == pytest.approx(0.75)
+    _press(view, Key.Key_End)
+    _press(view, Key.Key_2)
+    assert "mouth_stretch" in m.passes_done and "press N for mouth_open" in stage.status.text()
+    assert "background" in editor.protocol.next_button.styleSheet()  # the next blendshape is offered
+    assert _on_disk(editor) == m.annotations.to_dict()  # saved on every key
+    _press(view, Key.Key_N)
+    assert (m.blendshape, m.frame) == ("mouth_open", 0)
+    # the number box and the Set key button
+    editor.protocol.number.lineEdit().selectAll()
+    qtbot.keyClicks(editor.protocol.number, "0.45")
+    _press(editor.protocol.number, Key.Key_Return)
+    assert m.track.get(0).weight == pytest.approx(0.45)
+    # mouse on the curve editor: click empty space = go to that time; double-click = add a key
+    tl = editor.timeline
+    at50 = _view_point(tl, tl.time_scene_pos(50.0, 0.9))
+    QTest.mouseClick(tl.viewport(), Left, pos=at50)
+    assert m.frame == m.times.frame_at(_clicked_time(tl, at50))
+    at100 = _view_point(tl, tl.time_scene_pos(100.0, 0.6))
+    _double_click(tl.viewport(), at100)
+    f100 = m.times.frame_at(_clicked_time(tl, at100))
+    assert m.track.get(f100) is not None and m.track.get(f100).weight == pytest.approx(0.6, abs=0.03)
+    # back to mouth_stretch by clicking its row; drag its key from frame 15 to about t = 40 s, 0.5
+    rect = editor.protocol.shapes.visualItemRect(editor.protocol.shapes.item(0))
+    QTest.mouseClick(editor.protocol.shapes.viewport(), Left, pos=rect.center())
+    assert m.blendshape == "mouth_stretch"
+    _drag(tl, tl.key_point_scene_pos(15), tl.time_scene_pos(40.0, 0.5))
+    moved = [k for k in m.track.keys if k.frame not in (0, m.n_frames - 1)]
+    assert len(moved) == 1 and abs(m.times.t_at(moved[0].frame) - 40.0) < 0.5
+    assert moved[0].weight == pytest.approx(0.5, abs=0.03) and m.track.get(15) is None
+    assert tl.selected == moved[0].frame
+    # undo the drag with Ctrl+Z, redo it with Ctrl+Y, undo again
+    view.setFocus()
+    _press(view, Key.Key_Z, QtCore.Qt.KeyboardModifier.ControlModifier)
+    assert m.track.get(15).weight == pytest.approx(0.75)
+    _press(view, Key.Key_Y, QtCore.Qt.KeyboardModifier.ControlModifier)
+    assert m.track.get(15) is None
+    _press(view, Key.Key_Z, QtCore.Qt.KeyboardModifier.ControlModifier)
+    assert _on_disk(editor) == m.annotations.to_dict()
+    # copy the key on frame 15, paste it at frame 200, delete the one on frame 0
+    m.set_frame(15)
+    tl.select_key(None)
+    _press(view, Key.Key_C, QtCore.Qt.KeyboardModifier.ControlModifier)
+    m.set_frame(200)
+    _press(view, Key.Key_V, QtCore.Qt.KeyboardModifier.ControlModifier)
+    assert m.track.get(200).weight == pytest.approx(0.75)
+    _press(view, Key.Key_Home)
+    _press(view, Key.Key_Delete)
+    assert m.track.get(0) is None
+    saved = m.annotations.to_dict()
+    assert _on_disk(editor) == saved
+    # reopen in a fresh stage: the same keys come back
+    stage.close_session()
+    again = QtAnnotateStage(lab)
+    qtbot.addWidget(again)
+    editor2 = again.open_session(lab / SESSION, "R9")
+    assert editor2.model.annotations.to_dict() == saved
+    again.shutdown()
+    assert (lab / SESSION / "annotations" / "R1.json").read_bytes() == r1_before
+
+
+def test_the_video_shows_the_exact_frame_and_playback_advances(qtbot, stage: QtAnnotateStage) -> None:
+    editor = _open_by_mouse(qtbot, stage, "R1")
+    m = editor.model
+    editor.video_view.setFocus()
+    _press(editor.video_view, Key.Key_Right, times=12)
+    expected = editor.video.get(12, prefetch=False)
+    shown = editor.video_view._image
+    assert (shown.width(), shown.height()) == (expected.shape[1], expected.shape[0])
+    rgb = np.frombuffer(shown.constBits(), np.uint8).reshape(shown.height(), shown.bytesPerLine())
+    np.testing.assert_array_equal(rgb[:, :expected.shape[1] * 3].reshape(expected.shape)[:, :, ::-1], expected)
+    assert editor.frame_box.value() == 12 and editor.time_box.value() == pytest.approx(m.t_s, abs=1e-3)
+    # scrub: drag the cursor line of the heart-rate plot to about t = 120 s
+    tl = editor.timeline
+    hr_box = tl.hr_plot.getViewBox()
+    y_mid = sum(hr_box.viewRange()[1]) / 2
+    end = _view_point(tl, hr_box.mapViewToScene(QtCore.QPointF(120.0, y_mid)))
+    _drag(tl, hr_box.mapViewToScene(QtCore.QPointF(m.t_s, y_mid)), hr_box.mapViewToScene(QtCore.QPointF(120.0, y_mid)))
+    t_end = hr_box.mapSceneToView(tl.mapToScene(end)).x()
+    assert m.frame == m.times.frame_at(t_end) and abs(m.t_s - 120.0) < 0.5
+    editor.speed.setCurrentIndex(4)  # 4x
+    _press(editor.video_view, Key.Key_Space)
+    start = m.frame
+    qtbot.waitUntil(lambda: m.frame > start + 20, timeout=10_000)
+    _press(editor.video_view, Key.Key_Space)
+    assert not editor.playing
+    # go to a time typed in the time box: the frame on screen at that time, from the timestamps
+    editor.time_box.lineEdit().selectAll()
+    qtbot.keyClicks(editor.time_box, "57.5")
+    _press(editor.time_box, Key.Key_Return)
+    assert m.frame == m.times.frame_at(57.5)
+
+
+def test_bad_rater_code_is_shown_in_the_stage(qtbot, stage: QtAnnotateStage) -> None:
+    stage.rater.setText("Jane Doe")
+    qtbot.mouseClick(stage.open_button, Left)
+    assert stage.editor is None and "rater: expected a code" in stage.status.text()
+
+
+def test_export_writes_weights_and_keyframes_and_never_overwrites(qtbot, stage: QtAnnotateStage, tmp_path: Path) -> None:
+    editor = _open_by_mouse(qtbot, stage, "R2")
+    csv = stage.export_weights(tmp_path / "w.csv")
+    lines = csv.read_text().splitlines()
+    assert lines[0] == "frame,t_s,mouth_stretch,mouth_open,eye_squint,brow_lower"
+    assert len(lines) == 1 + editor.model.n_frames
+    row = lines[700].split(",")
+    expected = editor.model.weights(699)
+    assert [float(v) for v in row[2:]] == pytest.approx(list(expected.values()), abs=1e-4)
+    keys = stage.export_keyframes(tmp_path / "k.json")
+    assert read_annotations(keys).to_dict() == editor.model.annotations.to_dict()
+    assert stage.export_weights(tmp_path / "w.csv") is None
+    assert "refusing to overwrite" in stage.status.text()
+
+
+def test_reliability_report_matches_the_library(qtbot, stage: QtAnnotateStage, lab: Path) -> None:
+    stage.rater.setText("R1")
+    stage.tabs.setCurrentIndex(1)
+    panel = stage.reliability
+    assert panel is not None and panel.report is not None  # R1 rated every pose in the lab's round
+    ratings, source = gather_ratings(lab)
+    expected = agreement_report(ratings, source=source)
+    assert panel.per_shape.rowCount() == 5
+    assert panel.per_shape.item(4, 3).text() == f"{expected.overall.icc_a1:.3f}"
+    assert panel.per_shape.item(4, 5).text() == f"{expected.overall.alpha:.3f}"
+    flagged = [panel.per_pose.item(r, 0).text() for r in range(panel.per_pose.rowCount())
+               if panel.per_pose.item(r, 2).text() == "FLAG"]
+    assert sorted(flagged) == sorted(expected.flagged) and flagged == [panel.per_pose.item(0, 0).text()]
+    panel.threshold.setValue(10.0)
+    assert panel.report.flagged == agreement_report(ratings, flag_pct=10.0).flagged
+
+
+def test_a_new_rater_rates_blind_then_sees_the_report(qtbot, stage: QtAnnotateStage, lab: Path) -> None:
+    stage.rater.setText("R4")
+    stage.tabs.setCurrentIndex(1)
+    panel = stage.reliability
+    assert panel.report is None and panel.per_pose.rowCount() == 0  # nothing shown before rating
+    for row in range(18):
+        panel.poses.setCurrentCell(row, 0)
+        for i, spin in enumerate(panel.spins.values()):
+            spin.setValue(((row + i) % 10) / 10)
+        qtbot.mouseClick(panel.save_button, Left)
+    assert panel.report is not None and panel.report.raters == ["R1", "R2", "R3", "R4"]
+    mine = read_ratings(lab / "reliability" / "ratings_R4.csv")
+    assert len(mine) == 72 and {r.rater for r in mine} == {"R4"}
+
+
+ANNOTATOR = textwrap.dedent("""
+    import sys
+    from pathlib import Path
+    from PySide6 import QtCore, QtWidgets
+    from PySide6.QtTest import QTest
+    from annotate.gui.annotate_stage import QtAnnotateStage
+    app = QtWidgets.QApplication([])
+    lab, session = Path(sys.argv[1]), sys.argv[2]
+    stage = QtAnnotateStage(lab)
+    stage.show()
+    stage.activateWindow()
+    QTest.qWaitForWindowActive(stage)
+    editor = stage.open_session(lab / session, "R7")
+    view, m = editor.video_view, editor.model
+    view.setFocus()
+    n = 0
+    while True:  # key every third frame until killed
+        QTest.keyClick(view, QtCore.Qt.Key.Key_Right, QtCore.Qt.KeyboardModifier.NoModifier)
+        QTest.keyClick(view, QtCore.Qt.Key.Key_Right, QtCore.Qt.KeyboardModifier.NoModifier)
+        QTest.keyClick(view, QtCore.Qt.Key.Key_Right, QtCore.Qt.KeyboardModifier.NoModifier)
+        QTest.keyClick(view, getattr(QtCore.Qt.Key, f"Key_{n % 10}"), QtCore.Qt.KeyboardModifier.NoModifier)
+        print(f"KEYED {m.frame} {m.track.get(m.frame).weight}", flush=True)
+        n += 1
+""")
+
+
+def test_a_killed_annotator_loses_no_saved_key(lab: Path) -> None:
+    env = dict(os.environ, QT_QPA_PLATFORM="offscreen", PYTHONPATH=str(ROOT))
+    proc = subprocess.Popen([sys.executable, "-c", ANNOTATOR, str(lab), SESSION], stdout=subprocess.PIPE,
+                            stderr=subprocess.DEVNULL, text=True, env=env, cwd=ROOT)
+    keyed: list[tuple[int, float]] = []
+    try:
+        for line in proc.stdout:
+            if line.startswith("KEYED"):
+                _, frame, weight = line.split()
+                keyed.append((int(frame), float(weight)))
+            if len(keyed) >= 40:
+                break
+    finally:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(30)
+    assert proc.returncode == -signal.SIGKILL and len(keyed) == 40
+    track = read_annotations(lab / SESSION / "annotations" / "R7.json").tracks["mouth_stretch"]
+    on_disk = {k.frame: k.weight for k in track.keys}
+    assert all(on_disk.get(frame) == pytest.approx(weight) for frame, weight in keyed)
+    assert not list((lab / SESSION / "annotations").glob(".*.tmp"))  # no half-written file left behind
+
+
+def test_the_pyside_none_leak_is_guarded(qtbot, stage: QtAnnotateStage) -> None:
+    import sys
+
+    from annotate.gui.qt_compat import pyside_leaks_none
+
+    if pyside_leaks_none():  # PySide6 6.12.0 on CPython 3.11: void calls drop a reference to None
+        assert sys.getrefcount(None) > 1 << 39
+    for _ in range(20_000):  # far more than the ~19 000 references None starts with
+        stage.status.setText("x")

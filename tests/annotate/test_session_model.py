@@ -1,0 +1,143 @@
+"""The Qt-free annotation session model: protocol order, passes, keys, undo/redo, copy/paste, autosave,
+never overwriting another file; the blind round; the exports. No Qt, no sleeps."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from annotate.export import write_keyframes_json, write_weights_csv
+from annotate.keyframes import read_annotations
+from annotate.reliability import read_ratings
+from annotate.session_model import AnnotationSession, BlindRound, annotation_path
+from capture_tool.errors import UserError
+
+ROOT = Path(__file__).resolve().parents[2]
+SAMPLES = ROOT / "sample_sessions"
+SESSION = "P03_20260113-094400_cardio"
+
+
+@pytest.fixture
+def session(tmp_path: Path) -> Path:
+    dst = tmp_path / SESSION
+    dst.mkdir()
+    for f in ("session.json", "heart_rate.csv", "events.csv", "video_frames.csv"):
+        shutil.copy(SAMPLES / SESSION / f, dst)
+    shutil.copytree(SAMPLES / SESSION / "annotations", dst / "annotations")
+    return dst
+
+
+def test_protocol_order_and_passes(session: Path) -> None:
+    m = AnnotationSession(session, "R9")
+    seen: list[tuple[str, object]] = []
+    for event in ("blendshape_changed", "pass_done"):
+        m.connect(event, lambda x, e=event: seen.append((e, x)))
+    assert m.blendshape == "mouth_stretch" and m.next_blendshape == "mouth_open"
+    m.set_frame(m.n_frames - 1)
+    assert not m.passes_done  # reaching the end without a key is no pass
+    m.set_key(0.2, frame=0)
+    m.set_frame(10)
+    m.set_frame(m.n_frames - 1)
+    assert m.passes_done == {"mouth_stretch"} and ("pass_done", "mouth_stretch") in seen
+    assert m.start_next_pass() == "mouth_open" and m.frame == 0
+    m.set_blendshape("brow_lower")
+    assert m.next_blendshape is None and m.start_next_pass() is None
+    with pytest.raises(UserError, match="blendshape: expected one of"):
+        m.set_blendshape("smile")
+
+
+def test_edits_autosave_undo_and_redo(session: Path) -> None:
+    m = AnnotationSession(session, "R9")
+    path = annotation_path(session, "R9")
+    assert not path.exists()
+    m.set_key(0.3, frame=5)
+    m.set_key(0.8, frame=50, interp="smooth")
+    m.move_key(50, 60, 0.9)
+    m.set_interp("hold", frame=5)
+    assert read_annotations(path).to_dict() == m.annotations.to_dict()
+    assert [(k.frame, k.weight, k.interp) for k in m.track.keys] == [(5, 0.3, "hold"), (60, 0.9, "smooth")]
+    assert m.undo() and m.undo()
+    assert [(k.frame, k.weight) for k in m.track.keys] == [(5, 0.3), (50, 0.8)]
+    assert read_annotations(path).to_dict() == m.annotations.to_dict()
+    assert m.redo() and m.track.get(60).weight == 0.9
+    m.delete_key(5)
+    assert not m.can_redo  # a new edit clears the redo list
+    assert m.delete_key(5) is None
+    with pytest.raises(UserError, match="weight: expected a number in \\[0, 1\\]"):
+        m.set_key(1.5)
+    with pytest.raises(ValueError, match="frame already keyed"):
+        m.set_key(0.1, frame=70)
+        m.move_key(70, 60)
+    assert m.track.get(70) is not None and m.track.get(60).weight == 0.9  # the failed move changed nothing
+
+
+def test_copy_paste_is_one_undo_step(session: Path) -> None:
+    m = AnnotationSession(session, "R9", autosave=False)
+    for f, w in ((10, 0.1), (12, 0.5), (15, 0.2)):
+        m.set_key(w, frame=f)
+    assert m.copy(10, 15) == 3
+    assert m.paste(100) == 3
+    assert [(k.frame, k.weight) for k in m.track.keys][3:] == [(100, 0.1), (102, 0.5), (105, 0.2)]
+    m.undo()
+    assert len(m.track) == 3
+
+
+def test_weights_follow_the_interpolation(session: Path) -> None:
+    m = AnnotationSession(session, "R9", autosave=False)
+    assert np.isnan(m.weight())
+    m.set_key(0.0, frame=0, interp="linear")
+    m.set_key(1.0, frame=10)
+    assert m.weight(5) == pytest.approx(0.5)
+    m.set_interp("hold", frame=0)
+    assert m.weight(5) == 0.0
+    assert np.isnan(m.weights(5)["mouth_open"])
+
+
+def test_a_rater_sees_only_their_own_file_and_another_file_is_never_overwritten(session: Path) -> None:
+    r1 = AnnotationSession(session, "R1")
+    assert r1.annotations == read_annotations(session / "annotations" / "R1.json")
+    new = AnnotationSession(session, "R9")
+    shutil.copy(session / "annotations" / "R1.json", session / "annotations" / "R9.json")  # appears meanwhile
+    with pytest.raises(FileExistsError, match="refusing to overwrite"):
+        new.set_key(0.5)
+    assert len(new.track) == 0  # the edit was rolled back
+
+
+@pytest.mark.parametrize("rater", ["", "a b", "../R1", "x" * 40])
+def test_bad_rater_codes(session: Path, rater: str) -> None:
+    with pytest.raises(UserError, match="rater: expected a code"):
+        AnnotationSession(session, rater)
+
+
+def test_blind_round_saves_only_this_raters_ratings(tmp_path: Path) -> None:
+    shutil.copytree(SAMPLES / "reliability", tmp_path / "reliability")
+    r1 = BlindRound(tmp_path, "R1")
+    assert r1.complete
+    with pytest.raises(UserError, match="already rated by R1"):
+        r1.set_rating("pose01", "mouth_open", 0.5)
+    r4 = BlindRound(tmp_path, "R4")
+    assert not r4.complete and not r4.ratings
+    r4.set_rating("pose02", "eye_squint", 0.35)
+    assert [(r.pose_id, r.rater, r.weight) for r in read_ratings(tmp_path / "reliability" / "ratings_R4.csv")] \
+        == [("pose02", "R4", 0.35)]
+    assert BlindRound(tmp_path, "R4").rating("pose02", "eye_squint") == 0.35
+    with pytest.raises(UserError, match="pose: expected one of the pose set"):
+        r4.set_rating("pose99", "eye_squint", 0.1)
+    with pytest.raises(UserError, match="poses.csv: expected the reliability pose set"):
+        BlindRound(tmp_path / "nowhere", "R4")
+
+
+def test_exports_refuse_to_overwrite(session: Path, tmp_path: Path) -> None:
+    m = AnnotationSession(session, "R2")
+    out = write_weights_csv(m.annotations, m.times, tmp_path / "w.csv")
+    lines = out.read_text().splitlines()
+    assert len(lines) == m.n_frames + 1 and lines[1].startswith("0,")
+    with pytest.raises(FileExistsError):
+        write_weights_csv(m.annotations, m.times, out)
+    keys = write_keyframes_json(m.annotations, tmp_path / "k.json")
+    assert read_annotations(keys) == m.annotations
+    with pytest.raises(FileExistsError):
+        write_keyframes_json(m.annotations, keys)
