@@ -1,0 +1,434 @@
+"""The Capture stage: pre-flight, participant, live view, phases and markers, Record/Stop, sync test.
+
+:class:`QtCaptureStage` views a :class:`~capture_tool.gui.controller.CaptureController`: it calls
+its methods and draws what :meth:`~CaptureController.poll` returns on a QTimer. Starting, stopping
+and recovering block (devices open, threads join, files are re-indexed), so they run in
+:class:`~capture_tool.gui.jobs.Jobs` and the GUI thread never waits (STYLE.md L3, L5).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from PySide6 import QtCore, QtWidgets
+
+from capture_tool.errors import UserError
+from capture_tool.gui.controller import CaptureController, HrRow, LiveUpdate
+from capture_tool.gui.jobs import JobResult, Jobs
+from capture_tool.gui.live_view import QtLiveView, format_bytes, format_elapsed
+from capture_tool.gui.participant_form import QtParticipantForm
+from capture_tool.gui.phases import PHASE_TITLES, QtPhasePanel
+from capture_tool.gui.preflight import DeviceChoice, QtPreflight
+from capture_tool.session import Event
+
+__all__ = ["CaptureController", "QtCaptureStage"]
+
+POLL_MS = 100
+FLASH_MS = 250
+DEFAULT_REST_BPM = 60.0
+#: event kinds drawn as lines on the HR plot: (text, colour)
+_PLOTTED = {"phase_start": ("{title}", "#303030"), "marker": ("\u2691 {label}", "#6a3d9a"),
+            "device_gap": ("strap lost", "#b00020"), "reconnect": ("strap back", "#1b7f3b"),
+            "sync": ("sync flash", "#806000")}
+_BANNER_STYLE = {"warn": "background:#fff3cd; color:#664d03; border:1px solid #e0c060;",
+                 "info": "background:#e7f1ff; color:#084298; border:1px solid #9ec5fe;",
+                 "error": "background:#f8d7da; color:#842029; border:1px solid #e0a0a8;"}
+
+
+def tanaka_hr_max(age: float) -> float:
+    """Age-predicted maximal HR, Tanaka 2001: ``208 - 0.7 age`` (SCIENCE.md section 3)."""
+    return 208.0 - 0.7 * age
+
+
+class QtCaptureStage(QtWidgets.QWidget):
+    """The whole Capture stage.
+
+    Parameters
+    ----------
+    controller : CaptureController
+        The model: starts, marks, polls and stops recordings.
+    settings : QSettings
+        UI preferences (last port, protocol, video file).
+    parent : QWidget, optional
+        Parent widget.
+    """
+
+    recording_changed = QtCore.Signal(bool)
+
+    def __init__(self, controller: CaptureController, settings: QtCore.QSettings,
+                 parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.controller = controller
+        self.jobs = Jobs(workers=1)  # start, stop and recover run one at a time, in order
+        self._busy = False
+        self._banner_reason = ""
+        self._contact_lost = 0
+        self._contact_ok = True
+        self._build(settings)
+        self._connect()
+        self._timer = QtCore.QTimer(self, interval=POLL_MS, timeout=self._tick)
+        self._timer.start()
+        self._update_zones()
+        self._set_state("idle")
+        self.check_incomplete()
+
+    # ------------------------------------------------------------------------------- layout
+    def _build(self, settings: QtCore.QSettings) -> None:
+        self.preflight = QtPreflight(settings)
+        self.form = QtParticipantForm()
+        self.record_button = QtWidgets.QPushButton()
+        self.record_button.setMinimumHeight(52)
+        font = self.record_button.font()
+        font.setPointSize(font.pointSize() + 5)
+        font.setBold(True)
+        self.record_button.setFont(font)
+        self.session_label = QtWidgets.QLabel(wordWrap=True)
+        self.session_label.setTextInteractionFlags(QtCore.Qt.TextInteractionFlag.TextSelectableByMouse)
+        self.banner = QtWidgets.QLabel(wordWrap=True)
+        self.banner.setMargin(6)
+        self.banner.hide()
+        self.recovery_bar = _RecoveryBar()
+        self.live = QtLiveView()
+        self.phases = QtPhasePanel()
+        self.flash = QtWidgets.QWidget(self)
+        self.flash.setStyleSheet("background: white;")
+        self.flash.setAttribute(QtCore.Qt.WidgetAttribute.WA_StyledBackground, True)
+        self.flash.hide()
+        left = QtWidgets.QVBoxLayout()
+        for widget in (self.preflight, self.form, self.record_button, self.session_label):
+            left.addWidget(widget)
+        left.addStretch(1)
+        left_box = QtWidgets.QWidget()
+        left_box.setLayout(left)
+        scroll = QtWidgets.QScrollArea(widgetResizable=True)
+        scroll.setWidget(left_box)
+        scroll.setFixedWidth(420)
+        scroll.setFrameShape(QtWidgets.QFrame.Shape.NoFrame)
+        right = QtWidgets.QVBoxLayout()
+        right.addWidget(self.banner)
+        right.addWidget(self.recovery_bar)
+        right.addWidget(self.live, 1)
+        right.addWidget(self.phases)
+        layout = QtWidgets.QHBoxLayout(self)
+        layout.setContentsMargins(0, 0, 0, 0)
+        layout.addWidget(scroll)
+        layout.addLayout(right, 1)
+
+    def _connect(self) -> None:
+        self.record_button.clicked.connect(self.toggle_recording)
+        self.phases.phase_requested.connect(self._on_phase)
+        self.phases.load_changed.connect(lambda value: self._guarded(self.controller.change_load, value))
+        self.phases.marker_requested.connect(lambda text: self._guarded(self.controller.mark, "marker", text))
+        self.phases.sync_requested.connect(self.sync_test)
+        self.form.changed.connect(self._update_zones)
+        self.recovery_bar.recover.connect(self._recover)
+        self.preflight.camera_frame.connect(self._show_camera_check)
+
+    def _show_camera_check(self, frame: object) -> None:
+        """Before recording, show the chosen camera's first frame (to check the framing)."""
+        if not self.controller.recording:
+            caption = "camera check: first frame (live video starts with Record)" if frame is not None else ""
+            self.live.set_frame(frame, caption)  # type: ignore[arg-type]
+
+    # ------------------------------------------------------------------------- record / stop
+    def toggle_recording(self) -> None:
+        """Record if idle, stop if recording (the Record/Stop button)."""
+        if self._busy:
+            return
+        if self.controller.recording:
+            self.stop_recording()
+        else:
+            self.start_recording()
+
+    def start_recording(self) -> bool:
+        """Validate the form and devices (asking about a missing one), then start in the background.
+
+        Returns
+        -------
+        bool
+            True if a start was requested.
+        """
+        if self.form.validate():
+            self.show_banner("Check the participant form: " + self.form.message.text(), "error")
+            return False
+        choice = self._confirm_devices(self.preflight.choice())
+        if choice is None:
+            return False
+        participant, label = self.form.participant(), self.form.session_label()
+        self.preflight.remember()
+        self._set_state("starting")
+        self.jobs.submit("start", self.controller.start, participant, choice, label)
+        return True
+
+    def _confirm_devices(self, choice: DeviceChoice) -> DeviceChoice | None:
+        """Ask before recording without a ready strap or camera; None if the user declines."""
+        missing = self.preflight.missing()
+        if "strap" in missing:
+            text = ("The heart-rate strap is not shown ready. Record anyway? "
+                    "If its port cannot be opened the recording will not start.")
+            if not _ask(self, "Strap not ready", text):
+                return None
+        if "camera" in missing:
+            if not _ask(self, "No camera", "No camera is ready. Record heart rate without video?"):
+                return None
+            choice = DeviceChoice(choice.port, choice.protocol, None)
+        return choice
+
+    def stop_recording(self) -> None:
+        """Stop in the background: the session is closed and marked complete."""
+        self._set_state("stopping")
+        self.jobs.submit("stop", self._stop_and_summarise)
+
+    def _stop_and_summarise(self) -> tuple[Path, str]:
+        """Runs in the job thread: stop, then read the session back for the summary line."""
+        path = self.controller.stop()
+        return path, session_summary(path)
+
+    def stop_now(self) -> Path:
+        """Stop and wait (used when the application closes)."""
+        return self.controller.stop()
+
+    def may_close(self) -> bool:
+        """Ask before closing while recording; on yes, stop the recording cleanly first."""
+        if self._busy:
+            self.show_banner("Wait a moment: a recording is starting, stopping or being recovered.", "warn")
+            return False
+        if not self.controller.recording:
+            return True
+        text = "A recording is running. Stop it, save the session and close?"
+        if not _ask(self, "Recording in progress", text):
+            return False
+        self.stop_now()
+        return True
+
+    def settled(self) -> bool:
+        """True when no device check, start, stop or recovery is pending (screenshots, tests)."""
+        return self.jobs.idle() and self.preflight.jobs.idle() and not self.preflight._debounce.isActive()
+
+    def shutdown(self) -> None:
+        """Stop timers and background pools (the window is closing)."""
+        self._timer.stop()
+        self.preflight.shutdown()
+        self.jobs.shutdown()
+
+    # ----------------------------------------------------------------------- phases, markers
+    def _on_phase(self, phase: str, value: str) -> None:
+        t_s = self._guarded(self.controller.start_phase, phase, value)
+        if t_s is not None:
+            self.phases.set_current(phase, format_elapsed(float(t_s)))  # type: ignore[arg-type]
+
+    def _guarded(self, fn: object, *args: object) -> object:
+        """Call a controller method; show an expected error in the banner instead of raising."""
+        try:
+            return fn(*args)  # type: ignore[operator]
+        except UserError as exc:
+            self.show_banner(str(exc), "error")
+            return None
+
+    def sync_test(self) -> None:
+        """Flash the stage white and record the flash time as a ``sync`` event."""
+        self.flash.setGeometry(self.rect())
+        self.flash.raise_()
+        self.flash.show()
+        self.flash.repaint()
+        if self._guarded(self.controller.sync_flash) is None:
+            self.flash.hide()
+            return
+        QtCore.QTimer.singleShot(FLASH_MS, self.flash.hide)
+
+    # ------------------------------------------------------------------------------ polling
+    def _tick(self) -> None:
+        for result in self.jobs.drain():
+            getattr(self, f"_on_{result.key}_done")(result)
+        update = self.controller.poll()
+        if update is not None:
+            self._show_update(update)
+
+    def _show_update(self, update: LiveUpdate) -> None:
+        self._plot_rows(update.hr_rows)
+        self._plot_events(update.events)
+        if update.frame is not None:
+            self.live.set_frame(update.frame, f"live camera: {update.status.frames} frames recorded")
+        status = update.status
+        live = status.link_state == "connected"  # never show a stale HR while the strap is gone
+        self.live.set_current(status.hr_bpm if live else None, status.rr_ms if live else None)
+        self.live.set_counters({
+            "elapsed": format_elapsed(status.elapsed_s), "link": status.link_state,
+            "samples": status.samples, "contact_loss": self._contact_lost,
+            "bad": f"{update.frames_bad} / {status.bad_bytes} B", "frames": status.frames,
+            "dropped": status.dropped_frames, "size": format_bytes(status.bytes_on_disk)})
+        self._update_banner(status.link_state, update.camera_ended, self._contact_ok)
+
+    def _plot_rows(self, hr_rows: list[HrRow]) -> None:
+        """Plot the valid rows; count contact losses and remember whether contact is on now."""
+        rows = [r for r in hr_rows if r.valid and r.hr_bpm is not None]
+        if rows:
+            self.live.add_samples(np.array([r.t_s for r in rows]), np.array([r.hr_bpm for r in rows]))
+        self._contact_lost += sum(not r.valid for r in hr_rows)
+        if hr_rows:
+            self._contact_ok = hr_rows[-1].valid
+
+    def _plot_events(self, events: list[Event]) -> None:
+        """Draw phases, markers, gaps, reconnects and sync flashes as lines on the HR plot."""
+        for event in events:
+            if event.kind in _PLOTTED and event.label not in ("session_start", "session_stop"):
+                text, colour = _PLOTTED[event.kind]
+                title = PHASE_TITLES.get(event.label, event.label)
+                self.live.add_marker(event.t_s, text.format(label=event.label, title=title), colour)
+
+    def _update_banner(self, link_state: str, camera_ended: bool, contact_ok: bool) -> None:
+        """Show the most urgent device problem (strap lost, camera stopped, no contact) or hide."""
+        if link_state == "reconnecting":
+            reason = "Strap lost: reconnecting by itself. The recording goes on."
+        elif camera_ended:
+            reason = "The camera stopped delivering frames. The heart-rate recording goes on."
+        elif not contact_ok:
+            reason = "No skin contact: the strap reports no heart rate (check the strap is moist and tight)."
+        else:
+            reason = ""
+        if reason != self._banner_reason:
+            self._banner_reason = reason
+            if reason:
+                self.show_banner(reason, "warn")
+            else:
+                self.banner.hide()
+
+    def show_banner(self, text: str, kind: str = "info") -> None:
+        """Show a one-line message above the live view (``info``, ``warn`` or ``error``)."""
+        self.banner.setStyleSheet(_BANNER_STYLE[kind])
+        self.banner.setText(text)
+        self.banner.show()
+
+    # ----------------------------------------------------------------------- job results
+    def _on_start_done(self, result: JobResult) -> None:
+        if result.error is not None:
+            self._set_state("idle")
+            self.show_banner(f"Could not start: {result.error}", "error")
+            if not isinstance(result.error, (UserError, OSError)):
+                raise result.error
+            return
+        self._contact_lost = 0
+        self._contact_ok = True
+        self.live.clear()
+        self.banner.hide()
+        self._set_state("recording")
+        self.form.show_session_name(Path(result.value).name)
+        self.session_label.setText(f"Recording into<br><b>{result.value}</b>")
+
+    def _on_stop_done(self, result: JobResult) -> None:
+        self._set_state("idle")
+        if result.error is not None:
+            self.show_banner(f"Stop failed: {result.error}", "error")
+            raise result.error
+        self._banner_reason = ""
+        path, summary = result.value
+        self.live.set_current(None, None)
+        self.live.set_counters({"link": "stopped"})
+        self.live.preview_caption.setText("last frame recorded (stopped)")
+        self.session_label.setText(f"Saved, complete:<br><b>{path}</b>")
+        self.show_banner(summary, "info")
+
+    def _on_recover_done(self, result: JobResult) -> None:
+        self._busy = False
+        if result.error is not None:
+            self.show_banner(f"Recovery failed: {result.error}", "error")
+        else:
+            self.show_banner("Recovered: " + "; ".join(result.value.get("done", [])), "info")
+        self.check_incomplete()
+
+    # ----------------------------------------------------------------------------- recovery
+    def check_incomplete(self) -> list[Path]:
+        """Offer recovery of sessions a crash left incomplete; return them."""
+        sessions = self.controller.incomplete_sessions()
+        self.recovery_bar.offer(sessions)
+        return sessions
+
+    def _recover(self, folder: str) -> None:
+        if self._busy or self.controller.recording:
+            return
+        self._busy = True
+        self.jobs.submit("recover", self.controller.recover, folder)
+
+    # -------------------------------------------------------------------------------- state
+    def _set_state(self, state: str) -> None:
+        """idle, starting, recording or stopping: what can be pressed and what the button says."""
+        self._busy = state in ("starting", "stopping")
+        recording = state == "recording"
+        text = {"idle": "\u25CF  Record", "starting": "Starting...", "recording": "\u25A0  Stop",
+                "stopping": "Stopping..."}[state]
+        self.record_button.setText(text)
+        colour = "#1b7f3b" if state == "idle" else "#b00020"
+        self.record_button.setStyleSheet(f"color: white; background: {colour}; border-radius: 6px;")
+        self.record_button.setEnabled(not self._busy)
+        self.preflight.setEnabled(state == "idle")
+        self.form.setEnabled(state == "idle")
+        self.phases.setEnabled(recording)
+        if state == "idle":
+            self.phases.set_current(None)
+        self.recording_changed.emit(recording)
+
+    def _update_zones(self) -> None:
+        values = self.form.values()
+        rest = values["hr_rest_bpm"] or DEFAULT_REST_BPM
+        hr_max = values["hr_max_bpm"] or tanaka_hr_max(values["age"])
+        if hr_max > rest:
+            self.live.set_zones(rest, hr_max)
+
+    def resizeEvent(self, event: object) -> None:  # noqa: N802 - Qt override
+        """Keep the flash overlay covering the stage."""
+        super().resizeEvent(event)  # type: ignore[arg-type]
+        self.flash.setGeometry(self.rect())
+
+
+class _RecoveryBar(QtWidgets.QFrame):
+    """'N sessions were left incomplete by a crash' with a Recover button for the first one."""
+
+    recover = QtCore.Signal(str)
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.setStyleSheet(_BANNER_STYLE["warn"])
+        self.text = QtWidgets.QLabel(wordWrap=True)
+        self.button = QtWidgets.QPushButton("Recover")
+        self.later = QtWidgets.QPushButton("Later")
+        layout = QtWidgets.QHBoxLayout(self)
+        layout.addWidget(self.text, 1)
+        layout.addWidget(self.button)
+        layout.addWidget(self.later)
+        self.button.clicked.connect(lambda: self.recover.emit(self._first))
+        self.later.clicked.connect(self.hide)
+        self._first = ""
+        self.hide()
+
+    def offer(self, sessions: list[Path]) -> None:
+        """Show the offer for ``sessions`` (hide when empty)."""
+        if not sessions:
+            self.hide()
+            return
+        self._first = str(sessions[0])
+        more = f" (and {len(sessions) - 1} more)" if len(sessions) > 1 else ""
+        self.text.setText(f"A recording was left incomplete by a crash: <b>{sessions[0].name}</b>{more}. "
+                          "Recover it to finish its files and mark it complete.")
+        self.show()
+
+
+def session_summary(folder: Path) -> str:
+    """One line about a stopped session: id, duration, samples, frames, events (from its files)."""
+    from capture_tool.session import read_session
+
+    session = read_session(folder)
+    stats = session.info.extra.get("stats", {})
+    phases = sum(e.kind == "phase_start" for e in session.events)
+    return (f"Saved, complete: {session.info.session_id}  -  {format_elapsed(stats.get('duration_s', 0.0))}, "
+            f"{len(session.heart_rate)} HR rows, {len(session.frame_times_s)} video frames "
+            f"({stats.get('dropped_frames', 0)} dropped), {phases} phases, {len(session.events)} events")
+
+
+def _ask(parent: QtWidgets.QWidget, title: str, text: str) -> bool:
+    """A yes/no question (default: no)."""
+    answer = QtWidgets.QMessageBox.question(
+        parent, title, text,
+        QtWidgets.QMessageBox.StandardButton.Yes | QtWidgets.QMessageBox.StandardButton.No,
+        QtWidgets.QMessageBox.StandardButton.No)
+    return answer == QtWidgets.QMessageBox.StandardButton.Yes

@@ -1,0 +1,234 @@
+"""The live view: camera preview, HR plot with zones, large HR/RR figures and the recording counters.
+
+The view holds only what it draws. The capture stage drains the recorder's queues on a QTimer and
+calls :meth:`QtLiveView.add_samples`, :meth:`set_frame` and :meth:`set_status` (STYLE.md L5).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pyqtgraph as pg
+from PySide6 import QtCore, QtGui, QtWidgets
+
+#: heights (fraction of the plot) of successive marker labels
+_LABEL_POSITIONS = (0.95, 0.87, 0.79)
+#: seconds of HR shown on the plot
+WINDOW_S = 300.0
+#: (name, low, high) as fractions of the heart-rate reserve (Karvonen), with their colours
+ZONES = (("Z1", 0.5, 0.6, "#9ecae1"), ("Z2", 0.6, 0.7, "#a1d99b"), ("Z3", 0.7, 0.8, "#fdd49e"),
+         ("Z4", 0.8, 0.9, "#fc9272"), ("Z5", 0.9, 1.0, "#de2d26"))
+
+
+def hr_zones(hr_rest_bpm: float, hr_max_bpm: float) -> list[tuple[str, float, float]]:
+    """Heart-rate zones in bpm from the heart-rate reserve (Karvonen).
+
+    Parameters
+    ----------
+    hr_rest_bpm, hr_max_bpm : float
+        Resting and maximal heart rate.
+
+    Returns
+    -------
+    list of (name, low_bpm, high_bpm)
+    """
+    reserve = hr_max_bpm - hr_rest_bpm
+    return [(name, hr_rest_bpm + lo * reserve, hr_rest_bpm + hi * reserve) for name, lo, hi, _ in ZONES]
+
+
+def format_bytes(n_bytes: int) -> str:
+    """Human-readable size: ``512 B``, ``3.4 MB``."""
+    size = float(n_bytes)
+    for unit in ("B", "kB", "MB", "GB"):
+        if size < 1000 or unit == "GB":
+            return f"{size:.0f} {unit}" if unit == "B" else f"{size:.1f} {unit}"
+        size /= 1000
+    return f"{size:.1f} GB"  # pragma: no cover
+
+
+def format_elapsed(t_s: float) -> str:
+    """``h:mm:ss`` of a duration in seconds."""
+    total = int(max(t_s, 0.0))
+    return f"{total // 3600}:{total % 3600 // 60:02d}:{total % 60:02d}"
+
+
+class QtLiveView(QtWidgets.QWidget):
+    """Camera preview, HR plot, large HR/RR and recording counters.
+
+    Parameters
+    ----------
+    parent : QWidget, optional
+        Parent widget.
+    """
+
+    def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        self._t_s = np.empty(0)
+        self._hr_bpm = np.empty(0)
+        self._zone_items: list[pg.LinearRegionItem] = []
+        self._markers: list[pg.InfiniteLine] = []
+        self._build()
+
+    def _build(self) -> None:
+        self.preview = QtWidgets.QLabel("no camera")
+        self.preview.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
+        self.preview.setMinimumSize(320, 240)
+        self.preview.setSizePolicy(QtWidgets.QSizePolicy.Policy.Ignored,
+                                   QtWidgets.QSizePolicy.Policy.Ignored)
+        self.preview.setStyleSheet("background: #202020; color: #c0c0c0;")
+        self.hr_label = _BigLabel("--", "heart rate (bpm)", 44)
+        self.rr_label = _BigLabel("--", "last R-R interval (ms)", 26)
+        self.counters = _Counters()
+        self.plot = self._make_plot()
+        self.preview_caption = QtWidgets.QLabel("")
+        self.preview_caption.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
+        camera = QtWidgets.QVBoxLayout()
+        camera.setSpacing(2)
+        camera.addWidget(self.preview, 1)
+        camera.addWidget(self.preview_caption)
+        top = QtWidgets.QHBoxLayout()
+        top.addLayout(camera, 3)
+        figures = QtWidgets.QVBoxLayout()
+        figures.addWidget(self.hr_label)
+        figures.addWidget(self.rr_label)
+        figures.addWidget(self.counters)
+        figures.addStretch(1)
+        top.addLayout(figures, 2)
+        layout = QtWidgets.QVBoxLayout(self)
+        layout.setContentsMargins(0, 0, 0, 0)
+        layout.addLayout(top, 3)
+        layout.addWidget(self.plot, 2)
+
+    def _make_plot(self) -> pg.PlotWidget:
+        plot = pg.PlotWidget(background="w")
+        plot.setLabel("bottom", "session time", units="s")
+        plot.setLabel("left", "heart rate (bpm)")
+        plot.showGrid(x=True, y=True, alpha=0.2)
+        plot.setYRange(50, 200)
+        plot.setXRange(0, 60)
+        plot.setMouseEnabled(x=False, y=False)
+        plot.setMinimumHeight(180)
+        self.curve = plot.plot(pen=pg.mkPen("#c0002a", width=2))
+        self.curve.setDownsampling(auto=True, method="peak")
+        self.curve.setClipToView(True)
+        return plot
+
+    def set_zones(self, hr_rest_bpm: float, hr_max_bpm: float) -> None:
+        """Shade the HR zones for this participant's resting and maximal HR."""
+        for item in self._zone_items:
+            self.plot.removeItem(item)
+        self._zone_items = []
+        for (name, lo, hi), (*_, colour) in zip(hr_zones(hr_rest_bpm, hr_max_bpm), ZONES):
+            brush = QtGui.QColor(colour)
+            brush.setAlpha(60)
+            item = pg.LinearRegionItem((lo, hi), orientation="horizontal", movable=False, brush=brush,
+                                       pen=pg.mkPen(None))
+            item.setZValue(-10)
+            pg.InfLineLabel(item.lines[1], name, position=0.985, anchors=[(1, 1), (1, 1)], color="#606060")
+            self.plot.addItem(item)
+            self._zone_items.append(item)
+        self.plot.setYRange(hr_rest_bpm - 20, hr_max_bpm + 10)
+
+    def add_samples(self, t_s: np.ndarray, hr_bpm: np.ndarray) -> None:
+        """Append valid samples (session seconds, bpm) and redraw the last :data:`WINDOW_S`."""
+        if len(t_s) == 0:
+            return
+        self._t_s = np.concatenate([self._t_s, np.asarray(t_s, dtype=float)])
+        self._hr_bpm = np.concatenate([self._hr_bpm, np.asarray(hr_bpm, dtype=float)])
+        self.curve.setData(self._t_s, self._hr_bpm, connect="finite")
+        self.scroll_to(float(self._t_s[-1]))
+
+    def scroll_to(self, t_s: float) -> None:
+        """Show the window of :data:`WINDOW_S` ending at ``t_s`` (at least the first minute)."""
+        self.plot.setXRange(max(0.0, t_s - WINDOW_S), max(60.0, t_s), padding=0.02)
+
+    def n_samples(self) -> int:
+        """Samples drawn so far."""
+        return int(self._t_s.size)
+
+    def add_marker(self, t_s: float, label: str, colour: str = "#404040") -> None:
+        """Draw a phase or marker line at ``t_s`` with its label (labels step down so they do not overlap)."""
+        position = _LABEL_POSITIONS[len(self._markers) % len(_LABEL_POSITIONS)]
+        line = pg.InfiniteLine(t_s, angle=90, pen=pg.mkPen(colour, style=QtCore.Qt.PenStyle.DashLine),
+                               label=label, labelOpts={"position": position, "color": colour,
+                                                       "anchors": [(0, 0.5), (0, 0.5)]})
+        self.plot.addItem(line)
+        self._markers.append(line)
+
+    def set_current(self, hr_bpm: float | None, rr_ms: float | None) -> None:
+        """Show the current HR and RR in large figures ('--' when unknown)."""
+        self.hr_label.value.setText("--" if hr_bpm is None else f"{hr_bpm:.0f}")
+        self.rr_label.value.setText("--" if rr_ms is None else f"{rr_ms:.0f}")
+
+    def set_frame(self, frame_bgr: np.ndarray | None, caption: str = "") -> None:
+        """Show a camera frame (H x W x 3 BGR uint8) with an optional caption, or the caption alone."""
+        self.preview_caption.setText(caption)
+        if frame_bgr is None:
+            self.preview.setText("no camera")
+            return
+        rgb = np.ascontiguousarray(frame_bgr[..., ::-1])
+        h, w = rgb.shape[:2]
+        image = QtGui.QImage(rgb.data, w, h, 3 * w, QtGui.QImage.Format.Format_RGB888).copy()
+        pix = QtGui.QPixmap.fromImage(image).scaled(
+            self.preview.size(), QtCore.Qt.AspectRatioMode.KeepAspectRatio,
+            QtCore.Qt.TransformationMode.SmoothTransformation)
+        self.preview.setPixmap(pix)
+
+    def set_counters(self, counters: dict[str, Any]) -> None:
+        """Update the counters (keys of :data:`_Counters.ROWS`; missing keys keep their text)."""
+        self.counters.update(counters)
+
+    def clear(self) -> None:
+        """Forget the plotted samples and markers (a new recording)."""
+        self._t_s = np.empty(0)
+        self._hr_bpm = np.empty(0)
+        self.curve.setData([], [])
+        for line in self._markers:
+            self.plot.removeItem(line)
+        self._markers = []
+        self.set_current(None, None)
+        self.plot.setXRange(0, 60)
+
+
+class _BigLabel(QtWidgets.QWidget):
+    """A large number with its unit underneath."""
+
+    def __init__(self, text: str, unit: str, point_size: int) -> None:
+        super().__init__()
+        self.value = QtWidgets.QLabel(text)
+        font = self.value.font()
+        font.setPointSize(point_size)
+        font.setBold(True)
+        self.value.setFont(font)
+        self.value.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
+        self.unit = QtWidgets.QLabel(unit)
+        self.unit.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
+        layout = QtWidgets.QVBoxLayout(self)
+        layout.setContentsMargins(0, 0, 0, 0)
+        layout.setSpacing(0)
+        layout.addWidget(self.value)
+        layout.addWidget(self.unit)
+
+
+class _Counters(QtWidgets.QWidget):
+    """A two-column grid of the recording counters."""
+
+    ROWS = (("elapsed", "Elapsed"), ("link", "Strap"), ("samples", "HR samples"),
+            ("contact_loss", "Contact lost (samples)"), ("bad", "Bad frames / bytes"),
+            ("frames", "Video frames"), ("dropped", "Dropped frames"), ("size", "On disk"))
+
+    def __init__(self) -> None:
+        super().__init__()
+        grid = QtWidgets.QFormLayout(self)
+        grid.setContentsMargins(0, 0, 0, 0)
+        self.labels: dict[str, QtWidgets.QLabel] = {}
+        for key, text in self.ROWS:
+            self.labels[key] = QtWidgets.QLabel("-")
+            grid.addRow(text, self.labels[key])
+
+    def update(self, counters: dict[str, Any]) -> None:  # type: ignore[override]
+        """Set the text of the rows named in ``counters``."""
+        for key, value in counters.items():
+            if key in self.labels:
+                self.labels[key].setText(str(value))

@@ -1,0 +1,310 @@
+"""Pre-flight: which strap port, protocol and camera; each device shown ready or missing.
+
+Opening ports and cameras can block for a second or more, so every check runs in
+:class:`~capture_tool.gui.jobs.Jobs` and the results are drained on a QTimer.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from pathlib import Path
+from typing import Any
+
+from PySide6 import QtCore, QtWidgets
+
+from capture_tool.gui.detect import detect_protocol, read_first_bytes
+from capture_tool.gui.jobs import JobResult, Jobs
+from capture_tool.protocols import PROTOCOLS
+
+NO_VIDEO = "No video"
+VIDEO_FILE = "Video file..."
+READY, MISSING, CHECKING = "ready", "missing", "checking..."
+
+
+@dataclasses.dataclass(frozen=True)
+class DeviceChoice:
+    """What to record from: strap ``port`` (path or URL, '' for none), ``protocol``, ``camera``.
+
+    ``camera`` is a camera index, a video file path, or None for no video.
+    """
+
+    port: str
+    protocol: str
+    camera: int | str | None
+
+
+def check_strap(port: str) -> str:
+    """Open and close ``port`` (blocking); return a one-line 'ready' note or raise DeviceError."""
+    from capture_tool.serial_link import open_port
+
+    open_port(port).close()
+    return f"{port} opens"
+
+
+def check_camera(camera: int | str) -> tuple[str, Any]:
+    """Open a camera or video file, grab one frame, release it (blocking).
+
+    Returns
+    -------
+    (str, ndarray or None)
+        A 'WIDTHxHEIGHT' note and the first frame (BGR) for the preview.
+
+    Raises
+    ------
+    UserError, DeviceError
+        If it cannot be opened.
+    """
+    from capture_tool.camera import open_capture
+
+    cap = open_capture(camera)
+    try:
+        ok, frame = cap.read()
+        h, w = frame.shape[:2] if ok else (0, 0)
+        return f"{w}x{h}", frame if ok else None
+    finally:
+        cap.release()
+
+
+def found_ports() -> list[str]:
+    """Serial port paths on this machine."""
+    from capture_tool.serial_link import list_ports
+
+    return [p["device"] for p in list_ports()]
+
+
+def found_cameras() -> list[int]:
+    """Camera indices from ``/dev/video*``."""
+    from capture_tool.camera import list_cameras
+
+    out = []
+    for dev in list_cameras():
+        digits = "".join(c for c in Path(dev).name if c.isdigit())
+        if digits:
+            out.append(int(digits))
+    return out
+
+
+class QtPreflight(QtWidgets.QGroupBox):
+    """Port, protocol (with detection) and camera choice, each device shown ready or missing.
+
+    Parameters
+    ----------
+    settings : QSettings
+        Remembers the last port, protocol and video file.
+    parent : QWidget, optional
+        Parent widget.
+    """
+
+    #: the first frame of the chosen camera, for a preview before recording
+    camera_frame = QtCore.Signal(object)
+
+    def __init__(self, settings: QtCore.QSettings, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__("Devices", parent)
+        self.settings = settings
+        self.jobs = Jobs()
+        self.state = {"strap": MISSING, "camera": MISSING}
+        self.detect_seconds = 2.5  # how long Detect listens to the port
+        self._build()
+        self._timer = QtCore.QTimer(self, interval=100, timeout=self._drain)
+        self._timer.start()
+        self._restore()
+        self.refresh()
+
+    def _build(self) -> None:
+        self.port = QtWidgets.QComboBox(editable=True)
+        self.port.lineEdit().setPlaceholderText("/dev/ttyUSB0 or replay://file.serlog")
+        self.port.setMinimumContentsLength(22)
+        self.protocol = QtWidgets.QComboBox()
+        self.protocol.addItems(sorted(PROTOCOLS))
+        self.detect_button = QtWidgets.QPushButton("Detect")
+        self.detect_button.setToolTip("Listen to the port for 2.5 s and guess the protocol")
+        self.camera = QtWidgets.QComboBox()
+        self.camera.addItems([VIDEO_FILE, NO_VIDEO])
+        self.video_path = QtWidgets.QLineEdit(placeholderText="video file played as the camera")
+        self.browse = QtWidgets.QPushButton("Browse...")
+        self.refresh_button = QtWidgets.QPushButton("Refresh devices")
+        self.strap_status = QtWidgets.QLabel()
+        self.camera_status = QtWidgets.QLabel()
+        for label in (self.strap_status, self.camera_status):
+            label.setWordWrap(True)
+        form = QtWidgets.QFormLayout(self)
+        form.addRow("Strap port", self.port)
+        form.addRow("Protocol", _row(self.protocol, self.detect_button))
+        form.addRow("Strap", self.strap_status)
+        form.addRow("Camera", self.camera)
+        form.addRow("", _row(self.video_path, self.browse))
+        form.addRow("Camera state", self.camera_status)
+        form.addRow(self.refresh_button)
+        self.refresh_button.clicked.connect(self.refresh)
+        self.detect_button.clicked.connect(self.detect)
+        self.browse.clicked.connect(self._browse)
+        self._debounce = QtCore.QTimer(self, singleShot=True, interval=400, timeout=self.check)
+        self.port.currentTextChanged.connect(lambda _: self._debounce.start())
+        self.camera.currentIndexChanged.connect(lambda _: self._on_camera_changed())
+        self.video_path.editingFinished.connect(self.check)
+        self.video_path.textChanged.connect(self.video_path.setToolTip)
+        self.protocol.currentTextChanged.connect(lambda p: self.settings.setValue("capture/protocol", p))
+
+    def _restore(self) -> None:
+        protocol = self.settings.value("capture/protocol", "")
+        if protocol in PROTOCOLS:
+            self.protocol.setCurrentText(str(protocol))
+        self.video_path.setText(str(self.settings.value("capture/video_file", "")))
+
+    def refresh(self) -> None:
+        """List the ports and cameras found (in the background), then check the chosen ones."""
+        self.jobs.submit("ports", found_ports)
+        self.jobs.submit("cameras", found_cameras)
+
+    def choice(self) -> DeviceChoice:
+        """The devices chosen now."""
+        text = self.camera.currentText()
+        camera: int | str | None
+        if text in (NO_VIDEO, ""):
+            camera = None
+        elif text == VIDEO_FILE:
+            camera = self.video_path.text().strip() or None
+        else:
+            camera = int(text.split()[-1])
+        return DeviceChoice(self.port.currentText().strip(), self.protocol.currentText(), camera)
+
+    def set_choice(self, port: str | None = None, protocol: str | None = None,
+                   video_file: str | os.PathLike | None = None) -> None:
+        """Choose devices programmatically (tests, scripts): a port, a protocol, a video file."""
+        if protocol is not None:
+            self.protocol.setCurrentText(protocol)
+        if video_file is not None:
+            self.video_path.setText(os.fspath(video_file))
+            self.camera.setCurrentText(VIDEO_FILE)
+        if port is not None:
+            self.port.setCurrentText(port)
+        self.check()
+
+    def missing(self) -> list[str]:
+        """Devices chosen but not ready, and devices not chosen ('strap', 'camera')."""
+        return [name for name, state in self.state.items() if state != READY]
+
+    def remember(self) -> None:
+        """Store the chosen port and video file as the next defaults (on Record)."""
+        choice = self.choice()
+        self.settings.setValue("capture/port", choice.port)
+        if isinstance(choice.camera, str):
+            self.settings.setValue("capture/video_file", choice.camera)
+
+    def check(self) -> None:
+        """Check the chosen strap and camera in the background."""
+        choice = self.choice()
+        self._check_one("strap", choice.port, check_strap, "no port chosen")
+        self._check_one("camera", choice.camera, check_camera, "no video will be recorded")
+
+    def _check_one(self, name: str, target: object, fn: object, none_text: str) -> None:
+        if target in (None, ""):
+            self._show(name, MISSING, none_text)
+            if name == "camera":
+                self.camera_frame.emit(None)
+            return
+        self._show(name, CHECKING, str(target))
+        self.jobs.submit(name, fn, target)
+
+    def detect(self) -> None:
+        """Listen to the chosen port and pick the protocol its bytes fit (background)."""
+        port = self.choice().port
+        if not port:
+            self._show("strap", MISSING, "choose a port before detecting its protocol")
+            return
+        self.detect_button.setEnabled(False)
+        self.detect_button.setText("Listening...")
+        seconds = self.detect_seconds
+        self.jobs.submit("detect", lambda: detect_protocol(read_first_bytes(port, seconds)))
+
+    def _drain(self) -> None:
+        for result in self.jobs.drain():
+            getattr(self, f"_on_{result.key}")(result)
+
+    def _on_ports(self, result: JobResult) -> None:
+        current = self.port.currentText() or str(self.settings.value("capture/port", ""))
+        ports = list(result.value or [])
+        if current and current not in ports:
+            ports.insert(0, current)
+        self.port.blockSignals(True)
+        self.port.clear()
+        self.port.addItems(ports)
+        self.port.setCurrentText(current)
+        self.port.blockSignals(False)
+        self.check()
+
+    def _on_cameras(self, result: JobResult) -> None:
+        current = self.camera.currentText()
+        self.camera.blockSignals(True)
+        self.camera.clear()
+        self.camera.addItems([f"Camera {i}" for i in result.value or []] + [VIDEO_FILE, NO_VIDEO])
+        default = current or (VIDEO_FILE if self.video_path.text() else self.camera.itemText(0))
+        self.camera.setCurrentText(default)
+        self.camera.blockSignals(False)
+        self._on_camera_changed()
+
+    def _on_camera_changed(self) -> None:
+        is_file = self.camera.currentText() == VIDEO_FILE
+        self.video_path.setVisible(is_file)
+        self.browse.setVisible(is_file)
+        self.check()
+
+    def _on_strap(self, result: JobResult) -> None:
+        self._show_result("strap", result)
+
+    def _on_camera(self, result: JobResult) -> None:
+        if result.error is not None:
+            self._show_result("camera", result)
+            self.camera_frame.emit(None)
+            return
+        note, frame = result.value
+        self._show("camera", READY, note)
+        self.camera_frame.emit(frame)
+
+    def _on_detect(self, result: JobResult) -> None:
+        self.detect_button.setEnabled(True)
+        self.detect_button.setText("Detect")
+        if result.error is not None:
+            self._show("strap", MISSING, f"detection failed: {result.error}")
+        elif result.value is None:
+            self._show("strap", self.state["strap"], "protocol not recognised from its bytes "
+                                                     "(polled straps such as HRMI cannot be detected)")
+        else:
+            self.protocol.setCurrentText(result.value)
+            self._show("strap", self.state["strap"], f"detected protocol: {result.value}")
+
+    def _show_result(self, name: str, result: JobResult) -> None:
+        if result.error is None:
+            self._show(name, READY, str(result.value))
+        else:
+            self._show(name, MISSING, str(result.error).splitlines()[0])
+
+    def _show(self, name: str, state: str, note: str) -> None:
+        self.state[name] = state
+        label = self.strap_status if name == "strap" else self.camera_status
+        colour = {READY: "#1b7f3b", MISSING: "#b00020"}.get(state, "#806000")
+        mark = {READY: "\u2714", MISSING: "\u2716"}.get(state, "\u2026")
+        label.setText(f"<span style='color:{colour}'><b>{mark} {state}</b></span> {note}")
+
+    def _browse(self) -> None:
+        path, _ = QtWidgets.QFileDialog.getOpenFileName(self, "Video file played as the camera",
+                                                        self.video_path.text(), "Videos (*.avi *.mp4 *.mkv)")
+        if path:
+            self.video_path.setText(path)
+            self.check()
+
+    def shutdown(self) -> None:
+        """Stop the timer and the background pool."""
+        self._timer.stop()
+        self._debounce.stop()
+        self.jobs.shutdown()
+
+
+def _row(*widgets: QtWidgets.QWidget) -> QtWidgets.QWidget:
+    box = QtWidgets.QWidget()
+    layout = QtWidgets.QHBoxLayout(box)
+    layout.setContentsMargins(0, 0, 0, 0)
+    for i, widget in enumerate(widgets):
+        layout.addWidget(widget, 1 if i == 0 else 0)
+    return box
