@@ -92,6 +92,7 @@ class CameraSource:
         self.frames_written = 0
         self.grabbed = 0
         self.dropped = 0
+        self.latest_frame: Any = None  # newest grabbed frame (a reference, for previews)
         self.ended = False
         self._cap = open_capture(source)
         cv2 = _cv2()
@@ -149,6 +150,7 @@ class CameraSource:
     def _offer(self, frame: Any, t_s: float) -> None:
         """Queue a frame for the writer, or drop and count it when the writer is behind."""
         self.grabbed += 1
+        self.latest_frame = frame
         try:
             self._queue.put_nowait((frame, t_s))
         except queue.Full:

@@ -157,25 +157,7 @@ class CaptureController:
         path = recorder.start()
         self.recorder, self.phase, self._latest_frame = recorder, None, None
         self._tails = (CsvTail(path / HEART_RATE_CSV), CsvTail(path / EVENTS_CSV))
-        self._tap_camera(recorder)
         return path
-
-    def _tap_camera(self, recorder: Recorder) -> None:
-        """Keep a reference to the newest grabbed frame for the preview.
-
-        CameraSource has no public preview hook yet, so its per-frame ``_offer`` is wrapped on
-        this instance; the grab thread only stores a reference (no copy, no Qt).
-        """
-        camera = recorder.camera
-        if camera is None:
-            return
-        offer = camera._offer
-
-        def _offer_and_keep(frame: Any, t_s: float) -> None:
-            self._latest_frame = frame
-            offer(frame, t_s)
-
-        camera._offer = _offer_and_keep  # type: ignore[method-assign]
 
     def mark(self, kind: str, label: str = "", value: str = "") -> float:
         """Write an event on the session clock; return its time in seconds.
@@ -213,8 +195,12 @@ class CaptureController:
         hr_tail, event_tail = self._tails
         rows = [r for r in map(_hr_row, hr_tail.read_rows()) if r is not None]
         events = [e for e in map(_event, event_tail.read_rows()) if e is not None]
-        frame, self._latest_frame = self._latest_frame, None
         camera = recorder.camera
+        frame = None if camera is None else camera.latest_frame
+        if frame is self._latest_frame:
+            frame = None  # nothing new since the last poll
+        else:
+            self._latest_frame = frame
         return LiveUpdate(recorder.status(), rows, events, frame,
                           frames_bad=recorder.link.decoder.stats.frames_bad,
                           camera_ended=bool(camera is not None and camera.ended))
