@@ -1,0 +1,138 @@
+"""Export: runtime == scikit-learn (1e-9), ONNX == scikit-learn (1e-5), standard ops, no pickles,
+no silent overwrite, a failed check leaves nothing behind."""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import onnx
+import pytest
+
+from annotate.blendshapes import DEFAULT_SET
+from train import export
+from train.dataset import hr_series, prepare, synthetic_table
+from train.export import (FACE_ONNX, MODEL_CARD, STANDARD_OPS, ExportError, build_bundle, export_model,
+                          parity_features, run_onnx)
+from train.face_fit import FaceFitConfig, fit_face_models
+from train.hr_fit import fit_hr_model
+from train.runtime import Character, load_model
+
+
+@pytest.fixture(scope="module")
+def fitted():
+    prepared = prepare(synthetic_table(n_participants=4, seconds=300, seed=5))
+    face = fit_face_models(prepared, DEFAULT_SET.names,
+                           FaceFitConfig(grid={"C": [3.0], "gamma": [0.3], "epsilon": [0.05]},
+                                         max_rows_per_participant=120))
+    return face, fit_hr_model(hr_series(prepared))
+
+
+def _bundle(fitted):
+    face, hr = fitted
+    return build_bundle(face, hr, DEFAULT_SET, {"note": "test"}, {"participants": ["P01"]})
+
+
+@pytest.fixture(scope="module")
+def model_dir(fitted, tmp_path_factory) -> Path:
+    return export_model(_bundle(fitted), fitted[0], tmp_path_factory.mktemp("m") / "model")
+
+
+def test_runtime_equals_scikit_learn(fitted, model_dir):
+    face = fitted[0]
+    x = parity_features(face, seed=1)
+    runtime = load_model(model_dir).face.predict(x)
+    np.testing.assert_allclose(runtime, face.predict_norm(x), rtol=0, atol=1e-9)
+
+
+def test_onnx_equals_scikit_learn(fitted, model_dir):
+    face = fitted[0]
+    x = parity_features(face, seed=2)
+    np.testing.assert_allclose(run_onnx(model_dir / FACE_ONNX, x), face.predict_norm(x), rtol=0, atol=1e-5)
+
+
+def test_onnx_uses_standard_operators_only(model_dir):
+    model = onnx.load(str(model_dir / FACE_ONNX))
+    onnx.checker.check_model(model)
+    assert {op.domain for op in model.opset_import} == {""}
+    ops = {n.op_type for n in model.graph.node}
+    assert ops <= STANDARD_OPS and not any("SVM" in op for op in ops)
+    assert [o.name for o in model.graph.output] == ["normalised_weights"]
+
+
+def test_float32_graph_for_engines(fitted, tmp_path):
+    face = fitted[0]
+    out = export_model(_bundle(fitted), face, tmp_path / "m32", onnx_dtype="float32")
+    x = parity_features(face, seed=3)
+    np.testing.assert_allclose(run_onnx(out / FACE_ONNX, x), face.predict_norm(x), atol=1e-4)
+    assert json.loads((out / "model.json").read_text())["metrics"]["export_parity"]["onnx_dtype"] == "float32"
+
+
+def test_no_file_is_a_pickle(model_dir):
+    for f in model_dir.rglob("*"):
+        if f.is_file():
+            assert f.read_bytes()[:1] != b"\x80", f"{f} starts like a pickle"
+    with np.load(model_dir / "svr.npz", allow_pickle=False) as npz:
+        for k in npz.files:
+            assert npz[k].dtype != object
+    with zipfile.ZipFile(model_dir / "svr.npz") as z:
+        assert all(n.endswith(".npy") for n in z.namelist())
+    assert sorted(p.name for p in model_dir.iterdir()) == sorted(["model.json", "svr.npz", FACE_ONNX, MODEL_CARD])
+
+
+def test_model_json_has_gamma_numbers_and_parity(model_dir):
+    doc = json.loads((model_dir / "model.json").read_text())
+    assert all(isinstance(s["gamma"], float) for s in doc["svr"])
+    parity = doc["metrics"]["export_parity"]
+    assert parity["runtime_max_abs_diff"] <= 1e-9 and parity["onnx_max_abs_diff"] <= 1e-5
+    card = (model_dir / MODEL_CARD).read_text()
+    for section in ("## Intended use", "## Data", "## Metrics", "## Limitations"):
+        assert section in card
+
+
+def test_existing_folder_needs_force(fitted, model_dir):
+    before = (model_dir / "svr.npz").read_bytes()
+    with pytest.raises(FileExistsError, match="refusing to overwrite"):
+        export_model(_bundle(fitted), fitted[0], model_dir)
+    assert (model_dir / "svr.npz").read_bytes() == before
+
+
+def test_force_replaces(fitted, tmp_path):
+    out = export_model(_bundle(fitted), fitted[0], tmp_path / "m")
+    (out / "stale.txt").write_text("old")
+    export_model(_bundle(fitted), fitted[0], out, force=True)
+    assert not (out / "stale.txt").exists() and (out / "model.json").is_file()
+    assert not list(tmp_path.glob(".m.*"))
+
+
+def test_failed_parity_leaves_nothing(fitted, tmp_path, monkeypatch):
+    monkeypatch.setattr(export, "ONNX_TOL", -1.0)
+    with pytest.raises(ExportError, match=r"face.onnx: expected ONNX predictions within -1 of scikit-learn"):
+        export_model(_bundle(fitted), fitted[0], tmp_path / "m")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_runtime_synthesizes_with_the_bundle(model_dir):
+    model = load_model(model_dir)
+    t = np.arange(0, 120, 0.5)
+    w = np.where(t < 60, 15.0, 0.5)
+    curves = model.curves_from_work(t, w, w, 0.5, Character(training_level=3))
+    weights = np.column_stack([curves[n] for n in DEFAULT_SET.names])
+    assert weights.shape == (len(t), 4) and np.all((weights >= 0) & (weights <= 1))
+    assert curves["nhr"][119] > curves["nhr"][0]
+
+
+def test_blendshape_mismatch(fitted):
+    from annotate.blendshapes import BlendshapeSet
+    with pytest.raises(ExportError, match="blendshapes: expected the face fit's"):
+        build_bundle(fitted[0], fitted[1], BlendshapeSet(DEFAULT_SET.shapes[:2]), {}, {})
+
+
+def test_model_card_warns_when_tl_model_generalises_worse():
+    from train.export import hr_warnings
+
+    worse = hr_warnings({"tl_regression": {"rmse_pct": 23.0}, "pooled": {"rmse_pct": 9.0}})
+    assert len(worse) == 1 and "23.0 % RMSE" in worse[0] and "9.0 %" in worse[0]
+    assert hr_warnings({"tl_regression": {"rmse_pct": 8.0}, "pooled": {"rmse_pct": 9.0}}) == []

@@ -1,0 +1,140 @@
+"""The paper's heart-rate model: recovery of known coefficients, simulation, the three models."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from train.hr_fit import (HrCoefficients, HrSeries, evaluate_hr_models, fit_hr_model,
+                          fit_participant, fit_threshold_tree, score_series, simulate_nhr,
+                          simulate_series, step_samples)
+from train.physiology import NhrParams, PAPER_REGRESSION
+
+
+def _true(tl: float) -> HrCoefficients:
+    p = NhrParams.from_training_level(tl, PAPER_REGRESSION)
+    return HrCoefficients(p.t_root, p.c_inc, p.c_dec)
+
+
+def _work_profile(rng: np.random.Generator, dur_s: int) -> np.ndarray:
+    """Bouts of 30-150 s at random levels 0-22 W/kg with within-bout jitter."""
+    w: list[float] = []
+    while len(w) < dur_s:
+        n = int(rng.integers(30, 150))
+        w.extend(np.clip(rng.uniform(0, 22) + rng.normal(0, 0.8, n), 0, None))
+    return np.array(w[:dur_s])
+
+
+def _participant(code: str, tl: float, rng: np.random.Generator, dur_s: int = 2400,
+                 noise: float = 0.005) -> HrSeries:
+    w = _work_profile(rng, dur_s)
+    nhr = simulate_nhr(w, rng.uniform(0, 0.2), _true(tl))
+    measured = np.clip(nhr + rng.normal(0, noise, dur_s), 0, 1)
+    return HrSeries(code, f"{code}_20260101-000000", tl, np.arange(dur_s, dtype=float), w, measured,
+                    60.0, 190.0)
+
+
+@pytest.fixture(scope="module")
+def cohort() -> list[HrSeries]:
+    rng = np.random.default_rng(7)
+    return [_participant(f"P{i:02d}", tl, rng) for i, tl in enumerate([0, 1.5, 3, 4.5, 6, 7.5])]
+
+
+def test_recovers_each_participants_threshold_and_factors(cohort):
+    fit = fit_hr_model(cohort)
+    for s in cohort:
+        got, true = fit.per_participant[s.participant], _true(s.training_level)
+        assert abs(got.t_root_w_per_kg - true.t_root_w_per_kg) < 0.5, s.participant
+        assert got.c_inc == pytest.approx(true.c_inc, rel=0.15), s.participant
+        assert got.c_dec == pytest.approx(true.c_dec, rel=0.15), s.participant
+
+
+def test_recovers_the_training_level_regressions(cohort):
+    reg = fit_hr_model(cohort).tl_regression
+    for tl in (0.0, 3.0, 7.5):
+        got, true = reg.at(tl), _true(tl)
+        assert abs(got.t_root_w_per_kg - true.t_root_w_per_kg) < 0.5
+        assert got.c_inc == pytest.approx(true.c_inc, rel=0.15)
+        assert got.c_dec == pytest.approx(true.c_dec, rel=0.15)
+    assert reg.t_root.slope == pytest.approx(0.42, rel=0.15)
+
+
+def test_threshold_found_between_few_constant_work_levels():
+    """Exercise logs give a few constant levels: t must still land right, not at a mid-point."""
+    rng = np.random.default_rng(1)
+    levels = rng.choice([0.0, 2.0, 4.0, 6.0, 12.0, 16.0, 20.0], size=40)
+    w = np.repeat(levels, 60)
+    true = _true(2.0)
+    nhr = simulate_nhr(w, 0.1, true)
+    got = fit_threshold_tree(*step_samples(HrSeries("P01", "s", 2.0, np.arange(len(w), dtype=float),
+                                                    w, nhr, 60, 190), smooth_s=1))
+    assert abs(got.t_root_w_per_kg - true.t_root_w_per_kg) < 0.5
+    assert got.c_inc == pytest.approx(true.c_inc, rel=0.15)
+
+
+def test_simulation_matches_the_runtime_recursion():
+    """Running from rest at TL 0 gives NHR about 0.82 after 60 s (SCIENCE.md)."""
+    nhr = simulate_nhr(np.full(61, 20.5), 0.0, _true(0.0))
+    assert nhr[60] == pytest.approx(0.82, abs=0.03)
+
+
+def test_simulation_starts_from_first_measured_value_and_spans_gaps():
+    s = HrSeries("P01", "s", 3.0, np.array([0, 1, 2, 5, 6], dtype=float), np.full(5, 20.0),
+                 np.array([np.nan, 0.3, 0.35, 0.5, 0.55]), 60, 190)
+    pred = simulate_series(s, _true(3.0))
+    assert np.isnan(pred[0]) and pred[1] == pytest.approx(0.3)
+    direct = simulate_nhr(np.full(6, 20.0), 0.3, _true(3.0))
+    assert pred[3] == pytest.approx(direct[4]) and pred[4] == pytest.approx(direct[5])
+
+
+def test_three_models_on_held_out_participants(cohort):
+    """Per-participant best, TL regression close to it, pooled worse (the paper's ordering)."""
+    ev = evaluate_hr_models(cohort)
+    summ = ev.summary()
+    assert summ["per_participant"]["r"] > 0.95
+    assert summ["tl_regression"]["rmse_pct"] < summ["pooled"]["rmse_pct"]
+    assert {s.model for s in ev.scores} == {"per_participant", "pooled", "tl_regression"}
+    assert all(np.isfinite(s.hr_rmse_bpm) for s in ev.scores)
+
+
+def test_fit_on_a_real_cycling_ride(shared_data):
+    """A real 2.3 h ride at 1 Hz (power, strap HR): the fitted tree, simulated over the whole ride
+    from its first value, tracks the measured NHR about as well as the paper's per-participant model."""
+    ride = pd.read_csv(shared_data / "physiology" / "sweat_ride_4078723797.csv")
+    ride = ride.dropna(subset=["heart_rate_bpm", "power_w"])
+    hr = ride["heart_rate_bpm"].to_numpy(float)
+    rest, top = 50.0, float(hr.max()) + 5  # rider's rest and max are not published: assumed
+    s = HrSeries("R01", "ride", 5.0, ride["elapsed_s"].to_numpy(float),
+                 ride["power_w"].to_numpy(float) / 75.0, (hr - rest) / (top - rest), rest, top)
+    coef = fit_participant([s])
+    assert coef.c_inc > 0 and coef.c_dec > 0
+    pred = simulate_series(s, coef)
+    assert np.corrcoef(pred, s.nhr)[0, 1] > 0.8
+    assert score_series(s, pred, "per_participant").hr_rmse_bpm < 15
+
+
+@pytest.mark.parametrize("w, msg", [(np.zeros(50), "varying work"), (np.ones(5), ">= 10 samples")])
+def test_bad_fit_input(w, msg):
+    with pytest.raises(ValueError, match=msg):
+        fit_threshold_tree(w, np.zeros(len(w)), np.zeros(len(w)))
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "sample lab has one session per participant and the exercise kind alternates with the "
+    "participant (cardio: P01 P03 P05, strength: P02 P04 P06), so the per-participant thresholds "
+    "follow the exercise, not the training level: TL model RMSE 23 % vs pooled 9 %. With each "
+    "participant doing both kinds (tried with simlab in /tmp) TL 10.2 % beats pooled 11.3 %."))
+def test_tl_model_beats_pooled_on_held_out_sample_lab_participants():
+    """The paper's finding on the sample lab (whose heart is NOT the paper's recursion)."""
+    from pathlib import Path
+
+    from train.dataset import hr_series, prepare, sessions_table
+
+    lab = Path(__file__).resolve().parents[2] / "sample_sessions"
+    if not any(lab.glob("*/session.json")):
+        pytest.skip("sample_sessions/ has no sessions yet (run sample_sessions/generate.py)")
+    summary = evaluate_hr_models(hr_series(prepare(sessions_table([lab])))).summary()
+    print({k: (round(v["r"], 3), round(v["rmse_pct"], 1)) for k, v in summary.items()})
+    assert summary["tl_regression"]["rmse_pct"] < summary["pooled"]["rmse_pct"]
+    assert summary["per_participant"]["r"] > 0.85

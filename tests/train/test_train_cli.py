@@ -1,0 +1,132 @@
+"""``effortface train`` and ``effortface evaluate``: a small real run, and bad inputs -> exit 2 with
+one line naming the file or option and the problem."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from effortface.cli import main
+from tests.train.test_dataset import make_session
+from train.dataset import synthetic_table, write_table
+
+
+@pytest.fixture(scope="module")
+def table() -> pd.DataFrame:
+    return synthetic_table(n_participants=3, seconds=200, seed=21)
+
+
+@pytest.fixture(scope="module")
+def table_csv(table, tmp_path_factory) -> Path:
+    return write_table(table.drop(columns=["exercise"]), tmp_path_factory.mktemp("t") / "lab.csv")
+
+
+@pytest.fixture(scope="module")
+def trained(table_csv, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("m") / "model"
+    assert main(["train", "--table", str(table_csv), "--out", str(out), "--max-rows", "40"]) == 0
+    return out
+
+
+def test_train_writes_bundle_and_report(trained, capsys):
+    assert {p.name for p in trained.iterdir()} >= {"model.json", "svr.npz", "face.onnx", "MODEL_CARD.md", "report"}
+    report = (trained / "report" / "report.md").read_text()
+    assert "fig2_nhr.png" in report and "fig3_blendshapes.png" in report
+    assert (trained / "report" / "fig2_nhr.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    doc = json.loads((trained / "model.json").read_text())
+    assert set(doc["metrics"]["hr"]) == {"per_participant", "pooled", "tl_regression"}
+    assert doc["provenance"]["cv"] == "lopo" and doc["provenance"]["n_participants"] == 3
+
+
+def test_evaluate_rescoring(trained, table_csv, capsys):
+    assert main(["evaluate", str(trained), "--table", str(table_csv)]) == 0
+    out = capsys.readouterr().out
+    assert "## heart rate" in out and "| mouth_open |" in out
+
+
+def test_train_from_sessions(table, tmp_path, capsys):
+    for _, rows in table.groupby("session"):
+        make_session(tmp_path / "lab", rows.reset_index(drop=True), raters={"R1": 0.0, "R2": 0.05})
+    out = tmp_path / "model"
+    assert main(["train", str(tmp_path / "lab"), "--out", str(out), "--max-rows", "40",
+                 "--rater-policy", "R2"]) == 0
+    assert "report:" in capsys.readouterr().out
+    assert json.loads((out / "model.json").read_text())["provenance"]["rater_policy"] == "R2"
+
+
+def _sessions(table: pd.DataFrame, root: Path, spoil: str) -> list[str]:
+    for i, (_, rows) in enumerate(table.groupby("session")):
+        kw = {}
+        if spoil == "no_hr" and i == 0:
+            kw["hr"] = False
+        if spoil == "contradictory" and i == 1:
+            kw["participant"] = {"sex": "male", "age": 99.0, "height_m": 1.8, "mass_kg": 80.0,
+                                 "training_level": 1.0}
+        folder = make_session(root, rows.reset_index(drop=True), **kw)
+        if spoil == "unannotated" and i == 0:
+            for f in (folder / "annotations").glob("*.json"):
+                f.unlink()
+    return [str(root)]
+
+
+def _csv(t: pd.DataFrame, path: Path) -> str:
+    t.to_csv(path, index=False)
+    return str(path)
+
+
+BAD = {
+    "table missing a column": (
+        lambda t, d: ["--table", _csv(t.drop(columns=["p_per_kg"]), d / "bad.csv")],
+        r"bad.csv: expected columns p_per_kg"),
+    "session without heart rate": (
+        lambda t, d: _sessions(t, d / "lab", "no_hr"), r"heart_rate.csv: expected valid heart-rate samples, found 0"),
+    "unannotated session": (
+        lambda t, d: _sessions(t, d / "lab", "unannotated"), r"P01_\S+: expected key-framed annotations"),
+    "contradictory participant": (
+        lambda t, d: _sessions(t, d / "lab", "contradictory"), r"participant P01: expected one sex"),
+    "existing --out without --force": (
+        lambda t, d: ["--table", str(write_table(t, d / "ok.csv")), "--out", str(d)],
+        r"--out \S+: expected a new model folder, found an existing one \(pass --force"),
+    "neither sessions nor table": (lambda t, d: [], r"expected session folders or --table CSV .*found neither"),
+    "unknown rater": (
+        lambda t, d: _sessions(t, d / "lab", "") + ["--rater-policy", "R7"], r"expected rater 'R7'"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD))
+def test_bad_inputs_exit_2_with_one_line(case, table, tmp_path, capsys):
+    build, message = BAD[case]
+    args = build(table.copy(), tmp_path)
+    if "--out" not in args:
+        args += ["--out", str(tmp_path / "model")]
+    assert main(["train", *args, "--max-rows", "40"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("effortface train: error: ")
+    assert pytest.importorskip("re").search(message, err), err
+    assert not (tmp_path / "model").exists()
+
+
+def test_evaluate_bad_model_folder(tmp_path, table_csv, capsys):
+    assert main(["evaluate", str(tmp_path / "nope"), "--table", str(table_csv)]) == 2
+    assert "expected a model folder" in capsys.readouterr().err
+
+
+def test_random_frame_cv_only_when_asked_and_with_a_warning(table_csv, tmp_path, capsys):
+    out = tmp_path / "kfold"
+    assert main(["train", "--table", str(table_csv), "--out", str(out), "--max-rows", "40", "--cv", "kfold"]) == 0
+    assert "--cv kfold puts neighbouring, autocorrelated seconds" in capsys.readouterr().err
+    assert json.loads((out / "model.json").read_text())["provenance"]["cv"] == "kfold"
+
+
+def test_one_kind_of_exercise_gives_null_unseen_exercise_scores(table, tmp_path):
+    one = table.copy()
+    one["exercise"] = "circuit"
+    out = tmp_path / "one"
+    assert main(["train", "--table", str(write_table(one, tmp_path / "one.csv")), "--out", str(out),
+                 "--max-rows", "40"]) == 0
+    rows = json.loads((out / "model.json").read_text())["metrics"]["face_protocols"]
+    assert all(r["r"] is None for r in rows if r["protocol"] == "unseen_exercise")
+    assert all(r["r"] is not None for r in rows if r["protocol"] == "unseen_participant")

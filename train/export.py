@@ -1,0 +1,349 @@
+"""Export a trained model folder: ``model.json`` + ``svr.npz`` (train/bundle.py), ``face.onnx``, ``MODEL_CARD.md``.
+
+- ``face.onnx`` uses standard ONNX operators only (Sub, Div, Mul, MatMul, ReduceSum, Add, Relu, Exp),
+  so engines without the ``ai.onnx.ml`` domain (Unity Sentis, Unreal NNE) can run it. Input
+  ``features`` (N, 4) = [w_per_kg, p_per_kg, nhr, epoc_norm]; output ``normalised_weights`` (N, B),
+  one column per blendshape in the bundle's order, before expressiveness and clipping. The scaler is
+  inside the graph; the RBF kernel is ``||z||^2 - 2 z.SV^T + ||SV||^2`` for all blendshapes' support
+  vectors stacked, so one MatMul serves every output. float64 by default, which meets the 1e-5
+  parity bound; ``onnx_dtype="float32"`` (for engines that only run float32) is checked at 1e-4,
+  because float32 rounding alone measures about 6e-5 on the sample lab.
+- At export, predictions of scikit-learn, of the numpy runtime loading the written files
+  (:class:`train.face.SvrModel`) and of onnxruntime are compared on the training features and
+  random rows around them; the export fails (nothing is left at the target) if the runtime differs
+  by more than 1e-9 or ONNX by more than 1e-5.
+- The folder is built beside the target and renamed into place, so a failed export never leaves a
+  half-written model; an existing target is replaced only with ``force=True``. Never pickle.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import os
+import shutil
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import onnx
+from onnx import TensorProto, helper, numpy_helper
+
+from annotate.blendshapes import BlendshapeSet
+from capture_tool.errors import UserError
+from train.bundle import ModelBundle, default_physiology, read_bundle, write_bundle
+from train.face import FEATURE_NAMES
+from train.face_fit import FaceModelFit
+from train.hr_fit import HrModelFit
+from train.physiology import NhrParams
+
+FACE_ONNX = "face.onnx"
+MODEL_CARD = "MODEL_CARD.md"
+RUNTIME_TOL = 1e-9
+ONNX_TOL = 1e-5
+ONNX_TOL_FLOAT32 = 1e-4
+ONNX_OPSET = 17
+#: IR version 8 (ONNX 1.10+): loadable by older onnxruntime builds and by engines
+ONNX_IR_VERSION = 8
+#: every operator the graph may use (a test checks the exported graph against it)
+STANDARD_OPS = frozenset({"Sub", "Div", "Mul", "MatMul", "ReduceSum", "Add", "Relu", "Exp"})
+
+
+class ExportError(UserError):
+    """An export failed its checks (parity, operator set); the message names the file and the gap."""
+
+
+# --------------------------------------------------------------------------- bundle
+
+
+def build_bundle(face: FaceModelFit, hr: HrModelFit, blendshapes: BlendshapeSet,
+                 metrics: Mapping[str, Any], provenance: Mapping[str, Any],
+                 physiology: Mapping[str, Any] | None = None) -> ModelBundle:
+    """The :class:`~train.bundle.ModelBundle` of a fit.
+
+    Parameters
+    ----------
+    face : FaceModelFit
+        The four SVRs and their scaler.
+    hr : HrModelFit
+        The heart-rate fits; the runtime uses the training-level regression, and the pooled
+        coefficients are kept for reference.
+    blendshapes : BlendshapeSet
+        Output blendshapes (names must match the face fit's, same order).
+    metrics, provenance : mapping
+        JSON-ready scores and data/software description.
+    physiology : mapping, optional
+        Physiology choices (default: :func:`train.bundle.default_physiology`).
+
+    Returns
+    -------
+    ModelBundle
+    """
+    if tuple(blendshapes.names) != tuple(face.blendshapes):
+        raise ExportError(f"blendshapes: expected the face fit's {list(face.blendshapes)}, "
+                          f"found {list(blendshapes.names)}")
+    svrs = [face.svrs[n] for n in face.blendshapes]
+    pooled = hr.pooled
+    return ModelBundle(
+        blendshapes=blendshapes,
+        scaler_mean=np.asarray(face.scaler.mean_, float),
+        scaler_scale=np.asarray(face.scaler.scale_, float),
+        nhr_coefficients=NhrParams(pooled.t_root_w_per_kg, pooled.c_inc, pooled.c_dec),
+        nhr_regression=hr.tl_regression.to_nhr_regression(),
+        svr_hyperparameters=[{"C": float(s.C), "gamma": float(s.gamma), "epsilon": float(s.epsilon)}
+                             for s in svrs],
+        support_vectors=[np.asarray(s.support_vectors_, float) for s in svrs],
+        dual_coef=[np.asarray(s.dual_coef_, float).ravel() for s in svrs],
+        intercept=np.array([float(np.ravel(s.intercept_)[0]) for s in svrs]),
+        physiology=dict(physiology or default_physiology()),
+        metrics=dict(metrics), provenance=dict(provenance))
+
+
+# --------------------------------------------------------------------------- ONNX
+
+
+def face_onnx(bundle: ModelBundle, dtype: str = "float64") -> onnx.ModelProto:
+    """The face SVRs (scaler included) as an ONNX graph of standard operators.
+
+    Parameters
+    ----------
+    bundle : ModelBundle
+        The model.
+    dtype : {"float32", "float64"}
+        Tensor type of the input, output and constants.
+
+    Returns
+    -------
+    onnx.ModelProto
+        Checked with ``onnx.checker``.
+    """
+    np_type = {"float32": np.float32, "float64": np.float64}[dtype]
+    elem = {"float32": TensorProto.FLOAT, "float64": TensorProto.DOUBLE}[dtype]
+    inits = [numpy_helper.from_array(np.asarray(v, dtype=np_type), k) for k, v in _onnx_constants(bundle).items()]
+    inits.append(numpy_helper.from_array(np.array([1], dtype=np.int64), "axis1"))
+    n_b = len(bundle.support_vectors)
+    graph = helper.make_graph(
+        _onnx_nodes(), "effortface_face_svr",
+        [helper.make_tensor_value_info("features", elem, ["N", len(FEATURE_NAMES)])],
+        [helper.make_tensor_value_info("normalised_weights", elem, ["N", n_b])], inits)
+    graph.doc_string = (f"inputs [{', '.join(FEATURE_NAMES)}]; outputs normalised weights of "
+                        f"[{', '.join(bundle.blendshapes.names)}], multiply by expressiveness and clip")
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", ONNX_OPSET)],
+                              producer_name="effortface", ir_version=ONNX_IR_VERSION)
+    onnx.checker.check_model(model)
+    return model
+
+
+def _onnx_constants(bundle: ModelBundle) -> dict[str, np.ndarray]:
+    """Scaler, stacked support vectors (transposed), their squared norms, -gamma per vector, the
+    block of dual coefficients (S, B) and the intercepts."""
+    sv = np.concatenate(bundle.support_vectors)                              # (S, F)
+    owner = np.repeat(np.arange(len(bundle.support_vectors)), [len(s) for s in bundle.support_vectors])
+    gammas = np.array([h["gamma"] for h in bundle.svr_hyperparameters])
+    coef = np.zeros((len(sv), len(bundle.support_vectors)))
+    coef[np.arange(len(sv)), owner] = np.concatenate(bundle.dual_coef)
+    return {"mean": bundle.scaler_mean, "scale": bundle.scaler_scale, "sv_t": sv.T,
+            "sv_sq": np.einsum("ij,ij->i", sv, sv), "two": np.array(2.0),
+            "neg_gamma": -gammas[owner], "coef": coef, "intercept": bundle.intercept}
+
+
+def _onnx_nodes() -> list[onnx.NodeProto]:
+    """features -> z -> ||z||^2 - 2 z.SV^T + ||SV||^2 -> exp(-gamma d) -> K @ coef + b."""
+    return [
+        helper.make_node("Sub", ["features", "mean"], ["centred"]),
+        helper.make_node("Div", ["centred", "scale"], ["z"]),
+        helper.make_node("Mul", ["z", "z"], ["z_sq_each"]),
+        helper.make_node("ReduceSum", ["z_sq_each", "axis1"], ["z_sq"], keepdims=1),   # (N, 1)
+        helper.make_node("MatMul", ["z", "sv_t"], ["cross"]),                          # (N, S)
+        helper.make_node("Mul", ["cross", "two"], ["cross2"]),
+        helper.make_node("Sub", ["z_sq", "cross2"], ["d_part"]),
+        helper.make_node("Add", ["d_part", "sv_sq"], ["d_raw"]),
+        helper.make_node("Relu", ["d_raw"], ["dist_sq"]),  # rounding can dip below 0
+        helper.make_node("Mul", ["dist_sq", "neg_gamma"], ["log_k"]),
+        helper.make_node("Exp", ["log_k"], ["kernel"]),
+        helper.make_node("MatMul", ["kernel", "coef"], ["sums"]),                      # (N, B)
+        helper.make_node("Add", ["sums", "intercept"], ["normalised_weights"]),
+    ]
+
+
+def run_onnx(path: str | os.PathLike, features: np.ndarray) -> np.ndarray:
+    """Predictions of an exported ``face.onnx`` by onnxruntime (input cast to the graph's type)."""
+    import onnxruntime as ort  # heavy: only when checking
+
+    sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    inp = sess.get_inputs()[0]
+    dtype = np.float64 if inp.type == "tensor(double)" else np.float32
+    return sess.run(None, {inp.name: np.asarray(features, dtype=dtype)})[0].astype(float)
+
+
+# --------------------------------------------------------------------------- parity
+
+
+def parity_features(face: FaceModelFit, n_random: int = 500, seed: int = 0) -> np.ndarray:
+    """Rows to check: the training features and random rows spread around them."""
+    rng = np.random.default_rng(seed)
+    x = face.data.x
+    rand = x.mean(0) + rng.normal(0, 1.5, (n_random, x.shape[1])) * x.std(0)
+    return np.vstack([x, np.abs(rand)])
+
+
+def check_parity(face: FaceModelFit, folder: str | os.PathLike, onnx_tol: float = ONNX_TOL
+                 ) -> dict[str, float]:
+    """Compare scikit-learn with the numpy runtime (files as written) and with onnxruntime.
+
+    Returns
+    -------
+    dict
+        ``runtime_max_abs_diff`` and ``onnx_max_abs_diff``.
+
+    Raises
+    ------
+    ExportError
+        If the runtime differs by more than 1e-9 or the ONNX graph by more than ``onnx_tol``.
+    """
+    folder = Path(folder)
+    x = parity_features(face)
+    ref = face.predict_norm(x)
+    runtime = read_bundle(folder).face_model().predict(x)
+    via_onnx = run_onnx(folder / FACE_ONNX, x)
+    diffs = {"runtime_max_abs_diff": float(np.max(np.abs(runtime - ref))),
+             "onnx_max_abs_diff": float(np.max(np.abs(via_onnx - ref))), "n_rows": int(len(x))}
+    if diffs["runtime_max_abs_diff"] > RUNTIME_TOL:
+        raise ExportError(f"{folder / 'svr.npz'}: expected runtime predictions within {RUNTIME_TOL:g} "
+                          f"of scikit-learn, found {diffs['runtime_max_abs_diff']:.3g}")
+    if diffs["onnx_max_abs_diff"] > onnx_tol:
+        raise ExportError(f"{folder / FACE_ONNX}: expected ONNX predictions within {onnx_tol:g} of "
+                          f"scikit-learn, found {diffs['onnx_max_abs_diff']:.3g}")
+    return diffs
+
+
+# --------------------------------------------------------------------------- the folder
+
+
+def export_model(bundle: ModelBundle, face: FaceModelFit, out_dir: str | os.PathLike, *,
+                 force: bool = False, card: str | None = None, onnx_dtype: str = "float64") -> Path:
+    """Write the model folder: bundle, ``face.onnx``, parity check, ``MODEL_CARD.md``.
+
+    Parameters
+    ----------
+    bundle : ModelBundle
+        From :func:`build_bundle`; its ``metrics["export_parity"]`` is filled in.
+    face : FaceModelFit
+        The scikit-learn models the bundle came from (for the parity check).
+    out_dir : path-like
+        Target folder.
+    force : bool
+        Replace an existing target folder.
+    card : str, optional
+        Model card text; :func:`model_card` of the bundle by default.
+    onnx_dtype : {"float64", "float32"}
+        Tensor type of ``face.onnx`` (float32 is checked at 1e-4 instead of 1e-5).
+
+    Returns
+    -------
+    Path
+        The model folder.
+
+    Raises
+    ------
+    FileExistsError
+        If ``out_dir`` exists and ``force`` is False.
+    ExportError
+        If a parity check fails (the target is left untouched).
+    """
+    out = Path(out_dir)
+    if out.exists() and not force:
+        raise FileExistsError(f"{out}: model folder exists; refusing to overwrite (use --force)")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.parent / f".{out.name}.partial-{os.getpid()}"
+    shutil.rmtree(tmp, ignore_errors=True)
+    try:
+        write_bundle(bundle, tmp)
+        onnx.save(face_onnx(bundle, onnx_dtype), str(tmp / FACE_ONNX))
+        tol = ONNX_TOL_FLOAT32 if onnx_dtype == "float32" else ONNX_TOL
+        bundle.metrics["export_parity"] = {**check_parity(face, tmp, tol), "onnx_dtype": onnx_dtype}
+        write_bundle(bundle, tmp, overwrite=True)  # again, now with the parity figures
+        (tmp / MODEL_CARD).write_text(card or model_card(bundle), encoding="utf-8")
+        _swap_into_place(tmp, out)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return out
+
+
+def _swap_into_place(tmp: Path, out: Path) -> None:
+    """Rename the finished folder over the target (the old one removed only after)."""
+    old = out.parent / f".{out.name}.old-{os.getpid()}"
+    if out.exists():
+        os.replace(out, old)
+    os.replace(tmp, out)
+    shutil.rmtree(old, ignore_errors=True)
+
+
+# --------------------------------------------------------------------------- model card
+
+
+def _md_table(rows: list[Mapping[str, Any]], columns: list[str]) -> str:
+    """A small Markdown table (floats with 3 significant digits)."""
+    def fmt(v: Any) -> str:
+        """Floats to 3 significant digits."""
+        return f"{v:.3g}" if isinstance(v, float) else str(v)
+    head = "| " + " | ".join(columns) + " |\n|" + "---|" * len(columns) + "\n"
+    return head + "".join("| " + " | ".join(fmt(r.get(c, "")) for c in columns) + " |\n" for r in rows)
+
+
+def model_card(bundle: ModelBundle) -> str:
+    """``MODEL_CARD.md``: data, participants, metrics, limitations, intended use."""
+    prov, met = bundle.provenance, bundle.metrics
+    reg = bundle.nhr_regression
+    lines = [
+        "# Model card: effortface face-of-effort model", "",
+        f"Exported {prov.get('created_utc', _dt.datetime.now(_dt.timezone.utc).isoformat(timespec='seconds'))} "
+        f"by effortface {prov.get('software_version', '?')}.", "",
+        "## Intended use",
+        "Animate a 3D character's effort expressions (mouth stretch, mouth open, eye squint, brow lower) "
+        "from its motion, for games and films, after Boukhalfi et al. 2015. Not a medical or "
+        "physiological measurement: heart rate, VO2 and EPOC are internal model states.", "",
+        "## Data",
+        f"- sources: {', '.join(map(str, prov.get('sources', []))) or 'n/a'}",
+        f"- participants: {prov.get('n_participants', '?')} ({', '.join(prov.get('participants', []))}), "
+        f"training levels {prov.get('training_levels', '?')}",
+        f"- sessions: {prov.get('n_sessions', '?')}; participant-seconds: {prov.get('n_seconds', '?')}; "
+        f"face training rows after subsampling: {prov.get('n_face_rows', '?')}",
+        f"- rater policy: {prov.get('rater_policy', 'n/a')}", "",
+        "## Model",
+        f"- heart rate: t_root = {reg.t_root[0]:.3g} {reg.t_root[1]:+.3g} TL W/kg, "
+        f"c_inc = {reg.c_inc[0]:.3g} {reg.c_inc[1]:+.3g} TL, c_dec = {reg.c_dec[0]:.3g} {reg.c_dec[1]:+.3g} TL",
+        f"- face: one RBF epsilon-SVR per blendshape on standardised [{', '.join(bundle.feature_names)}]; "
+        f"hyper-parameters by {prov.get('cv', 'lopo')} cross-validation: "
+        + "; ".join(f"{n}: C={h['C']:g}, gamma={h['gamma']:g}, epsilon={h['epsilon']:g}"
+                    for n, h in zip(bundle.blendshapes.names, bundle.svr_hyperparameters)), "",
+        "## Metrics (held-out participants unless stated)", "",
+        "Heart rate (simulated over whole sessions from the first measured value; the "
+        "per-participant model is scored on its own participant, as in the paper's Fig. 2a):", "",
+        _md_table([{"model": k, **v} for k, v in met.get("hr", {}).items()],
+                  ["model", "r", "rmse_pct", "hr_rmse_bpm", "n_sessions"]), "",
+        "Face (weights, each held-out participant's own expressiveness):", "",
+        _md_table(met.get("face_held_out", []), ["blendshape", "model", "r", "rmse_pct_range", "rmse_pct_unit"]),
+        "", f"Export parity: {met.get('export_parity', {})}", "",
+        "## Limitations",
+        "- Trained on few participants; expressiveness is per character and must be supplied "
+        "(default 1 = the training participants' normalised scale).",
+        "- The EPOC recursion is our documented choice (Firstbeat's function is proprietary).",
+        "- Predictions outside the training ranges of work and power are extrapolations.",
+        "- Hyper-parameters were chosen by the same cross-validation that gives the held-out scores "
+        "(not nested), so those scores are slightly optimistic.",
+        *hr_warnings(met.get("hr", {})), "",
+    ]
+    return "\n".join(lines)
+
+
+def hr_warnings(hr: Mapping[str, Mapping[str, float]]) -> list[str]:
+    """Limitation lines (Markdown bullets) when the training-level heart-rate model generalises
+    worse than the pooled one on held-out participants (``hr``: :meth:`HrEvaluation.summary`)."""
+    tl, pooled = hr.get("tl_regression"), hr.get("pooled")
+    if not tl or not pooled or tl["rmse_pct"] <= pooled["rmse_pct"]:
+        return []
+    return [f"- On held-out participants the training-level heart-rate model ({tl['rmse_pct']:.1f} % RMSE) "
+            f"did worse than one pooled model ({pooled['rmse_pct']:.1f} %), unlike the paper: the "
+            "participants' thresholds may follow their exercises rather than their training level "
+            "(e.g. each did a different kind of exercise). Record every participant in every kind."]

@@ -1,0 +1,434 @@
+"""Face models (SCIENCE.md section 5): expressiveness, four RBF epsilon-SVRs, evaluation like the paper.
+
+Input is the per-second training table of :mod:`train.dataset` (one row per participant-second with
+``participant, session, t_s, w_per_kg, p_per_kg, nhr, epoc_norm``, an optional ``exercise`` and one
+column per blendshape, NaN where not annotated).
+
+- **Expressiveness.** For each participant and blendshape, ``e_b`` = the maximal key-framed weight;
+  the SVR learns ``y / e_b``. A participant who never showed a blendshape (``e_b`` below
+  ``MIN_EXPRESSIVENESS``) keeps ``e_b = MIN_EXPRESSIVENESS`` so the division stays bounded (choice).
+- **Features.** ``[w, p, NHR, EPOC_norm]`` standardised by a scaler fitted on the training rows;
+  seconds without a measured heart rate (no NHR) are left out.
+- **Hyper-parameters.** A grid over C, gamma and epsilon, scored by mean squared error averaged over
+  the folds of leave-one-participant-out CV (the default; ``cv="kfold"`` random-frame folds exist only
+  to show how autocorrelated frames inflate the score). gamma is always a number, never ``"scale"``.
+- **Speed (choices).** Training rows are subsampled evenly in time (rows are already 1 Hz) to at most
+  ``max_rows_per_participant`` per participant and ``max_total_rows`` in all, and leave-one-
+  participant-out becomes participant-grouped ``max_folds``-fold CV for large labs: an SVR fit costs
+  about the square of its rows, so these caps bound the cost of a training run whatever the size of
+  the lab (``benchmarks/bench_training.py`` prints the curve). Each fold's scaler and, per gamma,
+  its RBF Gram matrices are computed once and shared by every C, epsilon and blendshape
+  (``SVR(kernel="precomputed")``); libsvm's own solver dominates the time, so this cache is only
+  about as fast as a plain ``GridSearchCV`` over the same grid. Held-out scores reuse the
+  hyper-parameters the same CV chose (not nested CV), which is slightly optimistic.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+from collections.abc import Callable, Iterator, Sequence
+
+import numpy as np
+import pandas as pd
+from sklearn.linear_model import LinearRegression
+from sklearn.metrics.pairwise import rbf_kernel
+from sklearn.model_selection import GroupKFold, KFold, LeaveOneGroupOut
+from sklearn.preprocessing import StandardScaler
+from sklearn.svm import SVR
+
+from train.face import FEATURE_NAMES
+
+#: the SVR inputs, in order (units: W/kg, W/kg, 1, 1): the runtime's own list
+FEATURES = FEATURE_NAMES
+#: floor of an expressiveness value (choice, see module docstring)
+MIN_EXPRESSIVENESS = 0.05
+#: hyper-parameter grids on standardised features. "paper" is wider (32 points, about 15x the
+#: time of "small"); it stops at C = 100 because one libsvm fit at C = 1000, gamma = 1 takes
+#: about 4 s on the sample lab (0.04 s at C = 1). The paper's C 1e3-1e6 and gamma 1e-5-1e-2 were
+#: on unstandardised features, so they do not transfer.
+GRIDS: dict[str, dict[str, list[float]]] = {
+    "small": {"C": [1.0, 10.0], "gamma": [0.1, 0.5], "epsilon": [0.05]},
+    "paper": {"C": [0.1, 1.0, 10.0, 100.0], "gamma": [0.01, 0.05, 0.2, 1.0], "epsilon": [0.02, 0.1]},
+}
+CV_CHOICES = ("lopo", "kfold")
+
+
+@dataclasses.dataclass(frozen=True)
+class FaceFitConfig:
+    """Settings of a face fit (every choice a named parameter).
+
+    Parameters
+    ----------
+    grid : dict
+        Lists of ``C``, ``gamma`` and ``epsilon`` to search.
+    cv : {"lopo", "kfold"}
+        Leave-one-participant-out (default) or random-frame K-fold (inflated; for comparison only).
+    n_splits : int
+        Folds for ``cv="kfold"``.
+    max_rows_per_participant : int
+        Cap on training rows per participant (evenly spaced in time).
+    max_total_rows : int
+        Cap on all training rows: the per-participant cap shrinks to ``max_total_rows / P``.
+    max_folds : int
+        With more participants than this, ``cv="lopo"`` becomes participant-grouped K-fold
+        (``GroupKFold(max_folds)``), so the number of fits stops growing with the lab.
+    seed : int
+        Seed for the K-fold shuffle.
+    """
+
+    grid: dict = dataclasses.field(default_factory=lambda: dict(GRIDS["small"]))
+    cv: str = "lopo"
+    n_splits: int = 5
+    max_rows_per_participant: int = 300
+    max_total_rows: int = 2000
+    max_folds: int = 8
+    seed: int = 0
+
+    def rows_per_participant(self, n_participants: int) -> int:
+        """The effective per-participant cap for a lab of ``n_participants``."""
+        return max(20, min(self.max_rows_per_participant, self.max_total_rows // max(n_participants, 1)))
+
+    def __post_init__(self) -> None:
+        if self.cv not in CV_CHOICES:
+            raise ValueError(f"cv: expected one of {CV_CHOICES}, found {self.cv!r}")
+        for key in ("C", "gamma", "epsilon"):
+            vals = self.grid.get(key)
+            if not vals or not all(isinstance(v, (int, float)) and v > 0 for v in vals):
+                raise ValueError(f"grid[{key!r}]: expected a list of positive numbers, found {vals!r}")
+
+
+# --------------------------------------------------------------------------- data preparation
+
+
+def expressiveness(table: pd.DataFrame, blendshapes: Sequence[str]) -> pd.DataFrame:
+    """Expressiveness vectors: the maximal key-framed weight per participant and blendshape.
+
+    Parameters
+    ----------
+    table : DataFrame
+        Training table with ``participant`` and the blendshape columns.
+    blendshapes : sequence of str
+        Blendshape column names.
+
+    Returns
+    -------
+    DataFrame
+        Index: participant; columns: blendshapes; values floored at ``MIN_EXPRESSIVENESS``.
+    """
+    e = table.groupby("participant", sort=False)[list(blendshapes)].max()
+    return e.fillna(MIN_EXPRESSIVENESS).clip(lower=MIN_EXPRESSIVENESS)
+
+
+def subsample(table: pd.DataFrame, max_rows_per_participant: int) -> pd.DataFrame:
+    """At most ``max_rows_per_participant`` rows per participant, evenly spaced in time."""
+    parts = []
+    for _, rows in table.groupby("participant", sort=False):
+        rows = rows.sort_values(["session", "t_s"])
+        if len(rows) > max_rows_per_participant:
+            idx = np.linspace(0, len(rows) - 1, max_rows_per_participant).round().astype(int)
+            rows = rows.iloc[np.unique(idx)]
+        parts.append(rows)
+    return pd.concat(parts).reset_index(drop=True)
+
+
+@dataclasses.dataclass
+class FaceData:
+    """Arrays for fitting: features, normalised targets (NaN = not annotated), groups, expressiveness."""
+
+    x: np.ndarray            # (n, 4) raw features
+    y_norm: np.ndarray       # (n, B) weight / e_b
+    e: np.ndarray            # (n, B) the row's participant expressiveness
+    groups: np.ndarray       # (n,) participant codes
+    exercise: np.ndarray     # (n,) exercise labels
+    t_s: np.ndarray
+    session: np.ndarray
+    blendshapes: tuple[str, ...]
+
+
+def face_data(table: pd.DataFrame, blendshapes: Sequence[str],
+              e_table: pd.DataFrame | None = None) -> FaceData:
+    """Arrays from a training table; ``e_table`` defaults to the table's own expressiveness."""
+    blendshapes = tuple(blendshapes)
+    e_table = expressiveness(table, blendshapes) if e_table is None else e_table
+    e = e_table.loc[table["participant"], list(blendshapes)].to_numpy(float)
+    y = table[list(blendshapes)].to_numpy(float)
+    exercise = table["exercise"] if "exercise" in table else table["session"]
+    return FaceData(table[list(FEATURES)].to_numpy(float), np.clip(y / e, 0.0, 1.0), e,
+                    table["participant"].to_numpy(str), exercise.to_numpy(str),
+                    table["t_s"].to_numpy(float), table["session"].to_numpy(str), blendshapes)
+
+
+# --------------------------------------------------------------------------- folds and search
+
+
+def cv_folds(data: FaceData, cv: str = "lopo", n_splits: int = 5, seed: int = 0, max_folds: int = 8
+             ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Train/test index pairs: leave one participant out (participant-grouped ``max_folds``-fold
+    beyond ``max_folds`` participants), or shuffled random-frame K-fold."""
+    idx = np.arange(len(data.groups))
+    if cv == "lopo":
+        n_groups = len(np.unique(data.groups))
+        if n_groups < 2:
+            raise ValueError("cv: leave-one-participant-out needs >= 2 participants")
+        splitter = LeaveOneGroupOut() if n_groups <= max_folds else GroupKFold(max_folds)
+        return list(splitter.split(idx, groups=data.groups))
+    return list(KFold(n_splits, shuffle=True, random_state=seed).split(idx))
+
+
+def _fold_kernels(x: np.ndarray, train: np.ndarray, test: np.ndarray, gammas: Sequence[float]
+                  ) -> Iterator[tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+    """Per gamma: Gram matrices of the fold (scaler fitted on the training rows only)."""
+    scaler = StandardScaler().fit(x[train])
+    xs_tr, xs_te = scaler.transform(x[train]), scaler.transform(x[test])
+    for gamma in gammas:
+        yield gamma, rbf_kernel(xs_tr, xs_tr, gamma=gamma), rbf_kernel(xs_te, xs_tr, gamma=gamma), \
+            xs_tr, xs_te
+
+
+@dataclasses.dataclass
+class SearchResult:
+    """Grid-search outcome for one blendshape."""
+
+    best: dict[str, float]
+    cv_mse: float
+    cv_r: float
+    table: list[dict[str, float]]        # one row per grid point: C, gamma, epsilon, mse
+    oof: np.ndarray                      # out-of-fold normalised predictions at the best point
+    baselines: dict[str, np.ndarray]     # out-of-fold "mean" and "linear" predictions
+
+
+def grid_search(data: FaceData, config: FaceFitConfig,
+                progress: Callable[[int], None] | None = None) -> dict[str, SearchResult]:
+    """Grid search of every blendshape's SVR with cached per-fold Gram matrices.
+
+    Parameters
+    ----------
+    data : FaceData
+        Training arrays.
+    config : FaceFitConfig
+        Grid and CV scheme.
+    progress : callable, optional
+        Called with 1 after each fold (for a progress bar).
+
+    Returns
+    -------
+    dict
+        Blendshape name -> :class:`SearchResult`.
+    """
+    folds = cv_folds(data, config.cv, config.n_splits, config.seed, config.max_folds)
+    points = list(itertools.product(config.grid["C"], config.grid["gamma"], config.grid["epsilon"]))
+    n, nb = data.y_norm.shape
+    oof = {p: np.full((n, nb), np.nan) for p in points}
+    fold_mse = {p: np.zeros((len(folds), nb)) for p in points}
+    base = {k: np.full((n, nb), np.nan) for k in ("mean", "linear")}
+    for f, (train, test) in enumerate(folds):
+        for gamma, k_tr, k_te, xs_tr, xs_te in _fold_kernels(data.x, train, test, config.grid["gamma"]):
+            for b in range(nb):
+                _fit_fold(data, b, train, test, k_tr, k_te, gamma, config, oof, fold_mse, f)
+        _baseline_fold(data, train, test, base)
+        if progress:
+            progress(1)
+    return {name: _best(data, b, points, oof, fold_mse, base) for b, name in enumerate(data.blendshapes)}
+
+
+def _fit_fold(data: FaceData, b: int, train: np.ndarray, test: np.ndarray, k_tr: np.ndarray,
+              k_te: np.ndarray, gamma: float, config: FaceFitConfig, oof: dict, fold_mse: dict,
+              f: int) -> None:
+    """Fit blendshape b on one fold for every (C, epsilon) at this gamma; store predictions."""
+    y = data.y_norm[:, b]
+    tr, te = np.isfinite(y[train]), np.isfinite(y[test])
+    if tr.sum() < 2 or te.sum() == 0:
+        for c, eps in itertools.product(config.grid["C"], config.grid["epsilon"]):
+            fold_mse[(c, gamma, eps)][f, b] = np.nan
+        return
+    # slice the Gram matrices once for every (C, epsilon); skip the copy when nothing is missing
+    k_fit = k_tr if tr.all() else k_tr[np.ix_(tr, tr)]
+    k_pred = k_te if (tr.all() and te.all()) else k_te[np.ix_(te, tr)]
+    for c, eps in itertools.product(config.grid["C"], config.grid["epsilon"]):
+        svr = SVR(kernel="precomputed", C=c, epsilon=eps).fit(k_fit, y[train][tr])
+        pred = svr.predict(k_pred)
+        oof[(c, gamma, eps)][test[te], b] = pred
+        fold_mse[(c, gamma, eps)][f, b] = float(np.mean((pred - y[test][te]) ** 2))
+
+
+def _baseline_fold(data: FaceData, train: np.ndarray, test: np.ndarray, base: dict) -> None:
+    """Mean and linear-regression baselines on one fold (standardised features)."""
+    scaler = StandardScaler().fit(data.x[train])
+    for b in range(data.y_norm.shape[1]):
+        y = data.y_norm[:, b]
+        tr, te = train[np.isfinite(y[train])], test[np.isfinite(y[test])]
+        if len(tr) < 2 or len(te) == 0:
+            continue
+        base["mean"][te, b] = y[tr].mean()
+        lin = LinearRegression().fit(scaler.transform(data.x[tr]), y[tr])
+        base["linear"][te, b] = lin.predict(scaler.transform(data.x[te]))
+
+
+def _best(data: FaceData, b: int, points: list, oof: dict, fold_mse: dict, base: dict) -> SearchResult:
+    """The grid point with the lowest fold-averaged MSE for blendshape b."""
+    rows = [{"C": c, "gamma": g, "epsilon": e, "mse": float(np.nanmean(fold_mse[(c, g, e)][:, b]))}
+            for c, g, e in points]
+    best = min(rows, key=lambda r: r["mse"] if np.isfinite(r["mse"]) else np.inf)
+    key = (best["C"], best["gamma"], best["epsilon"])
+    y, pred = data.y_norm[:, b], oof[key][:, b]
+    ok = np.isfinite(y) & np.isfinite(pred)
+    r = float(np.corrcoef(y[ok], pred[ok])[0, 1]) if ok.sum() > 2 else float("nan")
+    return SearchResult({k: best[k] for k in ("C", "gamma", "epsilon")}, best["mse"], r, rows,
+                        pred, {k: v[:, b] for k, v in base.items()})
+
+
+# --------------------------------------------------------------------------- final fit
+
+
+@dataclasses.dataclass
+class FaceModelFit:
+    """The fitted face models and everything the export and the report need."""
+
+    blendshapes: tuple[str, ...]
+    scaler: StandardScaler
+    svrs: dict[str, SVR]
+    search: dict[str, SearchResult]
+    expressiveness: pd.DataFrame
+    data: FaceData
+    config: FaceFitConfig
+
+    def predict_norm(self, x: np.ndarray) -> np.ndarray:
+        """Normalised predictions (n, B) from raw features (n, 4), by scikit-learn."""
+        xs = self.scaler.transform(np.asarray(x, dtype=float))
+        return np.column_stack([self.svrs[b].predict(xs) for b in self.blendshapes])
+
+
+def fit_face_models(table: pd.DataFrame, blendshapes: Sequence[str],
+                    config: FaceFitConfig | None = None,
+                    progress: Callable[[int], None] | None = None) -> FaceModelFit:
+    """Search hyper-parameters by grouped CV, then fit one RBF SVR per blendshape on all rows.
+
+    Parameters
+    ----------
+    table : DataFrame
+        Training table (see the module docstring).
+    blendshapes : sequence of str
+        Blendshape columns to model.
+    config : FaceFitConfig, optional
+        Grid, CV scheme and subsampling.
+    progress : callable, optional
+        Called with 1 after each CV fold.
+
+    Returns
+    -------
+    FaceModelFit
+    """
+    config = config or FaceFitConfig()
+    table = table.dropna(subset=list(FEATURES))  # seconds without a heart rate carry no NHR
+    e_table = expressiveness(table, blendshapes)
+    per_participant = config.rows_per_participant(table["participant"].nunique())
+    data = face_data(subsample(table, per_participant), blendshapes, e_table)
+    search = grid_search(data, config, progress)
+    scaler = StandardScaler().fit(data.x)
+    xs = scaler.transform(data.x)
+    svrs = {}
+    for b, name in enumerate(data.blendshapes):
+        ok = np.isfinite(data.y_norm[:, b])
+        p = search[name].best
+        svrs[name] = SVR(kernel="rbf", C=p["C"], gamma=float(p["gamma"]),
+                         epsilon=p["epsilon"]).fit(xs[ok], data.y_norm[ok, b])
+    return FaceModelFit(tuple(blendshapes), scaler, svrs, search, e_table, data, config)
+
+
+# --------------------------------------------------------------------------- metrics
+
+
+def weight_metrics(y: np.ndarray, pred: np.ndarray) -> dict[str, float]:
+    """Pearson r and RMSE in % of the observed range and in % of [0, 1] (NaN rows skipped)."""
+    ok = np.isfinite(y) & np.isfinite(pred)
+    y, pred = y[ok], pred[ok]
+    if len(y) < 3:
+        return {"r": float("nan"), "rmse_pct_range": float("nan"), "rmse_pct_unit": float("nan"), "n": len(y)}
+    rmse = float(np.sqrt(np.mean((y - pred) ** 2)))
+    r = float(np.corrcoef(y, pred)[0, 1]) if np.std(y) > 0 and np.std(pred) > 0 else 0.0
+    span = float(np.ptp(y)) or 1.0
+    return {"r": r, "rmse_pct_range": 100 * rmse / span, "rmse_pct_unit": 100 * rmse, "n": int(len(y))}
+
+
+def held_out_scores(fit: FaceModelFit) -> pd.DataFrame:
+    """Per blendshape and model (svr, mean, linear): out-of-fold metrics on the weight scale.
+
+    Normalised predictions are multiplied back by each held-out participant's own expressiveness
+    (at run time the user supplies it) and clipped to [0, 1]; the targets are the key-framed weights.
+    """
+    rows = []
+    for b, name in enumerate(fit.blendshapes):
+        y = fit.data.y_norm[:, b] * fit.data.e[:, b]
+        s = fit.search[name]
+        for model, pred in (("svr", s.oof), ("mean", s.baselines["mean"]), ("linear", s.baselines["linear"])):
+            rows.append({"blendshape": name, "model": model,
+                         **weight_metrics(y, np.clip(pred * fit.data.e[:, b], 0, 1))})
+    return pd.DataFrame(rows)
+
+
+# --------------------------------------------------------------------------- the paper's Fig. 3 protocols
+
+PROTOCOLS = ("same_participant_exercise", "unseen_participant", "unseen_exercise")
+
+
+def _protocol_folds(data: FaceData, protocol: str, n_blocks: int = 5, max_folds: int = 8
+                    ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Folds for one protocol (see :func:`protocol_scores`)."""
+    idx = np.arange(len(data.groups))
+    if protocol == "unseen_participant":
+        return cv_folds(data, "lopo", max_folds=max_folds)
+    if protocol == "unseen_exercise":
+        if len(np.unique(data.exercise)) < 2:
+            return []
+        return list(LeaveOneGroupOut().split(idx, groups=data.exercise))
+    folds = []
+    for key in np.unique(np.char.add(np.char.add(data.groups, "|"), data.exercise)):
+        rows = idx[np.char.add(np.char.add(data.groups, "|"), data.exercise) == key]
+        rows = rows[np.argsort(data.t_s[rows], kind="stable")]
+        for block in np.array_split(rows, n_blocks):  # contiguous blocks of time
+            if len(block) and len(rows) - len(block) > 10:
+                folds.append((np.setdiff1d(rows, block), block))
+    return folds
+
+
+def protocol_scores(fit: FaceModelFit, protocols: Sequence[str] = PROTOCOLS) -> tuple[pd.DataFrame, dict]:
+    """The paper's Fig. 3 protocols with the chosen hyper-parameters.
+
+    - ``same_participant_exercise``: one model per participant and exercise, each contiguous fifth of
+      the time predicted from the other four fifths;
+    - ``unseen_participant``: trained on everyone else (leave one participant out);
+    - ``unseen_exercise``: trained on every other exercise, everyone pooled (leave one exercise out).
+
+    Returns
+    -------
+    scores : DataFrame
+        ``protocol, blendshape, r, rmse_pct_range, rmse_pct_unit, n`` (weight scale).
+    predictions : dict
+        protocol -> (n, B) array of predicted weights (NaN where not predicted), for the plots.
+    """
+    rows, preds = [], {}
+    for protocol in protocols:
+        pred = _predict_folds(fit, _protocol_folds(fit.data, protocol, max_folds=fit.config.max_folds))
+        preds[protocol] = pred
+        for b, name in enumerate(fit.blendshapes):
+            y = fit.data.y_norm[:, b] * fit.data.e[:, b]
+            rows.append({"protocol": protocol, "blendshape": name, **weight_metrics(y, pred[:, b])})
+    return pd.DataFrame(rows), preds
+
+
+def _predict_folds(fit: FaceModelFit, folds: list) -> np.ndarray:
+    """Out-of-fold predicted weights with each blendshape's chosen hyper-parameters."""
+    d = fit.data
+    out = np.full(d.y_norm.shape, np.nan)
+    for train, test in folds:
+        scaler = StandardScaler().fit(d.x[train])
+        for b, name in enumerate(fit.blendshapes):
+            tr = train[np.isfinite(d.y_norm[train, b])]
+            if len(tr) < 5:
+                continue
+            p = fit.search[name].best
+            svr = SVR(kernel="rbf", C=p["C"], gamma=p["gamma"], epsilon=p["epsilon"])
+            svr.fit(scaler.transform(d.x[tr]), d.y_norm[tr, b])
+            out[test, b] = np.clip(svr.predict(scaler.transform(d.x[test])) * d.e[test, b], 0, 1)
+    return out

@@ -1,0 +1,189 @@
+"""The trainer's report: Markdown with PNG plots like the paper's Fig. 2 and Fig. 3, and metric tables.
+
+matplotlib runs with the Agg backend (files only, no display, no Qt), imported inside the functions
+so that importing this module stays cheap.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from train.export import hr_warnings
+from train.face_fit import FaceModelFit
+from train.hr_fit import HrEvaluation, HrSeries
+
+REPORT_MD = "report.md"
+FIG2_PNG = "fig2_nhr.png"
+FIG3_PNG = "fig3_blendshapes.png"
+#: at most this many sessions in Fig. 2 (one panel each)
+MAX_FIG2_PANELS = 12
+_REAL, _PRED, _PRED2 = "#1f77b4", "#d62728", "#ff7f0e"  # the paper's blue (real) and red (predicted)
+
+
+def _pyplot() -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_fig2(evaluation: HrEvaluation, series: Sequence[HrSeries], path: str | os.PathLike) -> Path:
+    """Fig. 2: measured and simulated NHR over time (minutes), one panel per session.
+
+    Each panel shows the measured NHR (blue), the participant's own model (orange) and the
+    training-level model fitted without that participant (red).
+    """
+    plt = _pyplot()
+    shown = list(series)[:MAX_FIG2_PANELS]
+    cols = 3 if len(shown) > 4 else 2 if len(shown) > 1 else 1
+    rows = int(np.ceil(len(shown) / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 2.6 * rows), squeeze=False,
+                             sharey=True, constrained_layout=True)
+    for ax, s in zip(axes.flat, shown):
+        t_min = np.asarray(s.t_s) / 60.0
+        ax.plot(t_min, s.nhr, color=_REAL, lw=1.2, label="measured")
+        ax.plot(t_min, evaluation.predictions[("per_participant", s.session)], color=_PRED2, lw=1,
+                label="own model")
+        ax.plot(t_min, evaluation.predictions[("tl_regression", s.session)], color=_PRED, lw=1,
+                ls="--", label="TL model (held out)")
+        ax.set_title(f"{s.participant} TL {s.training_level:.3g}: {s.session.split('_')[-1]}", fontsize=9)
+        ax.set_ylim(-0.05, 1.05)
+        ax.set_xlabel("time (min)", fontsize=8)
+        ax.set_ylabel("NHR", fontsize=8)
+        ax.tick_params(labelsize=7)
+    for ax in list(axes.flat)[len(shown):]:
+        ax.set_visible(False)
+    axes.flat[0].legend(fontsize=7, loc="upper left")
+    fig.suptitle("Fig. 2: measured and simulated normalised heart rate", fontsize=11)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Path(path)
+
+
+def plot_fig3(fit: FaceModelFit, predictions: Mapping[str, np.ndarray], path: str | os.PathLike,
+              session: str | None = None) -> Path:
+    """Fig. 3: key-framed (blue) and predicted (red) weights of one session, per protocol and blendshape.
+
+    ``predictions`` is :func:`train.face_fit.protocol_scores`' second value. The session defaults to
+    the one with the most varied annotations.
+    """
+    plt = _pyplot()
+    d = fit.data
+    session = session or _liveliest_session(fit)
+    rows = np.flatnonzero(d.session == session)
+    rows = rows[np.argsort(d.t_s[rows])]
+    protos = [p for p in predictions if np.isfinite(predictions[p][rows]).any()]
+    nb = len(fit.blendshapes)
+    fig, axes = plt.subplots(max(len(protos), 1), nb, figsize=(3.3 * nb, 2.3 * max(len(protos), 1)),
+                             squeeze=False, sharex=True, sharey=True, constrained_layout=True)
+    t_min = d.t_s[rows] / 60.0
+    for i, proto in enumerate(protos):
+        for b, name in enumerate(fit.blendshapes):
+            ax = axes[i, b]
+            ax.plot(t_min, d.y_norm[rows, b] * d.e[rows, b], color=_REAL, lw=1.2, label="key-framed")
+            ax.plot(t_min, predictions[proto][rows, b], color=_PRED, lw=1, label="predicted")
+            ax.set_ylim(-0.02, 1.02)
+            ax.tick_params(labelsize=7)
+            if i == 0:
+                ax.set_title(name, fontsize=9)
+            if b == 0:
+                ax.set_ylabel(proto.replace("_", " "), fontsize=8)
+            if i == len(protos) - 1:
+                ax.set_xlabel("time (min)", fontsize=8)
+    axes[0, 0].legend(fontsize=7, loc="upper left")
+    fig.suptitle(f"Fig. 3: blendshape weights of {session} (never in the model's training data)",
+                 fontsize=11)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Path(path)
+
+
+def _liveliest_session(fit: FaceModelFit) -> str:
+    """The session whose annotated weights vary most (the most telling plot)."""
+    d = fit.data
+    spread = {s: float(np.nanstd(d.y_norm[d.session == s] * d.e[d.session == s]))
+              for s in np.unique(d.session)}
+    return max(spread, key=spread.get)
+
+
+def _md(df: pd.DataFrame) -> str:
+    """A DataFrame as a Markdown table (floats to 3 significant digits)."""
+    cols = list(df.columns)
+    out = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    for _, row in df.iterrows():
+        out.append("| " + " | ".join(f"{v:.3g}" if isinstance(v, float) else str(v) for v in row) + " |")
+    return "\n".join(out)
+
+
+def write_report(folder: str | os.PathLike, *, evaluation: HrEvaluation, series: Sequence[HrSeries],
+                 fit: FaceModelFit, held_out: pd.DataFrame, protocols: pd.DataFrame,
+                 protocol_predictions: Mapping[str, np.ndarray],
+                 header: Mapping[str, Any] | None = None) -> Path:
+    """Write ``report.md`` with ``fig2_nhr.png`` and ``fig3_blendshapes.png`` into ``folder``.
+
+    Parameters
+    ----------
+    folder : path-like
+        Output folder (created); existing report files in it are replaced.
+    evaluation, series
+        Heart-rate evaluation and the sessions it scored.
+    fit, held_out, protocols, protocol_predictions
+        Face fit, its held-out scores, the Fig. 3 protocol scores and predictions.
+    header : mapping, optional
+        Lines of provenance (``key: value``) for the top of the report.
+
+    Returns
+    -------
+    Path
+        The report file.
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    plot_fig2(evaluation, series, folder / FIG2_PNG)
+    plot_fig3(fit, protocol_predictions, folder / FIG3_PNG)
+    text = "\n".join(_report_lines(evaluation, fit, held_out, protocols, header or {}))
+    path = folder / REPORT_MD
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def _report_lines(evaluation: HrEvaluation, fit: FaceModelFit, held_out: pd.DataFrame,
+                  protocols: pd.DataFrame, header: Mapping[str, Any]) -> list[str]:
+    """The Markdown body."""
+    summ = pd.DataFrame([{"model": k, **v} for k, v in evaluation.summary().items()])
+    coef = pd.DataFrame([{"participant": p, "training_level": evaluation.fit.training_levels[p],
+                          **c.as_dict()} for p, c in evaluation.fit.per_participant.items()])
+    reg = pd.DataFrame([{"coefficient": k, **v} for k, v in evaluation.fit.tl_regression.as_dict().items()])
+    best = pd.DataFrame([{"blendshape": b, **s.best, "cv_mse": s.cv_mse, "cv_r": s.cv_r}
+                         for b, s in fit.search.items()])
+    mean_scores = held_out.groupby("model", sort=False)[["r", "rmse_pct_range", "rmse_pct_unit"]].mean()
+    return [
+        "# effortface training report", "",
+        *[f"- {k}: {v}" for k, v in header.items()], "",
+        "## Heart rate (SCIENCE.md section 3)", "",
+        "Simulated over whole sessions from the first measured value. Paper: per participant r 0.88, "
+        "RMSE 19 %; pooled r 0.21, RMSE 79 %; TL regression r 0.87, RMSE 24 %. Pooled and TL models "
+        "are fitted without the scored participant. RMSE in % of the NHR range [0, 1].", "",
+        _md(summ), "", *hr_warnings(evaluation.summary()), "",
+        "Per-participant trees:", "", _md(coef), "",
+        "Regressions on training level (value = intercept + slope x TL):", "", _md(reg), "",
+        f"![Fig. 2]({FIG2_PNG})", "",
+        "## Face (SCIENCE.md section 5)", "",
+        f"Hyper-parameters by {fit.config.cv} cross-validation over C {fit.config.grid['C']}, "
+        f"gamma {fit.config.grid['gamma']}, epsilon {fit.config.grid['epsilon']}:", "", _md(best), "",
+        "Held-out participants (weights = prediction x the participant's expressiveness), against the "
+        "training mean and a linear regression:", "", _md(held_out), "",
+        "Mean over blendshapes:", "", _md(mean_scores.reset_index()), "",
+        "The paper's Fig. 3 protocols:", "", _md(protocols), "",
+        f"![Fig. 3]({FIG3_PNG})", "",
+        "Expressiveness (maximal key-framed weight per participant):", "",
+        _md(fit.expressiveness.reset_index()), "",
+    ]
