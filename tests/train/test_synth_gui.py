@@ -1,0 +1,200 @@
+"""The Synthesize stage offscreen: a trained bundle drives the face while a real clip plays.
+
+Trains a small bundle on the sample lab (into tmp_path), loads it in
+:class:`train.gui.synth_stage.QtSynthStage`, plays the 120 Hz jumping-jacks clip and changes the
+character through the controls while it plays; asserts on the model
+(:class:`train.synth_session.SynthSession`) and on what the views show.
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PySide6 import QtCore
+
+from train.commands.synth import LIVELINK_BLENDSHAPES
+from train.gui.synth_stage import QtSynthStage
+from train.runtime import load_model
+from train.synth_session import SynthSession
+from train.train_session import TrainSession
+
+SAMPLE = Path(__file__).resolve().parents[2] / "sample_sessions"
+CLIP = "motion/cmu_13_29_jumping_jacks_120fps.bvh"
+LEFT = QtCore.Qt.MouseButton.LeftButton
+#: the offscreen platform says this whenever a top-level window is shown (harmless)
+pytestmark = pytest.mark.qt_log_ignore("This plugin does not support propagateSizeHints")
+
+
+@pytest.fixture(scope="module")
+def bundle(tmp_path_factory) -> Path:
+    """A model trained on the whole sample lab with small settings."""
+    out = tmp_path_factory.mktemp("synth_bundle") / "model"
+    s = TrainSession(SAMPLE)
+    s.set_selected([e.session_id for e in s.entries])
+    s.set_settings(max_rows_per_participant=60)
+    s.start_training()
+    s.wait(120)
+    s.export(out)
+    s.wait(120)
+    assert (out / "model.json").is_file()
+    return out
+
+
+@pytest.fixture
+def stage(qtbot, shared_data: Path) -> QtSynthStage:
+    view = QtSynthStage(SynthSession(background=True), motion_dir=shared_data / "motion")
+    qtbot.addWidget(view)
+    view.resize(1200, 800)
+    view.show()
+    assert view.load_clip(shared_data / CLIP)
+    view.session.wait(30)
+    yield view
+    view.shutdown()
+
+
+def _play(qtbot, stage: QtSynthStage, frames: int = 3) -> None:
+    start = stage.frames_drawn
+    if not stage.session.playing:
+        qtbot.mouseClick(stage.play_button, LEFT)
+    qtbot.waitUntil(lambda: stage.frames_drawn >= start + frames, timeout=10_000)
+
+
+def test_training_level_changes_nhr_while_playing(qtbot, stage: QtSynthStage) -> None:
+    """Built-in model (the paper's TL regression): higher TL -> lower NHR for the same motion."""
+    s = stage.session
+    stage.loops.setValue(30)                                 # about 110 s of jumping jacks
+    s.wait(30)                                               # recomputed on the worker thread
+    assert s.loops == 30 and s.n_frames == 30 * s.motion.n_frames
+    _play(qtbot, stage)
+    assert s.playing and s.position_s > 0
+    assert stage.play_button.text() == "Pause"
+    assert not stage.face.pixmap().isNull()
+
+    stage.character.fields["training_level"].setValue(0.0)   # through the control, while playing
+    s.wait(30)
+    nhr_tl0, before = s.curves["nhr"].copy(), s.position_s
+    _play(qtbot, stage)
+    stage.character.fields["training_level"].setValue(10.0)
+    s.wait(30)
+    nhr_tl10 = s.curves["nhr"].copy()
+    assert s.character.training_level == 10.0 and stage.character.tl_slider.value() == 100
+    assert s.position_s >= before                            # the play head kept going, not reset
+    assert nhr_tl0[-1] > 0.2 and nhr_tl10[-1] < nhr_tl0[-1] - 0.1
+    assert np.all(nhr_tl10 <= nhr_tl0 + 1e-9)
+    _play(qtbot, stage)
+    x, y = stage.plots.curves["nhr"].getOriginalDataset()
+    np.testing.assert_allclose(y, nhr_tl10)                  # the plot shows the new curve
+    # the right-hand HR axis reads the NHR curve as HR: its range maps NHR -0.02..1.02 to bpm
+    params = s.model.physiology_params(s.character)
+    rest, top = float(params.hr_rest_bpm), float(params.hr_max_bpm)
+    np.testing.assert_allclose(s.curves["hr_bpm"], rest + s.curves["nhr"] * (top - rest))
+    lo, hi = stage.plots._hr_view.viewRange()[1]
+    np.testing.assert_allclose([lo, hi], [rest - 0.02 * (top - rest), top + 0.02 * (top - rest)])
+    assert f"HR {s.curves['hr_bpm'][s.frame]:.0f} bpm" in stage.time_label.text()
+
+
+def test_bundle_curves_are_the_runtime_s(qtbot, stage: QtSynthStage, bundle: Path,
+                                         shared_data: Path) -> None:
+    """A trained bundle in the stage gives exactly what the runtime API gives, after every change."""
+    s = stage.session
+    assert stage.load_model(bundle)
+    s.wait(30)
+    assert s.model.name == str(bundle) and stage.model_label.text() == bundle.name
+    _play(qtbot, stage)
+    model = load_model(bundle)
+    for tl in (0.0, 10.0):
+        stage.character.fields["training_level"].setValue(tl)
+        stage.character.fields["mass_kg"].setValue(60.0 + tl)   # also refreshes the cached work
+        s.wait(30)
+        expected = model.synthesize(shared_data / CLIP, s.character)
+        for key in ("w_per_kg", "nhr", "hr_bpm", "epoc", *model.blendshapes.names):
+            np.testing.assert_allclose(s.curves[key], expected[key], rtol=1e-12, atol=1e-12)
+    _play(qtbot, stage)
+    assert np.isfinite(s.weights_at()).all()
+
+
+def test_expressiveness_half_halves_a_weight(qtbot, stage: QtSynthStage, bundle: Path) -> None:
+    s = stage.session
+    stage.load_model(bundle)
+    stage.loops.setValue(10)
+    s.wait(30)
+    _play(qtbot, stage)
+    name = s.model.blendshapes.names[0]
+    full = s.curves[name].copy()
+    stage.character.expressiveness[0].setValue(0.5)
+    s.wait(30)
+    half = s.curves[name]
+    assert s.character.expressiveness[0] == 0.5
+    below = (full > 0) & (full < 1)                          # not clipped at expressiveness 1
+    assert below.sum() > 100
+    np.testing.assert_allclose(half[below], 0.5 * full[below], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(half[full >= 1], np.clip(half[full >= 1], 0.5, 1))
+    for other in s.model.blendshapes.names[1:]:
+        assert np.isfinite(s.curves[other]).all()
+    _play(qtbot, stage)
+    label = stage.weights_label.text()
+    assert f"{name.replace('_', ' ')} {s.weights_at()[0]:.2f}" in label
+
+
+def test_loads_raise_work_and_side_view(qtbot, stage: QtSynthStage) -> None:
+    s = stage.session
+    w0 = s.curves["w_per_kg"].mean()
+    stage.character.fields["load_back_kg"].setValue(20.0)
+    s.wait(30)
+    assert s.character.load_back_kg == 20.0
+    assert s.curves["w_per_kg"].mean() > w0
+    s.seek(1.0)
+    front = stage.skeleton.bones.getData()[0].copy()
+    stage.view_combo.setCurrentIndex(1)
+    side = stage.skeleton.bones.getData()[0]
+    assert stage.skeleton.view == "side"
+    assert np.ptp(front) > 2 * np.ptp(side)                  # jumping jacks spread left-right
+
+
+def test_export_csv_livelink_and_overwrite(qtbot, stage: QtSynthStage, tmp_path: Path) -> None:
+    s = stage.session
+    out = tmp_path / "curves.csv"
+    assert stage.export(out, "csv")
+    with out.open() as f:
+        rows = list(csv.reader(f))
+    assert rows[0] == list(s.model.columns)
+    assert len(rows) == 1 + s.n_frames
+    np.testing.assert_allclose([float(r[3]) for r in rows[1:]], s.curves["nhr"], atol=1e-9)
+
+    text = out.read_text()
+    stage.confirm_overwrite = lambda path: False
+    assert not stage.export(out, "livelink")
+    assert out.read_text() == text                           # kept
+    stage.confirm_overwrite = lambda path: True
+    assert stage.export(out, "livelink")
+    header = out.read_text().splitlines()[0].split(",")
+    assert header[:2] == ["Timecode", "BlendShapeCount"] and header[2:54] == list(LIVELINK_BLENDSHAPES)
+
+
+def test_bad_inputs_are_shown_and_state_kept(qtbot, stage: QtSynthStage, tmp_path: Path) -> None:
+    s = stage.session
+    frames = s.n_frames
+    bad = tmp_path / "clip.txt"
+    bad.write_text("not a clip")
+    assert not stage.load_clip(bad)
+    assert "b00020" in stage.status.styleSheet() and "clip.txt" in stage.status.text()
+    assert s.n_frames == frames
+    assert not stage.load_model(tmp_path)                    # a folder without model.json
+    assert "model.json" in stage.status.text()
+    assert s.model.name.startswith("default")
+
+
+def test_pick_a_clip_found_in_the_folder(qtbot, stage: QtSynthStage, shared_data: Path) -> None:
+    combo = stage.clip_combo
+    names = [combo.itemText(i) for i in range(combo.count())]
+    assert "cmu_13_29_squats_120fps.bvh" in names and "amp_humanoid_run.npz" in names
+    index = names.index("cmu_13_29_squats_120fps.bvh")
+    combo.setCurrentIndex(index)
+    combo.activated.emit(index)                               # what a user's pick emits
+    stage.session.wait(30)
+    assert stage.session.motion_path == shared_data / "motion" / "cmu_13_29_squats_120fps.bvh"
+    assert stage.session.n_frames == stage.session.motion.n_frames * stage.session.loops
+    assert "squats" in stage.clip_label.text()

@@ -1,0 +1,184 @@
+"""The Train stage offscreen: pick part of the sample lab, train, read results, export, compare.
+
+Drives :class:`train.gui.train_stage.QtTrainStage` with real clicks and asserts on its model
+(:class:`train.train_session.TrainSession`). Reads ``sample_sessions/``, writes only to tmp_path.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PySide6 import QtCore
+
+from train.bundle import read_bundle
+from train.gui.train_stage import QtTrainStage
+from train.runtime import load_model
+from train.train_session import TrainSession, filter_entries
+
+SAMPLE = Path(__file__).resolve().parents[2] / "sample_sessions"
+CARDIO = ["P01_20260112-093000_cardio", "P03_20260113-094400_cardio", "P05_20260114-095800_cardio"]
+LEFT = QtCore.Qt.MouseButton.LeftButton
+TIMEOUT_MS = 60_000
+
+
+@pytest.fixture
+def stage(qtbot) -> QtTrainStage:
+    view = QtTrainStage(TrainSession(SAMPLE))
+    qtbot.addWidget(view)
+    yield view
+    view.shutdown()
+    view.session.wait(30)
+
+
+def _pick_cardio_small(stage: QtTrainStage) -> None:
+    """Filter to cardio sessions, use the shown ones, 60 face rows per participant."""
+    stage.picker.exercise.setCurrentIndex(stage.picker.exercise.findData("cardio"))
+    stage.picker.select_shown_button.click()
+    stage.settings_panel.max_rows.setValue(60)
+
+
+def _train(qtbot, stage: QtTrainStage) -> None:
+    qtbot.mouseClick(stage.train_button, LEFT)
+    qtbot.waitUntil(lambda: not stage.session.busy and stage.train_button.isEnabled(), timeout=TIMEOUT_MS)
+
+
+def test_filters_pick_part_of_the_lab(stage: QtTrainStage) -> None:
+    _pick_cardio_small(stage)
+    assert stage.picker.table.rowCount() == 3
+    assert stage.session.selected == set(CARDIO)
+    assert stage.session.settings.max_rows_per_participant == 60
+    # unchecking one row removes that session from the model's selection
+    stage.picker.table.item(1, 0).setCheckState(QtCore.Qt.CheckState.Unchecked)
+    assert stage.session.selected == {CARDIO[0], CARDIO[2]}
+    assert "2 sessions" in stage.picker.description.text()
+
+
+def test_train_export_and_refuse_overwrite(qtbot, stage: QtTrainStage, tmp_path: Path) -> None:
+    _pick_cardio_small(stage)
+    _train(qtbot, stage)
+    outcome = stage.session.outcome
+    assert outcome is not None and outcome.sessions == CARDIO
+    assert set(outcome.hr_table()["model"]) == {"per_participant", "pooled", "tl_regression"}
+    x, y = stage.hr_results.curves["tl"].getData()          # Fig. 2 is drawn from the results
+    np.testing.assert_allclose(y, outcome.fig2(CARDIO[0])["tl"])
+    assert stage.face_results.table.rowCount() == len(outcome.face.blendshapes) + 1  # + mean row
+    assert stage.export_button.isEnabled()
+
+    out = tmp_path / "model"
+    assert stage.export(out)
+    qtbot.waitUntil(lambda: not stage.session.busy and (out / "MODEL_CARD.md").exists(), timeout=TIMEOUT_MS)
+    stage.session.poll()
+    for name in ("model.json", "svr.npz", "face.onnx", "MODEL_CARD.md", "report/report.md"):
+        assert (out / name).is_file(), name
+    assert read_bundle(out).provenance["participants"] == ["P01", "P03", "P05"]
+    assert load_model(out).blendshapes.names == outcome.face.blendshapes
+
+    stamp = (out / "model.json").stat().st_mtime_ns
+    stage.confirm_overwrite = lambda path: False             # the user says no: nothing changes
+    assert not stage.export(out)
+    assert (out / "model.json").stat().st_mtime_ns == stamp
+    assert "kept" in stage.status.text()
+    stage.confirm_overwrite = lambda path: True              # the user says yes: replaced
+    assert stage.export(out)
+    qtbot.waitUntil(lambda: not stage.session.busy, timeout=TIMEOUT_MS)
+    stage.session.poll()
+    assert (out / "model.json").stat().st_mtime_ns != stamp
+
+
+def test_cancel_keeps_previous_state(qtbot, stage: QtTrainStage) -> None:
+    stage.picker.select_shown_button.click()
+    qtbot.mouseClick(stage.train_button, LEFT)
+    assert stage.cancel_button.isEnabled()
+    qtbot.mouseClick(stage.cancel_button, LEFT)
+    qtbot.waitUntil(lambda: stage.train_button.isEnabled(), timeout=TIMEOUT_MS)
+    assert stage.session.outcome is None
+    assert "cancelled" in stage.status.text()
+    assert not stage.export_button.isEnabled()
+
+
+def test_training_without_data_shows_the_error(qtbot, stage: QtTrainStage) -> None:
+    stage.picker.clear_button.click()
+    _train(qtbot, stage)
+    assert "expected at least one selected session" in stage.status.text()
+    assert "b00020" in stage.status.styleSheet()             # shown as an error, in the stage
+    assert stage.session.outcome is None
+
+
+def test_unannotated_session_is_reported(qtbot, tmp_path: Path) -> None:
+    """A session without annotations cannot train: the dataset error appears in the stage."""
+    import shutil
+
+    src = SAMPLE / CARDIO[0]
+    dst = tmp_path / CARDIO[0]
+    shutil.copytree(src, dst, ignore=shutil.ignore_patterns("annotations", "video.avi", "serial"))
+    session = TrainSession(tmp_path)
+    view = QtTrainStage(session)
+    qtbot.addWidget(view)
+    view.picker.annotation.setCurrentText("not annotated")
+    assert [e.session_id for e in view.picker.shown()] == [CARDIO[0]]
+    view.picker.select_shown_button.click()
+    _train(qtbot, view)
+    assert "annotations" in view.status.text() and "failed" in view.status.text()
+    view.shutdown()
+
+
+def test_train_on_a_loaded_table(qtbot, stage: QtTrainStage, tmp_path: Path) -> None:
+    from train.dataset import sessions_table, write_table
+
+    table = write_table(sessions_table([SAMPLE / s for s in CARDIO]), tmp_path / "lab.csv")
+    bad = tmp_path / "bad.csv"
+    bad.write_text("participant,t_s\nP01,0\n")
+    assert not stage.picker.load_table(bad)
+    assert "bad.csv" in stage.status.text() and "expected columns" in stage.status.text()
+    assert stage.session.table_path is None                  # the previous choice stays
+    assert stage.picker.load_table(table)
+    assert f"table {table}" in stage.picker.description.text()
+    stage.settings_panel.max_rows.setValue(60)
+    _train(qtbot, stage)
+    assert stage.session.outcome is not None
+    assert stage.session.outcome.sources == [str(table)]
+    assert stage.session.outcome.sessions == CARDIO
+
+
+@pytest.fixture(scope="module")
+def two_bundles(tmp_path_factory) -> tuple[Path, Path]:
+    """Bundle A: cardio sessions only; bundle B: all six sessions (small settings)."""
+    root = tmp_path_factory.mktemp("bundles")
+    out = []
+    for name, exercise in (("a", "cardio"), ("b", "any")):
+        s = TrainSession(SAMPLE)
+        s.set_selected([e.session_id for e in filter_entries(s.entries, exercise=exercise)])
+        s.set_settings(max_rows_per_participant=60)
+        s.start_training()
+        s.wait(120)
+        s.export(root / name)
+        s.wait(120)
+        assert (root / name / "model.json").is_file()
+        out.append(root / name)
+    return out[0], out[1]
+
+
+def test_compare_two_models(qtbot, stage: QtTrainStage, two_bundles: tuple[Path, Path]) -> None:
+    stage.picker.select_shown_button.click()
+    for edit, path in zip(stage.comparison.paths, two_bundles):
+        edit.setText(str(path))
+    qtbot.mouseClick(stage.comparison.compare_button, LEFT)
+    qtbot.waitUntil(lambda: stage.session.comparison is not None, timeout=TIMEOUT_MS)
+    c = stage.session.comparison
+    a, b = c["a"].curves, c["b"].curves
+    assert c["session"] in c["sessions"] and len(c["sessions"]) == 6
+    assert not np.allclose(a["nhr"], b["nhr"])               # different TL regressions
+    table = stage.comparison.table
+    headers = [table.horizontalHeaderItem(i).text() for i in range(table.columnCount())]
+    assert headers[:3] == ["metric", "model A", "model B"]
+    assert table.rowCount() >= 6
+    assert set(stage.comparison.axes) == {"nhr", *stage.session.blendshapes.names}
+
+
+def test_compare_needs_two_folders(qtbot, stage: QtTrainStage) -> None:
+    stage.comparison.paths[0].setText("")
+    qtbot.mouseClick(stage.comparison.compare_button, LEFT)
+    assert "expected two model folders" in stage.status.text()
+    assert stage.session.comparison is None

@@ -1,0 +1,119 @@
+"""Standalone launcher of the Train and Synthesize stages (for screenshots and for a quick look).
+
+::
+
+    python -m train.gui.launch synth --clip CLIP.bvh [--model DIR] [--loops N] [--seconds S] [--screenshot PNG]
+    python -m train.gui.launch train [--sessions DIR] [--train] [--tab N] [--screenshot PNG]
+
+``--screenshot`` renders offscreen and exits; ``--train`` trains on every annotated session first
+(with the small grid); ``--seconds`` plays the clip that long before the picture.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+from capture_tool.errors import UserError
+
+SIZE = (1400, 900)
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m train.gui.launch", description=__doc__.splitlines()[0])
+    p.add_argument("stage", choices=("train", "synth"))
+    p.add_argument("--sessions", default="sample_sessions", metavar="DIR")
+    p.add_argument("--clip", metavar="CLIP")
+    p.add_argument("--model", default="default", metavar="DIR")
+    p.add_argument("--loops", type=int, default=1)
+    p.add_argument("--training-level", type=float, default=None, metavar="TL")
+    p.add_argument("--view", choices=("front", "side"), default="front")
+    p.add_argument("--load-back", type=float, default=0.0, metavar="KG")
+    p.add_argument("--expressiveness", default=None, metavar="A,B,C,D")
+    p.add_argument("--seconds", type=float, default=0.0, metavar="S")
+    p.add_argument("--train", action="store_true")
+    p.add_argument("--compare", nargs=2, metavar="MODEL_DIR")
+    p.add_argument("--tab", type=int, default=0)
+    p.add_argument("--screenshot", metavar="PNG")
+    return p
+
+
+def _wait(app: object, seconds: float) -> None:
+    from PySide6 import QtCore
+
+    deadline = QtCore.QDeadlineTimer(int(seconds * 1000))
+    while not deadline.hasExpired():
+        app.processEvents(QtCore.QEventLoop.ProcessEventsFlag.AllEvents, 20)  # type: ignore[attr-defined]
+
+
+def _synth(args: argparse.Namespace) -> object:
+    from train.gui.synth_stage import QtSynthStage
+    from train.synth_session import SynthSession
+
+    session = SynthSession(args.model, background=True)
+    folder = Path(args.clip).parent if args.clip else Path(args.sessions)
+    stage = QtSynthStage(session, motion_dir=folder)
+    if args.clip:
+        stage.load_clip(args.clip)
+        session.set_loops(args.loops)
+    if args.training_level is not None:
+        session.set_character(training_level=args.training_level)
+    session.set_character(load_back_kg=args.load_back)
+    if args.expressiveness:
+        session.set_character(expressiveness=tuple(float(v) for v in args.expressiveness.split(",")))
+    stage.view_combo.setCurrentIndex(("front", "side").index(args.view))
+    session.wait()
+    return stage
+
+
+def _train(args: argparse.Namespace, app: object) -> object:
+    from train.gui.train_stage import QtTrainStage
+    from train.train_session import TrainSession
+
+    session = TrainSession(args.sessions)
+    stage = QtTrainStage(session)
+    if args.train:
+        session.set_selected([e.session_id for e in session.entries if e.annotated])
+        session.start_training()
+        session.wait()
+    if args.compare:
+        session.compare(*args.compare)
+        session.wait()
+    stage.tabs.setCurrentIndex(args.tab)
+    return stage
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Open a stage in its own window (or render it to a PNG and exit)."""
+    args = _parser().parse_args(argv)
+    if args.screenshot:
+        os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+    from PySide6 import QtWidgets
+
+    app = QtWidgets.QApplication.instance() or QtWidgets.QApplication(sys.argv[:1])
+    try:
+        stage = _synth(args) if args.stage == "synth" else _train(args, app)
+    except UserError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    stage.resize(*SIZE)  # type: ignore[attr-defined]
+    stage.show()  # type: ignore[attr-defined]
+    if args.stage == "synth" and args.seconds > 0:
+        stage.session.play()  # type: ignore[attr-defined]
+    _wait(app, max(args.seconds, 0.5))
+    if not args.screenshot:
+        return int(app.exec())  # type: ignore[attr-defined]
+    stage.shutdown()  # type: ignore[attr-defined]
+    _wait(app, 0.3)
+    out = Path(args.screenshot)
+    if not stage.grab().save(str(out), "PNG"):  # type: ignore[attr-defined]
+        print(f"error: --screenshot {out}: could not write", file=sys.stderr)
+        return 2
+    print(out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,603 @@
+"""The Train stage: pick sessions (or a table), choose settings, train in the background, read the
+results as the paper shows them, export the bundle, compare two bundles.
+
+:class:`QtTrainStage` views a :class:`~train.train_session.TrainSession`: the controls call its
+methods, its callbacks update the views, and a QTimer calls :meth:`TrainSession.poll` to bring the
+worker thread's progress and results to the GUI thread (STYLE.md L3, L5).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pyqtgraph as pg
+from PySide6 import QtCore, QtWidgets
+
+from annotate.gui.qt_compat import guard_none_refcount
+from capture_tool.errors import UserError
+from train.face_fit import CV_CHOICES, GRIDS, PROTOCOLS
+from train.train_session import ANY, TrainSession, filter_entries
+
+__all__ = ["QtTrainStage", "TrainSession"]
+
+POLL_MS = 50
+_REAL, _OWN, _PRED, _B = "#1f77b4", "#ff7f0e", "#d62728", "#2ca02c"
+_SESSION_COLUMNS = ("use", "session", "participant", "TL", "exercise", "raters", "complete")
+_ANNOTATION_CHOICES = {"any annotation status": None, "annotated": True, "not annotated": False}
+
+
+def _fmt(value: Any) -> str:
+    return f"{value:.3g}" if isinstance(value, (float, np.floating)) else str(value)
+
+
+class QtFrameTable(QtWidgets.QTableWidget):
+    """A read-only table showing a DataFrame (floats to 3 significant digits)."""
+
+    def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
+        self.verticalHeader().setVisible(False)
+        self.setAlternatingRowColors(True)
+
+    def show_frame(self, frame: pd.DataFrame) -> None:
+        """Replace the content with ``frame``."""
+        self.clear()
+        self.setColumnCount(len(frame.columns))
+        self.setRowCount(len(frame))
+        self.setHorizontalHeaderLabels([str(c) for c in frame.columns])
+        for r, row in enumerate(frame.itertuples(index=False)):
+            for c, value in enumerate(row):
+                self.setItem(r, c, QtWidgets.QTableWidgetItem(_fmt(value)))
+        self.resizeColumnsToContents()
+
+
+def _plot(title: str, y_label: str) -> pg.PlotWidget:
+    w = pg.PlotWidget(background="w", title=title)
+    w.showGrid(x=True, y=True, alpha=0.2)
+    w.setLabel("bottom", "time (min)")
+    w.setLabel("left", y_label)
+    w.setMenuEnabled(False)
+    return w
+
+
+# --------------------------------------------------------------------------- data and settings
+
+
+class QtDataPicker(QtWidgets.QGroupBox):
+    """Sessions filtered by participant, exercise and annotation status, with check boxes; or a table."""
+
+    def __init__(self, session: TrainSession, on_error: Callable[[str, bool], None],
+                 parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__("Training data", parent)
+        self.session = session
+        self._on_error = on_error
+        self.participant, self.exercise = QtWidgets.QComboBox(), QtWidgets.QComboBox()
+        self.annotation = QtWidgets.QComboBox()
+        self.annotation.addItems(list(_ANNOTATION_CHOICES))
+        self.table = QtWidgets.QTableWidget(0, len(_SESSION_COLUMNS))
+        self.table.setHorizontalHeaderLabels(list(_SESSION_COLUMNS))
+        self.table.verticalHeader().setVisible(False)
+        self.table.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
+        self.table.horizontalHeader().setStretchLastSection(True)
+        self.table.itemChanged.connect(self._on_item_changed)
+        self.description = QtWidgets.QLabel(wordWrap=True)
+        self._layout()
+        for combo in (self.participant, self.exercise, self.annotation):
+            combo.currentIndexChanged.connect(self.show_entries)
+        session.sessions_changed.connect(self._on_sessions_changed)
+        session.selection_changed.connect(self.show_entries)
+        self._on_sessions_changed()
+
+    def _layout(self) -> None:
+        filters = QtWidgets.QHBoxLayout()
+        for w in (self.participant, self.exercise, self.annotation):
+            filters.addWidget(w)
+        buttons = QtWidgets.QHBoxLayout()
+        self.select_shown_button = QtWidgets.QPushButton("Use shown")
+        self.select_shown_button.clicked.connect(lambda: self._select_shown(True))
+        self.clear_button = QtWidgets.QPushButton("Use none")
+        self.clear_button.clicked.connect(lambda: self._select_shown(False))
+        self.refresh_button = QtWidgets.QPushButton("Rescan")
+        self.refresh_button.clicked.connect(self.session.refresh)
+        self.table_button = QtWidgets.QPushButton("Load table...")
+        self.table_button.clicked.connect(self._ask_table)
+        for button in (self.select_shown_button, self.clear_button, self.refresh_button, self.table_button):
+            buttons.addWidget(button)
+        layout = QtWidgets.QVBoxLayout(self)
+        layout.addLayout(filters)
+        layout.addWidget(self.table, 1)
+        layout.addLayout(buttons)
+        layout.addWidget(self.description)
+
+    def _on_sessions_changed(self) -> None:
+        entries = self.session.entries
+        for combo, values, what in ((self.participant, sorted({e.participant for e in entries}), "participant"),
+                                    (self.exercise, sorted({e.exercise for e in entries}), "exercise")):
+            combo.blockSignals(True)
+            combo.clear()
+            combo.addItem(f"any {what}", ANY)
+            for v in values:
+                combo.addItem(v, v)
+            combo.blockSignals(False)
+        self.show_entries()
+
+    def shown(self) -> list[Any]:
+        """The entries that pass the filters."""
+        return filter_entries(self.session.entries, self.participant.currentData() or ANY,
+                              self.exercise.currentData() or ANY,
+                              _ANNOTATION_CHOICES[self.annotation.currentText()])
+
+    def show_entries(self) -> None:
+        """Fill the table with the filtered entries, checked when selected."""
+        self.table.blockSignals(True)
+        shown = self.shown()
+        self.table.setRowCount(len(shown))
+        for r, e in enumerate(shown):
+            use = QtWidgets.QTableWidgetItem()
+            use.setFlags(use.flags() | QtCore.Qt.ItemFlag.ItemIsUserCheckable)
+            use.setCheckState(QtCore.Qt.CheckState.Checked if e.session_id in self.session.selected
+                              else QtCore.Qt.CheckState.Unchecked)
+            use.setData(QtCore.Qt.ItemDataRole.UserRole, e.session_id)
+            self.table.setItem(r, 0, use)
+            for c, v in enumerate((e.session_id, e.participant, f"{e.training_level:g}", e.exercise,
+                                   ", ".join(e.raters) or "none", "yes" if e.complete else "NO"), 1):
+                self.table.setItem(r, c, QtWidgets.QTableWidgetItem(v))
+        self.table.resizeColumnsToContents()
+        self.table.blockSignals(False)
+        self.description.setText(f"Next training uses: {self.session.describe_data()}")
+
+    def _on_item_changed(self, item: QtWidgets.QTableWidgetItem) -> None:
+        if item.column() == 0:
+            checked = item.checkState() == QtCore.Qt.CheckState.Checked
+            self.session.set_selected([item.data(QtCore.Qt.ItemDataRole.UserRole)], checked)
+
+    def _select_shown(self, selected: bool) -> None:
+        self.session.set_selected([e.session_id for e in self.shown()], selected)
+
+    def _ask_table(self) -> None:
+        path, _ = QtWidgets.QFileDialog.getOpenFileName(self, "Open training table", "", "CSV (*.csv)")
+        if path:
+            self.load_table(path)
+
+    def load_table(self, path: str | Path) -> bool:
+        """Train on a long table instead of sessions (a bad file is reported in the stage)."""
+        try:
+            self.session.load_table(path)
+        except UserError as exc:
+            self._on_error(str(exc), True)
+            return False
+        return True
+
+
+class QtSettingsPanel(QtWidgets.QGroupBox):
+    """Rater policy, hyper-parameter grid, cross-validation and rows per participant."""
+
+    def __init__(self, session: TrainSession, on_error: Callable[[str, bool], None],
+                 parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__("Settings", parent)
+        self.session = session
+        self._on_error = on_error
+        self.rater = QtWidgets.QComboBox(editable=True)
+        self.grid = QtWidgets.QComboBox()
+        self.grid.addItems(list(GRIDS))
+        self.cv = QtWidgets.QComboBox()
+        for key, text in zip(CV_CHOICES, ("leave one participant out", "random-frame K-fold (inflated)")):
+            self.cv.addItem(text, key)
+        self.max_rows = QtWidgets.QSpinBox(minimum=20, maximum=100000, singleStep=50)
+        self.max_rows.setKeyboardTracking(False)
+        form = QtWidgets.QFormLayout(self)
+        form.addRow("Raters", self.rater)
+        form.addRow("SVR grid", self.grid)
+        form.addRow("Cross-validation", self.cv)
+        form.addRow("Face rows per participant", self.max_rows)
+        session.sessions_changed.connect(self._fill_raters)
+        self._fill_raters()
+        self.show_settings()
+        self.rater.currentTextChanged.connect(lambda v: self._write(rater_policy=v))
+        self.grid.currentTextChanged.connect(lambda v: self._write(grid=v))
+        self.cv.currentIndexChanged.connect(lambda i: self._write(cv=self.cv.itemData(i)))
+        self.max_rows.valueChanged.connect(lambda v: self._write(max_rows_per_participant=int(v)))
+
+    def _fill_raters(self) -> None:
+        raters = sorted({r for e in self.session.entries for r in e.raters})
+        self.rater.blockSignals(True)
+        self.rater.clear()
+        self.rater.addItems(["mean", *raters])
+        self.rater.setCurrentText(self.session.settings.rater_policy)
+        self.rater.blockSignals(False)
+
+    def _write(self, **changes: Any) -> None:
+        try:
+            self.session.set_settings(**changes)
+        except UserError as exc:
+            self._on_error(str(exc), True)
+            self.show_settings()
+
+    def show_settings(self) -> None:
+        """Show the session's settings (without writing back)."""
+        s = self.session.settings
+        for w in (self.rater, self.grid, self.cv, self.max_rows):
+            w.blockSignals(True)
+        self.rater.setCurrentText(s.rater_policy)
+        self.grid.setCurrentText(s.grid)
+        self.cv.setCurrentIndex(CV_CHOICES.index(s.cv))
+        self.max_rows.setValue(s.max_rows_per_participant)
+        for w in (self.rater, self.grid, self.cv, self.max_rows):
+            w.blockSignals(False)
+
+
+# --------------------------------------------------------------------------- results
+
+
+class QtHeartRateResults(QtWidgets.QWidget):
+    """Fig. 2: measured and simulated NHR of one session, and the models' scores beside the paper's."""
+
+    def __init__(self, session: TrainSession, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.session = session
+        self.choice = QtWidgets.QComboBox()
+        self.choice.currentTextChanged.connect(self.show_session)
+        self.plot = _plot("Train to see measured and simulated NHR", "NHR")
+        self.plot.addLegend(offset=(8, 8))
+        self.curves = {key: self.plot.plot([], [], pen=pg.mkPen(color, width=w, style=style), name=name)
+                       for key, color, w, style, name in (
+                           ("measured", _REAL, 2, QtCore.Qt.PenStyle.SolidLine, "measured"),
+                           ("own", _OWN, 1.5, QtCore.Qt.PenStyle.SolidLine, "own model"),
+                           ("tl", _PRED, 1.5, QtCore.Qt.PenStyle.DashLine, "TL model (held out)"))}
+        self.plot.setYRange(0, 1, padding=0.03)
+        self.table = QtFrameTable()
+        row = QtWidgets.QHBoxLayout()
+        row.addWidget(QtWidgets.QLabel("Session"))
+        row.addWidget(self.choice, 1)
+        layout = QtWidgets.QVBoxLayout(self)
+        layout.addLayout(row)
+        layout.addWidget(self.plot, 3)
+        layout.addWidget(QtWidgets.QLabel("Heart-rate models (pooled and TL model fitted without the scored "
+                                          "participant; the paper's figures in the last columns):"))
+        layout.addWidget(self.table, 1)
+        session.results_changed.connect(self.show_results)
+
+    def show_results(self) -> None:
+        """New training results: the session list and the table."""
+        o = self.session.outcome
+        assert o is not None
+        self.choice.blockSignals(True)
+        self.choice.clear()
+        self.choice.addItems(o.sessions)
+        self.choice.blockSignals(False)
+        self.table.show_frame(o.hr_table())
+        self.show_session(o.sessions[0])
+
+    def show_session(self, session_id: str) -> None:
+        """Draw Fig. 2 for one session."""
+        o = self.session.outcome
+        if o is None or not session_id:
+            return
+        fig = o.fig2(session_id)
+        for key, curve in self.curves.items():
+            curve.setData(fig["t_min"], fig[key], connect="finite")
+        self.plot.setTitle(f"Fig. 2: {fig['title']}")
+
+
+class QtFaceResults(QtWidgets.QWidget):
+    """Fig. 3: key-framed and predicted weights of one session under one protocol, and the scores."""
+
+    def __init__(self, session: TrainSession, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.session = session
+        self.choice, self.protocol = QtWidgets.QComboBox(), QtWidgets.QComboBox()
+        self.protocol.addItems([p.replace("_", " ") for p in PROTOCOLS])
+        self.choice.currentTextChanged.connect(self.show_session)
+        self.protocol.currentTextChanged.connect(self.show_session)
+        self.plots = pg.GraphicsLayoutWidget()
+        self.plots.setBackground("w")
+        self.axes: list[pg.PlotItem] = []
+        self.curves: list[tuple[pg.PlotDataItem, pg.PlotDataItem]] = []
+        self.table = QtFrameTable()
+        row = QtWidgets.QHBoxLayout()
+        for w in (QtWidgets.QLabel("Session"), self.choice, QtWidgets.QLabel("Protocol"), self.protocol):
+            row.addWidget(w)
+        row.addStretch(1)
+        layout = QtWidgets.QVBoxLayout(self)
+        layout.addLayout(row)
+        layout.addWidget(QtWidgets.QLabel("<span style='color:#1f77b4'>key-framed</span> and "
+                                          "<span style='color:#d62728'>predicted</span> weights "
+                                          "(Fig. 3)"))
+        layout.addWidget(self.plots, 3)
+        layout.addWidget(QtWidgets.QLabel("Face SVR on held-out participants beside the mean and "
+                                          "linear baselines (r, RMSE in % of the observed range):"))
+        layout.addWidget(self.table, 2)
+        session.results_changed.connect(self.show_results)
+
+    def _build_axes(self, names: tuple[str, ...]) -> None:
+        self.plots.clear()
+        self.axes, self.curves = [], []
+        for i, name in enumerate(names):
+            ax = self.plots.addPlot(row=i // 2, col=i % 2, title=name.replace("_", " "))
+            ax.setYRange(0, 1, padding=0.03)
+            ax.setLabel("bottom", "time (min)")
+            ax.showGrid(x=True, y=True, alpha=0.2)
+            self.axes.append(ax)
+            self.curves.append((ax.plot([], [], pen=pg.mkPen(_REAL, width=2)),
+                                ax.plot([], [], pen=pg.mkPen(_PRED, width=1.5))))
+
+    def show_results(self) -> None:
+        """New training results: sessions, axes and the score table."""
+        o = self.session.outcome
+        assert o is not None
+        self._build_axes(o.face.blendshapes)
+        self.choice.blockSignals(True)
+        self.choice.clear()
+        self.choice.addItems(o.face_sessions())
+        self.choice.blockSignals(False)
+        self.table.show_frame(o.face_table())
+        self.show_session()
+
+    def show_session(self, *_: Any) -> None:
+        """Draw Fig. 3 for the chosen session and protocol."""
+        o = self.session.outcome
+        if o is None or not self.choice.currentText():
+            return
+        fig = o.fig3(self.choice.currentText(), PROTOCOLS[self.protocol.currentIndex()])
+        for b, (keyed, pred) in enumerate(self.curves):
+            keyed.setData(fig["t_min"], fig["keyed"][:, b], connect="finite")
+            pred.setData(fig["t_min"], fig["predicted"][:, b], connect="finite")
+
+
+class QtCompare(QtWidgets.QWidget):
+    """Two bundles side by side: their stored metrics and their predictions over one session."""
+
+    def __init__(self, session: TrainSession, on_error: Callable[[str, bool], None],
+                 parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.session = session
+        self._on_error = on_error
+        self.paths = [QtWidgets.QLineEdit(placeholderText=f"model {k} folder") for k in "AB"]
+        self.choice = QtWidgets.QComboBox()
+        self.compare_button = QtWidgets.QPushButton("Compare")
+        self.compare_button.clicked.connect(self.compare)
+        self.table = QtFrameTable()
+        self.plots = pg.GraphicsLayoutWidget()
+        self.plots.setBackground("w")
+        self.axes: dict[str, pg.PlotItem] = {}
+        layout = QtWidgets.QVBoxLayout(self)
+        layout.addLayout(self._path_rows())
+        layout.addWidget(QtWidgets.QLabel("Metrics stored in each model.json (held-out participants "
+                                          "of its own training data):"))
+        layout.addWidget(self.table, 2)
+        layout.addWidget(QtWidgets.QLabel("<span style='color:#1f77b4'>measured</span>, "
+                                          "<span style='color:#d62728'>model A</span>, "
+                                          "<span style='color:#2ca02c'>model B</span> "
+                                          "(TL model and the participant's expressiveness)"))
+        layout.addWidget(self.plots, 3)
+        session.comparison_changed.connect(self.show_comparison)
+
+    def _path_rows(self) -> QtWidgets.QGridLayout:
+        grid = QtWidgets.QGridLayout()
+        for i, edit in enumerate(self.paths):
+            browse = QtWidgets.QPushButton("Browse...")
+            browse.clicked.connect(lambda _=False, e=edit: self._browse(e))
+            grid.addWidget(QtWidgets.QLabel(f"Model {'AB'[i]}"), i, 0)
+            grid.addWidget(edit, i, 1)
+            grid.addWidget(browse, i, 2)
+        grid.addWidget(QtWidgets.QLabel("Session"), 2, 0)
+        grid.addWidget(self.choice, 2, 1)
+        grid.addWidget(self.compare_button, 2, 2)
+        return grid
+
+    def _browse(self, edit: QtWidgets.QLineEdit) -> None:
+        path = QtWidgets.QFileDialog.getExistingDirectory(self, "Model bundle folder")
+        if path:
+            edit.setText(path)
+
+    def compare(self) -> None:
+        """Start the comparison of the two folders on the chosen session (errors shown in the stage)."""
+        a, b = (e.text().strip() for e in self.paths)
+        if not a or not b:
+            self._on_error("compare: expected two model folders, found "
+                           f"{'none' if not (a or b) else 'one'}", True)
+            return
+        try:
+            self.session.compare(a, b, self.choice.currentText() or None)
+        except UserError as exc:
+            self._on_error(str(exc), True)
+
+    def show_comparison(self) -> None:
+        """Metrics side by side and the curves of both models."""
+        c = self.session.comparison
+        assert c is not None
+        self.choice.blockSignals(True)
+        self.choice.clear()
+        self.choice.addItems(c["sessions"])
+        self.choice.setCurrentText(c["session"])
+        self.choice.blockSignals(False)
+        for edit, summary in zip(self.paths, (c["a"], c["b"])):
+            edit.setText(str(summary.path))
+        self.table.show_frame(_side_by_side(c["a"], c["b"]))
+        self._draw(c)
+
+    def _draw(self, c: dict[str, Any]) -> None:
+        self.plots.clear()
+        keys = ["nhr", *self.session.blendshapes.names]
+        m, t = c["measured"], c["measured"]["t_s"] / 60.0
+        for i, key in enumerate(keys):
+            ax = self.plots.addPlot(row=i // 3, col=i % 3, title=key.replace("_", " ").replace("nhr", "NHR"))
+            ax.setYRange(0, 1, padding=0.03)
+            ax.showGrid(x=True, y=True, alpha=0.2)
+            ax.setLabel("bottom", "time (min)")
+            if key in m:
+                ax.plot(t, m[key], pen=pg.mkPen(_REAL, width=2), connect="finite")
+            for which, color in (("a", _PRED), ("b", _B)):
+                curves = c[which].curves
+                if key in curves:
+                    ax.plot(curves["t_s"] / 60.0, curves[key], pen=pg.mkPen(color, width=1.5))
+            self.axes[key] = ax
+
+
+def _side_by_side(a: Any, b: Any) -> pd.DataFrame:
+    """One row per metric, a column per bundle."""
+    rows = []
+    for label, s in (("A", a), ("B", b)):
+        for _, r in s.hr.iterrows():
+            rows.append({"metric": f"HR {r['model']} r", label: r["r"]})
+            rows.append({"metric": f"HR {r['model']} RMSE %", label: r["RMSE %"]})
+        svr = s.face[s.face["model"] == "svr"] if "model" in s.face else s.face
+        for _, r in svr.iterrows():
+            rows.append({"metric": f"face {r['blendshape']} r", label: r["r"]})
+    frame = pd.DataFrame(rows)
+    out = frame.groupby("metric", sort=False).first().reset_index()
+    out.insert(1, "model A", out.pop("A") if "A" in out else np.nan)
+    out.insert(2, "model B", out.pop("B") if "B" in out else np.nan)
+    return out
+
+
+# --------------------------------------------------------------------------- the stage
+
+
+class QtTrainStage(QtWidgets.QWidget):
+    """The Train stage (data, settings, run, results, export, compare).
+
+    Parameters
+    ----------
+    session : TrainSession
+        The model this stage views and drives.
+    parent : QWidget, optional
+        Parent widget.
+    """
+
+    def __init__(self, session: TrainSession, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        guard_none_refcount()  # PySide6 6.12 on CPython 3.11 leaks references to None (see there)
+        self.session = session
+        self.status = QtWidgets.QLabel("Pick sessions (or load a table), then Train.", wordWrap=True)
+        self.picker = QtDataPicker(session, self.show_status)
+        self.settings_panel = QtSettingsPanel(session, self.show_status)
+        self.hr_results = QtHeartRateResults(session)
+        self.face_results = QtFaceResults(session)
+        self.comparison = QtCompare(session, self.show_status)
+        self.tabs = QtWidgets.QTabWidget()
+        self.tabs.addTab(self.hr_results, "Heart rate (Fig. 2)")
+        self.tabs.addTab(self.face_results, "Face (Fig. 3)")
+        self.tabs.addTab(self.comparison, "Compare models")
+        self._build()
+        self._connect_session()
+        self.timer = QtCore.QTimer(self, interval=POLL_MS)
+        self.timer.timeout.connect(session.poll)
+        self.timer.start()
+
+    def _build(self) -> None:
+        self.train_button = QtWidgets.QPushButton("Train")
+        self.train_button.clicked.connect(self.train)
+        self.cancel_button = QtWidgets.QPushButton("Cancel")
+        self.cancel_button.setEnabled(False)
+        self.cancel_button.clicked.connect(self.session.cancel)
+        self.export_button = QtWidgets.QPushButton("Export model...")
+        self.export_button.setEnabled(False)
+        self.export_button.clicked.connect(self._ask_export)
+        self.progress = QtWidgets.QProgressBar(maximum=1000, textVisible=True)
+        self.progress.setFormat("idle")
+        run = QtWidgets.QHBoxLayout()
+        for w in (self.train_button, self.cancel_button, self.export_button):
+            run.addWidget(w)
+        left = QtWidgets.QVBoxLayout()
+        left.addWidget(self.picker, 1)
+        left.addWidget(self.settings_panel)
+        left.addLayout(run)
+        left.addWidget(self.progress)
+        left.addWidget(self.status)
+        left_widget = QtWidgets.QWidget()
+        left_widget.setLayout(left)
+        split = QtWidgets.QSplitter()
+        split.addWidget(left_widget)
+        split.addWidget(self.tabs)
+        split.setSizes([610, 790])
+        layout = QtWidgets.QVBoxLayout(self)
+        layout.setContentsMargins(4, 4, 4, 4)
+        layout.addWidget(split)
+
+    def _connect_session(self) -> None:
+        s = self.session
+        s.progress_changed.connect(self._on_progress)
+        s.status_changed.connect(self.show_status)
+        s.busy_changed.connect(self._on_busy)
+        s.results_changed.connect(lambda: self.export_button.setEnabled(True))
+        s.exported.connect(self._on_exported)
+
+    def show_status(self, text: str, is_error: bool = False) -> None:
+        """Show a message under the buttons (errors in red)."""
+        self.status.setStyleSheet("color:#b00020;" if is_error else "color:#404040;")
+        self.status.setText(text)
+
+    def train(self) -> None:
+        """Start training (errors shown in the stage)."""
+        try:
+            self.session.start_training()
+        except UserError as exc:
+            self.show_status(str(exc), True)
+
+    def export(self, path: str | Path) -> bool:
+        """Export to ``path``; an existing folder is replaced only if the user agrees."""
+        path = Path(path)
+        overwrite = False
+        if path.exists():
+            overwrite = self.confirm_overwrite(path)
+            if not overwrite:
+                self.show_status(f"not exported: {path} exists and was kept", False)
+                return False
+        try:
+            self.session.export(path, overwrite=overwrite)
+        except (UserError, OSError) as exc:
+            self.show_status(str(exc), True)
+            return False
+        return True
+
+    def confirm_overwrite(self, path: Path) -> bool:
+        """Ask whether to replace the model folder ``path`` (tests replace this method)."""
+        answer = QtWidgets.QMessageBox.question(
+            self, "Replace model?", f"{path} exists. Replace the model folder?")
+        return answer == QtWidgets.QMessageBox.StandardButton.Yes
+
+    def _ask_export(self) -> None:
+        path = QtWidgets.QFileDialog.getSaveFileName(self, "Export model folder", "models/new_model")[0]
+        if path:
+            self.export(path)
+
+    def _on_progress(self, fraction: float, text: str) -> None:
+        self.progress.setValue(int(round(fraction * 1000)))
+        self.progress.setFormat(f"{text} ({fraction:.0%})")
+
+    def _on_busy(self, busy: bool) -> None:
+        for w in (self.train_button, self.picker, self.settings_panel, self.comparison.compare_button):
+            w.setEnabled(not busy)
+        self.export_button.setEnabled(not busy and self.session.outcome is not None)
+        self.cancel_button.setEnabled(busy)
+
+    def _on_exported(self, path: Path) -> None:
+        for edit in self.comparison.paths:
+            if not edit.text():
+                edit.setText(str(path))
+                break
+
+    # ---- hosting
+    def shutdown(self) -> None:
+        """Stop polling and cancel a running training."""
+        self.timer.stop()
+        self.session.shutdown()
+
+    def settled(self) -> bool:
+        """True when no background job runs."""
+        return not self.session.busy
+
+    def may_close(self) -> bool:
+        """Ask before closing while a job runs."""
+        if not self.session.busy:
+            return True
+        answer = QtWidgets.QMessageBox.question(self, "Training running", "A job is running. Stop it and close?")
+        if answer == QtWidgets.QMessageBox.StandardButton.Yes:
+            self.session.cancel()
+            return True
+        return False
