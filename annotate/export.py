@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from annotate.keyframes import RaterAnnotations, _atomic_write_text
+from annotate.keyframes import RaterAnnotations
+from capture_tool.fileio import atomic_write_text
 from annotate.video_index import FrameTimes
 
 
@@ -61,7 +62,7 @@ def write_weights_csv(annotations: RaterAnnotations, times: FrameTimes, path: st
         cells += ["" if np.isnan(w) else f"{w:.4f}" for w in row[2:]]
         out.write(",".join(cells) + "\n")
     path.parent.mkdir(parents=True, exist_ok=True)
-    _atomic_write_text(path, out.getvalue())
+    atomic_write_text(path, out.getvalue())
     return path
 
 

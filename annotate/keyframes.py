@@ -27,7 +27,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-import tempfile
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
@@ -35,6 +34,7 @@ import numpy as np
 
 from annotate.blendshapes import DEFAULT_SET, BlendshapeSet
 from capture_tool.errors import SessionFormatError, UserError
+from capture_tool.fileio import atomic_write_text
 
 SCHEMA_VERSION = 1
 INTERPOLATIONS = ("hold", "linear", "smooth")
@@ -253,22 +253,8 @@ class RaterAnnotations:
             raise FileExistsError(f"{path}: annotation file exists; refusing to overwrite")
         path.parent.mkdir(parents=True, exist_ok=True)
         text = json.dumps(self.to_dict(), indent=1) + "\n"
-        _atomic_write_text(path, text)
+        atomic_write_text(path, text)
         return path
-
-
-def _atomic_write_text(path: Path, text: str) -> None:
-    """Write ``text`` to a temp file beside ``path``, fsync it, then rename over ``path``."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def read_annotations(path: str | os.PathLike) -> RaterAnnotations:

@@ -22,12 +22,12 @@ import datetime as _dt
 import json
 import os
 import re
-import tempfile
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any, TextIO
 
 from capture_tool.errors import SessionFormatError, UserError
+from capture_tool.fileio import write_json_atomic  # noqa: F401  (re-exported for callers)
 from capture_tool.hr_csv import HR_CSV_HEADER, format_hr_row, read_hr_csv
 from capture_tool.protocols import HrSample
 
@@ -272,22 +272,6 @@ class SessionInfo:
             raise FileExistsError(f"{path}: session.json exists; refusing to overwrite")
         write_json_atomic(path, self.to_dict())
         return path
-
-
-def write_json_atomic(path: str | os.PathLike, data: Any) -> None:
-    """Write JSON to ``path`` through a temp file in the same folder, fsync, then ``os.replace``."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            json.dump(data, fh, indent=2, sort_keys=False)
-            fh.write("\n")
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def read_session_info(folder: str | os.PathLike) -> SessionInfo:

@@ -24,6 +24,7 @@ import numpy as np
 
 from annotate.blendshapes import BlendshapeSet
 from capture_tool.errors import UserError
+from capture_tool.fileio import atomic_write, atomic_write_text
 from train.face import FEATURE_NAMES, FEATURE_UNITS, SvrModel
 from train.physiology import HR_MAX_FORMULAS, EpocParams, NhrParams, NhrRegression
 
@@ -149,21 +150,13 @@ def write_bundle(bundle: ModelBundle, directory: str | os.PathLike, *,
                               "(pass overwrite=True to replace it)")
     directory.mkdir(parents=True, exist_ok=True)
     text = json.dumps(_to_json(bundle), indent=2, allow_nan=False)
-    _atomic_write(directory / MODEL_JSON, lambda f: f.write(text.encode("utf-8")))
+    atomic_write_text(directory / MODEL_JSON, text)
     arrays = {"intercept": np.asarray(bundle.intercept, float)}
     for name, sv, coef in zip(bundle.blendshapes.names, bundle.support_vectors, bundle.dual_coef):
         arrays[f"support_vectors_{name}"] = np.asarray(sv, float)
         arrays[f"dual_coef_{name}"] = np.asarray(coef, float).ravel()
-    _atomic_write(directory / SVR_NPZ, lambda f: np.savez(f, **arrays))  # type: ignore[arg-type]
+    atomic_write(directory / SVR_NPZ, lambda f: np.savez(f, **arrays))  # type: ignore[arg-type]
     return directory
-
-
-def _atomic_write(path: Path, write: Any) -> None:
-    """Write through a temporary file and rename, so a crash never leaves half a file."""
-    tmp = path.with_name(path.name + ".tmp")
-    with tmp.open("wb") as f:
-        write(f)
-    os.replace(tmp, path)
 
 
 # --------------------------------------------------------------------------- reading

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from capture_tool.errors import UserError
-from train.commands.synth import _write_new, curves_csv, livelink_csv
+from train.commands.synth import write_output, curves_csv, livelink_csv
 from train.energy import work_and_power
 from train.motion import Motion, read_motion
 from train.runtime import Character, FaceModel, load_model
@@ -287,6 +287,6 @@ class SynthSession:
             raise FileExistsError(f"{out}: file exists; refusing to overwrite")
         text = (livelink_csv(self.curves, self.model.blendshapes) if fmt == "livelink"
                 else curves_csv(self.curves, self.model.columns))
-        _write_new(out, text, force=True)
+        write_output(out, text, force=True)
         self.status_changed.emit(f"exported {self.n_frames} frames to {out}", False)
         return out

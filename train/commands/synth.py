@@ -13,7 +13,6 @@ from __future__ import annotations
 import argparse
 import csv
 import io
-import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -21,6 +20,7 @@ import numpy as np
 
 from annotate.blendshapes import BlendshapeSet
 from capture_tool.errors import UserError
+from capture_tool.fileio import atomic_write_text
 from train.runtime import Character, FaceModel, load_model
 
 #: Live Link Face CSV columns after Timecode and BlendShapeCount: the 52 ARKit blendshapes in the
@@ -131,27 +131,25 @@ def livelink_csv(curves: Mapping[str, np.ndarray], blendshapes: BlendshapeSet) -
     return buf.getvalue()
 
 
-def _write_new(path: Path, text: str, force: bool) -> None:
-    """Write through a temporary file; refuse an existing file unless ``force``."""
+def write_output(path: Path, text: str, force: bool) -> None:
+    """Write an output file atomically; refuse an existing file unless ``force`` (UserError)."""
     if path.exists() and not force:
         raise UserError(f"--out {path}: expected a new file, found an existing one "
                         "(use --force to replace it)")
     if not path.parent.is_dir():
         raise UserError(f"--out {path}: expected an existing folder, found no {path.parent}")
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
+    atomic_write_text(path, text)
 
 
 def run(args: argparse.Namespace) -> int:
     """Synthesize and write the curves; return 0."""
     out = Path(args.out)
     if out.exists() and not args.force:
-        _write_new(out, "", force=False)  # fail before the work
+        write_output(out, "", force=False)  # fail before the work
     model = load_model(args.model_dir)
     character = _character(args, model)
     curves = model.synthesize(args.motion, character, mapping=args.mapping)
     text = (livelink_csv(curves, model.blendshapes) if args.format == "livelink"
             else curves_csv(curves, model.columns))
-    _write_new(out, text, args.force)
+    write_output(out, text, args.force)
     return 0

@@ -1,0 +1,54 @@
+"""Crash-safe file writes shared by every stage (stdlib only, so the runtime may import it).
+
+A write goes to a temporary file in the same folder, is flushed and fsynced, then renamed over the
+target with ``os.replace``: a reader (or a crash) sees the old file or the new one, never half.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import IO, Any
+
+
+def atomic_write(path: str | os.PathLike, write: Callable[[IO[bytes]], Any]) -> Path:
+    """Call ``write(fh)`` on a temp file beside ``path``, fsync it, then rename it over ``path``.
+
+    Parameters
+    ----------
+    path : path-like
+        Target file; its folder must exist.
+    write : callable
+        Writes the content to the binary file object it is given.
+
+    Returns
+    -------
+    Path
+        The written path.
+    """
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            write(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
+    """Write UTF-8 ``text`` atomically (see :func:`atomic_write`)."""
+    data = text.encode("utf-8")
+    return atomic_write(path, lambda fh: fh.write(data))
+
+
+def write_json_atomic(path: str | os.PathLike, data: Any) -> Path:
+    """Write ``data`` as indented JSON atomically (see :func:`atomic_write`)."""
+    return atomic_write_text(path, json.dumps(data, indent=2, sort_keys=False) + "\n")
