@@ -280,22 +280,17 @@ def export_outcome(outcome: TrainingOutcome, out_dir: str | os.PathLike, *,
     FileExistsError
         If ``out_dir`` exists and ``overwrite`` is False.
     """
-    from train.commands.train import REPORT_DIR, _metrics, _provenance, _report_header
-    from train.export import build_bundle, export_model
-    from train.report import write_report
+    from train.pipeline import export_training
 
     out = Path(out_dir)
     if out.exists() and not overwrite:
         raise FileExistsError(f"{out}: model folder exists; refusing to overwrite")
     o = outcome
-    metrics = _metrics(o.hr_eval, o.face, o.held_out, o.protocols)  # undefined scores -> null
-    prov = _provenance(o.prepared, o.face, o.sources, o.settings.rater_policy, o.settings.config())
-    bundle = build_bundle(o.face, o.hr_eval.fit, o.blendshapes, metrics, prov)
-    model_dir = export_model(bundle, o.face, out, force=overwrite)
-    write_report(model_dir / REPORT_DIR, evaluation=o.hr_eval, series=o.series, fit=o.face,
-                 held_out=o.held_out, protocols=o.protocols,
-                 protocol_predictions=o.protocol_predictions,
-                 header=_report_header(bundle.provenance, model_dir))
+    model_dir, _, _ = export_training(
+        prepared=o.prepared, series=o.series, hr_eval=o.hr_eval, face=o.face,
+        held_out=o.held_out, protocols=o.protocols, protocol_predictions=o.protocol_predictions,
+        blendshapes=o.blendshapes, sources=o.sources, rater_policy=o.settings.rater_policy,
+        config=o.settings.config(), out=out, force=overwrite)
     return model_dir
 
 

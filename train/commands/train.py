@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import datetime as _dt
-import math
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -26,7 +24,6 @@ from train.dataset import blendshape_columns, hr_series, prepare, read_table, se
 from train.face_fit import GRIDS, FaceFitConfig, fit_face_models, held_out_scores, protocol_scores
 from train.hr_fit import evaluate_hr_models
 
-REPORT_DIR = "report"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -104,8 +101,7 @@ def run_training(table: pd.DataFrame, blendshapes: BlendshapeSet, out: str | Pat
     """
     from tqdm import tqdm
 
-    from train.export import build_bundle, export_model
-    from train.report import write_report
+    from train.pipeline import export_training
 
     config = config or FaceFitConfig()
     steps = tqdm(total=5, desc="train", unit="step", file=sys.stderr, disable=not progress)
@@ -125,13 +121,11 @@ def run_training(table: pd.DataFrame, blendshapes: BlendshapeSet, out: str | Pat
     held = held_out_scores(face)
     protos, proto_preds = protocol_scores(face)
     step("export and parity checks")
-    bundle = build_bundle(face, hr_eval.fit, blendshapes, _metrics(hr_eval, face, held, protos),
-                          _provenance(prepared, face, sources, rater_policy, config))
-    model_dir = export_model(bundle, face, out, force=force)
-    step("report")
-    report = write_report(model_dir / REPORT_DIR, evaluation=hr_eval, series=series, fit=face,
-                          held_out=held, protocols=protos, protocol_predictions=proto_preds,
-                          header=_report_header(bundle.provenance, model_dir))
+    model_dir, report, bundle = export_training(
+        prepared=prepared, series=series, hr_eval=hr_eval, face=face, held_out=held,
+        protocols=protos, protocol_predictions=proto_preds, blendshapes=blendshapes,
+        sources=sources, rater_policy=rater_policy, config=config, out=out, force=force,
+        on_report=lambda: step("report"))
     step("done")
     steps.close()
     return TrainingResult(model_dir, report, bundle.metrics)
@@ -147,63 +141,6 @@ def _fit_face(prepared: pd.DataFrame, blendshapes: BlendshapeSet, config: FaceFi
     with tqdm(total=n_folds, desc="face CV folds", unit="fold", file=sys.stderr, leave=False,
               disable=not progress) as bar:
         return fit_face_models(prepared, blendshapes.names, config, progress=bar.update)
-
-
-def _metrics(hr_eval: Any, face: Any, held: pd.DataFrame, protos: pd.DataFrame) -> dict[str, Any]:
-    """JSON-ready metrics for model.json and the model card (undefined scores become null)."""
-    return _finite_or_none({
-        "hr": hr_eval.summary(),
-        "hr_per_participant": {p: c.as_dict() for p, c in hr_eval.fit.per_participant.items()},
-        "hr_tl_regression": hr_eval.fit.tl_regression.as_dict(),
-        "face_held_out": held.to_dict("records"),
-        "face_protocols": protos.to_dict("records"),
-        "face_cv": {b: {"best": s.best, "cv_mse": s.cv_mse, "cv_r": s.cv_r} for b, s in face.search.items()},
-        "expressiveness": {p: {b: float(v) for b, v in row.items()}
-                           for p, row in face.expressiveness.iterrows()},
-    })
-
-
-def _finite_or_none(value: Any) -> Any:
-    """``value`` with NaN and infinities replaced by None: model.json is strict JSON, and a score
-    can be undefined (e.g. the unseen-exercise protocol when the lab did one kind of exercise)."""
-    if isinstance(value, dict):
-        return {k: _finite_or_none(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_finite_or_none(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
-
-
-def _provenance(prepared: pd.DataFrame, face: Any, sources: Sequence[str], rater_policy: str,
-                config: FaceFitConfig) -> dict[str, Any]:
-    """Data and software description for model.json and the model card."""
-    tls = prepared.groupby("participant")["training_level"].first()
-    return {
-        "created_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-        "software_version": _software_version(), "sources": list(sources),
-        "participants": sorted(map(str, tls.index)), "n_participants": int(len(tls)),
-        "training_levels": [float(v) for v in tls.to_numpy()],
-        "n_sessions": int(prepared["session"].nunique()), "n_seconds": int(len(prepared)),
-        "n_face_rows": int(len(face.data.x)), "rater_policy": rater_policy, "cv": config.cv,
-        "grid": config.grid, "max_rows_per_participant": config.max_rows_per_participant,
-    }
-
-
-def _software_version() -> str:
-    """The installed effortface distribution's version (train may not import effortface)."""
-    from importlib import metadata
-
-    try:
-        return metadata.version("effortface")
-    except metadata.PackageNotFoundError:
-        return "unknown"
-
-
-def _report_header(prov: dict[str, Any], model_dir: Path) -> dict[str, Any]:
-    keys = ("created_utc", "sources", "participants", "n_sessions", "n_seconds", "n_face_rows",
-            "rater_policy", "cv")
-    return {"model": str(model_dir), **{k: prov[k] for k in keys}}
 
 
 def run(args: argparse.Namespace) -> int:
