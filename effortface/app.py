@@ -27,16 +27,15 @@ log = logging.getLogger("effortface.app")
 
 #: stage key (``--stage``) -> title in the stage list
 STAGES = {"capture": "Capture", "annotate": "Annotate", "train": "Train", "synthesize": "Synthesize"}
-#: what each stage that is not built yet will do, and its issue
-_COMING = {
-    "capture": ("issue 6", "record a heart-rate strap and the face video with participant data and phases"),
-    "annotate": ("issue 7", "key-frame the four blendshape weights on the session videos, "
-                            "one blendshape at a time, and check inter-rater agreement"),
-    "train": ("issue 8", "fit the heart-rate model and the four face SVRs on these sessions, "
-                         "evaluate them like the paper and export a model bundle "
-                         "(headless today: effortface train / evaluate)"),
-    "synthesize": ("issue 8", "drive a character's face from a motion clip with an exported model "
-                              "(headless today: effortface synth)"),
+#: what each stage does (shown if a stage cannot be built, e.g. a missing optional module)
+_WHAT = {
+    "capture": "records a heart-rate strap and the face video with participant data and phases",
+    "annotate": "key-frames the four blendshape weights on the session videos, one blendshape at "
+                "a time, and checks inter-rater agreement",
+    "train": "fits the heart-rate model and the four face SVRs, evaluates them like the paper and "
+             "exports a model bundle (headless: effortface train / evaluate)",
+    "synthesize": "drives a character's face from a motion clip with an exported model "
+                  "(headless: effortface synth)",
 }
 ORGANIZATION, APPLICATION = "effortface", "effortface"
 SCREENSHOT_SIZE = (1400, 900)
@@ -66,7 +65,7 @@ def make_settings() -> QtCore.QSettings:
 
 
 class QtPlaceholderStage(QtWidgets.QWidget):
-    """A stage whose issue has not landed: says what it will do and lists the sessions found.
+    """A stage that could not be built: says what it does, why it is missing, and lists the sessions.
 
     Parameters
     ----------
@@ -81,11 +80,9 @@ class QtPlaceholderStage(QtWidgets.QWidget):
     def __init__(self, key: str, sessions_dir: Path, reason: str = "",
                  parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
-        issue, what = _COMING[key]
         why = f"<p>Not available here: {html.escape(reason)}</p>" if reason else ""
-        title = QtWidgets.QLabel(f"<h2>{STAGES[key]}</h2><p>This stage will {what}.</p>{why}"
-                                 f"<p>It arrives with {issue}; until then it shows the sessions it "
-                                 f"will work on.</p>", wordWrap=True)
+        title = QtWidgets.QLabel(f"<h2>{STAGES[key]}</h2><p>This stage {_WHAT[key]}.</p>{why}",
+                                 wordWrap=True)
         self.sessions = QtWidgets.QListWidget()
         layout = QtWidgets.QVBoxLayout(self)
         layout.addWidget(title)
@@ -143,7 +140,7 @@ def make_stage(key: str, sessions_dir: Path, settings: QtCore.QSettings) -> QtWi
     from train.gui.synth_stage import QtSynthStage
     from train.synth_session import SynthSession
 
-    return QtSynthStage(SynthSession(background=True))
+    return QtSynthStage(SynthSession(background=True), motion_dir=sessions_dir)
 
 
 class MainWindow(QtWidgets.QMainWindow):
