@@ -15,6 +15,7 @@ SHARED_DATA = ROOT.parent / "shared" / "data"
 
 def pytest_addoption(parser: pytest.Parser) -> None:
     parser.addoption("--hr-port", default=None, help="a real strap's serial port, e.g. /dev/ttyUSB0")
+    parser.addoption("--hr-protocol", default="hxm", help="that strap's protocol (ant, hxm, hrmi, lines)")
 
 
 @pytest.fixture(scope="session")
@@ -32,3 +33,9 @@ def hr_port(request: pytest.FixtureRequest) -> str:
     if not port:
         pytest.skip("needs a real strap: run pytest --hr-port=/dev/ttyUSB0")
     return port
+
+
+@pytest.fixture
+def hr_protocol(request: pytest.FixtureRequest) -> str:
+    """The protocol of the strap given with --hr-port."""
+    return request.config.getoption("--hr-protocol")
