@@ -38,6 +38,7 @@ from annotate.keyframes import read_annotations
 from annotate.reliability import (Pose, Rating, mean_abs_disagreement_pct, read_poses, read_ratings)
 from annotate.video_index import FrameTimes
 from capture_tool.errors import UserError
+from capture_tool.figures import agg_figure
 from capture_tool.session import Session, list_sessions, read_session
 
 #: poses whose mean absolute disagreement is above this (% of the weight range) are flagged
@@ -332,23 +333,15 @@ def save_bland_altman_png(report: AgreementReport, path: str | os.PathLike, *, o
     path = Path(path)
     if path.exists() and not overwrite:
         raise FileExistsError(f"{path}: file exists; refusing to overwrite")
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        from matplotlib import pyplot as plt
-    except ImportError:
-        raise UserError(f"--plot {path}: expected matplotlib installed (pip install matplotlib), found none") from None
-    fig, axes = plt.subplots(1, len(report.pairs), figsize=(4.2 * len(report.pairs), 3.6), squeeze=False)
+    fig = agg_figure((4.2 * len(report.pairs), 3.6), layout="tight")
+    axes = fig.subplots(1, len(report.pairs), squeeze=False)
     for ax, p in zip(axes[0], report.pairs):
         ax.scatter(p.means, p.diffs, s=10, alpha=0.6)
         for y, style in ((p.bias, "-"), (p.loa_low, "--"), (p.loa_high, "--")):
             ax.axhline(y, color="k", linestyle=style, linewidth=1)
         ax.set(title=f"{p.rater_a} - {p.rater_b}", xlabel="mean weight", ylabel="difference",
                xlim=(0, 1), ylim=(-1, 1))
-    fig.tight_layout()
     fig.savefig(path, dpi=100)
-    plt.close(fig)
     return path
 
 

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import datetime as dt
-import json
 import shutil
 import sys
 from collections.abc import Callable, Sequence
@@ -43,7 +42,7 @@ from capture_tool.session import (  # noqa: E402
     FrameTimeWriter, HrWriter, Participant, SessionInfo, create_session, write_json_atomic,
 )
 from sample_sessions.simlab import expression, heart, raters, streams, video  # noqa: E402
-from sample_sessions.simlab.lab import SessionPlan, build_plans, work_at  # noqa: E402
+from sample_sessions.simlab.lab import PEOPLE, Person, SessionPlan, build_plans, work_at  # noqa: E402
 
 DEFAULT_SEED = 2015
 GROUND_TRUTH = "_ground_truth"
@@ -51,16 +50,29 @@ RELIABILITY = "reliability"
 WORK_CSV = "work.csv"
 #: the session whose first loaded squat set also ships as motion capture
 MOTION_SESSION_INDEX = 1
+#: the session whose USB cable is pulled for 3 s (text lines, a USB PulseSensor)
+UNPLUG_SESSION_INDEX = 3
+#: the ANT+ session that sends extended messages (device number 3404)
+EXTENDED_ANT_SESSION_INDEX = 4
+#: the reliability round draws its 18 poses (3 each) from the first week's six sessions (one per
+#: participant, both kinds), as the paper's 18 poses came from its recordings
+POSE_SESSION_INDICES = range(6)
 SQUATS_CLIP = "cmu_13_29_squats_120fps.bvh"
 MOTION_DECIMATE = 4  # 120 Hz -> 30 Hz keeps the clip small; w is frame-rate invariant (SCIENCE 2)
 SKINS_BGR = ((150, 180, 225), (120, 150, 200), (110, 140, 185), (160, 190, 230), (95, 120, 165),
              (140, 170, 215))
-HAIRS_BGR = ((40, 55, 75), (30, 30, 35), (150, 150, 155), (60, 110, 170), (20, 25, 30), (35, 70, 110))
+#: per participant (PEOPLE order); P01's dark brown is kept clear of the open mouth's dark red
+HAIRS_BGR = ((30, 40, 55), (30, 30, 35), (150, 150, 155), (60, 110, 170), (20, 25, 30), (35, 70, 110))
 
 
 def _rngs(seed: int, index: int, n: int = 6) -> list[np.random.Generator]:
     """Independent generators for one session (heart, faults, bytes, video, raters, face)."""
     return [np.random.default_rng(s) for s in np.random.SeedSequence([seed, index]).spawn(n)]
+
+
+def participant_heart(person: Person, seed: int) -> heart.HeartParams:
+    """A participant's true heart, the same in all their sessions (its own random stream)."""
+    return heart.heart_params(person, np.random.default_rng([seed, 1000, PEOPLE.index(person)]))
 
 
 def _faults(plan: SessionPlan, rng: np.random.Generator) -> streams.LinkFaults:
@@ -96,16 +108,16 @@ def write_serial(folder: Path, plan: SessionPlan, beats: np.ndarray, faults: str
                  rng: np.random.Generator) -> tuple[Path, list[dict], list[tuple[float, float]]]:
     """Encode the beats, spoil them a little, write ``serial/<protocol>.serlog``.
 
-    The text-lines session also loses its USB cable for 3 s (a ``device_gap`` then a
+    One text-lines session also loses its USB cable for 3 s (a ``device_gap`` then a
     ``reconnect`` record, as the link writes them). Returns the path, the corrupted bytes and the
     unplug windows.
     """
-    device_number = 3404 if plan.index == 4 else None  # one ANT session in extended format
+    device_number = 3404 if plan.index == EXTENDED_ANT_SESSION_INDEX else None
     chunks = streams.chunks_for(plan.protocol, beats, faults, plan.duration_s, rng,
                                 device_number=device_number, speed_at=_speed_at(plan))
     chunks, corrupted = streams.corrupt(chunks, faults.n_corrupt_bytes, rng)
     unplugs = [(round(0.22 * plan.duration_s, 2), round(0.22 * plan.duration_s + 3.0, 2))] \
-        if plan.protocol == "lines" else []
+        if plan.index == UNPLUG_SESSION_INDEX else []
     path = folder / SERIAL_DIR / f"{plan.protocol}.serlog"
     header = _serial_header(plan)
     with SerlogWriter(path, header) as log:
@@ -192,8 +204,9 @@ def write_frames_and_video(folder: Path, plan: SessionPlan, grid_t: np.ndarray, 
         writer.write(i, float(t))
     writer.close()
     poses = video.head_motion(times, work_at(plan, times), rng)
+    who = PEOPLE.index(plan.person)  # the same face in both of a participant's sessions
     video.write_video(folder / VIDEO_AVI, truth, poses, video.lighting(times, rng),
-                      SKINS_BGR[plan.index % len(SKINS_BGR)], HAIRS_BGR[plan.index % len(HAIRS_BGR)], rng)
+                      SKINS_BGR[who % len(SKINS_BGR)], HAIRS_BGR[who % len(HAIRS_BGR)], rng)
     return np.round(times, 4), truth
 
 
@@ -253,7 +266,7 @@ def _session_info(plan: SessionPlan, seed: int) -> SessionInfo:
 def generate_session(out: Path, plan: SessionPlan, seed: int, shared_motion: Path) -> dict:
     """Write one session folder and its ground truth; return what the pose set needs."""
     r_heart, r_faults, r_bytes, r_video, r_raters, r_face = _rngs(seed, plan.index)
-    hp = heart.heart_params(plan.person, r_heart)
+    hp = participant_heart(plan.person, seed)
     grid_t, drive, hr = heart.simulate_hr(plan, hp)
     beats = heart.beat_times(grid_t, hr, hp, r_heart)
     faults = _faults(plan, r_faults)
@@ -276,7 +289,8 @@ def generate_session(out: Path, plan: SessionPlan, seed: int, shared_motion: Pat
                   "dropouts_s": faults.dropouts, "corrupted_bytes": corrupted, "unplugs_s": unplugs},
                   "beats": int(beats.size), "motion": motion}
     _write_truth(out / GROUND_TRUTH / plan.session_id, grid_t, drive, hr, nhr, d, times, truth, truth_meta)
-    return {"times": times, "truth": truth, "nhr_frames": np.interp(times, grid_t, nhr)}
+    return {"index": plan.index, "times": times, "truth": truth,
+            "nhr_frames": np.interp(times, grid_t, nhr)}
 
 
 def _write_truth(folder: Path, grid_t: np.ndarray, drive: np.ndarray, hr: np.ndarray, nhr: np.ndarray,
@@ -296,11 +310,12 @@ def _write_truth(folder: Path, grid_t: np.ndarray, drive: np.ndarray, hr: np.nda
 
 def write_lab_truth(out: Path, plans: Sequence[SessionPlan], seed: int) -> None:
     """``_ground_truth/lab.json``: participants' hidden traits and the raters' designed errors."""
-    people = {}
+    people: dict[str, dict] = {}
     for plan in plans:
-        hp = heart.heart_params(plan.person, _rngs(seed, plan.index)[0])
-        people[plan.person.code] = {**plan.person.__dict__, "session_id": plan.session_id,
-                                    "protocol": plan.protocol, "heart": hp.__dict__}
+        entry = people.setdefault(plan.person.code, {
+            **plan.person.__dict__, "sessions": {},
+            "heart": participant_heart(plan.person, seed).__dict__})
+        entry["sessions"][plan.session_id] = {"kind": plan.kind, "protocol": plan.protocol}
     doc = {"seed": seed, "blendshapes": list(DEFAULT_SET.names), "participants": people,
            "raters": {r.rater: {**r.__dict__, "designed_mae": r.designed_mae()} for r in raters.RATERS}}
     (out / GROUND_TRUTH).mkdir(parents=True, exist_ok=True)
@@ -308,12 +323,15 @@ def write_lab_truth(out: Path, plans: Sequence[SessionPlan], seed: int) -> None:
 
 
 def write_reliability(out: Path, made: dict[str, dict], seed: int) -> float:
-    """18 poses (3 per session) and the three raters' blind ratings; return the disagreement %."""
+    """18 poses (3 from each first-week session, see ``POSE_SESSION_INDICES``) and the three
+    raters' blind ratings; return the disagreement %."""
     from annotate.reliability import mean_abs_disagreement_pct
 
     poses: list[Pose] = []
     truth_by_pose: dict[str, np.ndarray] = {}
     for sid, m in made.items():
+        if m["index"] not in POSE_SESSION_INDICES:
+            continue
         chosen = raters.choose_poses(sid, m["times"], m["nhr_frames"], m["truth"], len(poses) + 1)
         for pose in chosen:
             truth_by_pose[pose.pose_id] = m["truth"][pose.frame]

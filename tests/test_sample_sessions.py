@@ -51,8 +51,8 @@ def _ids(paths: list[Path]) -> list[str]:
 
 # ----------------------------------------------------------------------------- the lab itself
 def test_the_lab_has_the_papers_variety() -> None:
-    assert 6 <= len(SESSIONS) <= 8
-    people = [read_session(s).participant for s in SESSIONS]
+    people = list({read_session(s).participant.code: read_session(s).participant for s in SESSIONS}.values())
+    assert 6 <= len(people) <= 8
     assert {p.sex for p in people} == {"female", "male"}
     ages = [p.age for p in people]
     assert 20 <= min(ages) and max(ages) <= 46 and max(ages) - min(ages) >= 20
@@ -60,8 +60,11 @@ def test_the_lab_has_the_papers_variety() -> None:
     assert min(tls) <= 1.0 and max(tls) >= 7.0 and all(0 <= t <= 7.5 for t in tls)
     expressiveness = [max(v["expressiveness"]) for v in _lab_truth()["participants"].values()]
     assert min(expressiveness) <= 0.35 and max(expressiveness) >= 0.95  # neutral ... pronounced
-    kinds = [read_session(s).info.extra["simulated"]["kind"] for s in SESSIONS]
-    assert set(kinds) == {"cardio", "strength"}
+    kinds: dict[str, list[str]] = {}
+    for s in SESSIONS:
+        kinds.setdefault(s.name.split("_")[0], []).append(read_session(s).info.extra["simulated"]["kind"])
+    # both kinds for everyone, so a participant's heart-rate threshold reflects fitness, not exercise
+    assert all(sorted(k) == ["cardio", "strength"] for k in kinds.values()) and len(kinds) == len(people)
     protocols = {read_session(s).devices["heart_rate"]["protocol"] for s in SESSIONS}
     assert protocols == {"ant", "hxm", "hrmi", "lines"}
 
@@ -207,7 +210,8 @@ def test_raters_match_the_truth_within_the_designed_error() -> None:
             w = read_annotations(session / "annotations" / f"{rater}.json").weights(frames)
             mae = np.abs(w - truth).mean(axis=0)
             assert np.all(mae <= design[rater]["designed_mae"]), (session.name, rater, mae)
-            assert np.all(mae >= 0.005), "a rater is not the truth"
+            seen = truth.max(axis=0) > 0.1  # a face that never moves is keyed 0 by everyone: no error
+            assert np.all(mae[seen] >= 0.005), "a rater is not the truth"
             inside = (truth > 0.15) & (truth < 0.85)  # away from the clipping at 0 and 1
             signed[rater].append(np.where(inside, w - truth, np.nan))
     for rater in RATERS:
@@ -230,7 +234,8 @@ def test_training_stage_builds_its_table_from_the_lab() -> None:
     from train.dataset import sessions_table
 
     table = sessions_table([LAB])
-    assert table["participant"].nunique() == len(SESSIONS)
+    assert table["session"].nunique() == len(SESSIONS)
+    assert table["participant"].nunique() == len({s.name.split("_")[0] for s in SESSIONS})
     assert table["hr_bpm"].notna().mean() > 0.9 and table["mouth_open"].notna().mean() > 0.9
 
 

@@ -1,7 +1,7 @@
 """The trainer's report: Markdown with PNG plots like the paper's Fig. 2 and Fig. 3, and metric tables.
 
-matplotlib runs with the Agg backend (files only, no display, no Qt), imported inside the functions
-so that importing this module stays cheap.
+Figures come from :func:`capture_tool.figures.agg_figure` (Agg canvas, no pyplot), so the Train
+stage may write the report from its worker thread.
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from capture_tool.figures import agg_figure
 from train.export import hr_warnings
 from train.face_fit import FaceModelFit
 from train.hr_fit import HrEvaluation, HrSeries
@@ -26,27 +27,17 @@ MAX_FIG2_PANELS = 12
 _REAL, _PRED, _PRED2 = "#1f77b4", "#d62728", "#ff7f0e"  # the paper's blue (real) and red (predicted)
 
 
-def _pyplot() -> Any:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def plot_fig2(evaluation: HrEvaluation, series: Sequence[HrSeries], path: str | os.PathLike) -> Path:
     """Fig. 2: measured and simulated NHR over time (minutes), one panel per session.
 
     Each panel shows the measured NHR (blue), the participant's own model (orange) and the
     training-level model fitted without that participant (red).
     """
-    plt = _pyplot()
     shown = list(series)[:MAX_FIG2_PANELS]
     cols = 3 if len(shown) > 4 else 2 if len(shown) > 1 else 1
     rows = int(np.ceil(len(shown) / cols))
-    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 2.6 * rows), squeeze=False,
-                             sharey=True, constrained_layout=True)
+    fig = agg_figure((4.2 * cols, 2.6 * rows), layout="constrained")
+    axes = fig.subplots(rows, cols, squeeze=False, sharey=True)
     for ax, s in zip(axes.flat, shown):
         t_min = np.asarray(s.t_s) / 60.0
         ax.plot(t_min, s.nhr, color=_REAL, lw=1.2, label="measured")
@@ -64,7 +55,6 @@ def plot_fig2(evaluation: HrEvaluation, series: Sequence[HrSeries], path: str | 
     axes.flat[0].legend(fontsize=7, loc="upper left")
     fig.suptitle("Fig. 2: measured and simulated normalised heart rate", fontsize=11)
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return Path(path)
 
 
@@ -75,15 +65,14 @@ def plot_fig3(fit: FaceModelFit, predictions: Mapping[str, np.ndarray], path: st
     ``predictions`` is :func:`train.face_fit.protocol_scores`' second value. The session defaults to
     the one with the most varied annotations.
     """
-    plt = _pyplot()
     d = fit.data
     session = session or _liveliest_session(fit)
     rows = np.flatnonzero(d.session == session)
     rows = rows[np.argsort(d.t_s[rows])]
     protos = [p for p in predictions if np.isfinite(predictions[p][rows]).any()]
     nb = len(fit.blendshapes)
-    fig, axes = plt.subplots(max(len(protos), 1), nb, figsize=(3.3 * nb, 2.3 * max(len(protos), 1)),
-                             squeeze=False, sharex=True, sharey=True, constrained_layout=True)
+    fig = agg_figure((3.3 * nb, 2.3 * max(len(protos), 1)), layout="constrained")
+    axes = fig.subplots(max(len(protos), 1), nb, squeeze=False, sharex=True, sharey=True)
     t_min = d.t_s[rows] / 60.0
     for i, proto in enumerate(protos):
         for b, name in enumerate(fit.blendshapes):
@@ -102,7 +91,6 @@ def plot_fig3(fit: FaceModelFit, predictions: Mapping[str, np.ndarray], path: st
     fig.suptitle(f"Fig. 3: blendshape weights of {session} (never in the model's training data)",
                  fontsize=11)
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return Path(path)
 
 

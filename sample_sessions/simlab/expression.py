@@ -47,7 +47,7 @@ def true_curves(d: dict[str, np.ndarray], expressiveness: tuple[float, ...],
     """The four true weights on the simulation grid, shape ``(n, 4)``, in [0, 1]."""
     ex, fa, nhr = d["exertion"], d["fatigue"], d["nhr"]
     breathing = 0.5 + 0.5 * np.sin(d["breath_phase"])
-    opens = 1.0 / (1.0 + np.exp(-(nhr - 0.6) / 0.07))  # closed early, opens past ~60 % HRR
+    opens = 1.0 / (1.0 + np.exp(-(nhr - 0.5) / 0.07))  # closed early, opens past ~50 % HRR
     raw = np.column_stack([
         0.7 * ex + 0.35 * fa,
         opens * (0.45 + 0.35 * fa) * (0.7 + 0.3 * breathing) + 0.35 * _expirations(nhr.size, fa, rng),

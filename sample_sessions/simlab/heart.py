@@ -1,10 +1,21 @@
 """An independent heart-rate simulation (deliberately NOT the paper's NHR recursion).
 
-First-order kinetics towards a work-dependent steady state, with a slow component, then beats:
+First-order kinetics towards a steady state set by the metabolic demand, with a slow component,
+then beats:
 
-    HR_ss(w)   = HR_rest + 0.95 (HR_max - HR_rest) (1 - exp(-w / w_scale))
+    HR_ss(d)   = HR_rest + 0.95 (HR_max - HR_rest) (1 - exp(-d / w_scale))
     dHR/dt     = (HR_ss + S - HR) / tau        tau = tau_on_s when rising, tau_off_s when falling
-    dS/dt      = (a_slow (HR_max - HR_rest) max(0, f(w) - 0.5) - S) / tau_slow_s
+    dS/dt      = (a_slow (HR_max - HR_rest) max(0, f(d) - 0.5) - S) / tau_slow_s
+
+**Demand d (choice).** The heart answers the metabolic demand of the exercise, not its mechanical
+work: d is the work rate times a demand factor per kind of exercise (``lab.Phase.drive_w_per_kg``:
+1 for walking and running, 1.8 for squats times (1 + back load / body mass), 1.2 for jumping jacks),
+the same for everyone. What differs between people is their **capacity**: ``w_scale``, the demand
+that takes HR to 60 % of the reserve, grows with training level (7 + 1.6 TL W/kg, as VO2max does:
+a fitter heart pumps more per beat, so the same exercise takes a smaller share of its reserve),
+and recovery is faster for fitter people (``tau_off`` 80 - 7 TL s). So a participant's fitted
+threshold reflects their fitness whichever kind of exercise they did, and the training-level model
+can beat a pooled one, as in the paper.
 
 Beats follow the instantaneous rate with beat-to-beat variability: respiratory sinus arrhythmia
 (amplitude falling with effort, at the breathing rate) and AR(1) noise. Fitting the paper's model
@@ -21,6 +32,12 @@ from sample_sessions.simlab.lab import Person, SessionPlan, work_at
 from train.physiology import hr_max_bpm, hr_rest_bpm
 
 DT_S = 0.1  # integration step
+#: capacity: ``w_scale = W_SCALE_W_PER_KG + W_SCALE_PER_TL * TL`` (W/kg of demand), see above
+W_SCALE_W_PER_KG = 7.0
+W_SCALE_PER_TL = 1.6
+#: recovery time constant ``TAU_OFF_S - TAU_OFF_PER_TL * TL`` (s): fitter people recover faster
+TAU_OFF_S = 80.0
+TAU_OFF_PER_TL = 7.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -44,9 +61,9 @@ def heart_params(person: Person, rng: np.random.Generator) -> HeartParams:
     return HeartParams(
         hr_rest_bpm=round(hr_rest_bpm(person.age, person.sex, tl) + rng.normal(0, 2.5), 1),
         hr_max_bpm=round(hr_max_bpm(person.age) + rng.normal(0, 4.0), 1),
-        w_scale_w_per_kg=round(9.0 + 1.1 * tl + rng.normal(0, 0.6), 2),
+        w_scale_w_per_kg=round(W_SCALE_W_PER_KG + W_SCALE_PER_TL * tl + rng.normal(0, 0.6), 2),
         tau_on_s=round(22.0 + rng.uniform(-4, 6), 1),
-        tau_off_s=round(70.0 - 5.0 * tl + rng.uniform(-6, 6), 1),
+        tau_off_s=round(TAU_OFF_S - TAU_OFF_PER_TL * tl + rng.uniform(-6, 6), 1),
         slow_amp=round(0.10 - 0.008 * tl + rng.uniform(0, 0.03), 3),
         tau_slow_s=round(150.0 + rng.uniform(-30, 30), 1),
         rsa_frac=round(0.03 + rng.uniform(0, 0.02), 3),

@@ -19,8 +19,11 @@ RUN_W_PER_KG_PER_M_S = 6.0
 STAND_W_PER_KG = 0.1
 SQUAT_W_PER_KG = 3.4
 JUMPING_JACK_W_PER_KG = 8.6
-#: effort / work for squats: strength work strains more than its mechanical work says (choice)
-STRAIN_FACTOR = 2.5
+#: metabolic demand per mechanical W/kg (choice): squats cost more than their "no transfer" work
+#: says (isometric holding, pressor response; a load adds to it), jumping jacks somewhat more;
+#: walking and running are the reference (1)
+SQUAT_DEMAND_PER_W = 1.8
+JUMPING_JACK_DEMAND_PER_W = 1.2
 
 
 @dataclasses.dataclass(frozen=True)
@@ -120,46 +123,53 @@ def _strength(bouts: Sequence[tuple[str, float, int, float]], mass_kg: float) ->
             # a load on the back raises the work per kg of body mass (SCIENCE.md section 2, loads);
             # muscular strain (pressor response) drives heart and face beyond the work itself
             w = SQUAT_W_PER_KG * (mass_kg + load) / mass_kg * (reps / (dur / 2.5))
-            effort, label = w * STRAIN_FACTOR * (1.0 + load / mass_kg), "squats"
+            effort, label = w * SQUAT_DEMAND_PER_W * (1.0 + load / mass_kg), "squats"
         else:
-            w, effort, label = JUMPING_JACK_W_PER_KG, JUMPING_JACK_W_PER_KG * 1.6, "jumping jacks"
+            w, effort, label = JUMPING_JACK_W_PER_KG, JUMPING_JACK_W_PER_KG * JUMPING_JACK_DEMAND_PER_W, "jumping jacks"
         phases.append(Phase(t, t + dur, label, w, None, load, reps, effort))
         t += dur
     return tuple(phases)
 
 
+#: the sessions of the first week (index 0-5: the kind alternates with the participant) and of the
+#: second week (index 6-11: each participant does the other kind), so every participant has both
+FIRST_WEEK = dt.datetime(2026, 1, 12, 9, 30, 0)
+SECOND_WEEK = dt.datetime(2026, 1, 19, 14, 0, 0)
+#: strap protocol per session index: ANT+, HxM, HRMI and text lines spread over both kinds
+PROTOCOLS = ("ant", "hxm", "hrmi", "lines", "ant", "hxm", "hrmi", "ant", "hxm", "hrmi", "lines", "ant")
+CARDIO_BOUTS: tuple[tuple[tuple[str, float, float], ...], ...] = (
+    (("walk", 1.5, 25), ("run", 2.5, 45), ("walk", 1.2, 35), ("run", 3.4, 45), ("rest", 0, 50)),
+    (("rest", 0, 15), ("walk", 1.5, 25), ("run", 2.8, 45), ("walk", 1.3, 30), ("run", 3.6, 45),
+     ("rest", 0, 45)),
+    (("rest", 0, 15), ("walk", 1.6, 25), ("run", 3.2, 50), ("rest", 0, 35), ("run", 3.8, 40),
+     ("rest", 0, 45)),
+)
+
+
 def build_plans() -> tuple[SessionPlan, ...]:
-    """The lab's sessions: alternating cardio and strength, low and high bouts with recovery."""
-    day = dt.datetime(2026, 1, 12, 9, 30, 0)
-    protocols = ("ant", "hxm", "hrmi", "lines", "ant", "hxm")
-    cardio_a = [("walk", 1.5, 30), ("run", 2.5, 50), ("walk", 1.2, 40), ("run", 3.4, 45),
-                ("rest", 0, 35)]
-    cardio_b = [("rest", 0, 20), ("walk", 1.5, 30), ("run", 2.8, 50), ("walk", 1.3, 35),
-                ("run", 3.6, 55), ("walk", 1.0, 30), ("run", 3.0, 35), ("rest", 0, 45)]
-    cardio_c = [("rest", 0, 20), ("walk", 1.6, 35), ("run", 3.2, 65), ("rest", 0, 40),
-                ("run", 3.8, 50), ("rest", 0, 60)]
+    """The lab's 12 sessions: every participant does one cardio and one strength session, each
+    alternating low and high bouts with recovery (about 3.5 min)."""
     plans = []
     for i, person in enumerate(PEOPLE):
-        start = day + dt.timedelta(days=i // 2, hours=2 * (i % 2), minutes=7 * i)
-        if i % 2 == 0:
-            bouts = (cardio_a, cardio_b, cardio_c)[i // 2]
-            plans.append(SessionPlan(i, person, "cardio", start, protocols[i], _cardio(bouts)))
-        else:
-            plans.append(SessionPlan(i, person, "strength", start, protocols[i],
-                                     _strength(_strength_bouts(i, person), person.mass_kg)))
-    return tuple(plans)
+        first = FIRST_WEEK + dt.timedelta(days=i // 2, hours=2 * (i % 2), minutes=7 * i)
+        second = SECOND_WEEK + dt.timedelta(days=i // 2, hours=-2 * (i % 2), minutes=11 * i)
+        kinds = ("cardio", "strength") if i % 2 == 0 else ("strength", "cardio")
+        for index, kind, start in ((i, kinds[0], first), (i + len(PEOPLE), kinds[1], second)):
+            phases = (_cardio(CARDIO_BOUTS[i // 2]) if kind == "cardio"
+                      else _strength(_strength_bouts(i), person.mass_kg))
+            plans.append(SessionPlan(index, person, kind, start, PROTOCOLS[index], phases))
+    return tuple(sorted(plans, key=lambda p: p.index))
 
 
-def _strength_bouts(i: int, person: Person) -> list[tuple[str, float, int, float]]:
-    """Bodyweight squats, loaded squats and jumping jacks with rests (loads scale with the person)."""
-    load = round(0.25 * person.mass_kg / 5) * 5
-    bouts: list[tuple[str, float, int, float]] = [("rest", 0, 0, 20), ("squats", 0, 12, 30), ("rest", 0, 0, 30),
-             ("squats", load, 12, 35), ("rest", 0, 0, 30), ("jacks", 0, 60, 55), ("rest", 0, 0, 40)]
-    if i == 3:  # one longer session with a heavy set
-        bouts[-1] = ("rest", 0, 0, 25)
-        bouts += [("squats", 2 * load, 10, 25), ("rest", 0, 0, 15), ("jacks", 0, 45, 35),
-                  ("rest", 0, 0, 25)]
-    return bouts
+def _strength_bouts(i: int) -> list[tuple[str, float, int, float]]:
+    """Bodyweight squats, loaded squats and jumping jacks with rests (loads scale with the person);
+    every other participant starts with the jumping jacks and ends with a heavy set."""
+    load = round(0.25 * PEOPLE[i].mass_kg / 5) * 5
+    if i % 2 == 0:
+        return [("rest", 0, 0, 15), ("squats", 0, 12, 30), ("rest", 0, 0, 25), ("squats", load, 12, 35),
+                ("rest", 0, 0, 25), ("jacks", 0, 50, 45), ("rest", 0, 0, 40)]
+    return [("rest", 0, 0, 15), ("jacks", 0, 45, 40), ("rest", 0, 0, 30), ("squats", load, 12, 35),
+            ("rest", 0, 0, 25), ("squats", 2 * load, 10, 25), ("rest", 0, 0, 45)]
 
 
 def work_at(plan: SessionPlan, t_s: np.ndarray, *, drive: bool = False) -> np.ndarray:

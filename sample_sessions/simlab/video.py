@@ -15,7 +15,7 @@ import numpy as np
 from annotate.face import render_face
 from sample_sessions.simlab.avi import write_mjpg_avi
 
-WIDTH, HEIGHT, FPS = 160, 120, 8.0
+WIDTH, HEIGHT, FPS = 160, 120, 5.0
 #: with optimised Huffman tables: about 1.6 kB a frame, so the whole lab fits in 25 MB
 JPEG_QUALITY = 40
 

@@ -6,10 +6,20 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from train.hr_fit import (HrCoefficients, HrSeries, evaluate_hr_models, fit_hr_model,
-                          fit_participant, fit_threshold_tree, score_series, simulate_nhr,
-                          simulate_series, step_samples)
-from train.physiology import NhrParams, PAPER_REGRESSION
+from train.hr_fit import (
+    HrCoefficients,
+    HrSeries,
+    by_participant,
+    evaluate_hr_models,
+    fit_hr_model,
+    fit_participant,
+    fit_threshold_tree,
+    score_series,
+    simulate_nhr,
+    simulate_series,
+    step_samples,
+)
+from train.physiology import PAPER_REGRESSION, NhrParams
 
 
 def _true(tl: float) -> HrCoefficients:
@@ -120,13 +130,11 @@ def test_bad_fit_input(w, msg):
         fit_threshold_tree(w, np.zeros(len(w)), np.zeros(len(w)))
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "sample lab has one session per participant and the exercise kind alternates with the "
-    "participant (cardio: P01 P03 P05, strength: P02 P04 P06), so the per-participant thresholds "
-    "follow the exercise, not the training level: TL model RMSE 23 % vs pooled 9 %. With each "
-    "participant doing both kinds (tried with simlab in /tmp) TL 10.2 % beats pooled 11.3 %."))
 def test_tl_model_beats_pooled_on_held_out_sample_lab_participants():
-    """The paper's finding on the sample lab (whose heart is NOT the paper's recursion)."""
+    """The paper's finding on the sample lab (whose heart is NOT the paper's recursion): every
+    participant did a cardio and a strength session, so their fitted thresholds follow their
+    fitness, not the exercise; on held-out participants the training-level model beats the pooled
+    one by a clear margin (measured: 6.6 % vs 10.3 % RMSE) and the threshold rises with TL."""
     from pathlib import Path
 
     from train.dataset import hr_series, prepare, sessions_table
@@ -134,7 +142,14 @@ def test_tl_model_beats_pooled_on_held_out_sample_lab_participants():
     lab = Path(__file__).resolve().parents[2] / "sample_sessions"
     if not any(lab.glob("*/session.json")):
         pytest.skip("sample_sessions/ has no sessions yet (run sample_sessions/generate.py)")
-    summary = evaluate_hr_models(hr_series(prepare(sessions_table([lab])))).summary()
+    series = hr_series(prepare(sessions_table([lab])))
+    assert all({s.session.rsplit("_", 1)[1] for s in own} == {"cardio", "strength"}
+               for own in by_participant(series).values())
+    ev = evaluate_hr_models(series)
+    summary = ev.summary()
     print({k: (round(v["r"], 3), round(v["rmse_pct"], 1)) for k, v in summary.items()})
-    assert summary["tl_regression"]["rmse_pct"] < summary["pooled"]["rmse_pct"]
+    assert summary["tl_regression"]["rmse_pct"] < 0.8 * summary["pooled"]["rmse_pct"]
+    assert summary["tl_regression"]["r"] > summary["pooled"]["r"]
+    assert ev.fit.tl_regression.t_root.slope > 0  # fitter -> higher threshold (paper: +0.42 W/kg per TL)
+    assert ev.fit.tl_regression.c_inc.slope < 0  # fitter -> slower rise (paper: -0.00043)
     assert summary["per_participant"]["r"] > 0.85

@@ -18,7 +18,8 @@ from train.runtime import load_model
 from train.train_session import TrainSession, filter_entries
 
 SAMPLE = Path(__file__).resolve().parents[2] / "sample_sessions"
-CARDIO = ["P01_20260112-093000_cardio", "P03_20260113-094400_cardio", "P05_20260114-095800_cardio"]
+SESSIONS = sorted(p.parent.name for p in SAMPLE.glob("*/session.json"))
+CARDIO = [s for s in SESSIONS if s.endswith("_cardio")]  # one per participant
 LEFT = QtCore.Qt.MouseButton.LeftButton
 TIMEOUT_MS = 60_000
 
@@ -46,13 +47,13 @@ def _train(qtbot, stage: QtTrainStage) -> None:
 
 def test_filters_pick_part_of_the_lab(stage: QtTrainStage) -> None:
     _pick_cardio_small(stage)
-    assert stage.picker.table.rowCount() == 3
+    assert stage.picker.table.rowCount() == len(CARDIO) == 6
     assert stage.session.selected == set(CARDIO)
     assert stage.session.settings.max_rows_per_participant == 60
     # unchecking one row removes that session from the model's selection
     stage.picker.table.item(1, 0).setCheckState(QtCore.Qt.CheckState.Unchecked)
-    assert stage.session.selected == {CARDIO[0], CARDIO[2]}
-    assert "2 sessions" in stage.picker.description.text()
+    assert stage.session.selected == set(CARDIO) - {CARDIO[1]}
+    assert "5 sessions" in stage.picker.description.text()
 
 
 def test_train_export_and_refuse_overwrite(qtbot, stage: QtTrainStage, tmp_path: Path) -> None:
@@ -72,7 +73,7 @@ def test_train_export_and_refuse_overwrite(qtbot, stage: QtTrainStage, tmp_path:
     stage.session.poll()
     for name in ("model.json", "svr.npz", "face.onnx", "MODEL_CARD.md", "report/report.md"):
         assert (out / name).is_file(), name
-    assert read_bundle(out).provenance["participants"] == ["P01", "P03", "P05"]
+    assert read_bundle(out).provenance["participants"] == [f"P0{i}" for i in range(1, 7)]
     assert load_model(out).blendshapes.names == outcome.face.blendshapes
 
     stamp = (out / "model.json").stat().st_mtime_ns
@@ -168,7 +169,7 @@ def test_compare_two_models(qtbot, stage: QtTrainStage, two_bundles: tuple[Path,
     qtbot.waitUntil(lambda: stage.session.comparison is not None, timeout=TIMEOUT_MS)
     c = stage.session.comparison
     a, b = c["a"].curves, c["b"].curves
-    assert c["session"] in c["sessions"] and len(c["sessions"]) == 6
+    assert c["session"] in c["sessions"] and len(c["sessions"]) == len(SESSIONS) == 12
     assert not np.allclose(a["nhr"], b["nhr"])               # different TL regressions
     table = stage.comparison.table
     headers = [table.horizontalHeaderItem(i).text() for i in range(table.columnCount())]
