@@ -22,6 +22,7 @@ from types import TracebackType
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from capture_tool.errors import UserError
+from capture_tool.gui.gui_gc import collect_in_gui_thread
 
 log = logging.getLogger("effortface.app")
 
@@ -387,15 +388,20 @@ def main(args: argparse.Namespace) -> int:
     app = QtWidgets.QApplication.instance() or QtWidgets.QApplication([sys.argv[0]])
     app.setOrganizationName(ORGANIZATION)
     app.setApplicationName(APPLICATION)
-    window = MainWindow(sessions_dir)
+    with collect_in_gui_thread():
+        return _run_window(app, MainWindow(sessions_dir), args.stage, out)
+
+
+def _run_window(app: QtWidgets.QApplication, window: MainWindow, stage: str, out: Path | None) -> int:
+    """Render ``stage`` to ``out`` and close, or show the window until the user quits."""
     if out is not None:
-        render_screenshot(window, args.stage, out)
+        render_screenshot(window, stage, out)
         print(out)
         window.shutdown()
         return 0
     restore = install_exception_hooks(window)
     try:
-        window.show_stage(args.stage)
+        window.show_stage(stage)
         window.show()
         return int(app.exec())
     finally:

@@ -39,3 +39,16 @@ def hr_port(request: pytest.FixtureRequest) -> str:
 def hr_protocol(request: pytest.FixtureRequest) -> str:
     """The protocol of the strap given with --hr-port."""
     return request.config.getoption("--hr-protocol")
+
+
+@pytest.fixture(autouse=True)
+def _gc_in_gui_thread(request: pytest.FixtureRequest):
+    """In Qt tests, collect garbage in the GUI thread only, as the application does."""
+    if "qtbot" not in request.fixturenames:
+        yield
+        return
+    request.getfixturevalue("qapp")
+    from capture_tool.gui.gui_gc import collect_in_gui_thread
+
+    with collect_in_gui_thread(interval_s=0.5):
+        yield
