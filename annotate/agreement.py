@@ -38,6 +38,7 @@ from annotate.keyframes import read_annotations
 from annotate.reliability import (Pose, Rating, mean_abs_disagreement_pct, read_poses, read_ratings)
 from annotate.video_index import FrameTimes
 from capture_tool.errors import UserError
+from capture_tool.fileio import refuse_overwrite
 from capture_tool.figures import agg_figure
 from capture_tool.session import Session, list_sessions, read_session
 
@@ -330,9 +331,7 @@ def save_bland_altman_png(report: AgreementReport, path: str | os.PathLike, *, o
     UserError
         If matplotlib is not installed.
     """
-    path = Path(path)
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path}: file exists; refusing to overwrite")
+    path = refuse_overwrite(path, overwrite=overwrite)
     fig = agg_figure((4.2 * len(report.pairs), 3.6), layout="tight")
     axes = fig.subplots(1, len(report.pairs), squeeze=False)
     for ax, p in zip(axes[0], report.pairs):

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from annotate.keyframes import RaterAnnotations
-from capture_tool.fileio import atomic_write_text
+from capture_tool.fileio import atomic_write_text, refuse_overwrite
 from annotate.video_index import FrameTimes
 
 
@@ -51,9 +51,7 @@ def write_weights_csv(annotations: RaterAnnotations, times: FrameTimes, path: st
     FileExistsError
         If ``path`` exists and ``overwrite`` is False.
     """
-    path = Path(path)
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path}: file exists; refusing to overwrite")
+    path = refuse_overwrite(path, overwrite=overwrite)
     header, rows = weights_table(annotations, times)
     out = io.StringIO()
     out.write(",".join(header) + "\n")

@@ -34,7 +34,7 @@ import numpy as np
 
 from annotate.blendshapes import DEFAULT_SET, BlendshapeSet
 from capture_tool.errors import SessionFormatError, UserError
-from capture_tool.fileio import atomic_write_text
+from capture_tool.fileio import atomic_write_text, refuse_overwrite
 
 SCHEMA_VERSION = 1
 INTERPOLATIONS = ("hold", "linear", "smooth")
@@ -248,9 +248,7 @@ class RaterAnnotations:
         FileExistsError
             If ``path`` exists and ``overwrite`` is False.
         """
-        path = Path(path)
-        if path.exists() and not overwrite:
-            raise FileExistsError(f"{path}: annotation file exists; refusing to overwrite")
+        path = refuse_overwrite(path, overwrite=overwrite, what="annotation file")
         path.parent.mkdir(parents=True, exist_ok=True)
         text = json.dumps(self.to_dict(), indent=1) + "\n"
         atomic_write_text(path, text)

@@ -20,6 +20,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from capture_tool.errors import SessionFormatError
+from capture_tool.fileio import refuse_overwrite
 
 POSES_HEADER = ("pose_id", "session_id", "frame", "t_s")
 RATINGS_HEADER = ("pose_id", "rater", "blendshape", "weight")
@@ -46,8 +47,7 @@ class Rating:
 
 
 def _write_csv(path: Path, header: tuple[str, ...], rows: Iterable[tuple], overwrite: bool) -> Path:
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path}: file exists; refusing to overwrite")
+    refuse_overwrite(path, overwrite=overwrite)
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, "w", encoding="utf-8", newline="") as fh:
         writer = csv.writer(fh, lineterminator="\n")

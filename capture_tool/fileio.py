@@ -14,6 +14,32 @@ from pathlib import Path
 from typing import IO, Any
 
 
+def refuse_overwrite(path: str | os.PathLike, *, overwrite: bool = False, what: str = "file",
+                     hint: str = "") -> Path:
+    """Return ``path`` as a Path, or refuse if it exists and ``overwrite`` is False.
+
+    Parameters
+    ----------
+    path : path-like
+        The file or folder about to be written.
+    overwrite : bool
+        True when the user asked to replace it.
+    what : str
+        What the path is, for the message (``"file"``, ``"model folder"``...).
+    hint : str
+        Appended to the message, e.g. ``" (use --force)"``.
+
+    Raises
+    ------
+    FileExistsError
+        If ``path`` exists and ``overwrite`` is False.
+    """
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path}: {what} exists; refusing to overwrite{hint}")
+    return path
+
+
 def atomic_write(path: str | os.PathLike, write: Callable[[IO[bytes]], Any]) -> Path:
     """Call ``write(fh)`` on a temp file beside ``path``, fsync it, then rename it over ``path``.
 

@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from capture_tool.errors import SessionFormatError, UserError
-from capture_tool.fileio import write_json_atomic  # noqa: F401  (re-exported for callers)
+from capture_tool.fileio import refuse_overwrite, write_json_atomic  # noqa: F401  (re-exported for callers)
 from capture_tool.hr_csv import HR_CSV_HEADER, format_hr_row, read_hr_csv
 from capture_tool.protocols import HrSample
 
@@ -267,9 +267,7 @@ class SessionInfo:
         FileExistsError
             If the file exists and ``overwrite`` is False.
         """
-        path = Path(folder) / SESSION_JSON
-        if path.exists() and not overwrite:
-            raise FileExistsError(f"{path}: session.json exists; refusing to overwrite")
+        path = refuse_overwrite(Path(folder) / SESSION_JSON, overwrite=overwrite, what=SESSION_JSON)
         write_json_atomic(path, self.to_dict())
         return path
 

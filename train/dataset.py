@@ -36,6 +36,7 @@ import pandas as pd
 from annotate.blendshapes import DEFAULT_SET, BlendshapeSet
 from annotate.keyframes import read_annotations
 from capture_tool.errors import UserError
+from capture_tool.fileio import refuse_overwrite
 from capture_tool.session import Session, list_sessions, parse_session_id, read_session
 from train.hr_fit import HrSeries
 from train.physiology import (EpocParams, hr_max_bpm, hr_rest_bpm, epoc_step,
@@ -117,9 +118,7 @@ def write_table(table: pd.DataFrame, path: str | os.PathLike, *, overwrite: bool
     FileExistsError
         If ``path`` exists and ``overwrite`` is False.
     """
-    path = Path(path)
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path}: table exists; refusing to overwrite")
+    path = refuse_overwrite(path, overwrite=overwrite, what="table")
     extra = [c for c in table.columns if c not in TABLE_COLUMNS]
     table[list(TABLE_COLUMNS) + extra].to_csv(path, index=False, float_format="%.6g")
     return path

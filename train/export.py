@@ -31,6 +31,7 @@ from onnx import TensorProto, helper, numpy_helper
 
 from annotate.blendshapes import BlendshapeSet
 from capture_tool.errors import UserError
+from capture_tool.fileio import refuse_overwrite
 from train.bundle import ModelBundle, default_physiology, read_bundle, write_bundle
 from train.face import FEATURE_NAMES
 from train.face_fit import FaceModelFit
@@ -251,9 +252,7 @@ def export_model(bundle: ModelBundle, face: FaceModelFit, out_dir: str | os.Path
     ExportError
         If a parity check fails (the target is left untouched).
     """
-    out = Path(out_dir)
-    if out.exists() and not force:
-        raise FileExistsError(f"{out}: model folder exists; refusing to overwrite (use --force)")
+    out = refuse_overwrite(out_dir, overwrite=force, what="model folder", hint=" (use --force)")
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.parent / f".{out.name}.partial-{os.getpid()}"
     shutil.rmtree(tmp, ignore_errors=True)

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from capture_tool.errors import UserError
+from capture_tool.fileio import refuse_overwrite
 from train.commands.synth import write_output, curves_csv, livelink_csv
 from train.energy import work_and_power
 from train.motion import Motion, read_motion
@@ -282,9 +283,7 @@ class SynthSession:
             raise UserError(f"format: expected one of {', '.join(EXPORT_FORMATS)}, found {fmt!r}")
         if not self.n_frames:
             raise UserError("export: expected curves, found none (load a motion clip first)")
-        out = Path(path)
-        if out.exists() and not overwrite:
-            raise FileExistsError(f"{out}: file exists; refusing to overwrite")
+        out = refuse_overwrite(path, overwrite=overwrite)
         text = (livelink_csv(self.curves, self.model.blendshapes) if fmt == "livelink"
                 else curves_csv(self.curves, self.model.columns))
         write_output(out, text, force=True)

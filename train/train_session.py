@@ -23,6 +23,7 @@ import pandas as pd
 
 from annotate.blendshapes import DEFAULT_SET, BlendshapeSet
 from capture_tool.errors import UserError
+from capture_tool.fileio import refuse_overwrite
 from capture_tool.session import list_sessions, parse_session_id, read_session_info
 from train.dataset import ANNOTATIONS_DIR, hr_series, prepare, read_table, sessions_table
 from train.face_fit import GRIDS, FaceFitConfig, FaceModelFit, held_out_scores, protocol_scores
@@ -282,9 +283,7 @@ def export_outcome(outcome: TrainingOutcome, out_dir: str | os.PathLike, *,
     """
     from train.pipeline import export_training
 
-    out = Path(out_dir)
-    if out.exists() and not overwrite:
-        raise FileExistsError(f"{out}: model folder exists; refusing to overwrite")
+    out = refuse_overwrite(out_dir, overwrite=overwrite, what="model folder")
     o = outcome
     model_dir, _, _ = export_training(
         prepared=o.prepared, series=o.series, hr_eval=o.hr_eval, face=o.face,
@@ -522,9 +521,7 @@ class TrainSession:
         """
         if self.outcome is None:
             raise UserError("export: expected a trained model, found none (train first)")
-        out = Path(out_dir)
-        if out.exists() and not overwrite:
-            raise FileExistsError(f"{out}: model folder exists; refusing to overwrite")
+        out = refuse_overwrite(out_dir, overwrite=overwrite, what="model folder")
         outcome = self.outcome
         self._start("export", lambda: export_outcome(outcome, out, overwrite=overwrite))
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 
-from PySide6 import QtCore, QtGui, QtWidgets
+from PySide6 import QtCore, QtWidgets
 
 from annotate.keyframes import INTERPOLATIONS
 from annotate.session_model import AnnotationSession

@@ -14,7 +14,7 @@ import serial
 
 from capture_tool.camera import index_video, read_frame
 from capture_tool.replay import PtyReplay
-from capture_tool.session import read_events, read_session, validate_session
+from capture_tool.session import read_session, validate_session
 
 from .capture_helpers import (
     HXM_DAT,

@@ -20,10 +20,8 @@ from capture_tool.session import (
     list_sessions,
     make_session_id,
     parse_session_id,
-    read_events,
     read_session,
     read_session_info,
-    read_video_frames,
     validate_session,
 )
 
