@@ -369,17 +369,51 @@ def work_and_power(
     UserError
         Bad windows or cut-off (named), or a body built for another skeleton.
     """
-    n_w = window_frames(window_s, motion.fps, "window_s")
-    n_p = window_frames(power_window_s, motion.fps, "power_window_s")
     energies = segment_energies(motion, body, cutoff_hz=cutoff_hz, zero_phase=zero_phase,
                                 use_rotations=use_rotations)
     rate = frame_rates(energies.total_j, body.mass_kg)
-    return EnergyCurves(
-        motion.t_s,
-        _trailing_sum(rate, n_w) * motion.fps / n_w,
-        _trailing_sum(rate, n_p) * motion.fps / n_p,
-        rate,
-    )
+    return _windowed(motion.t_s, rate, motion.fps, window_s, power_window_s)
+
+
+def _windowed(t_s: np.ndarray, rate: np.ndarray, fps: float, window_s: float,
+              power_window_s: float) -> EnergyCurves:
+    """w and p from per-frame rates: trailing sums over the work and power windows."""
+    n_w = window_frames(window_s, fps, "window_s")
+    n_p = window_frames(power_window_s, fps, "power_window_s")
+    return EnergyCurves(t_s, _trailing_sum(rate, n_w) * fps / n_w, _trailing_sum(rate, n_p) * fps / n_p, rate)
+
+
+def looped(curves: EnergyCurves, loops: int, fps: float, *, window_s: float = 1.0,
+           power_window_s: float = 0.25) -> EnergyCurves:
+    """Work and power of a clip played ``loops`` times end to end.
+
+    The clip's per-frame rates are repeated and the windows run across the seams, so w does not
+    fall back to its start-of-clip ramp each time the clip restarts. The jump from the last pose
+    to the first is not motion: the two frames after each seam, which have no rate of their own
+    (:func:`frame_rates`), hold the clip's first real rate.
+
+    Parameters
+    ----------
+    curves : EnergyCurves
+        One pass of the clip, from :func:`work_and_power` (same windows).
+    loops : int
+        Number of passes, at least 1.
+    fps : float
+        The clip's frame rate.
+
+    Returns
+    -------
+    EnergyCurves
+        ``loops`` times as many frames, time from 0 at ``fps``.
+    """
+    if loops < 1:
+        raise UserError(f"loops: expected a whole number from 1, found {loops!r}")
+    one = curves.rate_j_per_kg
+    rate = np.tile(one, loops)
+    if loops > 1 and len(one) > 2:
+        seam = np.arange(len(one), len(rate), len(one))
+        rate[seam] = rate[seam + 1] = one[2]
+    return _windowed(np.arange(len(rate)) / fps, rate, fps, window_s, power_window_s)
 
 
 def frame_rates(total_j: np.ndarray, mass_kg: float) -> np.ndarray:

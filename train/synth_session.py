@@ -8,8 +8,9 @@ Curves are recomputed for the whole clip whenever the character or the model cha
 for the GUI, on a worker thread whose newest result :meth:`SynthSession.poll` applies (a looped
 2-minute clip through an SVR bundle takes about 0.1 s); the work and power of the clip depend only on the body
 (mass, sex, loads), so they are cached and reused when only the training level, age, height or
-expressiveness change. ``loops`` repeats the clip's work and power end to end (choice: the seam is
-not re-filtered), so that a short clip shows heart rate and fatigue building up over minutes.
+expressiveness change. ``loops`` repeats the clip end to end (:func:`train.energy.looped`: the work
+window runs across the seam, which is not re-filtered), so that a short clip shows heart rate and
+fatigue building up over minutes.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ import numpy as np
 from capture_tool.errors import UserError
 from capture_tool.fileio import refuse_overwrite
 from train.commands.synth import write_output, curves_csv, livelink_csv
-from train.energy import work_and_power
+from train.energy import EnergyCurves, looped, work_and_power
 from train.motion import Motion, read_motion
 from train.runtime import Character, FaceModel, load_model
 from train.train_session import Emitter
@@ -99,7 +100,7 @@ class SynthSession:
         self.curves: dict[str, np.ndarray] = {}
         self.position_s = 0.0
         self.playing = False
-        self._work_cache: tuple[Motion, tuple, np.ndarray, np.ndarray] | None = None
+        self._work_cache: tuple[Motion, tuple, EnergyCurves] | None = None
         self._pool = cf.ThreadPoolExecutor(1, thread_name_prefix="synth-curves") if background else None
         self._pending: list[tuple[int, cf.Future]] = []
         self._generation = 0
@@ -156,22 +157,20 @@ class SynthSession:
         self._recompute()
 
     # ---- curves
-    def _work(self, model: FaceModel, motion: Motion, c: Character) -> tuple[np.ndarray, np.ndarray]:
-        """w and p (W/kg) of one pass of the clip, cached on what they depend on."""
+    def _work(self, model: FaceModel, motion: Motion, c: Character) -> EnergyCurves:
+        """Work and power of one pass of the clip, cached on what they depend on."""
         key = (c.mass_kg, c.sex, c.load_left_kg, c.load_right_kg, c.load_back_kg)
         cache = self._work_cache
         if cache is None or cache[0] is not motion or cache[1] != key:
             energy = work_and_power(motion, model.body(c, motion), zero_phase=True)
-            cache = self._work_cache = (motion, key, energy.w_per_kg, energy.p_per_kg)
-        return cache[2], cache[3]
+            cache = self._work_cache = (motion, key, energy)
+        return cache[2]
 
     def _curves(self, model: FaceModel, motion: Motion, character: Character, loops: int
                 ) -> dict[str, np.ndarray]:
         """Whole-clip curves (runs on the worker thread in background mode)."""
-        w, p = self._work(model, motion, character)
-        t_s = np.arange(len(w) * loops) / motion.fps
-        return model.curves_from_work(t_s, np.tile(w, loops), np.tile(p, loops), 1.0 / motion.fps,
-                                      character)
+        e = looped(self._work(model, motion, character), loops, motion.fps)
+        return model.curves_from_work(e.t_s, e.w_per_kg, e.p_per_kg, 1.0 / motion.fps, character)
 
     def _recompute(self) -> None:
         """Curves for the current model, character and loops (now, or on the worker); the play head stays."""

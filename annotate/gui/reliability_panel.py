@@ -185,7 +185,9 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         _fill(self.poses, [[p.pose_id, p.session_id.split("_")[0], str(p.frame),
                             "\u2713" if self.round.is_done(p.pose_id) else ""] for p in self.round.poses])
         if self.poses.currentRow() < 0 and self.round.poses:
-            self.poses.setCurrentCell(0, 0)
+            self.poses.setCurrentCell(0, 0)  # selects the first pose and shows it
+        else:
+            self._show_pose(self.poses.currentRow())  # same row, new rater or ratings: show them
 
     def _show_pose(self, row: int) -> None:
         if self.round is None or not 0 <= row < len(self.round.poses):

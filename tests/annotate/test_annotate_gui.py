@@ -261,6 +261,23 @@ def test_a_new_rater_rates_blind_then_sees_the_report(qtbot, stage: QtAnnotateSt
     assert len(mine) == 72 and {r.rater for r in mine} == {"R4"}
 
 
+def test_switching_rater_shows_the_new_raters_ratings_of_the_selected_pose(qtbot, stage: QtAnnotateStage,
+                                                                           lab: Path) -> None:
+    stage.rater.setText("R4")
+    stage.tabs.setCurrentIndex(1)
+    panel = stage.reliability
+    assert panel.save_button.isEnabled()  # R4 has not rated pose 1 yet
+    stage.tabs.setCurrentIndex(0)
+    stage.rater.setText("R1")
+    stage.tabs.setCurrentIndex(1)
+    pose = panel.round.poses[panel.poses.currentRow()]
+    r1 = {r.blendshape: r.weight for r in read_ratings(lab / "reliability" / "ratings.csv")
+          if r.rater == "R1" and r.pose_id == pose.pose_id}
+    assert not panel.save_button.isEnabled()  # R1's ratings live in the lab's file: shown, locked
+    assert {n: s.value() for n, s in panel.spins.items()} == pytest.approx(r1, abs=0.005)
+    assert not any(s.isEnabled() for s in panel.spins.values())
+
+
 ANNOTATOR = textwrap.dedent("""
     import sys
     from pathlib import Path

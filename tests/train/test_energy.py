@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from capture_tool.errors import UserError
-from train.energy import G_M_PER_S2, EnergyCrowd, EnergyStream, segment_energies, work_and_power
+from train.energy import G_M_PER_S2, EnergyCrowd, EnergyStream, looped, segment_energies, work_and_power
 from train.motion import Motion, axis_rotations, motion_from_positions, read_motion
 from train.segments import BodyModel, Loads, build_body
 
@@ -289,3 +289,25 @@ def test_empty_motion_is_refused(shared_data: Path) -> None:
     body = build_body(motion.joint_names, motion.parents, 70.0, "male")
     with pytest.raises(UserError, match=r"motion: expected at least one frame, got none \(.*amp_humanoid_run\.npz\)"):
         work_and_power(motion.slice_s(5.0, 6.0), body)
+
+
+def test_a_looped_clip_keeps_its_work_across_the_seams(shared_data: Path) -> None:
+    """Played 3 times end to end, w carries over each restart instead of ramping up from zero again."""
+    motion = read_motion(shared_data / "motion" / "cmu_13_29_jumping_jacks_120fps.bvh")
+    body = build_body(motion.joint_names, motion.parents, 72.0, "male", reference_positions_m=motion.positions_m)
+    one = work_and_power(motion, body)
+    once = looped(one, 1, motion.fps)
+    np.testing.assert_array_equal(once.w_per_kg, one.w_per_kg)
+    np.testing.assert_array_equal(once.p_per_kg, one.p_per_kg)
+    three = looped(one, 3, motion.fps)
+    n = len(one.t_s)
+    assert len(three.t_s) == 3 * n and three.t_s[-1] == pytest.approx((3 * n - 1) / motion.fps)
+    steady = one.w_per_kg[int(motion.fps):].mean()
+    first_second = slice(n, n + int(motion.fps))                 # the first second of the 2nd pass
+    assert one.w_per_kg[: int(motion.fps) // 4].min() < 0.2 * steady  # a single pass starts from rest
+    assert three.w_per_kg[first_second].min() > 0.5 * steady           # the loop does not (the window
+    # then holds the end of one jumping-jack cycle and the start of the next: 0.65 of the mean)
+    after_seam = int(motion.fps) + 2  # past the window holding the seam frames, the passes agree
+    np.testing.assert_allclose(three.w_per_kg[2 * n + after_seam:], one.w_per_kg[after_seam:])
+    with pytest.raises(UserError, match="loops"):
+        looped(one, 0, motion.fps)
