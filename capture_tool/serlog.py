@@ -162,6 +162,29 @@ def _parse_records(blob: bytes, pos: int) -> tuple[list[SerlogRecord], int]:
     return records, pos
 
 
+def read_serlog_header(path: str | os.PathLike) -> dict:
+    """Read only the JSON header of a ``.serlog`` (device, protocol, port...), not its records.
+
+    Raises
+    ------
+    SessionFormatError
+        If the file does not start with the serlog magic or its header is not a JSON object.
+    """
+    path = Path(path)
+    with open(path, "rb") as fh:
+        magic = fh.read(len(MAGIC))
+        line = fh.readline(1 << 20)
+    if magic != MAGIC:
+        raise SessionFormatError(f"{path}: expected a .serlog file starting with {MAGIC!r}, found {magic!r}")
+    try:
+        header = json.loads(line.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError):
+        header = None
+    if not isinstance(header, dict):
+        raise SessionFormatError(f"{path}: expected a JSON header line after the magic, found none")
+    return header
+
+
 def is_serlog(path: str | os.PathLike) -> bool:
     """True if the file starts with the serlog magic."""
     with open(path, "rb") as fh:

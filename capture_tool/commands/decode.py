@@ -1,6 +1,8 @@
-"""``effortface decode --protocol P FILE``: recorded strap bytes -> heart-rate CSV on stdout.
+"""``effortface decode [--protocol P] FILE``: recorded strap bytes -> heart-rate CSV on stdout.
 
-FILE is a ``.serlog``, a ``.pcap`` or a raw capture (see :mod:`capture_tool.captures`); its chunks
+FILE is a ``.serlog``, a ``.pcap`` or a raw capture (see :mod:`capture_tool.captures`). A
+``.serlog`` names its protocol in its header, so ``--protocol`` may be left out for one (given, it
+wins, with a note on stderr if it differs); a pcap or raw capture needs it. The file's chunks
 are fed to the decoder with their recorded arrival times, so ``t_s`` is seconds since the first
 chunk. The CSV is ``heart_rate.csv``'s format; a one-line summary of the decoder's counters goes
 to stderr.
@@ -18,12 +20,14 @@ from capture_tool.captures import read_timed_capture
 from capture_tool.errors import UserError
 from capture_tool.hr_csv import HR_CSV_HEADER, format_hr_row
 from capture_tool.protocols import PROTOCOLS, Decoder, HrSample, get_decoder
+from capture_tool.serlog import is_serlog, read_serlog_header
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Declare the options of ``effortface decode``."""
-    parser.add_argument("--protocol", required=True, metavar="P",
-                        help=f"strap protocol: {', '.join(sorted(PROTOCOLS))}")
+    parser.add_argument("--protocol", default=None, metavar="P",
+                        help=f"strap protocol: {', '.join(sorted(PROTOCOLS))} "
+                             "(default for a .serlog: the one in its header)")
     parser.add_argument("--device-type", type=int, default=None, metavar="N",
                         help="ANT only: device type that yields heart rate (default 120)")
     parser.add_argument("file", metavar="FILE", help=".serlog, .pcap or raw capture")
@@ -55,7 +59,29 @@ def summary_line(decoder: Decoder) -> str:
     return f"{decoder.name}: " + " ".join(f"{k}={v}" for k, v in counters.items())
 
 
+def file_protocol(path: str | os.PathLike, given: str | None) -> str:
+    """The protocol to decode ``path`` with: ``given``, else the one a ``.serlog`` header names.
+
+    Raises
+    ------
+    UserError
+        If none is given and the file is not a ``.serlog`` naming a protocol.
+    """
+    named = None
+    if os.path.isfile(path) and is_serlog(path):
+        named = read_serlog_header(path).get("protocol")
+    if given is not None:
+        if named is not None and named != given:
+            print(f"note: {path} was recorded as {named!r}; decoding as --protocol {given}", file=sys.stderr)
+        return given
+    if not isinstance(named, str):
+        raise UserError(f"--protocol: expected one of {', '.join(sorted(PROTOCOLS))} for {path}, found none "
+                        "(only a .serlog names its own protocol)")
+    return named
+
+
 def _make_decoder(args: argparse.Namespace) -> Decoder:
+    args.protocol = file_protocol(args.file, args.protocol)
     if args.device_type is None:
         return get_decoder(args.protocol)
     if args.protocol != "ant":

@@ -50,6 +50,29 @@ def test_serlog_decodes_like_the_raw_capture(shared_data, tmp_path, capsys):
     assert from_log == capsys.readouterr().out
 
 
+def test_a_serlog_names_its_own_protocol(shared_data, tmp_path, capsys):
+    """--protocol may be left out for a .serlog (its header names it); given, it wins with a note."""
+    log = tmp_path / "hxm.serlog"
+    with SerlogWriter(log, {"device": "hxm", "protocol": "hxm"}) as writer:
+        for t_s, data in read_timed_capture(shared_data / HXM):
+            writer.write(t_s, data)
+    assert main(["decode", str(log)]) == 0
+    implicit = capsys.readouterr()
+    assert main(["decode", "--protocol", "hxm", str(log)]) == 0
+    explicit = capsys.readouterr()
+    assert implicit.out == explicit.out and len(implicit.out.splitlines()) == 1 + 142
+    assert main(["decode", "--protocol", "lines", str(log)]) == 0
+    err = capsys.readouterr().err
+    assert "recorded as 'hxm'; decoding as --protocol lines" in err
+
+
+def test_a_raw_capture_without_protocol_is_one_clear_line(shared_data, capsys):
+    assert main(["decode", str(shared_data / HXM)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("effortface decode: error: --protocol: expected one of ant, ")
+    assert "120-second-bt-stream-hxm.dat" in err[0] and "found none" in err[0]
+
+
 def test_decode_ant_extended_through_main(shared_data, capsys):
     assert main(["decode", "--protocol", "ant", str(shared_data / ANT_EXT)]) == 0
     out, err = capsys.readouterr()
