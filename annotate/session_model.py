@@ -318,7 +318,9 @@ class BlindRound:
 
     The rater sees only their own ratings; they are saved atomically to
     ``reliability/ratings_<rater>.csv`` after every change. Ratings the lab already holds for this
-    rater in ``reliability/ratings.csv`` count as done and cannot be changed here.
+    rater in ``reliability/ratings.csv`` count as done and cannot be changed here, and once the rater
+    has rated every pose (the agreement report is then shown to them) all their ratings are locked:
+    nobody revises a rating after seeing the others'.
 
     Parameters
     ----------
@@ -372,8 +374,8 @@ class BlindRound:
         Raises
         ------
         UserError
-            For an unknown pose or blendshape, a weight outside [0, 1], or a rating the lab file
-            already holds.
+            For an unknown pose or blendshape, a weight outside [0, 1], a rating the lab file
+            already holds, or a finished round (the rater has seen the report).
         """
         from annotate.reliability import Rating, write_ratings
 
@@ -384,6 +386,9 @@ class BlindRound:
             raise UserError(f"weight: expected a number in [0, 1], found {weight!r}")
         if (pose_id, name) in self.locked:
             raise UserError(f"{pose_id} {name}: already rated by {self.rater} in reliability/ratings.csv")
+        if self.complete:
+            raise UserError(f"{pose_id} {name}: {self.rater} has finished the blind round and seen the "
+                            "agreement report, so the ratings are locked")
         self.ratings[(pose_id, name)] = round(float(weight), 4)
         mine = [Rating(p, self.rater, n, w) for (p, n), w in self.ratings.items() if (p, n) not in self.locked]
         tmp = self.path.with_name(f".{self.path.name}.tmp")

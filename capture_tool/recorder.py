@@ -26,6 +26,8 @@ from capture_tool.serial_link import SerialLink, is_simulated_port
 from capture_tool.serlog import DATA, EVENT, read_serlog
 from capture_tool.session import (
     EVENTS_CSV,
+    EVENTS_HEADER,
+    FRAMES_HEADER,
     HEART_RATE_CSV,
     SERIAL_DIR,
     VIDEO_AVI,
@@ -266,13 +268,24 @@ def _folder_bytes(path: Path) -> int:
 
 
 # ------------------------------------------------------------------------------------ recovery
+#: where recovery keeps a video with no whole frame, and its frame table (the session then has none)
+UNRECOVERABLE_AVI = "video.unrecoverable.avi"
+UNRECOVERABLE_FRAMES_CSV = "video_frames.unrecoverable.csv"
+
+
 def recover_session(path: str | os.PathLike) -> dict[str, Any]:
     """Finish a session that a crash left incomplete.
 
     Re-indexes the video (counts the frames that decode; rewrites the AVI into a fresh MJPG file
     when its header disagrees, so seeks are exact; trims ``video_frames.csv`` to match), re-decodes
     the serial logs to restore ``heart_rate.csv`` rows lost after the last flush, drops torn last
-    lines, and marks ``session.json`` complete with a ``recovered`` note.
+    lines, and marks ``session.json`` complete with a ``recovered`` note. A video with no frame that
+    both decodes and has a time (a crash in the first second) is kept as ``video.unrecoverable.avi``
+    (its table as ``video_frames.unrecoverable.csv``), so the session has no video.
+
+    Every repair is first written to a hidden file beside its target; only when all are ready are
+    they renamed over their targets, ``session.json`` last. A failure while preparing leaves the
+    folder as it was; one while renaming leaves it incomplete, and recovering again finishes it.
 
     Parameters
     ----------
@@ -287,38 +300,97 @@ def recover_session(path: str | os.PathLike) -> dict[str, Any]:
     Raises
     ------
     SessionFormatError
-        If the folder is not a session, or it is already complete.
+        If the folder is not a session, it is already complete, or a file cannot be read (the
+        folder is left as it was).
+    OSError
+        If a repair cannot be written (disk full...); the folder is left as it was.
     """
     folder = Path(path)
     info = read_session_info(folder)
     if info.complete:
         raise SessionFormatError(f"{folder / 'session.json'}: expected an incomplete session, found complete: true")
-    done: list[str] = []
-    for name, header in ((EVENTS_CSV, "t_s,kind,label,value"), (VIDEO_FRAMES_CSV, "frame,t_s"), (HEART_RATE_CSV, HR_CSV_HEADER)):
-        done += _drop_torn_line(folder / name, header)
-    done += _recover_heart_rate(folder, info)
-    done += _recover_video(folder)
-    note = {"when": utc_now_iso(), "done": done or ["nothing to repair"]}
+    repairs = _Repairs()
+    try:
+        _stage_text_file(folder / EVENTS_CSV, EVENTS_HEADER, repairs)
+        _stage_heart_rate(folder, repairs)
+        _stage_video(folder, repairs)
+        repairs.commit()
+    finally:
+        repairs.discard()
+    note = {"when": utc_now_iso(), "done": repairs.done or ["nothing to repair"]}
     info.complete = True
     info.extra["recovered"] = note
     info.save(folder, overwrite=True)
     return note
 
 
-def _drop_torn_line(path: Path, header: str) -> list[str]:
-    """Cut a last line that has no newline (written half when the process died); create if absent."""
-    if not path.exists():
-        return []
+class _Repairs:
+    """The renames one recovery will do, and what they repair; nothing changes before :meth:`commit`."""
+
+    def __init__(self) -> None:
+        self.done: list[str] = []
+        self._scratch: list[Path] = []
+        self._renames: list[tuple[Path, Path]] = []
+
+    def scratch(self, target: Path) -> Path:
+        """A hidden, empty path beside ``target`` (same extension) to build its replacement in.
+
+        A scratch file left by an interrupted recovery is removed: it is rebuilt from the sources.
+        """
+        tmp = target.with_name(f".{target.stem}.recovering{target.suffix}")
+        tmp.unlink(missing_ok=True)
+        self._scratch.append(tmp)
+        return tmp
+
+    def replace(self, scratch: Path, target: Path, notes: list[str]) -> None:
+        """At commit, rename the finished ``scratch`` over ``target``; ``notes`` say why."""
+        self._renames.append((scratch, target))
+        self.done += notes
+
+    def keep_as(self, src: Path, dst: Path) -> None:
+        """At commit, rename ``src`` to ``dst`` (never over an existing file).
+
+        Raises
+        ------
+        SessionFormatError
+            If ``dst`` exists already.
+        """
+        if dst.exists():
+            raise SessionFormatError(f"{dst}: expected no file (recovery keeps {src.name} under this name), "
+                                     "found one; move it out of the session and recover again")
+        self._renames.append((src, dst))
+
+    def commit(self) -> None:
+        """Do the renames, in the order they were planned."""
+        for src, dst in self._renames:
+            os.replace(src, dst)
+
+    def discard(self) -> None:
+        """Remove the scratch files not renamed (all of them when planning failed)."""
+        for tmp in self._scratch:
+            tmp.unlink(missing_ok=True)
+
+
+def _kept_bytes(path: Path) -> tuple[bytes, list[str]]:
+    """The bytes of a CSV a recovery keeps (a torn last line cut off) and what was cut."""
     blob = path.read_bytes()
-    if not blob:
-        path.write_text(header + "\n", encoding="utf-8")
-        return [f"{path.name}: wrote the missing header"]
-    if blob.endswith(b"\n"):
-        return []
+    if not blob or blob.endswith(b"\n"):
+        return blob, []
     cut = blob.rfind(b"\n") + 1
-    with open(path, "r+b") as fh:
-        fh.truncate(cut)
-    return [f"{path.name}: dropped a torn last line ({len(blob) - cut} bytes)"]
+    return blob[:cut], [f"{path.name}: dropped a torn last line ({len(blob) - cut} bytes)"]
+
+
+def _stage_text_file(path: Path, header: str, repairs: _Repairs) -> None:
+    """Stage ``path`` without its torn last line (with ``header`` if it would be empty)."""
+    if not path.exists():
+        return
+    kept, notes = _kept_bytes(path)
+    if not kept:
+        kept, notes = (header + "\n").encode(), notes + [f"{path.name}: wrote the missing header"]
+    if notes:
+        tmp = repairs.scratch(path)
+        tmp.write_bytes(kept)
+        repairs.replace(tmp, path, notes)
 
 
 def decode_serlog(path: str | os.PathLike) -> list[HrSample]:
@@ -334,57 +406,109 @@ def decode_serlog(path: str | os.PathLike) -> list[HrSample]:
     return out + decoder.finish()
 
 
-def _recover_heart_rate(folder: Path, info: SessionInfo) -> list[str]:
-    """Append the samples the serial logs hold beyond the rows already in heart_rate.csv."""
+def _stage_heart_rate(folder: Path, repairs: _Repairs) -> None:
+    """Stage heart_rate.csv without a torn line, plus the samples the serial logs hold beyond it."""
     hr_path = folder / HEART_RATE_CSV
-    rows = read_hr_csv(hr_path) if hr_path.exists() else []
+    samples = _serial_samples(folder)
+    kept, notes = _kept_bytes(hr_path) if hr_path.exists() else (b"", [])
+    if hr_path.exists() and not kept:
+        notes.append(f"{HEART_RATE_CSV}: wrote the missing header")
+    tmp = repairs.scratch(hr_path)
+    tmp.write_bytes(kept or (HR_CSV_HEADER + "\n").encode())
+    missing = samples[len(_read_hr_rows(tmp, hr_path)):]
+    if missing:
+        writer = HrWriter(tmp, append=True)
+        for s in missing:
+            writer.write(s)
+        writer.close()
+        notes.append(f"{HEART_RATE_CSV}: restored {len(missing)} rows from the serial log")
+    if notes:
+        repairs.replace(tmp, hr_path, notes)
+
+
+def _serial_samples(folder: Path) -> list[HrSample]:
+    """Every sample the session's serial logs decode to, in time order."""
     samples: list[HrSample] = []
     for log in sorted((folder / SERIAL_DIR).glob("*.serlog")):
         samples += decode_serlog(log)
-    samples.sort(key=lambda s: s.t_s)
-    missing = samples[len(rows):]
-    if not missing:
-        return []
-    writer = HrWriter(hr_path, append=True)
-    for s in missing:
-        writer.write(s)
-    writer.close()
-    return [f"{HEART_RATE_CSV}: restored {len(missing)} rows from the serial log"]
+    return sorted(samples, key=lambda s: s.t_s)
 
 
-def _recover_video(folder: Path) -> list[str]:
-    """Re-index video.avi; keep only frames that both decode and have a time; exact index."""
+def _read_hr_rows(staged: Path, target: Path) -> list[HrSample]:
+    """Read the staged heart-rate rows; an error names the session's file, not the scratch copy."""
+    try:
+        return read_hr_csv(staged)
+    except SessionFormatError as exc:
+        raise SessionFormatError(str(exc).replace(str(staged), str(target))) from None
+    except UnicodeDecodeError as exc:
+        raise SessionFormatError(f"{target}: expected UTF-8 text, found byte {exc.object[exc.start]:#04x} "
+                                 f"at offset {exc.start}") from None
+
+
+def _stage_video(folder: Path, repairs: _Repairs) -> None:
+    """Stage an exact video index: keep only frames that both decode and have a time."""
     avi, frames_csv = folder / VIDEO_AVI, folder / VIDEO_FRAMES_CSV
-    if not avi.exists():
-        return []
+    if not avi.exists() and not frames_csv.exists():
+        return
+    kept, torn = _kept_bytes(frames_csv) if frames_csv.exists() else (b"", [])
+    times = _frame_rows(kept, frames_csv)
+    n_decoded = index_video(avi) if avi.exists() else 0
+    n_keep = _stage_avi(avi, n_decoded, len(times), repairs) if min(n_decoded, len(times)) else 0
+    if n_keep == 0:
+        _stage_no_video(avi, frames_csv, n_decoded, len(times), repairs)
+        return
+    if torn or len(times) != n_keep:
+        trimmed = [f"{VIDEO_FRAMES_CSV}: trimmed {len(times) - n_keep} rows of frames missing from the video"]
+        tmp = repairs.scratch(frames_csv)
+        tmp.write_text("\n".join([FRAMES_HEADER] + times[:n_keep]) + "\n", encoding="utf-8")
+        repairs.replace(tmp, frames_csv, torn + (trimmed if len(times) != n_keep else []))
+
+
+def _stage_avi(avi: Path, n_decoded: int, n_times: int, repairs: _Repairs) -> int:
+    """Stage a rewrite of the AVI if its header or frames disagree with the times; return frames kept.
+
+    Returns 0 when no frame could be rewritten (the caller then keeps no video).
+    """
     import cv2
 
-    times = _frame_rows(frames_csv)
-    n_decoded = index_video(avi)
-    n_keep = min(n_decoded, len(times))
+    n_keep = min(n_decoded, n_times)
     cap = cv2.VideoCapture(str(avi))
     n_header = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
     cap.release()
-    done = []
-    if n_header != n_keep or n_decoded != n_keep:
-        fresh = avi.with_name(".video.recovered.avi")
-        fresh.unlink(missing_ok=True)
-        n_keep = rewrite_video(avi, fresh, max_frames=n_keep)
-        os.replace(fresh, avi)
-        done.append(
-            f"{VIDEO_AVI}: header said {n_header} frames, {n_decoded} decode, {len(times)} have a time; "
-            f"rewrote {n_keep} frames with an exact index"
-        )
-    if len(times) != n_keep:
-        tmp = frames_csv.with_name("." + frames_csv.name + ".tmp")
-        tmp.write_text("\n".join(["frame,t_s"] + times[:n_keep]) + "\n", encoding="utf-8")
-        os.replace(tmp, frames_csv)
-        done.append(f"{VIDEO_FRAMES_CSV}: trimmed {len(times) - n_keep} rows of frames missing from the video")
-    return done
+    if n_header == n_keep and n_decoded == n_keep:
+        return n_keep
+    tmp = repairs.scratch(avi)
+    n_written = rewrite_video(avi, tmp, max_frames=n_keep)
+    if n_written:
+        note = (f"{VIDEO_AVI}: header said {n_header} frames, {n_decoded} decode, {n_times} have a time; "
+                f"rewrote {n_written} frames with an exact index")
+        repairs.replace(tmp, avi, [note])
+    return n_written
 
 
-def _frame_rows(path: Path) -> list[str]:
-    """The data lines of video_frames.csv (empty if absent)."""
-    if not path.exists():
-        return []
-    return [line for line in path.read_text(encoding="utf-8").splitlines()[1:] if line.strip()]
+def _stage_no_video(avi: Path, frames_csv: Path, n_decoded: int, n_times: int, repairs: _Repairs) -> None:
+    """No frame both decodes and has a time: keep both files under other names; no video is left."""
+    kept = []
+    for src, name in ((avi, UNRECOVERABLE_AVI), (frames_csv, UNRECOVERABLE_FRAMES_CSV)):
+        if src.exists():
+            repairs.keep_as(src, src.with_name(name))
+            kept.append(f"{src.name} ({src.stat().st_size} bytes) as {name}")
+    found = f"{avi.stat().st_size} bytes, {n_decoded} frames decode" if avi.exists() else "missing"
+    repairs.done.append(f"{VIDEO_AVI}: no whole frame that decodes and has a time ({found}, {n_times} rows "
+                        f"in {VIDEO_FRAMES_CSV}); kept {' and '.join(kept)}; the session has 0 video frames")
+
+
+def _frame_rows(blob: bytes, path: Path) -> list[str]:
+    """The data lines of the bytes of video_frames.csv ``path`` (the header line skipped).
+
+    Raises
+    ------
+    SessionFormatError
+        If the bytes are not UTF-8 text.
+    """
+    try:
+        lines = blob.decode("utf-8").splitlines()[1:]
+    except UnicodeDecodeError as exc:
+        raise SessionFormatError(f"{path}: expected UTF-8 text, found byte {blob[exc.start]:#04x} "
+                                 f"at offset {exc.start}") from None
+    return [line for line in lines if line.strip()]

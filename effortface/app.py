@@ -149,7 +149,8 @@ class MainWindow(QtWidgets.QMainWindow):
 
     Capture is built at once (it offers to recover crashed sessions at start); the other stages
     are built the first time they are shown. A stage whose code is missing or cannot start shows
-    a placeholder that says why and lists the sessions.
+    a placeholder that says why and lists the sessions. A stage with a ``focus_main()`` method
+    gets the keyboard each time it is shown (it gives the focus to its main widget).
 
     Parameters
     ----------
@@ -211,6 +212,9 @@ class MainWindow(QtWidgets.QMainWindow):
         self.stack.setCurrentIndex(row)
         if isinstance(widget, QtPlaceholderStage):
             widget.refresh(self.sessions_dir)
+        focus_main = getattr(widget, "focus_main", None)
+        if focus_main is not None:  # the keys go to the stage's main widget, not the stage list
+            focus_main()
 
     def show_stage(self, key: str) -> QtWidgets.QWidget:
         """Switch to stage ``key`` and return its widget.

@@ -36,6 +36,8 @@ PAPER_HR = {"per_participant": {"r": 0.88, "rmse_pct": 19.0},
 #: fraction of the progress bar reached after each step (the CV folds fill the middle)
 _STEP_FRACTION = {"prepare": 0.05, "hr": 0.2, "folds": 0.8, "held_out": 0.85, "protocols": 1.0}
 ANY = "any"
+#: the background jobs that :meth:`TrainSession.cancel` can stop (an export always finishes)
+CANCELLABLE_JOBS = ("train", "compare")
 
 
 class Emitter:
@@ -93,6 +95,16 @@ def scan_sessions(folder: str | os.PathLike) -> list[SessionEntry]:
         out.append(SessionEntry(path, info.session_id, info.participant.code, label,
                                 float("nan") if tl is None else float(tl), raters, info.complete))
     return out
+
+
+def _people(entries: Sequence[SessionEntry]) -> str:
+    """Participants of some entries, for a one-line description."""
+    return ", ".join(sorted({e.participant for e in entries}))
+
+
+def _count(items: Sequence[Any], noun: str) -> str:
+    """``"1 session"``, ``"2 sessions"``."""
+    return f"{len(items)} {noun}{'' if len(items) == 1 else 's'}"
 
 
 def filter_entries(entries: Sequence[SessionEntry], participant: str = ANY, exercise: str = ANY,
@@ -467,6 +479,37 @@ class TrainSession:
         """Change settings (validated: a bad value raises UserError and keeps the old ones)."""
         self.settings = dataclasses.replace(self.settings, **changes)
 
+    def known_raters(self) -> list[str]:
+        """Raters of the selected sessions (of every session when none is selected), sorted."""
+        chosen = [e for e in self.entries if e.session_id in self.selected] or self.entries
+        return sorted({r for e in chosen for r in e.raters})
+
+    def set_rater_policy(self, policy: str) -> None:
+        """Use ``"mean"`` or one rater of the selected sessions (a warning if some lack that rater).
+
+        Raises
+        ------
+        UserError
+            For an empty name or a rater who annotated none of the selected sessions (of the
+            lab when none is selected); the settings keep the previous policy.
+        """
+        name = policy.strip()
+        raters = self.known_raters()
+        where = "the selected sessions" if self.selected else f"the sessions of {self.sessions_dir}"
+        if name != "mean" and name not in raters:
+            raise UserError(f"raters: expected 'mean' or a rater of {where} "
+                            f"({', '.join(raters) or 'none annotated'}), found {name or 'nothing'!r}; "
+                            f"training still uses {self.settings.rater_policy!r}")
+        self.set_settings(rater_policy=name)
+        missing = [e.session_id for e in self.entries if e.session_id in self.selected
+                   and name != "mean" and name not in e.raters]
+        if missing:
+            self.status_changed.emit(f"raters: {name} did not annotate {len(missing)} of the selected "
+                                     f"sessions ({', '.join(missing)}): training on them fails", True)
+        else:
+            self.status_changed.emit(
+                f"raters: training uses {'the mean of the raters' if name == 'mean' else name}", False)
+
     def describe_data(self) -> str:
         """One line: what the next training run will use."""
         if self.table_path is not None:
@@ -482,8 +525,60 @@ class TrainSession:
         if not paths:
             raise UserError("sessions: expected at least one selected session or a loaded table, "
                             "found none")
-        return (sessions_table(paths, self.blendshapes, self.settings.rater_policy),
-                [str(p) for p in paths])
+        return self._sessions_table(paths), [str(p) for p in paths]
+
+    def _sessions_table(self, paths: Sequence[Path]) -> pd.DataFrame:
+        return sessions_table(paths, self.blendshapes, self.settings.rater_policy)
+
+    def bundle_sessions(self, *bundles: str | os.PathLike) -> list[SessionEntry]:
+        """Annotated sessions of this lab that the bundles were trained on, in the lab's order.
+
+        A bundle's provenance lists its ``sources`` (session folders, matched here by name); a
+        bundle trained on a table gives the lab's sessions of its ``participants`` instead.
+
+        Raises
+        ------
+        UserError
+            If a folder is not a readable bundle.
+        """
+        from train.bundle import read_bundle
+
+        ids: set[str] = set()
+        for bundle in bundles:
+            prov = read_bundle(Path(bundle)).provenance
+            named = {Path(str(src)).name for src in prov.get("sources", [])}
+            found = {e.session_id for e in self.entries if e.session_id in named}
+            people = set(prov.get("participants", []))
+            ids |= found or {e.session_id for e in self.entries if e.participant in people}
+        return [e for e in self.entries if e.session_id in ids and e.annotated]
+
+    def comparison_data(self, bundle_a: str | os.PathLike, bundle_b: str | os.PathLike
+                        ) -> tuple[list[SessionEntry], str]:
+        """The sessions a comparison runs on, and a line saying which.
+
+        The loaded table if there is one (no entries then), else the ticked sessions, else
+        (nothing ticked) the sessions of this lab that the two models were trained on.
+
+        Raises
+        ------
+        UserError
+            If nothing is ticked and a folder is missing or not a bundle, or neither model was
+            trained on annotated sessions of this lab.
+        """
+        if self.table_path is not None:
+            return [], f"the loaded table {self.table_path}"
+        ticked = [e for e in self.entries if e.session_id in self.selected]
+        if ticked:
+            return ticked, f"the {_count(ticked, 'ticked session')} ({_people(ticked)})"
+        if not (str(bundle_a).strip() and str(bundle_b).strip()):
+            raise UserError("compare: expected two model folders (Compare uses the sessions both were "
+                            "trained on) or ticked sessions, found neither")
+        trained = self.bundle_sessions(bundle_a, bundle_b)
+        if not trained:
+            raise UserError(f"compare: expected ticked sessions, or models trained on annotated "
+                            f"sessions of {self.sessions_dir}; found neither (tick sessions to compare on)")
+        return trained, (f"the {_count(trained, 'session')} the models were trained on (nothing "
+                         f"ticked; {_people(trained)})")
 
     # ---- jobs
     @property
@@ -504,10 +599,21 @@ class TrainSession:
 
         self._start("train", job)
 
+    @property
+    def cancellable(self) -> bool:
+        """True while a job that :meth:`cancel` can stop runs (training or comparison, not export)."""
+        return self.busy and self._worker.job in CANCELLABLE_JOBS
+
     def cancel(self) -> None:
-        """Ask the running training to stop at its next step or fold."""
+        """Ask the running training or comparison to stop at its next step; an export finishes."""
+        if not self.busy:
+            return
+        if not self.cancellable:
+            self.status_changed.emit(f"{self._worker.job} cannot be cancelled: it finishes on its own",
+                                     False)
+            return
         self._worker.cancel_event.set()
-        self.status_changed.emit("cancelling at the next step...", False)
+        self.status_changed.emit(f"{self._worker.job}: cancelling at the next step...", False)
 
     def export(self, out_dir: str | os.PathLike, *, overwrite: bool = False) -> None:
         """Export the last training's bundle, model card and report in the background.
@@ -527,21 +633,49 @@ class TrainSession:
 
     def compare(self, bundle_a: str | os.PathLike, bundle_b: str | os.PathLike,
                 session: str | None = None) -> None:
-        """Load two bundles and predict over one session of the current data, in the background."""
-        blendshapes = self.blendshapes
+        """Load two bundles and predict over one session, in the background (cancellable).
+
+        The data are :meth:`comparison_data`'s: the loaded table, the ticked sessions, or the
+        sessions the two models were trained on. ``session`` defaults to the first of them.
+
+        Raises
+        ------
+        UserError
+            If there are no data to compare on, or a folder is not a readable bundle.
+        """
+        entries, what = self.comparison_data(bundle_a, bundle_b)
+        table_path = self.table_path
 
         def job() -> dict[str, Any]:
-            table, _ = self.table()
-            prepared = prepare(table)
-            sid = session or str(prepared["session"].iloc[0])
-            rows = prepared[prepared["session"] == sid]
-            if rows.empty:
-                raise UserError(f"session: expected one of the training data, found {sid!r}")
-            return {"session": sid, "sessions": sorted(prepared["session"].unique().tolist()),
-                    "measured": measured_curves(rows, blendshapes.names),
-                    "a": compare_bundle(bundle_a, rows), "b": compare_bundle(bundle_b, rows)}
+            table = (read_table(table_path, self.blendshapes) if table_path is not None
+                     else self._sessions_table([e.path for e in entries]))
+            return {"data": what, **self._compare_on(table, bundle_a, bundle_b, session)}
 
         self._start("compare", job)
+
+    def _compare_on(self, table: pd.DataFrame, bundle_a: str | os.PathLike, bundle_b: str | os.PathLike,
+                    session: str | None) -> dict[str, Any]:
+        """The comparison's results on a training table (runs on the worker; stops when cancelled)."""
+        worker = self._worker
+
+        def step(fraction: float, text: str) -> None:
+            if worker.cancel_event.is_set():
+                raise Cancelled(text)
+            worker.report(fraction, text)
+
+        step(0.4, "compare: data read")
+        prepared = prepare(table)
+        sid = session or str(prepared["session"].iloc[0])
+        rows = prepared[prepared["session"] == sid]
+        if rows.empty:
+            raise UserError(f"session: expected one of the compared data, found {sid!r}")
+        step(0.5, "compare: model A")
+        a = compare_bundle(bundle_a, rows)
+        step(0.75, "compare: model B")
+        b = compare_bundle(bundle_b, rows)
+        step(1.0, "compare: done")
+        return {"session": sid, "sessions": sorted(prepared["session"].unique().tolist()),
+                "measured": measured_curves(rows, self.blendshapes.names), "a": a, "b": b}
 
     def _start(self, job: str, fn: Callable[[], Any]) -> None:
         self._worker.start(job, fn)
@@ -580,7 +714,8 @@ class TrainSession:
         elif msg.job == "compare":
             self.comparison = msg.value
             self.comparison_changed.emit()
-            self.status_changed.emit(f"compared on {msg.value['session']}", False)
+            self.status_changed.emit(f"compared on {msg.value['session']} of {msg.value['data']}",
+                                     False)
 
     def wait(self, timeout_s: float | None = None) -> None:
         """Block until the running job ends, then :meth:`poll` (tests and scripts, not the GUI)."""

@@ -8,7 +8,10 @@ undo history, autosave) and a :class:`~annotate.video_index.VideoIndex` (frame-e
 with prefetch): video and face preview side by side, the protocol panel, transport controls, heart
 rate and the curve editor on the session's time axis. Keyboard first: see
 :data:`~annotate.gui.protocol_panel.HELP_TEXT`. Every edit is saved at once (atomic write), so
-closing never asks and a crash loses nothing.
+closing never asks and a crash loses nothing. Editing the rater code hides the open session and the
+reliability round at once, until the new code is confirmed (blind raters never see another's keys
+or ratings). The session list is read again each time the stage is shown (and on F5 / Rescan), and
+playback pauses whenever the editor is out of sight.
 """
 
 from __future__ import annotations
@@ -32,9 +35,12 @@ from annotate.gui.timeline import QtTimeline
 from annotate.session_model import AnnotationSession, check_rater
 from annotate.video_index import VideoIndex
 from capture_tool.errors import UserError
+from capture_tool.gui.widgets import QtElidedLabel
 from capture_tool.session import list_sessions, read_session_info
 
 SPEEDS = (0.25, 0.5, 1.0, 2.0, 4.0)
+#: the side panel (sessions, rater) is this wide, and may shrink to SIDE_MIN_WIDTH on a small screen
+SIDE_WIDTH, SIDE_MIN_WIDTH = 250, 170
 PLAY_TICK_MS = 15
 WEIGHT_NUDGE = 0.05
 _ERROR_STYLE = "color:#842029;"
@@ -68,8 +74,7 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         self._add_shortcuts()
         model.connect("frame_changed", self._show_frame)
         model.connect("keys_changed", lambda *_: self._show_face())
-        model.connect("saved", lambda path: self.saved_label.setText(
-            f"\u2714 all keys saved to {path.name} at {time.strftime('%H:%M:%S')}"))
+        model.connect("saved", self._show_saved)
         model.connect("pass_done", lambda name: self.report(
             f"pass on {name} done: press N for {model.next_blendshape}" if model.next_blendshape
             else f"pass on {name} done: every blendshape keyed", False))
@@ -121,6 +126,14 @@ class QtKeyframeEditor(QtWidgets.QWidget):
             button.setFocusPolicy(QtCore.Qt.FocusPolicy.NoFocus)
             button.clicked.connect(slot)
             row.addWidget(button)
+        self._build_go_to(row)
+        return row
+
+    def _build_go_to(self, row: QtWidgets.QHBoxLayout) -> None:
+        """Speed, frame and time boxes and the save state, after the transport buttons (one row).
+
+        The save state elides when the window is narrow, so the row never widens the stage.
+        """
         self.speed = QtWidgets.QComboBox()
         self.speed.addItems([f"{s:g}x" for s in SPEEDS])
         self.speed.setCurrentIndex(SPEEDS.index(1.0))
@@ -131,17 +144,20 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         self.time_box = QtWidgets.QDoubleSpinBox(minimum=0.0, maximum=self.model.times.duration_s, decimals=3,
                                                  suffix=" s", keyboardTracking=False)
         self.time_box.editingFinished.connect(lambda: self._go(lambda: self.model.go_to_time(self.time_box.value())))
-        self.position = QtWidgets.QLabel()
+        for box in (self.frame_box, self.time_box):
+            box.setToolTip("Type a frame or time and press Enter; Esc cancels")
+            box.installEventFilter(self)
+        self.position = QtWidgets.QLabel(f"/ {self.model.n_frames - 1}")  # the last frame, after the frame box
         for label, widget in (("speed", self.speed), ("frame", self.frame_box), ("time", self.time_box)):
             row.addSpacing(8)
             row.addWidget(QtWidgets.QLabel(label))
             row.addWidget(widget)
+            if widget is self.frame_box:
+                row.addWidget(self.position)
         row.addSpacing(8)
-        row.addWidget(self.position, 1)
-        self.saved_label = QtWidgets.QLabel("no edit yet")
+        self.saved_label = QtElidedLabel("no edit yet", min_chars=8, mode=QtCore.Qt.TextElideMode.ElideRight)
         self.saved_label.setStyleSheet(_INFO_STYLE)
-        row.addWidget(self.saved_label)
-        return row
+        row.addWidget(self.saved_label, 1)
 
     def _add_shortcuts(self) -> None:
         m = self.model
@@ -180,21 +196,36 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         self._guarded(slot)
         self.video_view.setFocus()
 
+    def eventFilter(self, watched: QtCore.QObject, event: QtCore.QEvent) -> bool:  # noqa: N802 - Qt override
+        """Esc in the frame or time box cancels the go-to and hands the keys back to the video."""
+        if (event.type() == QtCore.QEvent.Type.KeyPress and event.key() == QtCore.Qt.Key.Key_Escape
+                and watched in (self.frame_box, self.time_box)):
+            self.cancel_go_to()
+            return True
+        return super().eventFilter(watched, event)
+
+    def cancel_go_to(self) -> None:
+        """Put the current frame and time back in their boxes and focus the video view."""
+        for box, value in ((self.frame_box, self.model.frame), (self.time_box, self.model.t_s)):
+            box.blockSignals(True)
+            box.setValue(value)
+            box.blockSignals(False)
+        self.video_view.setFocus()
+
     def nudge(self, delta: float) -> None:
         """Key the current frame at its weight + ``delta`` (clipped to [0, 1])."""
         w = self.model.weight()
         self.model.set_key(min(max((0.0 if math.isnan(w) else w) + delta, 0.0), 1.0))
 
     def delete_key(self) -> None:
-        """Delete the key selected in the curve editor, else the key on the current frame."""
-        frame = self.timeline.selected if self.timeline.selected is not None else self.model.frame
+        """Delete the current blendshape's key on the current frame (where a selected key always is)."""
+        frame = self.model.frame
         if self.model.delete_key(frame) is None:
             self.report(f"no {self.model.blendshape} key on frame {frame} to delete", True)
 
     def copy_key(self) -> None:
-        """Copy the selected key (else the current frame's key) of the current blendshape."""
-        frame = self.timeline.selected if self.timeline.selected is not None else self.model.frame
-        n = self.model.copy(frame)
+        """Copy the current blendshape's key on the current frame (where a selected key always is)."""
+        n = self.model.copy(self.model.frame)
         self.report(f"copied {n} key{'s' * (n != 1)} of {self.model.blendshape}", n == 0)
 
     def paste(self) -> None:
@@ -221,6 +252,11 @@ class QtKeyframeEditor(QtWidgets.QWidget):
             self.play_button.setChecked(on)
         self.play_button.setText("Pause (Space)" if on else "Play (Space)")
 
+    def hideEvent(self, event: QtGui.QHideEvent) -> None:  # noqa: N802 - Qt override
+        """Pause playback when the editor goes out of sight (another stage, tab or rater)."""
+        self.set_playing(False)
+        super().hideEvent(event)
+
     def _restart_clock(self) -> None:
         self._play_from = (self.model.t_s, time.perf_counter())
 
@@ -242,8 +278,11 @@ class QtKeyframeEditor(QtWidgets.QWidget):
                 box.blockSignals(True)
                 box.setValue(value)
                 box.blockSignals(False)
-        self.position.setText(f"frame {frame} / {self.model.n_frames - 1}   t = {self.model.t_s:.3f} s")
         self._show_face()
+
+    def _show_saved(self, path: Path) -> None:
+        self.saved_label.setText(f"\u2714 all keys saved at {time.strftime('%H:%M:%S')}")
+        self.saved_label.setToolTip(f"every key is saved to {path} as soon as it is set")
 
     def _show_face(self) -> None:
         weights = tuple(0.0 if math.isnan(w) else w for w in self.model.weights().values())
@@ -257,6 +296,12 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         self._play_timer.stop()
         self.model.disconnect_all()
         self.video.close()
+
+
+def _centred_note() -> QtWidgets.QLabel:
+    label = QtWidgets.QLabel(alignment=QtCore.Qt.AlignmentFlag.AlignCenter, wordWrap=True)
+    label.setMinimumWidth(200)
+    return label
 
 
 class QtAnnotateStage(QtWidgets.QWidget):
@@ -289,37 +334,59 @@ class QtAnnotateStage(QtWidgets.QWidget):
         self.sessions.itemDoubleClicked.connect(lambda *_: self.open_selected())
         rater = str(self.settings.value("annotate/rater", "")) if self.settings is not None else ""
         self.rater = QtWidgets.QLineEdit(rater, placeholderText="your code, e.g. R1", maxLength=32)
-        self.rater.returnPressed.connect(self.open_selected)
+        self.rater.textChanged.connect(self._on_rater_edited)
+        self.rater.editingFinished.connect(self._on_rater_confirmed)
+        self.rater.returnPressed.connect(lambda: self.open_selected() if self.tabs.currentIndex() == 0 else None)
         self.open_button = QtWidgets.QPushButton("Open session")
         self.open_button.clicked.connect(self.open_selected)
+        self.rescan_button = QtWidgets.QPushButton("Rescan (F5)", toolTip="List the sessions recorded since")
+        self.rescan_button.clicked.connect(self.refresh_sessions)
         self.status = QtWidgets.QLabel(wordWrap=True)
         self.status.setMinimumHeight(36)
+        self.editor_host = QtWidgets.QStackedWidget()
+        self.placeholder = _centred_note()
+        self.editor_host.addWidget(self.placeholder)
+        self.reliability: QtReliabilityPanel | None = None
+        self.reliability_host = QtWidgets.QStackedWidget()
+        self.reliability_note = _centred_note()
+        self.reliability_host.addWidget(self.reliability_note)
+        self._show_notes()
+        self.tabs = QtWidgets.QTabWidget()
+        self.tabs.addTab(self.editor_host, "Key-frames")
+        self.tabs.addTab(self.reliability_host, "Reliability round")
+        self.tabs.currentChanged.connect(self._on_tab)
+        layout = QtWidgets.QHBoxLayout(self)
+        layout.addWidget(self._build_side())
+        layout.addWidget(self.tabs, 1)
+        self._add_shortcut("F5", self.refresh_sessions)
+
+    def _build_side(self) -> QtWidgets.QWidget:
+        buttons = QtWidgets.QHBoxLayout()
+        buttons.addWidget(self.open_button, 1)
+        buttons.addWidget(self.rescan_button)
         left = QtWidgets.QVBoxLayout()
         left.addWidget(QtWidgets.QLabel("<b>Sessions</b>"))
         left.addWidget(self.sessions, 1)
-        left.addWidget(QtWidgets.QLabel("<b>Rater</b> (you see only your own keys)"))
+        left.addWidget(QtWidgets.QLabel("<b>Rater</b> (you see only your own keys)", wordWrap=True))
         left.addWidget(self.rater)
-        left.addWidget(self.open_button)
+        left.addLayout(buttons)
         left.addWidget(self._build_toolbar())
         left.addWidget(self.status)
         side = QtWidgets.QWidget()
         side.setLayout(left)
-        side.setFixedWidth(250)
-        self.editor_host = QtWidgets.QStackedWidget()
-        self.placeholder = QtWidgets.QLabel("Choose a session, type your rater code and press Open session.",
-                                            alignment=QtCore.Qt.AlignmentFlag.AlignCenter)
-        self.editor_host.addWidget(self.placeholder)
-        self.reliability: QtReliabilityPanel | None = None
-        self.reliability_host = QtWidgets.QStackedWidget()
-        self.reliability_host.addWidget(QtWidgets.QLabel("Type your rater code to join the reliability round.",
-                                                         alignment=QtCore.Qt.AlignmentFlag.AlignCenter))
-        self.tabs = QtWidgets.QTabWidget()
-        self.tabs.addTab(self.editor_host, "Key-frames")
-        self.tabs.addTab(self.reliability_host, "Reliability round")
-        self.tabs.currentChanged.connect(lambda i: self.open_reliability() if i == 1 else None)
-        layout = QtWidgets.QHBoxLayout(self)
-        layout.addWidget(side)
-        layout.addWidget(self.tabs, 1)
+        side.setMinimumWidth(SIDE_MIN_WIDTH)
+        side.setMaximumWidth(SIDE_WIDTH)
+        side.setSizePolicy(QtWidgets.QSizePolicy.Policy.Preferred, QtWidgets.QSizePolicy.Policy.Preferred)
+        self.sessions.setTextElideMode(QtCore.Qt.TextElideMode.ElideMiddle)
+        self.sessions.setHorizontalScrollBarPolicy(QtCore.Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+        return side
+
+    def _add_shortcut(self, seq: str, slot: Callable[[], Any]) -> None:
+        action = QtGui.QAction(self)
+        action.setShortcut(QtGui.QKeySequence(seq))
+        action.setShortcutContext(QtCore.Qt.ShortcutContext.WidgetWithChildrenShortcut)
+        action.triggered.connect(lambda *_: slot())
+        self.addAction(action)
 
     def _build_toolbar(self) -> QtWidgets.QWidget:
         bar = QtWidgets.QToolBar()
@@ -336,10 +403,56 @@ class QtAnnotateStage(QtWidgets.QWidget):
         return bar
 
     def _on_editor(self, fn: Callable[[QtKeyframeEditor], Any]) -> None:
-        if self.editor is None:
+        editor = self.shown_editor()
+        if editor is None:
             self.show_message("open a session first", True)
         else:
-            fn(self.editor)
+            fn(editor)
+
+    def shown_editor(self) -> QtKeyframeEditor | None:
+        """The open session's editor if it is shown (its rater is the confirmed rater code), else None."""
+        return self.editor if self.editor is not None and self.editor_host.currentWidget() is self.editor else None
+
+    # ----------------------------------------------------------------------------------- rater
+    def _on_rater_edited(self, text: str) -> None:
+        """Hide the open session and the reliability round as soon as the code no longer names their rater.
+
+        They come back only when a code is confirmed (Enter, leaving the field, Open session), so a
+        rater typing ``R12`` never sees ``R1``'s keys or report on the way.
+        """
+        rater = text.strip()
+        hidden = False
+        if self.shown_editor() is not None and self.editor.model.rater != rater:
+            self.editor_host.setCurrentWidget(self.placeholder)
+            hidden = True
+        if self.reliability is not None and self.reliability.rater != rater:
+            hidden = hidden or self.reliability_host.currentWidget() is self.reliability
+            self.reliability_host.setCurrentWidget(self.reliability_note)
+        if hidden:
+            self.show_message("rater code changed: press Enter to confirm it")
+        self._show_notes()
+
+    def _on_rater_confirmed(self) -> None:
+        """The typed code is confirmed: show that rater's open session or reliability round."""
+        rater = self.rater.text().strip()
+        if self.editor is not None and self.editor.model.rater == rater:
+            self.editor_host.setCurrentWidget(self.editor)
+        if self.tabs.currentIndex() == 1:
+            self.open_reliability()
+
+    def _show_notes(self) -> None:
+        rater = self.rater.text().strip() or "your code"
+        self.placeholder.setText(
+            f"The open session is hidden while the rater code changes: press Enter or Open session "
+            f"to open the selected session as {rater}." if self.editor is not None
+            else "Choose a session, type your rater code and press Open session.")
+        self.reliability_note.setText("Type your rater code and press Enter to join the reliability round.")
+
+    def _on_tab(self, index: int) -> None:
+        if index == 1:
+            self.open_reliability()
+        else:
+            self.focus_main()
 
     def show_message(self, message: str, is_error: bool = False) -> None:
         """One line in the status area (errors in red)."""
@@ -348,7 +461,9 @@ class QtAnnotateStage(QtWidgets.QWidget):
 
     # -------------------------------------------------------------------------------- sessions
     def refresh_sessions(self) -> None:
-        """List the session folders that have video."""
+        """List the session folders that have video (again), keeping the selected one selected."""
+        item = self.sessions.currentItem()
+        selected = Path(item.data(QtCore.Qt.ItemDataRole.UserRole)) if item is not None else None
         self.sessions.clear()
         try:
             folders = list_sessions(self.sessions_dir)
@@ -360,9 +475,27 @@ class QtAnnotateStage(QtWidgets.QWidget):
                 continue
             item = QtWidgets.QListWidgetItem(self._describe(folder))
             item.setData(QtCore.Qt.ItemDataRole.UserRole, str(folder))
+            item.setToolTip(str(folder))
             self.sessions.addItem(item)
         if self.sessions.count():
             self.sessions.setCurrentRow(0)
+        if selected is not None:
+            self._select_listed(selected)
+
+    def showEvent(self, event: QtGui.QShowEvent) -> None:  # noqa: N802 - Qt override
+        """List the sessions again each time the stage is shown (Capture may have recorded one)."""
+        super().showEvent(event)
+        if not event.spontaneous():
+            self.refresh_sessions()
+
+    def focus_main(self) -> None:
+        """Give the keyboard to the stage's main widget (the video of the open session, else the list)."""
+        if self.tabs.currentIndex() == 1 and self.reliability_host.currentWidget() is self.reliability:
+            self.reliability.poses.setFocus()
+        elif self.shown_editor() is not None:
+            self.editor.video_view.setFocus()
+        else:
+            self.sessions.setFocus()
 
     @staticmethod
     def _describe(folder: Path) -> str:
@@ -392,6 +525,8 @@ class QtAnnotateStage(QtWidgets.QWidget):
             self.show_message(str(exc), True)
             return None
         self.close_session()
+        if self.rater.text().strip() != rater:
+            self.rater.setText(rater)  # the field names whose keys are shown
         self._select_listed(Path(folder))
         self.editor = QtKeyframeEditor(model, video, self.show_message)
         self.editor_host.addWidget(self.editor)
@@ -418,6 +553,7 @@ class QtAnnotateStage(QtWidgets.QWidget):
             self.editor_host.removeWidget(self.editor)
             self.editor.deleteLater()
             self.editor = None
+            self._show_notes()
 
     def open_reliability(self) -> QtReliabilityPanel | None:
         """Show the reliability round for the typed rater."""
@@ -425,6 +561,7 @@ class QtAnnotateStage(QtWidgets.QWidget):
         try:
             check_rater(rater)
         except UserError as exc:
+            self.reliability_host.setCurrentWidget(self.reliability_note)
             self.show_message(str(exc), True)
             return None
         if self.reliability is None:
@@ -448,17 +585,18 @@ class QtAnnotateStage(QtWidgets.QWidget):
 
     def _export(self, suffix: str, filter_: str, path: str | os.PathLike | None, overwrite: bool,
                 write: Callable[[QtKeyframeEditor, Path, bool], Path]) -> Path | None:
-        if self.editor is None:
+        editor = self.shown_editor()
+        if editor is None:
             self.show_message("open a session first", True)
             return None
         if path is None:  # the dialog asks before replacing a file: that is the explicit choice
-            default = self.editor.model.session.path / f"{self.editor.model.rater}_{suffix}"
+            default = editor.model.session.path / f"{editor.model.rater}_{suffix}"
             chosen, _ = QtWidgets.QFileDialog.getSaveFileName(self, "Export", str(default), filter_)
             if not chosen:
                 return None
             path, overwrite = chosen, True
         try:
-            out = write(self.editor, Path(path), overwrite)
+            out = write(editor, Path(path), overwrite)
         except (FileExistsError, OSError, UserError) as exc:
             self.show_message(str(exc), True)
             return None

@@ -23,6 +23,21 @@ _TICK = "  \u2713 pass done"
 _NEXT_READY = "QPushButton { background:#ffd870; font-weight:bold; }"
 
 
+class WheelGuard(QtCore.QObject):
+    """Event filter: a watched widget ignores the mouse wheel unless it has the keyboard focus.
+
+    So scrolling past the weight box, slider or interpolation list never sets a key. The wheel
+    event is ignored (not eaten) so a scrollable parent still scrolls.
+    """
+
+    def eventFilter(self, watched: QtCore.QObject, event: QtCore.QEvent) -> bool:  # noqa: N802 - Qt override
+        """Stop a wheel event for an unfocused watched widget; let everything else through."""
+        if event.type() == QtCore.QEvent.Type.Wheel and not watched.hasFocus():
+            event.ignore()
+            return True
+        return False
+
+
 class QtProtocolPanel(QtWidgets.QWidget):
     """Blendshape order, weight slider and number, interpolation, key buttons (see module docstring).
 
@@ -74,7 +89,15 @@ class QtProtocolPanel(QtWidgets.QWidget):
         self.key_state = QtWidgets.QLabel()
         self.readout = QtWidgets.QLabel()
         self.readout.setTextFormat(QtCore.Qt.TextFormat.RichText)
+        self._guard_wheel()
         self._lay_out()
+
+    def _guard_wheel(self) -> None:
+        """The wheel edits the weight box only once it was clicked or tabbed into (slider, list: never)."""
+        self.number.setFocusPolicy(QtCore.Qt.FocusPolicy.StrongFocus)
+        self._wheel_guard = WheelGuard(self)
+        for widget in (self.number, self.slider, self.interp):
+            widget.installEventFilter(self._wheel_guard)
 
     def _lay_out(self) -> None:
         weight_row = QtWidgets.QHBoxLayout()

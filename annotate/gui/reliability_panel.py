@@ -180,7 +180,7 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         done = sum(self.round.is_done(p.pose_id) for p in self.round.poses)
         n = len(self.round.poses)
         self.status.setText(f"Rater {self.rater}: {done} of {n} poses rated " + (
-            "(round done: the agreement report is shown)" if done == n
+            "(round done: the agreement report is shown and your ratings are locked)" if done == n
             else "(blind: other raters' ratings stay hidden until you finish)"))
         _fill(self.poses, [[p.pose_id, p.session_id.split("_")[0], str(p.frame),
                             "\u2713" if self.round.is_done(p.pose_id) else ""] for p in self.round.poses])
@@ -197,13 +197,17 @@ class QtReliabilityPanel(QtWidgets.QWidget):
             self.image.set_image(read_frame(self.lab_dir / pose.session_id / "video.avi", pose.frame))
         except UserError as exc:
             self.image.setText(str(exc))
-        locked = any((pose.pose_id, n) in self.round.locked for n in self.spins)
+        in_lab_file = any((pose.pose_id, n) in self.round.locked for n in self.spins)
+        locked = in_lab_file or self.round.complete
         for name, spin in self.spins.items():
             value = self.round.rating(pose.pose_id, name)
             spin.setValue(0.0 if value is None else value)
             spin.setEnabled(not locked)
         self.save_button.setEnabled(not locked)
-        self.save_button.setText("Rated in the lab's ratings.csv" if locked else "Save my rating of this pose")
+        self.save_button.setText("Rated in the lab's ratings.csv" if in_lab_file
+                                 else "Round done: ratings locked" if locked else "Save my rating of this pose")
+        self.save_button.setToolTip("You have seen the agreement report: your ratings can no longer change"
+                                    if locked and not in_lab_file else "")
 
     def save_pose(self) -> None:
         """Save this rater's weights for the selected pose (atomic write of their ratings file)."""

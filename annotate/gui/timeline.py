@@ -8,6 +8,7 @@
   blendshapes faint), its key-frames as points. Click a key to select it (and go to its frame),
   drag it to move it in time and weight (one undo step, snapped to a recorded frame), click empty
   space to go to that time, double-click to add a key there; Delete removes the selected key;
+  moving to another frame clears the selection;
 - a cursor line at the current frame's time in both plots; dragging it scrubs the video.
 
 Everything is written back through the model's methods (STYLE.md L3); the widget keeps only the
@@ -205,6 +206,8 @@ class QtTimeline(pg.GraphicsLayoutWidget):
         self.title.setPos(self.t_s[0], 1.05)
 
     def _on_frame(self, frame: int) -> None:
+        if self.selected is not None and self.selected != frame:
+            self.select_key(None)  # Del and Ctrl+C act on the current frame once it moves away
         t = float(self.t_s[frame])
         for line in self.cursors:
             if line.value() != t:

@@ -31,6 +31,10 @@ DEFAULT_REST_BPM = 60.0
 _PLOTTED = {"phase_start": ("{title}", "#303030"), "marker": ("\u2691 {label}", "#6a3d9a"),
             "device_gap": ("strap lost", "#b00020"), "reconnect": ("strap back", "#1b7f3b"),
             "sync": ("sync flash", "#806000")}
+#: what the Record button says in each state, and its colour (red unless listed)
+_STATE_TEXT = {"idle": "\u25CF  Record", "starting": "Starting...", "recording": "\u25A0  Stop",
+               "stopping": "Stopping...", "recovering": "Recovering..."}
+_STATE_COLOUR = {"idle": "#1b7f3b", "recovering": "#6c757d"}
 _BANNER_STYLE = {"warn": "background:#fff3cd; color:#664d03; border:1px solid #e0c060;",
                  "info": "background:#e7f1ff; color:#084298; border:1px solid #9ec5fe;",
                  "error": "background:#f8d7da; color:#842029; border:1px solid #e0a0a8;"}
@@ -62,6 +66,7 @@ class QtCaptureStage(QtWidgets.QWidget):
         self.controller = controller
         self.jobs = Jobs(workers=1)  # start, stop and recover run one at a time, in order
         self._busy = False
+        self._recovering: Path | None = None
         self._banner_reason = ""
         self._contact_lost = 0
         self._contact_ok = True
@@ -330,11 +335,20 @@ class QtCaptureStage(QtWidgets.QWidget):
         self.show_banner(summary, "info")
 
     def _on_recover_done(self, result: JobResult) -> None:
-        self._busy = False
+        """Show what the recovery did or why it failed; offer the next incomplete session.
+
+        A session whose recovery failed is not offered again in this run, so a broken one never
+        hides the others.
+        """
+        folder, self._recovering = self._recovering, None
+        name = folder.name if folder is not None else "the session"
+        self._set_state("idle")
         if result.error is not None:
-            self.show_banner(f"Recovery failed: {result.error}", "error")
+            if folder is not None:
+                self.recovery_bar.mark_failed(folder)
+            self.show_banner(f"Recovery of {name} failed: {_error_line(result.error)}", "error")
         else:
-            self.show_banner("Recovered: " + "; ".join(result.value.get("done", [])), "info")
+            self.show_banner(f"Recovered {name}: " + "; ".join(result.value.get("done", [])), "info")
         self.check_incomplete()
 
     # ----------------------------------------------------------------------------- recovery
@@ -345,25 +359,32 @@ class QtCaptureStage(QtWidgets.QWidget):
         return sessions
 
     def _recover(self, folder: str) -> None:
-        if self._busy or self.controller.recording:
+        """Recover ``folder`` in the background; Record and Recover are disabled until it is done."""
+        if self._busy or self.controller.recording or not folder:
             return
-        self._busy = True
+        self._recovering = Path(folder)
+        self._set_state("recovering")
         self.jobs.submit("recover", self.controller.recover, folder)
 
     # -------------------------------------------------------------------------------- state
     def _set_state(self, state: str) -> None:
-        """idle, starting, recording or stopping: what can be pressed and what the button says."""
-        self._busy = state in ("starting", "stopping")
+        """What can be pressed and what the Record button says.
+
+        Parameters
+        ----------
+        state : str
+            ``idle``, ``starting``, ``recording``, ``stopping`` or ``recovering``.
+        """
+        self._busy = state in ("starting", "stopping", "recovering")
         recording = state == "recording"
-        text = {"idle": "\u25CF  Record", "starting": "Starting...", "recording": "\u25A0  Stop",
-                "stopping": "Stopping..."}[state]
-        self.record_button.setText(text)
-        colour = "#1b7f3b" if state == "idle" else "#b00020"
+        self.record_button.setText(_STATE_TEXT[state])
+        colour = _STATE_COLOUR.get(state, "#b00020")
         self.record_button.setStyleSheet(f"color: white; background: {colour}; border-radius: 6px;")
         self.record_button.setEnabled(not self._busy)
         self.preflight.setEnabled(state == "idle")
         self.form.setEnabled(state == "idle")
         self.phases.setEnabled(recording)
+        self.recovery_bar.set_actions_enabled(state == "idle")
         if state == "idle":
             self.phases.set_current(None)
         self.recording_changed.emit(recording)
@@ -382,7 +403,11 @@ class QtCaptureStage(QtWidgets.QWidget):
 
 
 class _RecoveryBar(QtWidgets.QFrame):
-    """'N sessions were left incomplete by a crash' with a Recover button for the first one."""
+    """'A recording was left incomplete by a crash' with Recover, Next and Later.
+
+    Next moves on to the next incomplete session (round the list), so every one can be reached. A
+    session whose recovery failed (:meth:`mark_failed`) is not offered again in this run.
+    """
 
     recover = QtCore.Signal(str)
 
@@ -391,25 +416,66 @@ class _RecoveryBar(QtWidgets.QFrame):
         self.setStyleSheet(_BANNER_STYLE["warn"])
         self.text = QtWidgets.QLabel(wordWrap=True)
         self.button = QtWidgets.QPushButton("Recover")
+        self.next = QtWidgets.QPushButton("Next")
+        self.next.setToolTip("Offer the next incomplete session instead")
         self.later = QtWidgets.QPushButton("Later")
         layout = QtWidgets.QHBoxLayout(self)
         layout.addWidget(self.text, 1)
-        layout.addWidget(self.button)
-        layout.addWidget(self.later)
-        self.button.clicked.connect(lambda: self.recover.emit(self._first))
+        for button in (self.button, self.next, self.later):
+            layout.addWidget(button)
+        self.button.clicked.connect(lambda: self.recover.emit(self.current()))
+        self.next.clicked.connect(self.show_next)
         self.later.clicked.connect(self.hide)
-        self._first = ""
+        self._sessions: list[Path] = []
+        self._index = 0
+        self._failed: set[Path] = set()
+        self._n_failed = 0  # failed sessions still incomplete
+        self._enabled = True
         self.hide()
 
+    def current(self) -> str:
+        """The session on offer ('' when none)."""
+        return str(self._sessions[self._index]) if self._sessions else ""
+
     def offer(self, sessions: list[Path]) -> None:
-        """Show the offer for ``sessions`` (hide when empty)."""
-        if not sessions:
+        """Offer ``sessions`` except those that failed; stay on the current one, else the next.
+
+        Hides when none is left.
+        """
+        previous = self.current()
+        self._sessions = [Path(s) for s in sessions if Path(s) not in self._failed]
+        self._n_failed = len(sessions) - len(self._sessions)
+        later = [i for i, s in enumerate(self._sessions) if str(s) >= previous]
+        self._index = later[0] if later and previous else 0
+        self._show_current()
+
+    def show_next(self) -> None:
+        """Offer the next session (after the last, the first again)."""
+        if self._sessions:
+            self._index = (self._index + 1) % len(self._sessions)
+        self._show_current()
+
+    def mark_failed(self, folder: str | Path) -> None:
+        """Do not offer ``folder`` again in this run (its recovery failed)."""
+        self._failed.add(Path(folder))
+
+    def set_actions_enabled(self, enabled: bool) -> None:
+        """Enable Recover and Next (disabled while recording, starting, stopping or recovering)."""
+        self._enabled = enabled
+        self.button.setEnabled(enabled and bool(self._sessions))
+        self.next.setEnabled(enabled and len(self._sessions) > 1)
+
+    def _show_current(self) -> None:
+        """Show the offer for the current session, or hide when there is none."""
+        self.set_actions_enabled(self._enabled)
+        if not self._sessions:
             self.hide()
             return
-        self._first = str(sessions[0])
-        more = f" (and {len(sessions) - 1} more)" if len(sessions) > 1 else ""
-        self.text.setText(f"A recording was left incomplete by a crash: <b>{sessions[0].name}</b>{more}. "
-                          "Recover it to finish its files and mark it complete.")
+        n = len(self._sessions)
+        more = f" ({self._index + 1} of {n} incomplete)" if n > 1 else ""
+        failed = f" {self._n_failed} could not be recovered (see the message above)." if self._n_failed else ""
+        self.text.setText(f"A recording was left incomplete by a crash: <b>{self._sessions[self._index].name}</b>"
+                          f"{more}. Recover it to finish its files and mark it complete.{failed}")
         self.show()
 
 
@@ -423,6 +489,12 @@ def session_summary(folder: Path) -> str:
     return (f"Saved, complete: {session.info.session_id}  -  {format_elapsed(stats.get('duration_s', 0.0))}, "
             f"{len(session.heart_rate)} HR rows, {len(session.frame_times_s)} video frames "
             f"({stats.get('dropped_frames', 0)} dropped), {phases} phases, {len(session.events)} events")
+
+
+def _error_line(error: BaseException) -> str:
+    """One line for an error: its message (a UserError's says what and where), else type and message."""
+    text = str(error).strip().splitlines()[0] if str(error).strip() else ""
+    return text if isinstance(error, UserError) else f"{type(error).__name__}: {text}"
 
 
 def _ask(parent: QtWidgets.QWidget, title: str, text: str) -> bool:

@@ -335,3 +335,154 @@ def test_the_pyside_none_leak_is_guarded(qtbot, stage: QtAnnotateStage) -> None:
         assert sys.getrefcount(None) > 1 << 39
     for _ in range(20_000):  # far more than the ~19 000 references None starts with
         stage.status.setText("x")
+
+
+# ------------------------------------------------------------------ review fixes (GUI audit)
+def _wheel(widget, dy: int = 120) -> None:
+    """A mouse-wheel notch over the middle of ``widget`` (spontaneous, as from a real mouse)."""
+    from PySide6 import QtGui, QtWidgets
+
+    pos = QtCore.QPointF(widget.width() / 2, widget.height() / 2)
+    event = QtGui.QWheelEvent(pos, QtCore.QPointF(widget.mapToGlobal(pos.toPoint())), QtCore.QPoint(),
+                              QtCore.QPoint(0, dy), QtCore.Qt.MouseButton.NoButton,
+                              QtCore.Qt.KeyboardModifier.NoModifier, QtCore.Qt.ScrollPhase.NoScrollPhase, False)
+    QtWidgets.QApplication.sendEvent(widget, event)
+
+
+def test_typing_another_rater_code_hides_the_previous_raters_report(qtbot, stage: QtAnnotateStage) -> None:
+    stage.rater.setText("R1")
+    stage.tabs.setCurrentIndex(1)
+    panel = stage.reliability
+    assert panel.isVisible() and panel.report is not None  # R1 has finished: their report is shown
+    stage.rater.clear()
+    qtbot.keyClicks(stage.rater, "R1")  # on the way to R12: must not show R1's round again
+    assert not panel.isVisible() and stage.reliability_note.isVisible()
+    qtbot.keyClicks(stage.rater, "2")
+    assert not panel.isVisible()
+    _press(stage.rater, Key.Key_Return)  # confirmed: R12's own, blind round
+    assert panel.isVisible() and panel.rater == "R12" and panel.report is None
+    assert panel.per_pose.rowCount() == 0 and not panel.results.currentIndex()
+    assert all(s.value() == 0.0 and s.isEnabled() for s in panel.spins.values())
+
+
+def test_typing_another_rater_code_hides_the_open_session(qtbot, stage: QtAnnotateStage, tmp_path: Path) -> None:
+    editor = _open_by_mouse(qtbot, stage, "R1")
+    assert editor.isVisible() and len(editor.model.track) > 0
+    stage.rater.clear()
+    qtbot.keyClicks(stage.rater, "R2")
+    assert not editor.isVisible() and not editor.timeline.isVisible()  # R1's keys and title are gone
+    assert stage.placeholder.isVisible() and "R2" in stage.placeholder.text()
+    assert stage.export_keyframes(tmp_path / "k.json") is None  # nor exported for R2
+    assert not (tmp_path / "k.json").exists()
+    qtbot.mouseClick(stage.open_button, Left)  # R2 opens the session: only R2's keys
+    assert stage.editor is not editor and stage.editor.isVisible() and stage.editor.model.rater == "R2"
+    stage.rater.clear()
+    qtbot.keyClicks(stage.rater, "R2")
+    assert not stage.editor.isVisible()
+    _press(stage.rater, Key.Key_Return)  # the same code confirmed: back to R2's session
+    assert stage.editor.isVisible() and stage.editor.model.rater == "R2"
+
+
+def test_a_rater_who_finished_the_round_cannot_change_a_rating(qtbot, stage: QtAnnotateStage, lab: Path) -> None:
+    stage.rater.setText("R4")
+    stage.tabs.setCurrentIndex(1)
+    panel = stage.reliability
+    for row in range(18):
+        panel.poses.setCurrentCell(row, 0)
+        for spin in panel.spins.values():
+            spin.setValue(0.3)
+        qtbot.mouseClick(panel.save_button, Left)
+    assert panel.report is not None
+    before = (lab / "reliability" / "ratings_R4.csv").read_bytes()
+    panel.poses.setCurrentCell(3, 0)
+    assert not panel.save_button.isEnabled() and "locked" in panel.save_button.text()
+    assert not any(s.isEnabled() for s in panel.spins.values())
+    panel.save_pose()  # even if a save got through, it is refused with a clear message
+    assert "finished the blind round" in panel.status.text()
+    assert (lab / "reliability" / "ratings_R4.csv").read_bytes() == before
+
+
+def test_the_mouse_wheel_over_the_protocol_panel_never_edits(qtbot, stage: QtAnnotateStage) -> None:
+    editor = _open_by_mouse(qtbot, stage, "R9")
+    m, p = editor.model, editor.protocol
+    editor.video_view.setFocus()
+    _press(editor.video_view, Key.Key_Right, times=7)
+    for widget, dy in ((p.number, 120), (p.slider, 120), (p.interp, -120), (p.interp, 120)):
+        _wheel(widget, dy)
+    assert len(m.track) == 0 and not m.can_undo and m.interp == "linear"
+    assert p.interp.currentText() == "linear" and p.number.value() == 0.0
+    qtbot.mouseClick(p.number, Left)  # clicked into: now the wheel is meant for the box
+    assert p.number.hasFocus()
+    _wheel(p.number)
+    assert m.key_at() is not None and m.key_at().weight == pytest.approx(0.01)
+
+
+def test_delete_and_copy_act_on_the_current_frame_not_on_an_old_selection(qtbot, stage: QtAnnotateStage) -> None:
+    editor = _open_by_mouse(qtbot, stage, "R9")
+    m, view, tl = editor.model, editor.video_view, editor.timeline
+    view.setFocus()
+    _press(view, Key.Key_Right, times=2)
+    _press(view, Key.Key_7)
+    QTest.mouseClick(tl.viewport(), Left, pos=_view_point(tl, tl.key_point_scene_pos(2)))  # select it
+    assert tl.selected == 2
+    _press(view, Key.Key_Right, times=20)
+    assert tl.selected is None  # moving away clears the selection
+    _press(view, Key.Key_4)
+    _press(view, Key.Key_C, QtCore.Qt.KeyboardModifier.ControlModifier)
+    _press(view, Key.Key_Delete)
+    assert m.track.get(22) is None and m.track.get(2).weight == pytest.approx(0.7)
+    _press(view, Key.Key_Right)
+    _press(view, Key.Key_V, QtCore.Qt.KeyboardModifier.ControlModifier)
+    assert m.track.get(23).weight == pytest.approx(0.4)  # Ctrl+C copied frame 22's key, not frame 2's
+    _drag(tl, tl.key_point_scene_pos(2), tl.time_scene_pos(m.times.t_at(60), 0.5))  # dragging still works
+    assert m.track.get(2) is None and tl.selected is not None and m.frame == tl.selected
+
+
+def test_escape_in_the_frame_box_cancels_and_gives_the_keys_back(qtbot, stage: QtAnnotateStage) -> None:
+    from PySide6 import QtWidgets
+
+    editor = _open_by_mouse(qtbot, stage, "R9")
+    m, view = editor.model, editor.video_view
+    view.setFocus()
+    _press(view, Key.Key_Right, times=4)
+    _press(view, Key.Key_G, QtCore.Qt.KeyboardModifier.ControlModifier)
+    assert QtWidgets.QApplication.focusWidget() is editor.frame_box
+    qtbot.keyClicks(editor.frame_box, "123")
+    _press(editor.frame_box, Key.Key_Escape)
+    assert QtWidgets.QApplication.focusWidget() is view
+    assert m.frame == 4 and editor.frame_box.text() == "4"
+    _press(QtWidgets.QApplication.focusWidget(), Key.Key_Right)
+    _press(QtWidgets.QApplication.focusWidget(), Key.Key_3)
+    assert m.frame == 5 and m.key_at().weight == pytest.approx(0.3)
+
+
+def test_rescan_lists_a_session_recorded_since_and_keeps_the_selection(qtbot, stage: QtAnnotateStage,
+                                                                       lab: Path) -> None:
+    assert stage.sessions.count() == 1
+    new = "P02_20260112-113700_strength"
+    shutil.copytree(SAMPLES / new, lab / new, ignore=shutil.ignore_patterns("serial", "work.csv"))
+    stage.sessions.setFocus()
+    _press(stage.sessions, Key.Key_F5)
+    assert stage.sessions.count() == 2
+    assert stage.sessions.currentItem().text().startswith(SESSION)  # still the one chosen before
+    shutil.rmtree(lab / new)
+    qtbot.mouseClick(stage.rescan_button, Left)
+    assert stage.sessions.count() == 1
+    shutil.copytree(SAMPLES / new, lab / new, ignore=shutil.ignore_patterns("serial", "work.csv"))
+    stage.hide()
+    stage.show()  # shown again (the main window's stage list does this): listed at once
+    assert stage.sessions.count() == 2
+
+
+def test_hiding_the_stage_pauses_playback(qtbot, stage: QtAnnotateStage) -> None:
+    editor = _open_by_mouse(qtbot, stage, "R1")
+    editor.video_view.setFocus()
+    _press(editor.video_view, Key.Key_Space)
+    assert editor.playing
+    stage.hide()
+    assert not editor.playing and not editor.play_button.isChecked()
+    stage.show()
+    qtbot.mouseClick(editor.play_button, Left)
+    assert editor.playing
+    stage.tabs.setCurrentIndex(1)  # the editor is out of sight on the other tab too
+    assert not editor.playing

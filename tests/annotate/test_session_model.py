@@ -141,3 +141,20 @@ def test_exports_refuse_to_overwrite(session: Path, tmp_path: Path) -> None:
     assert read_annotations(keys) == m.annotations
     with pytest.raises(FileExistsError):
         write_keyframes_json(m.annotations, keys)
+
+
+def test_a_finished_round_is_locked(tmp_path: Path) -> None:
+    """Once every pose is rated the rater has seen the report: no rating may change any more."""
+    shutil.copytree(SAMPLES / "reliability", tmp_path / "reliability")
+    r4 = BlindRound(tmp_path, "R4")
+    for pose in r4.poses:
+        for name in r4.blendshapes.names:
+            r4.set_rating(pose.pose_id, name, 0.25)
+    assert r4.complete
+    before = (tmp_path / "reliability" / "ratings_R4.csv").read_bytes()
+    with pytest.raises(UserError, match="R4 has finished the blind round and seen the agreement report"):
+        r4.set_rating("pose01", "mouth_open", 0.9)
+    with pytest.raises(UserError, match="finished the blind round"):
+        BlindRound(tmp_path, "R4").set_rating("pose02", "eye_squint", 0.1)  # also after reopening
+    assert (tmp_path / "reliability" / "ratings_R4.csv").read_bytes() == before
+    assert r4.rating("pose01", "mouth_open") == 0.25

@@ -198,3 +198,63 @@ def test_pick_a_clip_found_in_the_folder(qtbot, stage: QtSynthStage, shared_data
     assert stage.session.motion_path == shared_data / "motion" / "cmu_13_29_squats_120fps.bvh"
     assert stage.session.n_frames == stage.session.motion.n_frames * stage.session.loops
     assert "squats" in stage.clip_label.text()
+
+
+# --------------------------------------------------------------------------- fixes of the GUI audit
+
+
+def test_long_names_keep_the_stage_1280_wide(qtbot, stage: QtSynthStage, bundle: Path,
+                                             shared_data: Path, tmp_path: Path) -> None:
+    """Long clip and model names elide (whole in the tooltip); the status line wraps."""
+    import shutil
+
+    folder = tmp_path / "a_rather_deeply_nested_folder_of_motion_capture_takes_from_the_lab"
+    folder.mkdir()
+    clip = folder / "participant_P02_session_20260112_113700_strength_take_03_retake_final_v2.bvh"
+    shutil.copy(shared_data / CLIP, clip)
+    model = tmp_path / "bundle_trained_on_all_twelve_sessions_with_the_large_grid_and_mean_raters_v3"
+    shutil.copytree(bundle, model)
+    assert stage.load_clip(clip) and stage.load_model(model)
+    stage.session.wait(30)
+    _play(qtbot, stage)
+    assert stage.minimumSizeHint().width() <= 1100
+    assert clip.name in stage.clip_label.text() and str(clip) in stage.clip_label.toolTip()
+    assert stage.model_label.text() == model.name and str(model) in stage.model_label.toolTip()
+    assert str(model) in stage.status.text()                 # wrapped, not cut
+
+
+def test_clip_combo_shows_the_loaded_clip(qtbot, stage: QtSynthStage, shared_data: Path,
+                                          tmp_path: Path) -> None:
+    import shutil
+
+    combo = stage.clip_combo
+    assert combo.currentText() == Path(CLIP).name            # loaded by the fixture, listed
+    index = combo.findText("cmu_13_29_squats_120fps.bvh")
+    combo.setCurrentIndex(index)
+    combo.activated.emit(index)                              # the user picks squats
+    assert "squats" in stage.clip_label.text()
+    assert stage.load_clip(shared_data / CLIP)               # then opens another listed clip
+    assert combo.currentText() == Path(CLIP).name
+    elsewhere = tmp_path / "elsewhere.bvh"
+    shutil.copy(shared_data / CLIP, elsewhere)
+    assert stage.load_clip(elsewhere)                        # a clip not in the list: neutral entry
+    assert combo.currentIndex() == 0 and combo.currentData() is None
+    assert "elsewhere" in stage.clip_label.text()
+
+
+def test_hiding_the_stage_pauses_playback(qtbot, stage: QtSynthStage) -> None:
+    """Showing another stage of the main window (a QStackedWidget) pauses the clip."""
+    from PySide6 import QtWidgets
+
+    host = QtWidgets.QStackedWidget()
+    qtbot.addWidget(host)
+    other = QtWidgets.QLabel("another stage")
+    host.addWidget(stage)
+    host.addWidget(other)
+    host.show()
+    _play(qtbot, stage)
+    assert stage.timer.isActive()
+    host.setCurrentWidget(other)
+    assert not stage.session.playing and not stage.timer.isActive()
+    assert stage.play_button.text() == "Play" and not stage.play_button.isChecked()
+    stage.setParent(None)                                    # the fixture, not the host, ends it

@@ -183,3 +183,113 @@ def test_compare_needs_two_folders(qtbot, stage: QtTrainStage) -> None:
     qtbot.mouseClick(stage.comparison.compare_button, LEFT)
     assert "expected two model folders" in stage.status.text()
     assert stage.session.comparison is None
+
+
+# --------------------------------------------------------------------------- fixes of the GUI audit
+
+
+def test_stage_fits_a_1280_window_after_training(qtbot, stage: QtTrainStage) -> None:
+    """Captions wrap and tables shrink: the stage fits beside the main window's stage list."""
+    _pick_cardio_small(stage)
+    _train(qtbot, stage)
+    for tab in range(stage.tabs.count()):
+        stage.tabs.setCurrentIndex(tab)
+        assert stage.minimumSizeHint().width() <= 1100, stage.tabs.tabText(tab)
+
+
+def test_export_cannot_be_cancelled_so_cancel_is_disabled(qtbot, stage: QtTrainStage,
+                                                         tmp_path: Path) -> None:
+    _pick_cardio_small(stage)
+    _train(qtbot, stage)
+    assert stage.export(tmp_path / "model")
+    assert stage.session.busy and not stage.train_button.isEnabled()
+    assert not stage.cancel_button.isEnabled()               # an export always finishes
+    stage.session.cancel()                                   # (e.g. closing the window) says so
+    assert "cannot be cancelled" in stage.status.text()
+    qtbot.waitUntil(lambda: not stage.session.busy and stage.train_button.isEnabled(), timeout=TIMEOUT_MS)
+    assert "exported model to" in stage.status.text()
+    assert not stage.cancel_button.isEnabled()
+
+
+def test_cancel_stops_a_comparison(qtbot, stage: QtTrainStage, two_bundles: tuple[Path, Path],
+                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """Cancel is enabled while comparing, and the comparison stops at its next step."""
+    import threading
+
+    import train.train_session as ts
+
+    release, real = threading.Event(), ts.compare_bundle
+
+    def held_compare_bundle(*args):
+        assert release.wait(TIMEOUT_MS / 1000)               # until the test has clicked Cancel
+        return real(*args)
+
+    monkeypatch.setattr(ts, "compare_bundle", held_compare_bundle)
+    _pick_cardio_small(stage)
+    for edit, path in zip(stage.comparison.paths, two_bundles):
+        edit.setText(str(path))
+    qtbot.mouseClick(stage.comparison.compare_button, LEFT)
+    assert stage.cancel_button.isEnabled()
+    qtbot.mouseClick(stage.cancel_button, LEFT)
+    release.set()                                            # model A loads, then the job stops
+    qtbot.waitUntil(lambda: not stage.session.busy and stage.train_button.isEnabled(), timeout=TIMEOUT_MS)
+    assert "compare cancelled" in stage.status.text()
+    assert stage.session.comparison is None
+
+
+def test_rater_field_can_be_cleared_and_retyped(qtbot, stage: QtTrainStage) -> None:
+    """Typing is free; the name is checked when the user is done (Enter, leaving, picking)."""
+    Key = QtCore.Qt.Key
+    _pick_cardio_small(stage)
+    combo = stage.settings_panel.rater
+    edit = combo.lineEdit()
+    edit.selectAll()
+    qtbot.keyClick(edit, Key.Key_Backspace)
+    assert edit.text() == ""                                 # not snapped back to "mean"
+    assert "b00020" not in stage.status.styleSheet()
+    qtbot.keyClicks(edit, "X1")
+    assert edit.text() == "X1"
+    assert stage.session.settings.rater_policy == "mean"     # not written on every keystroke
+    qtbot.keyClick(edit, Key.Key_Return)
+    assert "X1" in stage.status.text() and "R1, R2, R3" in stage.status.text()
+    assert "b00020" in stage.status.styleSheet()
+    assert edit.text() == "X1" and stage.session.settings.rater_policy == "mean"
+    qtbot.mouseClick(stage.train_button, LEFT)               # refused before training starts
+    assert not stage.session.busy and "X1" in stage.status.text()
+
+    edit.selectAll()
+    qtbot.keyClicks(edit, "R2")
+    qtbot.keyClick(edit, Key.Key_Return)
+    assert stage.session.settings.rater_policy == "R2"
+    assert "b00020" not in stage.status.styleSheet() and "R2" in stage.status.text()
+    index = combo.findText("mean")
+    combo.setCurrentIndex(index)
+    combo.activated.emit(index)                              # what a user's pick emits
+    assert stage.session.settings.rater_policy == "mean"
+    assert [combo.itemText(i) for i in range(combo.count())] == ["mean", "R1", "R2", "R3"]
+
+
+def test_compare_without_ticks_uses_the_models_sessions(qtbot, stage: QtTrainStage,
+                                                        two_bundles: tuple[Path, Path]) -> None:
+    """Nothing ticked: the sessions the models were trained on (said, and offered before comparing)."""
+    a, b = two_bundles
+    cmp = stage.comparison
+    assert not stage.session.selected
+    cmp.paths[0].setText(str(a))
+    cmp.paths[1].setText(str(b))
+    assert [cmp.choice.itemText(i) for i in range(cmp.choice.count())] == SESSIONS   # A cardio, B all
+    assert "nothing ticked" in cmp.data_label.text() and "12 sessions" in cmp.data_label.text()
+    cmp.paths[1].setText(str(a))                             # model A against itself: its sessions
+    assert [cmp.choice.itemText(i) for i in range(cmp.choice.count())] == CARDIO
+    assert "6 sessions" in cmp.data_label.text()
+    cmp.choice.setCurrentText(CARDIO[2])
+    qtbot.mouseClick(cmp.compare_button, LEFT)
+    qtbot.waitUntil(lambda: stage.session.comparison is not None, timeout=TIMEOUT_MS)
+    c = stage.session.comparison
+    assert c["session"] == CARDIO[2] and c["sessions"] == CARDIO
+    assert "nothing ticked" in stage.status.text() and "b00020" not in stage.status.styleSheet()
+    assert "Compared on the 6 sessions the models were trained on" in cmp.data_label.text()
+    assert stage.minimumSizeHint().width() <= 1100
+    stage.picker.table.item(1, 0).setCheckState(QtCore.Qt.CheckState.Checked)   # ticked ones win
+    assert "1 ticked session (P01)" in cmp.data_label.text()
+    assert [cmp.choice.itemText(i) for i in range(cmp.choice.count())] == [SESSIONS[1]]

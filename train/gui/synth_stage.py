@@ -21,8 +21,15 @@ from PySide6 import QtCore, QtGui, QtWidgets
 from annotate.face import render_face
 from annotate.gui.qt_compat import guard_none_refcount
 from capture_tool.errors import UserError
+from capture_tool.gui.widgets import QtElidedLabel, caption
 from train.runtime import AGE_RANGE, HEIGHT_RANGE_M, SEXES, TRAINING_LEVEL_RANGE
-from train.synth_session import MAX_LOOPS, SynthSession, find_clips, stick_pairs, view_axes
+from train.synth_session import (
+    MAX_LOOPS,
+    SynthSession,
+    find_clips,
+    stick_pairs,
+    view_axes,
+)
 
 __all__ = ["QtSynthStage", "SynthSession"]
 
@@ -44,6 +51,12 @@ def _show_error(label: QtWidgets.QLabel, text: str, is_error: bool) -> None:
     """Status line: errors in red, news in grey."""
     label.setStyleSheet("color:#b00020;" if is_error else "color:#404040;")
     label.setText(text)
+
+
+def _weights_text(names: tuple[str, ...], weights: np.ndarray, per_line: int = 2) -> str:
+    """``name weight`` pairs, ``per_line`` to a line (the face preview's width, whatever the model)."""
+    pairs = [f"{n.replace('_', ' ')} {w:.2f}" for n, w in zip(names, weights)]
+    return "\n".join("  ".join(pairs[i:i + per_line]) for i in range(0, len(pairs), per_line))
 
 
 # --------------------------------------------------------------------------- character controls
@@ -355,7 +368,7 @@ class QtSynthStage(QtWidgets.QWidget):
 
     # ---- layout
     def _build(self) -> None:
-        self.status = QtWidgets.QLabel("Open a motion clip (.bvh or .npz) to start.")
+        self.status = caption("Open a motion clip (.bvh or .npz) to start.")
         self.skeleton = QtSkeletonView()
         self.face = QtFacePreview()
         self.character = QtCharacterPanel(self.session, self.show_status)
@@ -381,32 +394,41 @@ class QtSynthStage(QtWidgets.QWidget):
     def _file_bar(self) -> QtWidgets.QHBoxLayout:
         self.open_clip_button = QtWidgets.QPushButton("Open clip...")
         self.open_clip_button.clicked.connect(self._ask_clip)
-        self.clip_label = QtWidgets.QLabel("no clip")
-        self.clip_combo = QtWidgets.QComboBox()
-        self.clip_combo.setToolTip(f"motion clips found in {self.motion_dir}")
-        self.clip_combo.setMaximumWidth(230)
-        self.clip_combo.addItem(f"clips in {self.motion_dir.name or self.motion_dir}...", None)
-        for path in find_clips(self.motion_dir):
-            self.clip_combo.addItem(str(path.relative_to(self.motion_dir)), str(path))
-        self.clip_combo.setEnabled(self.clip_combo.count() > 1)
+        self.clip_label = QtElidedLabel("no clip")
+        self.clip_combo = self._clip_combo()
         self.clip_combo.activated.connect(self._on_clip_picked)
         self.open_model_button = QtWidgets.QPushButton("Open model...")
         self.open_model_button.clicked.connect(self._ask_model)
         self.default_model_button = QtWidgets.QPushButton("Built-in rule model")
         self.default_model_button.clicked.connect(lambda: self.load_model("default"))
-        self.model_label = QtWidgets.QLabel()
+        self.model_label = QtElidedLabel()
         self.export_csv_button = QtWidgets.QPushButton("Export CSV...")
         self.export_csv_button.clicked.connect(lambda: self._ask_export("csv"))
         self.export_livelink_button = QtWidgets.QPushButton("Export Live Link Face...")
         self.export_livelink_button.clicked.connect(lambda: self._ask_export("livelink"))
         bar = QtWidgets.QHBoxLayout()
-        for w in (self.open_clip_button, self.clip_combo, self.clip_label):
-            bar.addWidget(w)
-        bar.addStretch(1)
-        for w in (QtWidgets.QLabel("Model:"), self.model_label, self.open_model_button,
-                  self.default_model_button):
-            bar.addWidget(w)
+        for w, stretch in ((self.open_clip_button, 0), (self.clip_combo, 0), (self.clip_label, 1),
+                           (QtWidgets.QLabel("Model:"), 0), (self.model_label, 1),
+                           (self.open_model_button, 0), (self.default_model_button, 0)):
+            bar.addWidget(w, stretch)     # the two names share the room left (elided if short of it)
         return bar
+
+    def _clip_combo(self) -> QtWidgets.QComboBox:
+        """The clips of the motion folder after a neutral entry; its width does not follow the names.
+
+        The list that drops down is as wide as the names need (up to 640 pixels).
+        """
+        combo = QtWidgets.QComboBox()
+        combo.setToolTip(f"motion clips found in {self.motion_dir}")
+        combo.setSizeAdjustPolicy(QtWidgets.QComboBox.SizeAdjustPolicy.AdjustToMinimumContentsLengthWithIcon)
+        combo.setMinimumContentsLength(18)
+        combo.setMaximumWidth(230)
+        combo.addItem(f"clips in {self.motion_dir.name or self.motion_dir}...", None)
+        for path in find_clips(self.motion_dir):
+            combo.addItem(str(path.relative_to(self.motion_dir)), str(path))
+        combo.setEnabled(combo.count() > 1)
+        combo.view().setMinimumWidth(min(combo.view().sizeHintForColumn(0) + 24, 640))
+        return combo
 
     def _player_bar(self) -> QtWidgets.QHBoxLayout:
         self.play_button = QtWidgets.QPushButton("Play")
@@ -530,7 +552,19 @@ class QtSynthStage(QtWidgets.QWidget):
         assert m is not None
         self.clip_label.setText(f"{self.session.motion_path.name if self.session.motion_path else 'clip'}"
                                 f"  ({m.n_frames} frames, {m.fps:g} Hz)")
+        self.clip_label.setToolTip(f"{self.session.motion_path or 'a motion given in memory'}: "
+                                   f"{m.n_frames} frames at {m.fps:g} Hz")
+        self._show_clip_in_combo(self.session.motion_path)
         self.skeleton.set_skeleton(m)
+
+    def _show_clip_in_combo(self, path: Path | None) -> None:
+        """The combo shows the loaded clip, or its neutral first entry if the clip is not listed."""
+        index = 0
+        if path is not None:
+            wanted = Path(path).resolve()
+            index = next((i for i in range(1, self.clip_combo.count())
+                          if Path(self.clip_combo.itemData(i)).resolve() == wanted), 0)
+        self.clip_combo.setCurrentIndex(index)       # emits no activated: loads nothing
 
     def _on_curves_changed(self) -> None:
         s = self.session
@@ -566,8 +600,7 @@ class QtSynthStage(QtWidgets.QWidget):
         t1 = time.perf_counter()
         self.skeleton.show_pose(pose)
         self.face.show_weights(weights)
-        self.weights_label.setText("  ".join(f"{n.replace('_', ' ')} {w:.2f}"
-                                             for n, w in zip(s.model.blendshapes.names, weights)))
+        self.weights_label.setText(_weights_text(s.model.blendshapes.names, weights))
         self.plots.move_cursor(t_s)
         self.slider.blockSignals(True)
         self.slider.setValue(frame)
@@ -578,6 +611,12 @@ class QtSynthStage(QtWidgets.QWidget):
         self.frames_drawn += 1
 
     # ---- hosting
+    def hideEvent(self, event: QtGui.QHideEvent) -> None:
+        """Pause playback when the stage is hidden (another stage shown, window minimised)."""
+        if self.session.playing:
+            self.session.play(False)
+        super().hideEvent(event)
+
     def shutdown(self) -> None:
         """Stop playback and the background recomputes (the main window calls this on exit)."""
         self.timer.stop()

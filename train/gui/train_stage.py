@@ -19,6 +19,7 @@ from PySide6 import QtCore, QtWidgets
 
 from annotate.gui.qt_compat import guard_none_refcount
 from capture_tool.errors import UserError
+from capture_tool.gui.widgets import caption
 from train.face_fit import CV_CHOICES, GRIDS, PROTOCOLS
 from train.train_session import ANY, TrainSession, filter_entries
 
@@ -182,6 +183,7 @@ class QtSettingsPanel(QtWidgets.QGroupBox):
         self.session = session
         self._on_error = on_error
         self.rater = QtWidgets.QComboBox(editable=True)
+        self.rater.setInsertPolicy(QtWidgets.QComboBox.InsertPolicy.NoInsert)
         self.grid = QtWidgets.QComboBox()
         self.grid.addItems(list(GRIDS))
         self.cv = QtWidgets.QComboBox()
@@ -197,7 +199,8 @@ class QtSettingsPanel(QtWidgets.QGroupBox):
         session.sessions_changed.connect(self._fill_raters)
         self._fill_raters()
         self.show_settings()
-        self.rater.currentTextChanged.connect(lambda v: self._write(rater_policy=v))
+        self.rater.lineEdit().editingFinished.connect(self.commit_rater)   # not on every keystroke
+        self.rater.activated.connect(self.commit_rater)                    # a pick from the list
         self.grid.currentTextChanged.connect(lambda v: self._write(grid=v))
         self.cv.currentIndexChanged.connect(lambda i: self._write(cv=self.cv.itemData(i)))
         self.max_rows.valueChanged.connect(lambda v: self._write(max_rows_per_participant=int(v)))
@@ -209,6 +212,22 @@ class QtSettingsPanel(QtWidgets.QGroupBox):
         self.rater.addItems(["mean", *raters])
         self.rater.setCurrentText(self.session.settings.rater_policy)
         self.rater.blockSignals(False)
+
+    def commit_rater(self, *_: Any) -> bool:
+        """Validate and use the rater typed or picked (when it differs from the settings).
+
+        A rejected name is reported in red and stays in the field for the user to correct; the
+        settings keep the previous policy.
+        """
+        text = self.rater.currentText()
+        if text.strip() == self.session.settings.rater_policy:
+            return True
+        try:
+            self.session.set_rater_policy(text)       # says what it did through status_changed
+        except UserError as exc:
+            self._on_error(str(exc), True)
+            return False
+        return True
 
     def _write(self, **changes: Any) -> None:
         try:
@@ -256,8 +275,8 @@ class QtHeartRateResults(QtWidgets.QWidget):
         layout = QtWidgets.QVBoxLayout(self)
         layout.addLayout(row)
         layout.addWidget(self.plot, 3)
-        layout.addWidget(QtWidgets.QLabel("Heart-rate models (pooled and TL model fitted without the scored "
-                                          "participant; the paper's figures in the last columns):"))
+        layout.addWidget(caption("Heart-rate models (pooled and TL model fitted without the scored "
+                                 "participant; the paper's figures in the last columns):"))
         layout.addWidget(self.table, 1)
         session.results_changed.connect(self.show_results)
 
@@ -304,12 +323,11 @@ class QtFaceResults(QtWidgets.QWidget):
         row.addStretch(1)
         layout = QtWidgets.QVBoxLayout(self)
         layout.addLayout(row)
-        layout.addWidget(QtWidgets.QLabel("<span style='color:#1f77b4'>key-framed</span> and "
-                                          "<span style='color:#d62728'>predicted</span> weights "
-                                          "(Fig. 3)"))
+        layout.addWidget(caption("<span style='color:#1f77b4'>key-framed</span> and "
+                                 "<span style='color:#d62728'>predicted</span> weights (Fig. 3)"))
         layout.addWidget(self.plots, 3)
-        layout.addWidget(QtWidgets.QLabel("Face SVR on held-out participants beside the mean and "
-                                          "linear baselines (r, RMSE in % of the observed range):"))
+        layout.addWidget(caption("Face SVR on held-out participants beside the mean and "
+                                 "linear baselines (r, RMSE in % of the observed range):"))
         layout.addWidget(self.table, 2)
         session.results_changed.connect(self.show_results)
 
@@ -360,21 +378,28 @@ class QtCompare(QtWidgets.QWidget):
         self.choice = QtWidgets.QComboBox()
         self.compare_button = QtWidgets.QPushButton("Compare")
         self.compare_button.clicked.connect(self.compare)
+        self.data_label = caption("")
         self.table = QtFrameTable()
         self.plots = pg.GraphicsLayoutWidget()
         self.plots.setBackground("w")
         self.axes: dict[str, pg.PlotItem] = {}
         layout = QtWidgets.QVBoxLayout(self)
         layout.addLayout(self._path_rows())
-        layout.addWidget(QtWidgets.QLabel("Metrics stored in each model.json (held-out participants "
-                                          "of its own training data):"))
+        layout.addWidget(self.data_label)
+        layout.addWidget(caption("Metrics stored in each model.json (held-out participants "
+                                 "of its own training data):"))
         layout.addWidget(self.table, 2)
-        layout.addWidget(QtWidgets.QLabel("<span style='color:#1f77b4'>measured</span>, "
-                                          "<span style='color:#d62728'>model A</span>, "
-                                          "<span style='color:#2ca02c'>model B</span> "
-                                          "(TL model and the participant's expressiveness)"))
+        layout.addWidget(caption("<span style='color:#1f77b4'>measured</span>, "
+                                 "<span style='color:#d62728'>model A</span>, "
+                                 "<span style='color:#2ca02c'>model B</span> "
+                                 "(TL model and the participant's expressiveness)"))
         layout.addWidget(self.plots, 3)
         session.comparison_changed.connect(self.show_comparison)
+        for signal in (session.selection_changed, session.sessions_changed):
+            signal.connect(self.show_data)
+        for edit in self.paths:
+            edit.textChanged.connect(self.show_data)
+        self.show_data()
 
     def _path_rows(self) -> QtWidgets.QGridLayout:
         grid = QtWidgets.QGridLayout()
@@ -387,7 +412,33 @@ class QtCompare(QtWidgets.QWidget):
         grid.addWidget(QtWidgets.QLabel("Session"), 2, 0)
         grid.addWidget(self.choice, 2, 1)
         grid.addWidget(self.compare_button, 2, 2)
+        grid.setColumnStretch(1, 1)
         return grid
+
+    def show_data(self, *_: Any) -> None:
+        """Say which sessions Compare will use and offer them in the Session list."""
+        a, b = (e.text().strip() for e in self.paths)
+        try:
+            entries, what = self.session.comparison_data(a, b)
+        except UserError as exc:
+            self.data_label.setText(str(exc) if a and b else
+                                    "Compare uses the ticked sessions or, with nothing ticked, the "
+                                    "sessions both models were trained on.")
+            return
+        self.data_label.setText(f"Compares on {what}.")
+        self.data_label.setToolTip("\n".join(e.session_id for e in entries))
+        if entries:
+            self._offer_sessions([e.session_id for e in entries])
+
+    def _offer_sessions(self, session_ids: list[str], current: str | None = None) -> None:
+        """The Session list's choices (the current one kept when still offered)."""
+        current = current or self.choice.currentText()
+        self.choice.blockSignals(True)
+        self.choice.clear()
+        self.choice.addItems(session_ids)
+        if current in session_ids:
+            self.choice.setCurrentText(current)
+        self.choice.blockSignals(False)
 
     def _browse(self, edit: QtWidgets.QLineEdit) -> None:
         path = QtWidgets.QFileDialog.getExistingDirectory(self, "Model bundle folder")
@@ -395,7 +446,11 @@ class QtCompare(QtWidgets.QWidget):
             edit.setText(path)
 
     def compare(self) -> None:
-        """Start the comparison of the two folders on the chosen session (errors shown in the stage)."""
+        """Compare the two folders on the chosen session (errors shown in the stage).
+
+        The data are the ticked sessions, or with nothing ticked the sessions both models were
+        trained on (:meth:`TrainSession.comparison_data`); :attr:`data_label` says which.
+        """
         a, b = (e.text().strip() for e in self.paths)
         if not a or not b:
             self._on_error("compare: expected two model folders, found "
@@ -410,13 +465,10 @@ class QtCompare(QtWidgets.QWidget):
         """Metrics side by side and the curves of both models."""
         c = self.session.comparison
         assert c is not None
-        self.choice.blockSignals(True)
-        self.choice.clear()
-        self.choice.addItems(c["sessions"])
-        self.choice.setCurrentText(c["session"])
-        self.choice.blockSignals(False)
         for edit, summary in zip(self.paths, (c["a"], c["b"])):
             edit.setText(str(summary.path))
+        self._offer_sessions(c["sessions"], c["session"])
+        self.data_label.setText(f"Compared on {c['data']}.")
         self.table.show_frame(_side_by_side(c["a"], c["b"]))
         self._draw(c)
 
@@ -533,7 +585,9 @@ class QtTrainStage(QtWidgets.QWidget):
         self.status.setText(text)
 
     def train(self) -> None:
-        """Start training (errors shown in the stage)."""
+        """Start training (errors shown in the stage, a rejected rater name among them)."""
+        if not self.settings_panel.commit_rater():
+            return
         try:
             self.session.start_training()
         except UserError as exc:
@@ -574,7 +628,7 @@ class QtTrainStage(QtWidgets.QWidget):
         for w in (self.train_button, self.picker, self.settings_panel, self.comparison.compare_button):
             w.setEnabled(not busy)
         self.export_button.setEnabled(not busy and self.session.outcome is not None)
-        self.cancel_button.setEnabled(busy)
+        self.cancel_button.setEnabled(busy and self.session.cancellable)   # an export always finishes
 
     def _on_exported(self, path: Path) -> None:
         for edit in self.comparison.paths:

@@ -1,0 +1,104 @@
+"""The Annotate stage inside the main window: keyboard focus, session list and playback across stage
+switches, and a 1280x800 screen."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+from PySide6 import QtCore, QtWidgets
+from PySide6.QtTest import QTest
+
+from effortface.app import STAGES, MainWindow
+
+pytestmark = pytest.mark.qt_log_ignore("This plugin does not support propagateSizeHints")
+
+ROOT = Path(__file__).resolve().parents[2]
+SAMPLES = ROOT / "sample_sessions"
+SESSION = "P01_20260112-093000_cardio"
+LATER = "P02_20260112-113700_strength"
+Key = QtCore.Qt.Key
+Left = QtCore.Qt.MouseButton.LeftButton
+
+
+def _copy_session(name: str, lab: Path) -> None:
+    shutil.copytree(SAMPLES / name, lab / name, ignore=shutil.ignore_patterns("serial", "work.csv"))
+
+
+@pytest.fixture
+def window(qtbot, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> MainWindow:
+    """The main window on a lab with one sample session, the Annotate stage open for R9."""
+    settings_path = tmp_path / "settings.ini"
+    monkeypatch.setenv("EFFORTFACE_SETTINGS", str(settings_path))  # never the user's own settings
+    lab = tmp_path / "lab"
+    _copy_session(SESSION, lab)
+    win = MainWindow(lab, QtCore.QSettings(str(settings_path), QtCore.QSettings.Format.IniFormat))
+    qtbot.addWidget(win)
+    win.resize(1280, 800)
+    win.show()
+    qtbot.waitExposed(win)
+    win.activateWindow()
+    yield win
+    win.shutdown()
+
+
+def _click_stage(window: MainWindow, key: str) -> None:
+    lst = window.stage_list
+    rect = lst.visualItemRect(lst.item(list(STAGES).index(key)))
+    QTest.mouseClick(lst.viewport(), Left, pos=rect.center())
+
+
+def _open(window: MainWindow):
+    _click_stage(window, "annotate")
+    stage = window.stages["annotate"]
+    editor = stage.open_session(window.sessions_dir / SESSION, "R9")
+    assert editor is not None, stage.status.text()
+    return stage, editor
+
+
+def _key_to_focus(key) -> None:
+    QTest.keyClick(QtWidgets.QApplication.focusWidget(), key)
+
+
+def test_the_keyboard_reaches_the_editor_after_switching_stages(qtbot, window: MainWindow) -> None:
+    stage, editor = _open(window)
+    _click_stage(window, "capture")
+    _click_stage(window, "annotate")
+    assert QtWidgets.QApplication.focusWidget() is editor.video_view
+    _key_to_focus(Key.Key_Right)
+    _key_to_focus(Key.Key_Down)  # a weight nudge in the editor, not the next stage
+    assert editor.model.frame == 1 and window.stage_list.currentRow() == list(STAGES).index("annotate")
+
+
+def test_a_session_recorded_meanwhile_is_listed_when_annotate_is_shown_again(qtbot, window: MainWindow) -> None:
+    stage, _ = _open(window)
+    assert stage.sessions.count() == 1
+    _click_stage(window, "capture")
+    _copy_session(LATER, window.sessions_dir)  # what a recording in Capture leaves behind
+    _click_stage(window, "annotate")
+    assert [stage.sessions.item(i).text().split()[0] for i in range(stage.sessions.count())] == [SESSION, LATER]
+    assert stage.sessions.currentItem().text().startswith(SESSION)  # the open session stays selected
+
+
+def test_playback_pauses_when_another_stage_is_shown(qtbot, window: MainWindow) -> None:
+    _, editor = _open(window)
+    _key_to_focus(Key.Key_Space)
+    assert editor.playing
+    _click_stage(window, "capture")
+    assert not editor.playing
+
+
+def test_annotate_fits_a_1280x800_screen(qtbot, window: MainWindow, tmp_path: Path) -> None:
+    stage, editor = _open(window)
+    _key_to_focus(Key.Key_5)  # a saved key: the longest status text of the transport row
+    assert editor.saved_label.text().startswith("\u2714 all keys saved")
+    room = 1280 - window.stage_list.width()
+    assert stage.minimumSizeHint().width() <= room
+    stage.tabs.setCurrentIndex(1)
+    assert stage.minimumSizeHint().width() <= room
+    stage.tabs.setCurrentIndex(0)
+    window.resize(1280, 800)
+    QtWidgets.QApplication.processEvents()
+    assert window.width() == 1280
+    assert window.grab().save(str(tmp_path / "annotate_1280x800.png"))
