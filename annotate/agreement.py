@@ -236,6 +236,8 @@ def ratings_cube(ratings: Sequence[Rating], blendshapes: Sequence[str] | None = 
 
 def _item_stats(name: str, table: np.ndarray, ratings: Iterable[Rating]) -> ItemStats:
     """Statistics of one ``(items, raters)`` table; ICCs on its complete rows only."""
+    if not np.any(np.isfinite(table).sum(axis=1) >= 2):  # no item rated by two raters: nothing to compare
+        return ItemStats(name, int(table.shape[0]), math.nan, math.nan, math.nan, math.nan)
     complete = table[np.all(np.isfinite(table), axis=1)]
     icc_a = icc_a1(complete) if complete.shape[0] >= 2 else math.nan
     icc_c = icc_c1(complete) if complete.shape[0] >= 2 else math.nan
@@ -266,7 +268,8 @@ def agreement_report(ratings: Sequence[Rating], *, flag_pct: float = FLAG_PCT,
     Raises
     ------
     UserError
-        If fewer than two raters, or fewer than two poses rated by two raters, are found.
+        If fewer than two raters or two poses are found, if no pose and blendshape is rated by two
+        raters, or if a pair of raters shares fewer than 2 rated pose blendshapes.
     """
     ratings = list(ratings)
     if blendshapes is not None:
@@ -278,12 +281,21 @@ def agreement_report(ratings: Sequence[Rating], *, flag_pct: float = FLAG_PCT,
         raise UserError(f"ratings{f' ({source})' if source else ''}: expected at least 2 raters and 2 poses, "
                         f"found {len(raters)} raters and {len(poses)} poses")
     per_pose = {p: pct for p in poses if not math.isnan(pct := _pose_pct(ratings, p))}
+    if not per_pose:
+        raise UserError(f"ratings{f' ({source})' if source else ''}: expected at least one pose and blendshape "
+                        f"rated by two raters, found none ({len(raters)} raters never rated the same pose)")
     per_shape = [_item_stats(n, cube[:, j, :], [r for r in ratings if r.blendshape == n])
                  for j, n in enumerate(names)]
     overall = _item_stats("all", cube.reshape(-1, len(raters)), ratings)
     flat = cube.reshape(-1, len(raters))
-    pairs = [bland_altman(flat[:, i], flat[:, j], raters[i], raters[j])
-             for i, j in itertools.combinations(range(len(raters)), 2)]
+    pairs = []
+    for i, j in itertools.combinations(range(len(raters)), 2):
+        shared = int(np.sum(np.isfinite(flat[:, i]) & np.isfinite(flat[:, j])))
+        if shared < 2:
+            raise UserError(f"ratings{f' ({source})' if source else ''}: expected raters {raters[i]} and "
+                            f"{raters[j]} to rate at least 2 pose blendshapes in common (for Bland-Altman), "
+                            f"found {shared}")
+        pairs.append(bland_altman(flat[:, i], flat[:, j], raters[i], raters[j]))
     incomplete = [p for i, p in enumerate(poses) if not np.all(np.isfinite(cube[i]))]
     flagged = [p for p, pct in per_pose.items() if pct > flag_pct]
     return AgreementReport(raters, poses, names, per_pose, per_shape, overall, pairs, flag_pct,

@@ -36,10 +36,12 @@ def open_capture(source: int | str | os.PathLike) -> Any:
     Raises
     ------
     UserError
-        If a video file is missing or cannot be decoded.
+        If a camera index is negative, or a video file is missing or cannot be decoded.
     DeviceError
         If the camera index cannot be opened (reason NOT_FOUND).
     """
+    if isinstance(source, int) and source < 0:
+        raise UserError(f"--camera: expected a camera index >= 0, found {source}")
     cv2 = _cv2()
     if isinstance(source, int):
         cap = cv2.VideoCapture(source)

@@ -23,11 +23,12 @@ at the last time, so no byte is ever lost.
 from __future__ import annotations
 
 import csv
+import math
 import os
 import struct
 from pathlib import Path
 
-from capture_tool.errors import SessionFormatError, UserError
+from capture_tool.errors import SessionFormatError, UserError, not_text_error
 from capture_tool.serlog import MAGIC as SERLOG_MAGIC
 from capture_tool.serlog import read_serlog
 
@@ -59,11 +60,12 @@ def read_timed_capture(path: str | os.PathLike) -> list[Chunk]:
     Raises
     ------
     UserError
-        If the file is missing or unreadable, or its format is not one of the above.
+        If the file is missing, not a regular file or unreadable, or its format is not one of
+        the above (a ``.serlog`` or ``.pcap`` with bad magic says so).
     SessionFormatError
         If a timing CSV or a pcap header is malformed.
     """
-    path = Path(path)
+    path = check_capture_file(path)
     try:
         with open(path, "rb") as fh:
             head = fh.read(len(SERLOG_MAGIC))
@@ -78,9 +80,36 @@ def read_timed_capture(path: str | os.PathLike) -> list[Chunk]:
     elif path.suffix.lower() in RAW_SUFFIXES:
         chunks = _read_raw(path)
     else:
-        raise UserError(f"{path}: expected a .serlog, .pcap or raw .dat/.bin/.raw/.txt capture, "
-                        f"found suffix {path.suffix!r}")
+        raise _bad_format(path, head)
     return _relative(chunks)
+
+
+def check_capture_file(path: str | os.PathLike) -> Path:
+    """``path`` as a Path if it is an existing regular file (never a FIFO or device that reads forever).
+
+    Raises
+    ------
+    UserError
+        If it is missing, a folder or not a regular file.
+    """
+    path = Path(path)
+    if not path.is_file():
+        found = ("nothing (no such file)" if not path.exists() else "a folder" if path.is_dir()
+                 else "a special file (FIFO, device or socket)")
+        raise UserError(f"{path}: expected a readable capture file, found {found}")
+    return path
+
+
+def _bad_format(path: Path, head: bytes) -> UserError:
+    """The error for a file whose magic fits no format: bad magic for a known suffix, else the suffix."""
+    suffix = path.suffix.lower()
+    if suffix == ".serlog":
+        return SessionFormatError(f"{path}: expected a .serlog file starting with {SERLOG_MAGIC!r}, found {head!r}")
+    if suffix == ".pcap":
+        return SessionFormatError(f"{path}: expected a libpcap file starting with magic a1b2c3d4 or a1b23c4d, "
+                                  f"found {head[:4].hex() or 'an empty file'}")
+    return UserError(f"{path}: expected a .serlog, .pcap or raw .dat/.bin/.raw/.txt capture, "
+                     f"found suffix {path.suffix!r}")
 
 
 def _relative(chunks: list[Chunk]) -> list[Chunk]:
@@ -129,14 +158,18 @@ def find_timing_file(path: str | os.PathLike) -> Path | None:
             return path.parent / name
     for cand in sorted(path.parent.glob("*timing.csv")):
         prefix = cand.name[: -len("timing.csv")].rstrip("-_")
-        if prefix and path.stem.startswith(prefix):
+        if prefix and path.stem.startswith(prefix) and cand.is_file():
             return cand
     return None
 
 
 def _read_timing_rows(timing: Path) -> list[list[str]]:
-    with open(timing, newline="", encoding="utf-8") as fh:
-        return [row for row in csv.reader(fh) if row]
+    """The non-empty rows of a timing CSV; SessionFormatError naming it if it is not CSV text."""
+    try:
+        with open(timing, newline="", encoding="utf-8") as fh:
+            return [row for row in csv.reader(fh) if row]
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise not_text_error(timing, exc) from None
 
 
 def _is_number(text: str) -> bool:
@@ -160,12 +193,37 @@ def _offset_column(header: list[str], path: Path, timing: Path) -> int:
 
 
 def _parse_row(row: list[str], col: int, timing: Path, line: int) -> tuple[float, int]:
+    """``(time, offset)`` of one timing row; SessionFormatError naming the line unless both are numbers."""
     try:
-        return float(row[0]), int(row[col])
+        t, offset = float(row[0]), int(row[col])
     except (ValueError, IndexError):
+        t, offset = math.nan, -1
+    if not math.isfinite(t) or offset < 0:
         raise SessionFormatError(
-            f"{timing}: line {line}: expected 'time,offset' numbers, found {','.join(row)!r}"
-        ) from None
+            f"{timing}: line {line}: expected 'time,offset' numbers (offset >= 0), found {','.join(row)!r}"
+        )
+    return t, offset
+
+
+def _start_marks(rows: list[list[str]], col: int, timing: Path) -> list[tuple[float, int]]:
+    """The ``(time, START offset)`` rows after the header; they must exist and be in offset order.
+
+    Raises
+    ------
+    SessionFormatError
+        If there is no row after the header, or an offset is below the one before it (the
+        message names the timing file and line).
+    """
+    if len(rows) < 2:
+        raise SessionFormatError(f"{timing}: expected 'time,offset' rows after the header, found none")
+    marks: list[tuple[float, int]] = []
+    for line, row in enumerate(rows[1:], 2):
+        t, start = _parse_row(row, col, timing, line)
+        if marks and start < marks[-1][1]:
+            raise SessionFormatError(f"{timing}: line {line}: expected an offset >= {marks[-1][1]} "
+                                     f"(offsets in order), found {start}")
+        marks.append((t, start))
+    return marks
 
 
 def _chunks_from_ends(blob: bytes, rows: list[list[str]], timing: Path) -> list[Chunk]:
@@ -185,7 +243,7 @@ def _chunks_from_ends(blob: bytes, rows: list[list[str]], timing: Path) -> list[
 
 def _chunks_from_starts(blob: bytes, rows: list[list[str]], col: int, timing: Path) -> list[Chunk]:
     """Header row then ``(time, START offset)`` rows: one frame per row."""
-    marks = [_parse_row(row, col, timing, line) for line, row in enumerate(rows[1:], 2)]
+    marks = _start_marks(rows, col, timing)
     chunks: list[Chunk] = []
     if marks and marks[0][1] > 0:
         chunks.append((marks[0][0], blob[: marks[0][1]]))

@@ -6,6 +6,7 @@ a missing device). The command line prints its message as one line and exits wit
 
 from __future__ import annotations
 
+import csv
 import enum
 
 
@@ -15,6 +16,26 @@ class UserError(ValueError):
 
 class SessionFormatError(UserError):
     """A session folder or one of its files does not follow the session format."""
+
+
+def not_text_error(path: object, exc: UnicodeDecodeError | csv.Error) -> SessionFormatError:
+    """The SessionFormatError for a file that should be UTF-8 CSV text but is not.
+
+    Parameters
+    ----------
+    path : path-like
+        The file, named in the message.
+    exc : UnicodeDecodeError or csv.Error
+        What reading it raised.
+
+    Returns
+    -------
+    SessionFormatError
+    """
+    if isinstance(exc, UnicodeDecodeError):
+        return SessionFormatError(f"{path}: expected UTF-8 text, found byte {exc.object[exc.start]:#04x} "
+                                  "that is not UTF-8 (a binary file?)")
+    return SessionFormatError(f"{path}: expected CSV text, found unreadable CSV ({exc})")
 
 
 class DeviceErrorReason(enum.Enum):

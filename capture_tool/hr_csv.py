@@ -12,7 +12,7 @@ import csv
 import os
 from pathlib import Path
 
-from capture_tool.errors import SessionFormatError
+from capture_tool.errors import SessionFormatError, not_text_error
 from capture_tool.protocols import HrSample
 
 HR_CSV_COLUMNS = ("t_s", "hr_bpm", "rr_ms", "beat_count", "device", "valid")
@@ -74,21 +74,31 @@ def read_hr_csv(path: str | os.PathLike) -> list[HrSample]:
     Raises
     ------
     SessionFormatError
-        If the header differs or a row cannot be parsed (the message names the file and line).
+        If the file is a folder or not UTF-8 CSV text, the header differs or a row cannot be
+        parsed (the message names the file and line).
     """
     path = Path(path)
-    with open(path, newline="", encoding="utf-8") as fh:
-        reader = csv.DictReader(fh)
-        if tuple(reader.fieldnames or ()) != HR_CSV_COLUMNS:
+    if path.is_dir():
+        raise SessionFormatError(f"{path}: expected a heart-rate CSV file, found a folder")
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            return _read_rows(csv.DictReader(fh), path)
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise not_text_error(path, exc) from None
+
+
+def _read_rows(reader: csv.DictReader, path: Path) -> list[HrSample]:
+    """Check the header of ``reader`` (reading ``path``) and parse its rows."""
+    if tuple(reader.fieldnames or ()) != HR_CSV_COLUMNS:
+        raise SessionFormatError(
+            f"{path}: expected header {HR_CSV_HEADER!r}, found {','.join(reader.fieldnames or [])!r}"
+        )
+    out: list[HrSample] = []
+    for row in reader:
+        try:
+            out.append(_parse_row(row))
+        except (ValueError, TypeError, AttributeError) as exc:
             raise SessionFormatError(
-                f"{path}: expected header {HR_CSV_HEADER!r}, found {','.join(reader.fieldnames or [])!r}"
-            )
-        out: list[HrSample] = []
-        for row in reader:
-            try:
-                out.append(_parse_row(row))
-            except (ValueError, TypeError, AttributeError) as exc:
-                raise SessionFormatError(
-                    f"{path}: line {reader.line_num}: expected a heart-rate row, found {row!r} ({exc})"
-                ) from None
+                f"{path}: line {reader.line_num}: expected a heart-rate row, found {row!r} ({exc})"
+            ) from None
     return out

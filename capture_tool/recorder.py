@@ -21,9 +21,9 @@ from capture_tool import __version__
 from capture_tool.camera import CameraSource, index_video, rewrite_video
 from capture_tool.errors import SessionFormatError
 from capture_tool.hr_csv import HR_CSV_HEADER, read_hr_csv
-from capture_tool.protocols import DeviceEvent, HrSample, get_decoder
-from capture_tool.serial_link import SerialLink, is_simulated_port
-from capture_tool.serlog import DATA, EVENT, read_serlog
+from capture_tool.protocols import PROTOCOLS, DeviceEvent, HrSample, get_decoder
+from capture_tool.serial_link import SerialLink, check_port_exists, is_simulated_port
+from capture_tool.serlog import DATA, EVENT, Serlog, read_serlog
 from capture_tool.session import (
     EVENTS_CSV,
     EVENTS_HEADER,
@@ -69,10 +69,13 @@ def device_startup_frames(protocol: str, port: str) -> list[bytes]:
     Raises
     ------
     DeviceError
-        ``NO_KEY`` for a real ANT stick without a network key (the message says how to get one).
+        ``NOT_FOUND`` for a port that does not exist (checked first, so a missing port is not
+        reported as a missing key); ``NO_KEY`` for a real ANT stick without a network key (the
+        message says how to get one).
     """
     if protocol != "ant" or is_simulated_port(port):
         return []
+    check_port_exists(port)
     from capture_tool.protocols.ant_stick import load_network_key, open_sequence
 
     return open_sequence(load_network_key())
@@ -371,8 +374,19 @@ class _Repairs:
             tmp.unlink(missing_ok=True)
 
 
+def _present(path: Path) -> bool:
+    """True if a session file exists; SessionFormatError if it is a folder or not a regular file."""
+    if not path.exists():
+        return False
+    if not path.is_file():
+        found = "a folder" if path.is_dir() else "a special file"
+        raise SessionFormatError(f"{path}: expected a file, found {found}")
+    return True
+
+
 def _kept_bytes(path: Path) -> tuple[bytes, list[str]]:
     """The bytes of a CSV a recovery keeps (a torn last line cut off) and what was cut."""
+    _present(path)
     blob = path.read_bytes()
     if not blob or blob.endswith(b"\n"):
         return blob, []
@@ -393,23 +407,52 @@ def _stage_text_file(path: Path, header: str, repairs: _Repairs) -> None:
         repairs.replace(tmp, path, notes)
 
 
-def decode_serlog(path: str | os.PathLike) -> list[HrSample]:
-    """Decode a ``.serlog`` exactly as the link did live (a gap event ends the partial frame)."""
+def decode_serlog(path: str | os.PathLike, notes: list[str] | None = None) -> list[HrSample]:
+    """Decode a ``.serlog`` exactly as the link did live (a gap event ends the partial frame).
+
+    Parameters
+    ----------
+    path : path-like
+        The serial log.
+    notes : list of str, optional
+        Receives a line counting the corrupt event records skipped, if any.
+
+    Returns
+    -------
+    list of HrSample
+
+    Raises
+    ------
+    SessionFormatError
+        If the file is not a serial log or its header names no known protocol.
+    """
     log = read_serlog(path)
-    decoder = get_decoder(str(log.header.get("protocol", "")))
+    decoder = get_decoder(_header_protocol(log))
     out: list[HrSample] = []
     for rec in log.records:
         if rec.kind == DATA:
             out += decoder.feed(rec.payload, rec.t_s)
         elif rec.kind == EVENT and rec.event().get("kind") == "device_gap":
             out += decoder.finish()
+    corrupt = sum(rec.is_corrupt_event() for rec in log.records)
+    if corrupt and notes is not None:
+        notes.append(f"{log.path.name}: skipped {corrupt} corrupt event record(s)")
     return out + decoder.finish()
+
+
+def _header_protocol(log: Serlog) -> str:
+    """The protocol a serial log's header names; SessionFormatError naming the file if unknown."""
+    protocol = log.header.get("protocol")
+    if not isinstance(protocol, str) or protocol not in PROTOCOLS:
+        raise SessionFormatError(f"{log.path}: header field 'protocol': expected one of "
+                                 f"{', '.join(sorted(PROTOCOLS))}, found {protocol!r}")
+    return protocol
 
 
 def _stage_heart_rate(folder: Path, repairs: _Repairs) -> None:
     """Stage heart_rate.csv without a torn line, plus the samples the serial logs hold beyond it."""
     hr_path = folder / HEART_RATE_CSV
-    samples = _serial_samples(folder)
+    samples = _serial_samples(folder, repairs.done)
     kept, notes = _kept_bytes(hr_path) if hr_path.exists() else (b"", [])
     if hr_path.exists() and not kept:
         notes.append(f"{HEART_RATE_CSV}: wrote the missing header")
@@ -426,11 +469,11 @@ def _stage_heart_rate(folder: Path, repairs: _Repairs) -> None:
         repairs.replace(tmp, hr_path, notes)
 
 
-def _serial_samples(folder: Path) -> list[HrSample]:
-    """Every sample the session's serial logs decode to, in time order."""
+def _serial_samples(folder: Path, notes: list[str]) -> list[HrSample]:
+    """Every sample the session's serial logs decode to, in time order (``notes`` get skipped events)."""
     samples: list[HrSample] = []
     for log in sorted((folder / SERIAL_DIR).glob("*.serlog")):
-        samples += decode_serlog(log)
+        samples += decode_serlog(log, notes)
     return sorted(samples, key=lambda s: s.t_s)
 
 
@@ -440,15 +483,12 @@ def _read_hr_rows(staged: Path, target: Path) -> list[HrSample]:
         return read_hr_csv(staged)
     except SessionFormatError as exc:
         raise SessionFormatError(str(exc).replace(str(staged), str(target))) from None
-    except UnicodeDecodeError as exc:
-        raise SessionFormatError(f"{target}: expected UTF-8 text, found byte {exc.object[exc.start]:#04x} "
-                                 f"at offset {exc.start}") from None
 
 
 def _stage_video(folder: Path, repairs: _Repairs) -> None:
     """Stage an exact video index: keep only frames that both decode and have a time."""
     avi, frames_csv = folder / VIDEO_AVI, folder / VIDEO_FRAMES_CSV
-    if not avi.exists() and not frames_csv.exists():
+    if not _present(avi) and not _present(frames_csv):
         return
     kept, torn = _kept_bytes(frames_csv) if frames_csv.exists() else (b"", [])
     times = _frame_rows(kept, frames_csv)

@@ -76,6 +76,22 @@ def _device_error(port: str, exc: BaseException) -> DeviceError:
     return DeviceError(f"--port {port}: could not open ({text.splitlines()[0] if text else type(exc).__name__})")
 
 
+def check_port_exists(port: str) -> None:
+    """Raise DeviceError NOT_FOUND if ``port`` is a POSIX device path that does not exist.
+
+    URLs (``loop://``, ``replay://...``) and Windows names (``COM3``) are not checked: opening
+    them reports any problem.
+
+    Raises
+    ------
+    DeviceError
+        With reason NOT_FOUND, the message of a failed open.
+    """
+    if "://" in port or os.name != "posix" or os.path.exists(port):
+        return
+    raise _device_error(port, FileNotFoundError(errno.ENOENT, "No such file or directory", port))
+
+
 def is_simulated_port(port: str) -> bool:
     """True for pyserial URLs and pseudo-terminals (replays), which need no device configuration."""
     if "://" in port:

@@ -39,8 +39,22 @@ class SerlogRecord:
     payload: bytes
 
     def event(self) -> dict[str, str]:
-        """The event dict of an EVENT record."""
-        return json.loads(self.payload.decode("utf-8"))
+        """The event dict of an EVENT record; ``{}`` if its payload is not a UTF-8 JSON object.
+
+        Returns
+        -------
+        dict
+            ``{"kind", "label", "value"}``, or ``{}`` for a corrupt payload (see :meth:`is_corrupt_event`).
+        """
+        try:
+            event = json.loads(self.payload.decode("utf-8"))
+        except (UnicodeDecodeError, json.JSONDecodeError):
+            return {}
+        return event if isinstance(event, dict) else {}
+
+    def is_corrupt_event(self) -> bool:
+        """True for an EVENT record whose payload is not a UTF-8 JSON object."""
+        return self.kind == EVENT and not self.event()
 
 
 @dataclasses.dataclass
@@ -115,6 +129,21 @@ class SerlogWriter:
         self.close()
 
 
+def _check_file(path: str | os.PathLike) -> Path:
+    """``path`` as a Path if it is an existing regular file.
+
+    Raises
+    ------
+    SessionFormatError
+        If it is missing, a folder, or not a regular file (a FIFO, a device...).
+    """
+    path = Path(path)
+    if not path.is_file():
+        found = "nothing" if not path.exists() else "a folder" if path.is_dir() else "a special file"
+        raise SessionFormatError(f"{path}: expected a .serlog file, found {found}")
+    return path
+
+
 def read_serlog(path: str | os.PathLike) -> Serlog:
     """Read a ``.serlog`` file, tolerating a truncated last record.
 
@@ -130,9 +159,10 @@ def read_serlog(path: str | os.PathLike) -> Serlog:
     Raises
     ------
     SessionFormatError
-        If the file does not start with the serlog magic or its header is not JSON.
+        If the path is not a regular file, does not start with the serlog magic or its header
+        is not JSON.
     """
-    path = Path(path)
+    path = _check_file(path)
     blob = path.read_bytes()
     if not blob.startswith(MAGIC):
         raise SessionFormatError(
@@ -170,7 +200,7 @@ def read_serlog_header(path: str | os.PathLike) -> dict:
     SessionFormatError
         If the file does not start with the serlog magic or its header is not a JSON object.
     """
-    path = Path(path)
+    path = _check_file(path)
     with open(path, "rb") as fh:
         magic = fh.read(len(MAGIC))
         line = fh.readline(1 << 20)

@@ -26,7 +26,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any, TextIO
 
-from capture_tool.errors import SessionFormatError, UserError
+from capture_tool.errors import SessionFormatError, UserError, not_text_error
 from capture_tool.fileio import refuse_overwrite, write_json_atomic  # noqa: F401  (re-exported for callers)
 from capture_tool.hr_csv import HR_CSV_HEADER, format_hr_row, read_hr_csv
 from capture_tool.protocols import HrSample
@@ -48,7 +48,7 @@ _LABEL_RE = re.compile(r"^[A-Za-z0-9-]{1,32}$")
 _ID_RE = re.compile(r"^(?P<code>[A-Z][A-Z0-9-]{1,15})_(?P<stamp>\d{8}-\d{6})(?:_(?P<label>[A-Za-z0-9-]{1,32}))?$")
 _STAMP_FMT = "%Y%m%d-%H%M%S"
 SEXES = ("female", "male")
-_SEX_ALIASES = {"f": "female", "m": "male", "female": "female", "male": "male"}
+SEX_ALIASES = {"f": "female", "m": "male", "female": "female", "male": "male"}
 
 
 # ----------------------------------------------------------------------------------- participant
@@ -84,11 +84,11 @@ class Participant:
     def __post_init__(self) -> None:
         check_participant_code(self.code)
         if self.sex is not None:
-            sex = _SEX_ALIASES.get(str(self.sex).strip().lower())
+            sex = SEX_ALIASES.get(str(self.sex).strip().lower())
             if sex is None:
                 raise UserError(f"participant sex: expected one of {', '.join(SEXES)}, found {self.sex!r}")
             object.__setattr__(self, "sex", sex)
-        for name, (lo, hi) in _RANGES.items():
+        for name, (lo, hi) in PARTICIPANT_RANGES.items():
             _check_range(name, getattr(self, name), lo, hi)
         if self.hr_rest_bpm is not None and self.hr_max_bpm is not None and self.hr_rest_bpm >= self.hr_max_bpm:
             raise UserError(
@@ -105,15 +105,26 @@ class Participant:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Participant:
-        """Build from a ``session.json`` ``participant`` dict (unknown keys are an error)."""
+        """Build from a ``session.json`` ``participant`` object (not an object, unknown keys or no
+        ``code`` are a UserError naming the problem)."""
+        if not isinstance(data, dict):
+            raise UserError(f"participant: expected a JSON object, found {_json_type(data)}")
         names = {f.name for f in dataclasses.fields(cls)}
         unknown = set(data) - names
         if unknown:
             raise UserError(f"participant: expected keys among {sorted(names)}, found {sorted(unknown)}")
+        if "code" not in data:
+            raise UserError(f"participant: expected the key 'code', found only {sorted(data)}")
         return cls(**data)
 
 
-_RANGES = {
+def _json_type(value: Any) -> str:
+    """The JSON name of a parsed value's type (``object``, ``array``, ``string``...), for messages."""
+    names = {dict: "object", list: "array", str: "string", bool: "boolean", int: "number", float: "number"}
+    return "null" if value is None else f"{names.get(type(value), type(value).__name__)} {value!r}"[:80]
+
+
+PARTICIPANT_RANGES = {
     "age": (5, 120),
     "height_m": (0.5, 2.5),
     "mass_kg": (15, 300),
@@ -238,17 +249,20 @@ class SessionInfo:
                 f"{source}: expected schema_version {SCHEMA_VERSION}, found {data['schema_version']!r}"
             )
         try:
-            participant = Participant.from_dict(dict(data["participant"]))
+            participant = Participant.from_dict(data["participant"])
         except (UserError, TypeError, ValueError) as exc:
             raise SessionFormatError(f"{source}: {exc}") from None
+        if not isinstance(data["complete"], bool):
+            raise SessionFormatError(f"{source}: field 'complete': expected true or false, "
+                                     f"found {_json_type(data['complete'])}")
         known = {"schema_version", "session_id", "complete", "created_utc", "participant", "devices", "software"}
         return cls(
             session_id=str(data["session_id"]),
             participant=participant,
-            devices=dict(data.get("devices") or {}),
-            complete=bool(data["complete"]),
+            devices=_object_field(data, "devices", source),
+            complete=data["complete"],
             created_utc=str(data.get("created_utc", "")),
-            software=dict(data.get("software") or {}),
+            software=_object_field(data, "software", source),
             extra={k: v for k, v in data.items() if k not in known},
         )
 
@@ -272,15 +286,45 @@ class SessionInfo:
         return path
 
 
+def _object_field(data: dict[str, Any], key: str, source: str | os.PathLike) -> dict[str, Any]:
+    """``data[key]`` as a dict ({} when absent or null); SessionFormatError naming ``source`` otherwise.
+
+    Parameters
+    ----------
+    data : dict
+        The parsed ``session.json``.
+    key : str
+        The field, e.g. ``"devices"``.
+    source : path-like
+        The file, for the message.
+
+    Returns
+    -------
+    dict
+        A copy of the field.
+    """
+    value = data.get(key)
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise SessionFormatError(f"{source}: field {key!r}: expected a JSON object, found {_json_type(value)}")
+    return dict(value)
+
+
 def read_session_info(folder: str | os.PathLike) -> SessionInfo:
     """Read ``folder/session.json``.
 
     Raises
     ------
     SessionFormatError
-        If the file is missing, not JSON, or does not follow schema version 1.
+        If ``folder`` is a file, ``session.json`` is missing, a folder or not JSON, or it does not
+        follow schema version 1 (a field of the wrong JSON type is named).
     """
     path = Path(folder) / SESSION_JSON
+    if Path(folder).exists() and not Path(folder).is_dir():
+        raise SessionFormatError(f"{folder}: expected a session folder, found a file")
+    if path.is_dir():
+        raise SessionFormatError(f"{path}: expected a session.json file, found a folder")
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
@@ -390,13 +434,24 @@ def _csv_line(fields: Iterable[str]) -> str:
 
 
 def _read_csv_rows(path: Path, header: str) -> list[tuple[int, list[str]]]:
-    """Data rows of a CSV as ``(line number, fields)`` after checking its header line."""
-    with open(path, newline="", encoding="utf-8") as fh:
-        reader = csv.reader(fh)
-        first = next(reader, None)
-        if first is None or ",".join(first) != header:
-            raise SessionFormatError(f"{path}: expected header {header!r}, found {','.join(first or [])!r}")
-        return [(reader.line_num, row) for row in reader if row]
+    """Data rows of a CSV as ``(line number, fields)`` after checking its header line.
+
+    Raises
+    ------
+    SessionFormatError
+        If the file is a folder, is not UTF-8 CSV text, or its header differs.
+    """
+    if path.is_dir():
+        raise SessionFormatError(f"{path}: expected a CSV file, found a folder")
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            reader = csv.reader(fh)
+            first = next(reader, None)
+            if first is None or ",".join(first) != header:
+                raise SessionFormatError(f"{path}: expected header {header!r}, found {','.join(first or [])!r}")
+            return [(reader.line_num, row) for row in reader if row]
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise not_text_error(path, exc) from None
 
 
 def read_events(path: str | os.PathLike) -> list[Event]:

@@ -2,7 +2,9 @@
 
 Each sub-command lives in its own module exposing ``add_arguments(parser)`` and ``run(args) -> int``;
 only the chosen one is imported, so ``effortface decode`` never pays for Qt or scikit-learn.
-A :class:`~capture_tool.errors.UserError` becomes one line on stderr and exit status 2.
+A :class:`~capture_tool.errors.UserError` becomes one line on stderr and exit status 2; so does, as a
+last resort, an :class:`OSError` naming a path (a file or folder a command could not read or write).
+A first argument that is neither a command, an option nor an existing folder is refused the same way.
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ import argparse
 import importlib
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 from capture_tool.errors import UserError
 
@@ -55,12 +58,23 @@ def _version() -> str:
     return f"effortface {__version__}"
 
 
+def _os_error_paths(exc: OSError) -> str:
+    """The path(s) an OSError names, or what it is when it names none."""
+    paths = [str(p) for p in (exc.filename, exc.filename2) if p is not None]
+    return " -> ".join(paths) if paths else "file system"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``effortface`` command line; return the exit status."""
     args = list(sys.argv[1:] if argv is None else argv)
     if args and args[0] in ("-h", "--help", "--version"):
         _top_parser().parse_args(args)
         return 0
+    if args and args[0] not in COMMANDS and not args[0].startswith("-") and not Path(args[0]).is_dir():
+        found = f"{args[0]!r}" + (" (a file)" if Path(args[0]).exists() else "")
+        print(f"effortface: error: expected a command ({', '.join(COMMANDS)}) or a sessions folder, "
+              f"found {found}", file=sys.stderr)
+        return 2
     command = args[0] if args and args[0] in COMMANDS else "app"
     rest = args[1:] if args and args[0] in COMMANDS else args
     module = importlib.import_module(COMMANDS[command][0])
@@ -71,6 +85,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(module.run(ns) or 0)
     except UserError as exc:
         print(f"effortface {command}: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # last resort for a path the command did not check itself
+        if exc.filename is None and exc.strerror is None:
+            raise  # not a file-system error (e.g. a bare OSError raised by a library): keep the traceback
+        print(f"effortface {command}: error: {_os_error_paths(exc)}: expected a readable/writable path, "
+              f"found {exc.strerror or type(exc).__name__}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"effortface {command}: interrupted", file=sys.stderr)

@@ -32,6 +32,14 @@ SCHEMA_VERSION = 1
 MODEL_JSON = "model.json"
 SVR_NPZ = "svr.npz"
 
+#: Training levels at which the NHR TL regression is checked (the runtime's accepted range, 0-10;
+#: the lines are linear, so checking both ends checks the whole range).
+TL_CHECK_RANGE = (0.0, 10.0)
+#: Largest accepted magnitude of an NHR coefficient or TL-regression value (choice): far above any
+#: fit (the paper: t_root 7-12 W/kg, rates below 0.01 per W/kg per s; odd small data sets give
+#: hundreds) and far enough from float overflow for the recursion (1e308 overflowed it).
+NHR_MAX_ABS = 1e6
+
 
 class BundleFormatError(UserError):
     """A model bundle folder or one of its files does not follow the bundle format."""
@@ -211,15 +219,31 @@ def _read_json(path: Path) -> dict[str, Any]:
 
 
 def _read_blendshapes(doc: dict[str, Any], where: str) -> BlendshapeSet:
+    """The blendshape set: each entry ``{name: str, drives: str, arkit: [str, ...]}``, unique names."""
     items = _get(doc, "blendshapes", where, list)
-    try:
-        shapes = BlendshapeSet.from_dict(items)
-    except (KeyError, TypeError, AttributeError) as exc:
-        raise BundleFormatError(f"{where}.blendshapes: expected a list of {{name, arkit}}, "
-                                f"found {exc!r}") from None
+    for i, item in enumerate(items):
+        _check_blendshape(item, f"{where}.blendshapes[{i}]")
+    shapes = BlendshapeSet.from_dict(items)
     if not shapes.names or len(set(shapes.names)) != len(shapes.names):
         raise BundleFormatError(f"{where}.blendshapes: expected unique names, found {shapes.names}")
     return shapes
+
+
+def _check_blendshape(item: Any, where: str) -> None:
+    """Raise naming ``where`` unless ``item`` is one well-typed blendshape entry."""
+    if not isinstance(item, dict):
+        raise BundleFormatError(f"{where}: expected an object {{name, drives, arkit}}, "
+                                f"found {type(item).__name__} {item!r:.60}")
+    name = _get(item, "name", where, str)
+    if not name:
+        raise BundleFormatError(f"{where}.name: expected a non-empty name, found ''")
+    if "drives" in item:
+        _get(item, "drives", where, str)
+    arkit = _get(item, "arkit", where, list) if "arkit" in item else []
+    bad = [a for a in arkit if not isinstance(a, str) or not a]
+    if bad:
+        raise BundleFormatError(f"{where}.arkit: expected ARKit blendshape names (strings), "
+                                f"found {bad[0]!r:.60}")
 
 
 def _read_features(doc: dict[str, Any], where: str) -> None:
@@ -235,11 +259,30 @@ def _read_nhr(doc: dict[str, Any], where: str) -> tuple[NhrParams, NhrRegression
     coef = _get(nhr, "coefficients", f"{where}.nhr", dict)
     reg = _get(nhr, "tl_regression", f"{where}.nhr", dict)
     keys = ("t_root", "c_inc", "c_dec")
-    params = NhrParams(*(_number(coef, k, f"{where}.nhr.coefficients") for k in keys))
+    params = NhrParams(*(_nhr_value(_number(coef, k, f"{where}.nhr.coefficients"),
+                                    f"{where}.nhr.coefficients.{k}") for k in keys))
     lines = [_get(reg, k, f"{where}.nhr.tl_regression", dict) for k in keys]
     pairs = [(_number(d, "intercept", f"{where}.nhr.tl_regression.{k}"),
               _number(d, "slope", f"{where}.nhr.tl_regression.{k}")) for k, d in zip(keys, lines)]
+    for k, (a, b) in zip(keys, pairs):
+        for tl in TL_CHECK_RANGE:
+            _nhr_value(a + b * tl, f"{where}.nhr.tl_regression.{k}", f" at training level {tl:g}",
+                       signed=True)
     return params, NhrRegression(*pairs)
+
+
+def _nhr_value(value: float, where: str, at: str = "", *, signed: bool = False) -> float:
+    """``value`` if it is in (0, NHR_MAX_ABS], else raise naming ``where`` (SCIENCE.md 3).
+
+    The pooled t_root, c_inc and c_dec are positive by their meaning. With ``signed`` (the TL
+    regression lines) only the magnitude is bounded: fitted lines extrapolate below 0 at training
+    levels beyond the participants' (seen on real fits for t_root and c_inc at TL 10).
+    """
+    if not (abs(value) <= NHR_MAX_ABS if signed else 0.0 < value <= NHR_MAX_ABS):
+        expected = (f"a value from {-NHR_MAX_ABS:g} to {NHR_MAX_ABS:g}" if signed
+                    else f"a value above 0 and at most {NHR_MAX_ABS:g}")
+        raise BundleFormatError(f"{where}: expected {expected}{at}, found {value:.6g}")
+    return value
 
 
 def _read_physiology(doc: dict[str, Any], where: str) -> dict[str, Any]:
@@ -266,13 +309,15 @@ def _read_svr_json(doc: dict[str, Any], where: str, names: tuple[str, ...]) -> l
 
 
 def _read_npz(path: Path, names: tuple[str, ...]) -> tuple[list, list, np.ndarray]:
+    """The SVR arrays of ``svr.npz``: support vectors (n_b, 4), dual coefs (n_b,), intercept (B,)."""
     if not path.is_file():
         raise BundleFormatError(f"{path}: expected the SVR arrays file, found none")
     try:
         with np.load(path, allow_pickle=False) as npz:
             arrays = {k: npz[k] for k in npz.files}
-    except (OSError, ValueError, zipfile.BadZipFile) as exc:
-        raise BundleFormatError(f"{path}: expected a numpy .npz without pickles, found {exc}") from None
+    except (OSError, ValueError, EOFError, TypeError, zipfile.BadZipFile) as exc:  # TypeError: a .npy
+        raise BundleFormatError(f"{path}: expected a numpy .npz without pickles, "
+                                f"found {str(exc) or type(exc).__name__}") from None
     wanted = ["intercept"] + [f"{p}_{n}" for n in names for p in ("support_vectors", "dual_coef")]
     missing = [k for k in wanted if k not in arrays]
     if missing:
@@ -282,12 +327,25 @@ def _read_npz(path: Path, names: tuple[str, ...]) -> tuple[list, list, np.ndarra
     if bad:
         raise BundleFormatError(f"{path}: {bad[0]}: expected finite numbers, found dtype "
                                 f"{arrays[bad[0]].dtype}")
-    shapes = [arrays[f"support_vectors_{n}"].shape for n in names]
-    if any(len(sh) != 2 or sh[1] != len(FEATURE_NAMES) for sh in shapes):
-        raise BundleFormatError(f"{path}: support_vectors: expected shape (n, {len(FEATURE_NAMES)}) "
-                                f"per blendshape, found {shapes}")
-    return ([arrays[f"support_vectors_{n}"] for n in names],
-            [arrays[f"dual_coef_{n}"] for n in names], arrays["intercept"])
+    _check_svr_shapes(path, arrays, names)
+    return ([arrays[f"support_vectors_{n}"].astype(float) for n in names],
+            [arrays[f"dual_coef_{n}"].astype(float) for n in names], arrays["intercept"].astype(float))
+
+
+def _check_svr_shapes(path: Path, arrays: Mapping[str, np.ndarray], names: tuple[str, ...]) -> None:
+    """Raise naming the file and array unless the SVR array shapes agree with each other."""
+    n_features = len(FEATURE_NAMES)
+    if arrays["intercept"].shape != (len(names),):
+        raise BundleFormatError(f"{path}: intercept: expected shape ({len(names)},) (one per "
+                                f"blendshape), found {arrays['intercept'].shape}")
+    for n in names:
+        sv, coef = arrays[f"support_vectors_{n}"], arrays[f"dual_coef_{n}"]
+        if sv.ndim != 2 or sv.shape[1] != n_features:
+            raise BundleFormatError(f"{path}: support_vectors_{n}: expected shape (n, {n_features}), "
+                                    f"found {sv.shape}")
+        if coef.shape != (sv.shape[0],):
+            raise BundleFormatError(f"{path}: dual_coef_{n}: expected shape ({sv.shape[0]},) (one per "
+                                    f"support vector), found {coef.shape}")
 
 
 def read_bundle(directory: str | os.PathLike) -> ModelBundle:

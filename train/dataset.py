@@ -37,7 +37,8 @@ from annotate.blendshapes import DEFAULT_SET, BlendshapeSet
 from annotate.keyframes import read_annotations
 from capture_tool.errors import UserError
 from capture_tool.fileio import refuse_overwrite
-from capture_tool.session import Session, list_sessions, parse_session_id, read_session
+from capture_tool.session import PARTICIPANT_RANGES, SEX_ALIASES  # the limits capture enforces
+from capture_tool.session import SEXES, Session, list_sessions, parse_session_id, read_session
 from train.hr_fit import HrSeries
 from train.physiology import (EpocParams, hr_max_bpm, hr_rest_bpm, epoc_step,
                               vo2max_ml_per_kg_min, VO2_REST_ML_PER_KG_MIN)
@@ -79,8 +80,10 @@ def read_table(path: str | os.PathLike, blendshapes: BlendshapeSet | None = None
     Raises
     ------
     DatasetError
-        If the file cannot be read, a column is missing, a value is not numeric, or a participant's
-        data contradict themselves; the message names the file.
+        If the file cannot be read or has no rows, a column is missing, an id or ``t_s`` is empty or
+        repeated, a value is not numeric or out of range (:func:`check_rows`, :func:`check_values`,
+        :func:`check_participants`), or a participant's data contradict themselves; the message
+        names the file.
     """
     path = Path(path)
     try:
@@ -106,7 +109,10 @@ def read_table(path: str | os.PathLike, blendshapes: BlendshapeSet | None = None
             raise DatasetError(f"{path}: column {col}: expected numbers, found "
                                f"{df[col][pd.to_numeric(df[col], errors='coerce').isna() & df[col].notna()].iloc[0]!r}") from None
     df["exercise"] = df["exercise"] if "exercise" in df else df["session"].map(_session_label)
+    df["sex"] = df["sex"].map(lambda v: SEX_ALIASES.get(str(v).strip().lower(), v) if pd.notna(v) else v)
+    check_rows(df, str(path))
     check_participants(df, str(path))
+    check_values(df, names, str(path))
     return df
 
 
@@ -124,8 +130,81 @@ def write_table(table: pd.DataFrame, path: str | os.PathLike, *, overwrite: bool
     return path
 
 
+#: plausible ranges of the per-second columns (NaN allowed: not measured / not annotated)
+VALUE_RANGES = {"hr_bpm": (25.0, 250.0), "w_per_kg": (0.0, 100.0), "p_per_kg": (0.0, 100.0)}
+#: key-framed blendshape weights
+WEIGHT_RANGE = (0.0, 1.0)
+
+
+def _line(table: pd.DataFrame, mask: pd.Series) -> int:
+    """CSV line number (header = line 1) of the first row where ``mask`` holds."""
+    return int(np.flatnonzero(mask.to_numpy())[0]) + 2
+
+
+def check_rows(table: pd.DataFrame, source: str) -> None:
+    """DatasetError for a table without rows, rows without ids, or bad ``t_s``.
+
+    Parameters
+    ----------
+    table : DataFrame
+        The long table, numeric columns already floats, rows in file order.
+    source : str
+        The file, for the message.
+
+    Raises
+    ------
+    DatasetError
+        If there are no rows, a participant or session id is empty, ``t_s`` is not a finite
+        number, or a session repeats a ``t_s``.
+    """
+    if table.empty:
+        raise DatasetError(f"{source}: expected rows of participant-seconds, found only the header")
+    for col in ("participant", "session"):
+        empty = table[col].isna() | (table[col].astype(str).str.strip() == "")
+        if empty.any():
+            raise DatasetError(f"{source}: column {col}: expected an id on every row, found "
+                               f"{int(empty.sum())} empty (first on line {_line(table, empty)})")
+    bad = ~np.isfinite(table["t_s"])
+    if bad.any():
+        raise DatasetError(f"{source}: column t_s: expected a finite time on every row, found "
+                           f"{table['t_s'][bad].iloc[0]} on line {_line(table, bad)}")
+    dup = table.duplicated(["session", "t_s"])
+    if dup.any():
+        row = table[dup].iloc[0]
+        raise DatasetError(f"{source}: session {row['session']}: expected one row per t_s, found "
+                           f"t_s {row['t_s']:g} again on line {_line(table, dup)}")
+
+
+def check_values(table: pd.DataFrame, blendshapes: Sequence[str], source: str) -> None:
+    """DatasetError for a per-second value outside its range (:data:`VALUE_RANGES`, weights in
+    :data:`WEIGHT_RANGE`); empty cells are allowed.
+
+    Raises
+    ------
+    DatasetError
+        Naming the source, the column, the range, the value and its line.
+    """
+    ranges = {**VALUE_RANGES, **{n: WEIGHT_RANGE for n in blendshapes}}
+    for col, (lo, hi) in ranges.items():
+        values = table[col]
+        bad = values.notna() & ~values.between(lo, hi)
+        if bad.any():
+            raise DatasetError(f"{source}: column {col}: expected values from {lo:g} to {hi:g} (or "
+                               f"empty), found {values[bad].iloc[0]:g} on line {_line(table, bad)}")
+
+
 def check_participants(table: pd.DataFrame, source: str) -> None:
-    """DatasetError if one participant code carries different sex/age/height/mass/TL values."""
+    """DatasetError if a participant's sex/age/height/mass/TL is missing, implausible, or differs
+    between rows.
+
+    The ranges are capture's (``capture_tool.session``): age 5-120 years, height 0.5-2.5 m, mass
+    15-300 kg, TL 0-10, measured HR_rest 25-120 and HR_max 100-240 bpm; sex female or male.
+
+    Raises
+    ------
+    DatasetError
+        Naming the source, the participant (and session) and the field.
+    """
     for code, rows in table.groupby("participant", sort=False):
         for col in PARTICIPANT_COLUMNS:
             values = rows[col].dropna().unique()
@@ -135,6 +214,28 @@ def check_participants(table: pd.DataFrame, source: str) -> None:
                                    f"{', '.join(map(str, values))} (sessions {', '.join(sessions)})")
             if len(values) == 0:
                 raise DatasetError(f"{source}: participant {code}: expected a {col}, found none")
+            if rows[col].isna().any():
+                session = rows[rows[col].isna()]["session"].iloc[0]
+                raise DatasetError(f"{source}: session {session}: expected a {col} for participant "
+                                   f"{code}, found none")
+            _check_participant_value(source, str(code), col, values[0])
+        for col in ("hr_rest_bpm", "hr_max_bpm"):
+            if col in rows:
+                for value in rows[col].dropna().unique():
+                    _check_participant_value(source, str(code), col, value)
+
+
+def _check_participant_value(source: str, code: str, col: str, value: object) -> None:
+    """DatasetError unless ``value`` is a valid sex or lies in capture's range for ``col``."""
+    if col == "sex":
+        if value not in SEXES:
+            raise DatasetError(f"{source}: participant {code}: column sex: expected one of "
+                               f"{', '.join(SEXES)}, found {value!r}")
+        return
+    lo, hi = PARTICIPANT_RANGES[col]
+    if not lo <= float(value) <= hi:  # type: ignore[arg-type]
+        raise DatasetError(f"{source}: participant {code}: column {col}: expected a number from "
+                           f"{lo} to {hi}, found {value:g}")
 
 
 def _session_label(session_id: str) -> str:
@@ -183,7 +284,11 @@ def sessions_table(paths: Iterable[str | os.PathLike], blendshapes: BlendshapeSe
     """
     folders = expand_paths(paths)
     table = pd.concat([session_table(f, blendshapes, rater_policy) for f in folders], ignore_index=True)
-    check_participants(table, ", ".join(str(f.parent) for f in folders[:1]) or "sessions")
+    for col in (*PARTICIPANT_COLUMNS[1:], "hr_rest_bpm", "hr_max_bpm"):
+        table[col] = pd.to_numeric(table[col]).astype(float)  # None (not recorded) -> NaN
+    source = ", ".join(str(f.parent) for f in folders[:1]) or "sessions"
+    check_participants(table, source)
+    check_values(table, blendshapes.names, source)
     return table
 
 
@@ -326,12 +431,20 @@ def prepare(table: pd.DataFrame, hr_max_formula: str = "tanaka",
     DatasetError
         If a session has no heart rate at all, or rest >= max.
     """
+    if table.empty:
+        raise DatasetError(f"{source}: expected rows of participant-seconds, found none")
     out = table.sort_values(["participant", "session", "t_s"]).reset_index(drop=True).copy()
     for col in ("hr_rest_bpm", "hr_max_bpm"):
         if col not in out:
             out[col] = np.nan
-    parts = [_prepare_session(rows, hr_max_formula, epoc, source)
-             for _, rows in out.groupby("session", sort=False)]
+    parts = []
+    for sid, rows in out.groupby("session", sort=False):
+        try:
+            parts.append(_prepare_session(rows, hr_max_formula, epoc, source))
+        except DatasetError:
+            raise
+        except UserError as exc:  # physiology: names the field only
+            raise DatasetError(f"{source}: session {sid}: {exc}") from None
     return pd.concat(parts).reset_index(drop=True)
 
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 import datetime as _dt
 import os
 import shutil
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -253,6 +253,7 @@ def export_model(bundle: ModelBundle, face: FaceModelFit, out_dir: str | os.Path
         If a parity check fails (the target is left untouched).
     """
     out = refuse_overwrite(out_dir, overwrite=force, what="model folder", hint=" (use --force)")
+    check_model_target(out, force=force)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.parent / f".{out.name}.partial-{os.getpid()}"
     shutil.rmtree(tmp, ignore_errors=True)
@@ -267,6 +268,68 @@ def export_model(bundle: ModelBundle, face: FaceModelFit, out_dir: str | os.Path
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return out
+
+
+def check_model_target(out_dir: str | os.PathLike, *, force: bool = False,
+                       inputs: Sequence[str | os.PathLike] = ()) -> Path:
+    """Refuse a model-folder target that would lose data; return it as a Path.
+
+    ``force`` replaces only an existing model folder (one holding ``model.json``) or an empty
+    folder, never the current directory (or a folder above it), and never a path that is or holds
+    one of ``inputs``.
+
+    Parameters
+    ----------
+    out_dir : path-like
+        The ``--out`` target.
+    force : bool
+        True when the user asked to replace an existing target.
+    inputs : sequence of path-like
+        The training inputs (session folders, folders of sessions, the table).
+
+    Returns
+    -------
+    Path
+        ``out_dir`` as a Path.
+
+    Raises
+    ------
+    UserError
+        One line naming ``--out``, what was expected and what was found.
+    """
+    out = Path(out_dir)
+    target = out.resolve()
+    cwd = Path.cwd().resolve()
+    if target == cwd or target in cwd.parents:
+        raise UserError(f"--out {out}: expected a model folder to write, found the current directory"
+                        + ("" if target == cwd else " inside it"))
+    for src in map(Path, inputs):
+        s = src.resolve()
+        if s == target or target in s.parents:
+            raise UserError(f"--out {out}: expected a model folder apart from the inputs, found input "
+                            f"{src}" + ("" if s == target else " inside it"))
+    if not out.exists() and not out.is_symlink():
+        return out
+    if not force:
+        raise UserError(f"--out {out}: expected a new model folder, found an existing one "
+                        "(pass --force to replace it)")
+    if out.is_dir() and not out.is_symlink() and ((out / "model.json").is_file() or not any(out.iterdir())):
+        return out
+    raise UserError(f"--out {out}: expected a model folder (with model.json) to replace, found "
+                    f"{_describe(out)}")
+
+
+def _describe(path: Path) -> str:
+    """What an existing non-model path is, for a refusal message."""
+    if path.is_symlink():
+        return "a symbolic link"
+    if not path.is_dir():
+        return "a file"
+    entries = list(path.iterdir())
+    sessions = sum((e / "session.json").is_file() for e in entries)
+    if sessions:
+        return f"a folder with {sessions} session folder{'s' * (sessions != 1)}"
+    return f"a folder with {len(entries)} entr{'ies' if len(entries) != 1 else 'y'} and no model.json"
 
 
 def _swap_into_place(tmp: Path, out: Path) -> None:

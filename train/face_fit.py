@@ -37,6 +37,7 @@ from sklearn.model_selection import GroupKFold, KFold, LeaveOneGroupOut
 from sklearn.preprocessing import StandardScaler
 from sklearn.svm import SVR
 
+from capture_tool.errors import UserError
 from train.face import FEATURE_NAMES
 
 #: the SVR inputs, in order (units: W/kg, W/kg, 1, 1): the runtime's own list
@@ -52,6 +53,10 @@ GRIDS: dict[str, dict[str, list[float]]] = {
     "paper": {"C": [0.1, 1.0, 10.0, 100.0], "gamma": [0.01, 0.05, 0.2, 1.0], "epsilon": [0.02, 0.1]},
 }
 CV_CHOICES = ("lopo", "kfold")
+
+
+#: the fewest face-training rows per participant any fit accepts (train, demo and the Train stage check it)
+MIN_ROWS_PER_PARTICIPANT = 20
 
 
 @dataclasses.dataclass(frozen=True)
@@ -87,7 +92,8 @@ class FaceFitConfig:
 
     def rows_per_participant(self, n_participants: int) -> int:
         """The effective per-participant cap for a lab of ``n_participants``."""
-        return max(20, min(self.max_rows_per_participant, self.max_total_rows // max(n_participants, 1)))
+        per_share = self.max_total_rows // max(n_participants, 1)
+        return max(MIN_ROWS_PER_PARTICIPANT, min(self.max_rows_per_participant, per_share))
 
     def __post_init__(self) -> None:
         if self.cv not in CV_CHOICES:
@@ -297,6 +303,42 @@ class FaceModelFit:
         """Normalised predictions (n, B) from raw features (n, 4), by scikit-learn."""
         xs = self.scaler.transform(np.asarray(x, dtype=float))
         return np.column_stack([self.svrs[b].predict(xs) for b in self.blendshapes])
+
+
+def check_face_table(table: pd.DataFrame, blendshapes: Sequence[str], source: str = "table",
+                     config: FaceFitConfig | None = None) -> None:
+    """Refuse a prepared table the face models cannot be fitted on, before any work starts.
+
+    Every blendshape needs key-framed weights on at least two of the seconds the fit uses (those
+    with work and heart rate, after the even subsampling of :func:`subsample`).
+
+    Parameters
+    ----------
+    table : DataFrame
+        Prepared training table (with ``nhr`` and ``epoc_norm``).
+    blendshapes : sequence of str
+        Blendshape columns to model.
+    source : str
+        The table or sessions, for the message.
+    config : FaceFitConfig, optional
+        The fit's settings (its subsampling).
+
+    Raises
+    ------
+    UserError
+        Naming ``source`` and the first blendshape without annotations.
+    """
+    config = config or FaceFitConfig()
+    usable = table.dropna(subset=list(FEATURES))
+    kept = subsample(usable, config.rows_per_participant(usable["participant"].nunique())) \
+        if len(usable) else usable
+    for name in blendshapes:
+        n_all, n_used = int(table[name].notna().sum()), int(kept[name].notna().sum())
+        if n_used < 2:
+            found = "none (the column is empty)" if n_all == 0 else \
+                f"{n_used} of its {n_all} annotated seconds"
+            raise UserError(f"{source}: blendshape {name}: expected key-framed weights on at least 2 "
+                            f"seconds with work and heart rate, found {found}")
 
 
 def fit_face_models(table: pd.DataFrame, blendshapes: Sequence[str],

@@ -33,6 +33,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from capture_tool.errors import UserError
 from train.physiology import NhrParams, NhrRegression, nhr_step
 
 #: default centred-difference span for dNHR, seconds (choice, see module docstring)
@@ -199,7 +200,9 @@ def fit_threshold_tree(w_per_kg: np.ndarray, nhr: np.ndarray, dnhr_per_s: np.nda
     """
     w, nhr, y = (np.asarray(a, dtype=float) for a in (w_per_kg, nhr, dnhr_per_s))
     if len(w) < 10 or np.ptp(w) <= 0:
-        raise ValueError(f"heart-rate fit: expected >= 10 samples with varying work, found {len(w)}")
+        raise ValueError(f"heart-rate fit: expected >= 10 samples (evenly spaced seconds t_s with "
+                         f"hr_bpm) with varying work (w_per_kg), found {len(w)}"
+                         + (" with constant work" if len(w) >= 10 else ""))
     order = np.argsort(w, kind="stable")
     w, nhr, y = w[order], nhr[order], y[order]
     t_cand = _candidate_thresholds(w)
@@ -245,6 +248,48 @@ def _leaf_sse(moments: np.ndarray, n: np.ndarray, t: np.ndarray) -> tuple[np.nda
 
 
 # --------------------------------------------------------------------------- fits
+
+
+#: participants needed to train: the TL model is scored leaving one participant out, and the
+#: remaining ones must still span two training levels
+MIN_PARTICIPANTS = 3
+
+
+def check_hr_series(series: Sequence[HrSeries], source: str = "table",
+                    smooth_s: int = DEFAULT_SMOOTH_S) -> None:
+    """Refuse data the heart-rate models cannot be fitted and scored on, before any work starts.
+
+    Parameters
+    ----------
+    series : sequence of HrSeries
+        The sessions (from :func:`train.dataset.hr_series`).
+    source : str
+        The table or sessions, for the message.
+    smooth_s : int
+        Span of the centred difference, seconds.
+
+    Raises
+    ------
+    UserError
+        Naming ``source`` (and the participant) when there are fewer than :data:`MIN_PARTICIPANTS`
+        participants, when leaving one out leaves a single training level, or when a participant's
+        own tree cannot be fitted.
+    """
+    groups = by_participant(series)
+    tls = {code: float(ss[0].training_level) for code, ss in groups.items()}
+    need = (f"{source}: expected sessions of at least {MIN_PARTICIPANTS} participants with 2 or more "
+            "distinct training levels (without any one of them) to fit the TL model, found")
+    if len(groups) < MIN_PARTICIPANTS:
+        raise UserError(f"{need} {len(groups)} participant{'s' * (len(groups) != 1)}")
+    for code in groups:
+        rest = {tl for c, tl in tls.items() if c != code}
+        if len(rest) < 2:
+            raise UserError(f"{need} only training level {rest.pop():g} without {code}")
+    for code, own in groups.items():
+        try:
+            fit_participant(own, smooth_s)
+        except ValueError as exc:
+            raise UserError(f"{source}: participant {code}: {exc}") from None
 
 
 def fit_participant(series: Sequence[HrSeries], smooth_s: int = DEFAULT_SMOOTH_S) -> HrCoefficients:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import zipfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -55,6 +56,64 @@ _Y_UP_TO_Z_UP = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 
 class MotionFormatError(UserError):
     """A motion file does not follow its format; the message names the file (and line)."""
+
+
+def check_parents(parents: np.ndarray, source: str | Path) -> np.ndarray:
+    """Check that ``parents`` is a skeleton tree listed parents first; return it as int array.
+
+    Parameters
+    ----------
+    parents : ndarray, shape (J,)
+        Parent index of every joint, -1 for a root.
+    source : str or Path
+        File (or description) named in the error message.
+
+    Returns
+    -------
+    ndarray of int, shape (J,)
+
+    Raises
+    ------
+    MotionFormatError
+        A parent index that is not -1 or the index of an earlier joint (out of range, the joint
+        itself or a later joint, so cycles are impossible), or a non-integer parent index.
+    """
+    par = np.asarray(parents)
+    if par.ndim != 1 or (par.size and par.dtype.kind not in "iu"):
+        raise MotionFormatError(
+            f"{source}: parent_indices: expected a 1-D array of integers, found {par.dtype} shape {par.shape}")
+    par = par.astype(int)
+    bad = np.flatnonzero((par < -1) | (par >= np.arange(par.size)))
+    if bad.size:
+        j = int(bad[0])
+        raise MotionFormatError(
+            f"{source}: parent_indices: expected -1 or the index of an earlier joint (a tree, parents "
+            f"first), found joint {j} with parent {int(par[j])}")
+    return par
+
+
+def check_finite(source: str | Path, name: str, values: np.ndarray, frame_axis: bool = True) -> None:
+    """Raise naming ``source``, ``name`` and the first bad frame if ``values`` has NaN or inf.
+
+    Parameters
+    ----------
+    source : str or Path
+        File (or description) named in the error message.
+    name : str
+        Field named in the message.
+    values : ndarray
+        Per-frame values (frames along axis 0) or, with ``frame_axis=False``, static values.
+    frame_axis : bool
+        Whether axis 0 counts frames (then the first bad frame, 0-based, is named).
+    """
+    ok = np.isfinite(values)
+    if ok.all():
+        return
+    if frame_axis and values.ndim >= 1:
+        frame = int(np.flatnonzero(~ok.reshape(ok.shape[0], -1).all(axis=1))[0])
+        found = values[frame][~ok[frame]].flat[0]
+        raise MotionFormatError(f"{source}: {name}: expected finite numbers, found {found} at frame {frame}")
+    raise MotionFormatError(f"{source}: {name}: expected finite numbers, found {values[~ok].flat[0]}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -166,8 +225,10 @@ def motion_from_positions(
             f"positions_m: expected shape (T >= 1, {len(names)}, 3) with {len(names)} parents, "
             f"got {pos.shape} and {par.shape[0]} parents"
         )
-    if not fps > 0:
+    if not (isinstance(fps, (int, float, np.number)) and math.isfinite(fps) and fps > 0):
         raise UserError(f"fps: expected a positive number, got {fps!r}")
+    par = check_parents(par, source)
+    check_finite(source, "positions_m", pos)
     return Motion(names, par, pos, None, float(fps), source)
 
 
@@ -321,6 +382,8 @@ class _Tokens:
                 value = float(self.items[self.i][0])
             except ValueError:
                 raise self.error(expected) from None
+            if not math.isfinite(value):
+                raise self.error(f"{expected} (finite)")
             self.i += 1
             return value
         raise self.error(expected)
@@ -394,7 +457,7 @@ def _parse_header_value(path: Path, lines: list[str], i: int, label: str) -> flo
     line = lines[i] if i < len(lines) else ""
     head, _, value = line.partition(":")
     try:
-        if " ".join(head.split()).lower() != label.lower():
+        if " ".join(head.split()).lower() != label.lower() or not math.isfinite(float(value)):
             raise ValueError
         return float(value)
     except ValueError:
@@ -428,7 +491,19 @@ def _parse_frames(path: Path, lines: list[str], motion_at: int, n_channels: int)
         values = None
     if values is None or values.size != len(rows) * n_channels:
         _raise_bad_frame(path, rows, first, n_channels)
-    return values.reshape(len(rows), n_channels), frame_time_s  # type: ignore[union-attr]
+    frames = values.reshape(len(rows), n_channels)  # type: ignore[union-attr]
+    _check_finite_frames(path, frames, first)
+    return frames, frame_time_s
+
+
+def _check_finite_frames(path: Path, frames: np.ndarray, first: int) -> None:
+    """Raise naming the file, line and frame of the first frame with a NaN or infinite value."""
+    bad = np.flatnonzero(~np.isfinite(frames).all(axis=1))
+    if bad.size:
+        k = int(bad[0])
+        value = frames[k][~np.isfinite(frames[k])][0]
+        raise MotionFormatError(
+            f"{path}: line {first + k + 1}: expected finite numbers in frame {k}, found {value}")
 
 
 def _raise_bad_frame(path: Path, rows: list[str], first: int, n_channels: int) -> None:
@@ -547,11 +622,11 @@ def read_bvh(path: str | Path, *, unit_m: float | None = None, up_axis: str = "y
         raise UserError(f"up_axis: expected 'y' or 'z', got {up_axis!r}")
     joints, n_channels, motion_at = _parse_hierarchy(path, lines)
     frames, frame_time_s = _parse_frames(path, lines, motion_at, n_channels)
-    parents = np.array([j.parent for j in joints])
+    parents = check_parents(np.array([j.parent for j in joints]), path)
     offsets = np.array([j.offset for j in joints])
     local_rot, local_trans, root_trans = _local_rotations(joints, frames)
     pos, rot = forward_kinematics(parents, offsets, local_rot, offsets[0] + root_trans, local_trans)
-    scale = _bvh_scale(offsets, parents, up_axis, unit_m)
+    scale = _bvh_scale(path, offsets, parents, up_axis, unit_m)
     pos = pos * scale
     if up_axis == "y":
         pos = pos @ _Y_UP_TO_Z_UP.T
@@ -566,7 +641,9 @@ def _fps_from_frame_time(frame_time_s: float) -> float:
     return float(round(fps)) if abs(fps - round(fps)) < 1e-4 * fps else fps
 
 
-def _bvh_scale(offsets: np.ndarray, parents: np.ndarray, up_axis: str, unit_m: float | None) -> float:
+def _bvh_scale(
+    path: Path, offsets: np.ndarray, parents: np.ndarray, up_axis: str, unit_m: float | None
+) -> float:
     """Metres per file unit: ``unit_m`` if given (checked), else detected from the rest pose."""
     if unit_m is not None:
         if not unit_m > 0:
@@ -576,7 +653,15 @@ def _bvh_scale(offsets: np.ndarray, parents: np.ndarray, up_axis: str, unit_m: f
     for j, p in enumerate(parents):
         rest[j] = offsets[j] + (rest[p] if p >= 0 else 0.0)
     up = rest[:, 1 if up_axis == "y" else 2]
-    return detect_bvh_unit_m(float(up.max() - up.min()))[1]
+    height = float(up.max() - up.min())
+    try:
+        return detect_bvh_unit_m(height)[1]
+    except UserError:
+        lo, hi = STATURE_RANGE_M
+        raise MotionFormatError(
+            f"{path}: expected a skeleton whose rest pose is {lo}-{hi} m tall in one of the units "
+            f"{', '.join(n for n, _ in BVH_UNITS_M)}, found a rest-pose height of {height:.4g} file units"
+        ) from None
 
 
 # --------------------------------------------------------------------------------------------
@@ -617,11 +702,11 @@ def read_npz_motion(
     """
     path = Path(path)
     data = _load_npz(path)
-    names = [str(n) for n in data["node_names"]]
-    parents = np.asarray(data["parent_indices"], dtype=int)
-    offsets = np.asarray(data["local_translation"], dtype=float)
-    quats = np.asarray(data["rotation_xyzw_local"], dtype=float)
-    root = np.asarray(data["root_translation"], dtype=float)
+    names = [str(n) for n in np.atleast_1d(data["node_names"])]
+    parents = np.atleast_1d(data["parent_indices"])
+    offsets = _float_array(path, data, "local_translation")
+    quats = _float_array(path, data, "rotation_xyzw_local")
+    root = _float_array(path, data, "root_translation")
     n_joints = len(names)
     if parents.shape != (n_joints,) or offsets.shape != (n_joints, 3) or quats.shape[1:] != (n_joints, 4) \
             or root.shape != (quats.shape[0], 3):
@@ -630,25 +715,65 @@ def read_npz_motion(
             f"rotation_xyzw_local (T, {n_joints}, 4) and root_translation (T, 3), got {parents.shape}, "
             f"{offsets.shape}, {quats.shape}, {root.shape}"
         )
+    fps = _npz_fps(path, data["fps"])
+    parents = check_parents(parents, path)
+    _check_npz_values(path, offsets, quats, root)
     names, parents, offsets, local_rot = _add_end_sites(
         names, parents, offsets, quaternions_xyzw_to_matrices(quats),
         AMP_END_SITES_M if end_sites_m is None else end_sites_m,
     )
     pos, rot = forward_kinematics(parents, offsets, local_rot, root)
-    return Motion(tuple(names), parents, pos, rot, float(data["fps"]), str(path))
+    return Motion(tuple(names), parents, pos, rot, fps, str(path))
+
+
+def _float_array(path: Path, data: Mapping[str, np.ndarray], key: str) -> np.ndarray:
+    """``data[key]`` as a float array, or raise naming the file and key if it is not numeric."""
+    value = np.asarray(data[key])
+    if value.dtype.kind not in "biuf":
+        raise MotionFormatError(f"{path}: {key}: expected numbers, found {value.dtype} values")
+    return value.astype(float)
+
+
+def _npz_fps(path: Path, value: np.ndarray) -> float:
+    """The clip's frame rate: one finite number above 0, or raise naming the file and its fps."""
+    value = np.asarray(value)
+    if value.size != 1 or value.dtype.kind not in "iuf" or not (np.isfinite(value) & (value > 0)).all():
+        shown = value.tolist() if value.size <= 4 else f"an array of shape {value.shape}"
+        raise MotionFormatError(f"{path}: fps: expected one positive frame rate, found {shown}")
+    return float(value.reshape(()))
+
+
+def _check_npz_values(path: Path, offsets: np.ndarray, quats: np.ndarray, root: np.ndarray) -> None:
+    """Raise naming the file (and first bad frame) for non-finite values or zero quaternions."""
+    check_finite(path, "local_translation", offsets, frame_axis=False)
+    check_finite(path, "rotation_xyzw_local", quats)
+    check_finite(path, "root_translation", root)
+    if quats.shape[0] < 1:
+        raise MotionFormatError(f"{path}: rotation_xyzw_local: expected at least one frame, found 0")
+    zero = np.linalg.norm(quats, axis=-1) < 1e-12
+    if zero.any():
+        frame, joint = (int(i[0]) for i in np.nonzero(zero))
+        raise MotionFormatError(
+            f"{path}: rotation_xyzw_local: expected unit quaternions, found (0, 0, 0, 0) at frame "
+            f"{frame}, joint {joint}")
 
 
 def _load_npz(path: Path) -> dict[str, np.ndarray]:
     """Load the npz arrays (no pickle) and check the keys are present."""
     try:
-        with np.load(path, allow_pickle=False) as npz:
-            data = {k: npz[k] for k in npz.files}
-    except (OSError, ValueError) as exc:
-        raise MotionFormatError(f"{path}: expected a readable .npz motion file, got {exc}") from None
-    missing = [k for k in _NPZ_KEYS if k not in data]
+        loaded = np.load(path, allow_pickle=False)
+        if isinstance(loaded, np.lib.npyio.NpzFile):
+            with loaded as npz:
+                loaded = {k: npz[k] for k in npz.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+        raise MotionFormatError(
+            f"{path}: expected a readable .npz motion file, found {str(exc) or type(exc).__name__}") from None
+    if not isinstance(loaded, dict):
+        raise MotionFormatError(f"{path}: expected a .npz archive of arrays, found a single .npy array")
+    missing = [k for k in _NPZ_KEYS if k not in loaded]
     if missing:
         raise MotionFormatError(f"{path}: expected keys {', '.join(_NPZ_KEYS)}; missing {', '.join(missing)}")
-    return data
+    return loaded
 
 
 def _add_end_sites(

@@ -179,8 +179,16 @@ def hr_rest_bpm(age: float, sex: str, training_level: float,
     -------
     float
         HR_rest in bpm.
+
+    Raises
+    ------
+    UserError
+        If ``sex`` is not in the chart.
     """
     chart = _default_chart() if chart is None else chart
+    sexes = sorted({k[0] for k in chart})
+    if sex not in sexes:
+        raise UserError(f"sex: expected one of {', '.join(sexes)} (resting-HR chart), found {sex!r}")
     band = _age_band(float(age))
     bpm = [chart[(sex, cat)][band] for cat in CHART_CATEGORIES]
     tls = [i * TL_PER_CATEGORY for i in range(len(CHART_CATEGORIES))]
@@ -197,7 +205,16 @@ def vo2max_ml_per_kg_min(age: float, sex: str, height_m: float, mass_kg: float,
     -------
     float
         VO2max in ml/kg/min.
+
+    Raises
+    ------
+    UserError
+        If a value is missing, not finite, or (except TL) not positive.
     """
+    for name, value in (("age", age), ("height_m", height_m), ("mass_kg", mass_kg),
+                        ("training_level", training_level)):
+        if value is None or not np.isfinite(float(value)) or (name != "training_level" and value <= 0):
+            raise UserError(f"{name}: expected a positive number for VO2max, found {value!r}")
     bmi = mass_kg / height_m ** 2
     par = min(float(training_level), 7.0)
     male = 1.0 if sex == "male" else 0.0

@@ -229,14 +229,26 @@ def read_mapping(path: str | Path) -> dict[str, tuple[EndPoint, EndPoint]]:
     if not isinstance(data, dict):
         raise SegmentMappingError(
             f"{path}: expected a JSON object segment -> [proximal, distal], got {type(data).__name__}")
-    bad = [k for k, v in data.items() if not (isinstance(v, list) and len(v) == 2)]
+    bad = [k for k, v in data.items() if not _is_pair(v)]
     unknown = [k for k in data if k not in SEGMENT_ROWS]
     if bad or unknown:
         raise SegmentMappingError(
-            f"{path}: expected [proximal, distal] for segments among {', '.join(REQUIRED_SEGMENTS)}; "
-            f"bad entries: {', '.join(bad + unknown)}"
+            f"{path}: expected [proximal, distal] joint names (a name or a list of names each) for "
+            f"segments among {', '.join(REQUIRED_SEGMENTS)}; bad entries: {', '.join(bad + unknown)}"
         )
     return {k: (v[0], v[1]) for k, v in data.items()}
+
+
+def _is_end(end: object) -> bool:
+    """True if ``end`` is a joint name or a non-empty list/tuple of joint names."""
+    if isinstance(end, str):
+        return True
+    return isinstance(end, (list, tuple)) and bool(end) and all(isinstance(e, str) for e in end)
+
+
+def _is_pair(ends: object) -> bool:
+    """True if ``ends`` is a ``[proximal, distal]`` pair of end points."""
+    return isinstance(ends, (list, tuple)) and len(ends) == 2 and all(_is_end(e) for e in ends)
 
 
 def _joint_key(name: str) -> str:
@@ -261,10 +273,17 @@ def resolve_mapping(
     joint_names: Sequence[str], mapping: SegmentMapping
 ) -> tuple[dict[str, tuple[tuple[int, ...], tuple[int, ...]]], list[str]]:
     """Joint indices of every mapped segment and the list of required segments left unmapped."""
+    if not isinstance(mapping, Mapping):
+        raise SegmentMappingError(
+            f"mapping: expected a mapping segment -> (proximal, distal), found {type(mapping).__name__}")
     index = {_joint_key(n): i for i, n in enumerate(joint_names)}
     resolved, missing = {}, []
     for seg in REQUIRED_SEGMENTS:
         ends = mapping.get(seg)
+        if ends is not None and not _is_pair(ends):
+            raise SegmentMappingError(
+                f"mapping: {seg}: expected (proximal, distal) joint names (a name or a list of names "
+                f"each), found {ends!r}")
         prox = _resolve_end(ends[0], index) if ends else None
         dist = _resolve_end(ends[1], index) if ends else None
         if prox is None or dist is None:
@@ -401,8 +420,11 @@ def _end_weights(ends: Sequence[tuple[int, ...]], n_joints: int) -> np.ndarray:
 
 def _ancestors(j: int, parents: np.ndarray) -> list[int]:
     """``j`` and its ancestors, nearest first."""
-    out = []
+    out: list[int] = []
     while j >= 0:
+        if j >= len(parents) or len(out) >= len(parents):
+            raise UserError(f"parents: expected a tree of {len(parents)} joints (indices -1 to "
+                            f"{len(parents) - 1}, no cycles), found the chain {out + [j]}")
         out.append(j)
         j = int(parents[j])
     return out

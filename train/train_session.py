@@ -26,7 +26,8 @@ from capture_tool.errors import UserError
 from capture_tool.fileio import refuse_overwrite
 from capture_tool.session import list_sessions, parse_session_id, read_session_info
 from train.dataset import ANNOTATIONS_DIR, hr_series, prepare, read_table, sessions_table
-from train.face_fit import GRIDS, FaceFitConfig, FaceModelFit, held_out_scores, protocol_scores
+from train.face_fit import (GRIDS, MIN_ROWS_PER_PARTICIPANT, FaceFitConfig, FaceModelFit,
+                            held_out_scores, protocol_scores)
 from train.hr_fit import HrEvaluation, HrSeries, evaluate_hr_models
 
 #: the paper's heart-rate results (section 3 of SCIENCE.md), shown beside ours
@@ -139,8 +140,8 @@ class TrainSettings:
     def __post_init__(self) -> None:
         if self.grid not in GRIDS:
             raise UserError(f"grid: expected one of {', '.join(GRIDS)}, found {self.grid!r}")
-        if self.max_rows_per_participant < 20:
-            raise UserError(f"max rows per participant: expected at least 20, "
+        if self.max_rows_per_participant < MIN_ROWS_PER_PARTICIPANT:
+            raise UserError(f"max rows per participant: expected at least {MIN_ROWS_PER_PARTICIPANT}, "
                             f"found {self.max_rows_per_participant}")
         if not self.rater_policy.strip():
             raise UserError("rater policy: expected 'mean' or a rater's name, found nothing")

@@ -11,6 +11,7 @@ flagged poses. ``--plot PNG`` also draws the Bland-Altman plot.
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
 from annotate.agreement import FLAG_PCT, agreement_report, format_report, gather_ratings, save_bland_altman_png
@@ -35,6 +36,7 @@ def run(args: argparse.Namespace) -> int:
                         f"found {'both' if args.target else 'neither'}")
     if not 0.0 <= args.threshold <= 100.0:
         raise UserError(f"--threshold: expected a percentage from 0 to 100, found {args.threshold}")
+    plot = _check_plot(args.plot) if args.plot else None
     if args.ratings is not None:
         path = Path(args.ratings)
         if not path.is_file():
@@ -44,10 +46,31 @@ def run(args: argparse.Namespace) -> int:
         ratings, source = gather_ratings(args.target)
     report = agreement_report(ratings, flag_pct=args.threshold, source=source)
     print(format_report(report), end="")
-    if args.plot:
+    if plot is not None:
         try:
-            save_bland_altman_png(report, args.plot)
+            save_bland_altman_png(report, plot)
         except FileExistsError as exc:
             raise UserError(f"--plot {args.plot}: expected a new file, found one exists (not overwritten)") from exc
+        except OSError as exc:
+            raise UserError(f"--plot {args.plot}: expected a writable PNG path, found "
+                            f"{exc.strerror or exc}") from exc
         print(f"Bland-Altman plot: {args.plot}")
     return 0
+
+
+def _check_plot(value: str) -> Path:
+    """``--plot``: a new ``.png`` file in an existing folder (checked before any work is done)."""
+    path = Path(value)
+    if path.suffix.lower() != ".png":
+        raise UserError(f"--plot {value}: expected a path ending in .png, found {path.suffix or 'no suffix'!r}")
+    if path.is_dir():
+        raise UserError(f"--plot {value}: expected a new PNG file, found a folder")
+    if path.exists() or path.is_symlink():
+        raise UserError(f"--plot {value}: expected a new file, found one exists (not overwritten)")
+    folder = path.parent
+    if not folder.is_dir():
+        raise UserError(f"--plot {value}: expected an existing folder for the PNG, found "
+                        f"{'a file' if folder.exists() else 'nothing'} at {str(folder)!r}")
+    if not os.access(folder, os.W_OK):
+        raise UserError(f"--plot {value}: expected a writable folder, found {str(folder)!r} read-only")
+    return path

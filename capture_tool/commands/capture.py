@@ -8,10 +8,12 @@ stderr.
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 import threading
 import time
+from pathlib import Path
 
 from capture_tool.errors import UserError
 from capture_tool.protocols import PROTOCOLS
@@ -62,13 +64,12 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--duration: expected seconds above 0, found {args.duration}")
     if args.protocol not in PROTOCOLS:
         raise UserError(f"--protocol: expected one of {', '.join(sorted(PROTOCOLS))}, found {args.protocol!r}")
+    if args.camera is not None and args.camera < 0:
+        raise UserError(f"--camera: expected a camera index >= 0, found {args.camera}")
     recorder = Recorder(args.out, _participant(args), args.port, args.protocol, _video_source(args), label=args.label)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    try:
-        path = recorder.start()
-    except FileExistsError as exc:
-        raise UserError(f"--out {args.out}: expected a new session folder, found one of that name ({exc.filename})") from None
+    path = _start(recorder, args.out)
     print(path, flush=True)
     try:
         _wait(recorder, stop, args.duration)
@@ -80,6 +81,40 @@ def run(args: argparse.Namespace) -> int:
     print(f"complete: {st.samples} heart-rate samples, {st.frames} frames ({st.dropped_frames} dropped) in {path}",
           file=sys.stderr)
     return 0
+
+
+def _start(recorder: Recorder, out: str) -> Path:
+    """Start ``recorder``; a session folder that cannot be created in ``out`` is a UserError naming --out.
+
+    Parameters
+    ----------
+    recorder : Recorder
+        The recorder to start.
+    out : str
+        The --out folder.
+
+    Returns
+    -------
+    Path
+        The new session folder.
+    """
+    if os.path.exists(out) and not os.path.isdir(out):
+        raise UserError(f"--out {out}: expected a folder, found a file")
+    try:
+        return recorder.start()
+    except FileExistsError as exc:
+        raise UserError(f"--out {out}: expected a new session folder, found one of that name ({exc.filename})") from None
+    except OSError as exc:
+        if exc.filename is None or not _is_under(exc.filename, out):
+            raise
+        raise UserError(f"--out {out}: expected a folder where a session folder can be created, "
+                        f"found {exc.strerror or type(exc).__name__} ({exc.filename})") from None
+
+
+def _is_under(path: str | os.PathLike, folder: str) -> bool:
+    """True if ``path`` is ``folder`` or inside it, or one of its parent folders (lexically)."""
+    path, folder_path = Path(os.path.abspath(path)), Path(os.path.abspath(folder))
+    return path == folder_path or folder_path in path.parents or path in folder_path.parents
 
 
 def _wait(recorder: Recorder, stop: threading.Event, duration_s: float | None) -> None:

@@ -14,10 +14,11 @@ import argparse
 import os
 import sys
 from collections.abc import Iterable
+from pathlib import Path
 from typing import TextIO
 
-from capture_tool.captures import read_timed_capture
-from capture_tool.errors import UserError
+from capture_tool.captures import check_capture_file, read_timed_capture
+from capture_tool.errors import SessionFormatError, UserError
 from capture_tool.hr_csv import HR_CSV_HEADER, format_hr_row
 from capture_tool.protocols import PROTOCOLS, Decoder, HrSample, get_decoder
 from capture_tool.serlog import is_serlog, read_serlog_header
@@ -62,22 +63,35 @@ def summary_line(decoder: Decoder) -> str:
 def file_protocol(path: str | os.PathLike, given: str | None) -> str:
     """The protocol to decode ``path`` with: ``given``, else the one a ``.serlog`` header names.
 
+    ``given`` is checked first, then the file (it must be a regular file; one named ``.serlog``
+    must start with the serlog magic), then a note goes to stderr if the header disagrees.
+
     Raises
     ------
     UserError
-        If none is given and the file is not a ``.serlog`` naming a protocol.
+        If ``given`` is not a protocol, the file is missing or not a regular file, a ``.serlog``
+        is malformed, or none is given and the file is not a ``.serlog`` naming a protocol.
     """
-    named = None
-    if os.path.isfile(path) and is_serlog(path):
-        named = read_serlog_header(path).get("protocol")
+    if given is not None and given not in PROTOCOLS:
+        raise UserError(f"--protocol: expected one of {', '.join(sorted(PROTOCOLS))}, found {given!r}")
+    path = check_capture_file(path)
+    named = read_serlog_header(path).get("protocol") if _looks_like_serlog(path) else None
     if given is not None:
         if named is not None and named != given:
             print(f"note: {path} was recorded as {named!r}; decoding as --protocol {given}", file=sys.stderr)
         return given
-    if not isinstance(named, str):
+    if named is None:
         raise UserError(f"--protocol: expected one of {', '.join(sorted(PROTOCOLS))} for {path}, found none "
                         "(only a .serlog names its own protocol)")
+    if not isinstance(named, str) or named not in PROTOCOLS:
+        raise SessionFormatError(f"{path}: header field 'protocol': expected one of "
+                                 f"{', '.join(sorted(PROTOCOLS))}, found {named!r}")
     return named
+
+
+def _looks_like_serlog(path: Path) -> bool:
+    """True for a file named ``.serlog`` or starting with the serlog magic (its header is then read)."""
+    return path.suffix.lower() == ".serlog" or is_serlog(path)
 
 
 def _make_decoder(args: argparse.Namespace) -> Decoder:

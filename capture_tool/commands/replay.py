@@ -8,6 +8,7 @@ reader closes the port (or ``--unplug-after`` pulls it, or Ctrl-C / SIGTERM).
 from __future__ import annotations
 
 import argparse
+import math
 import signal
 import sys
 
@@ -27,7 +28,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Open the pseudo-terminal, print its path, replay, close."""
-    if args.unplug_after is not None and args.unplug_after < 0:
+    if not (math.isfinite(args.wait) and args.wait > 0):
+        raise UserError(f"--wait: expected seconds above 0, found {args.wait}")
+    if args.unplug_after is not None and not (math.isfinite(args.unplug_after) and args.unplug_after >= 0):
         raise UserError(f"--unplug-after: expected seconds >= 0, found {args.unplug_after}")
     replay = open_pty_replay(args.log, speed=args.speed, unplug_after_s=args.unplug_after)
     signal.signal(signal.SIGTERM, lambda *_: replay.stop())

@@ -3,17 +3,28 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
+
+from capture_tool.errors import UserError
+
+#: the folder opened when no DIR is given (relative to the current directory)
+DEFAULT_DIR = "sample_sessions"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Declare the options of ``effortface app``."""
-    parser.add_argument("dir", nargs="?", default="sample_sessions", help="sessions folder")
+    parser.add_argument("dir", nargs="?", default=None,
+                        help=f"sessions folder (default: {DEFAULT_DIR})")
     parser.add_argument("--screenshot", metavar="PATH", help="render offscreen to a PNG and exit")
     parser.add_argument("--stage", default="capture", help="stage to show (with --screenshot)")
 
 
 def run(args: argparse.Namespace) -> int:
     """Open the main window (imports Qt only here)."""
+    if args.dir is None:
+        args.dir = DEFAULT_DIR
+    elif not Path(args.dir).exists():
+        raise UserError(f"DIR {args.dir}: expected a folder of sessions, found nothing")
     from effortface.app import main
 
     return main(args)

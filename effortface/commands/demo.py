@@ -8,7 +8,8 @@
 4. **evaluate**: the exported bundle re-scored through the runtime (``DIR/evaluation.md``);
 5. **synthesize**: a clip's face curves with the trained bundle (``DIR/synth.csv``).
 
-It ends by printing where the report is. An existing ``--out`` is refused unless ``--force``; by
+It ends by printing where the report is. An existing ``--out`` is refused unless ``--force``, which
+replaces only a previous demo output (it holds a ``.effortface-demo`` file) or an empty folder; by
 default a fresh timestamped folder is made in the current directory.
 """
 
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import datetime as _dt
+import math
 import shutil
 import subprocess
 import sys
@@ -25,17 +27,20 @@ from pathlib import Path
 import pandas as pd
 
 from capture_tool.errors import UserError
+from train.face_fit import MIN_ROWS_PER_PARTICIPANT
 
 SAMPLE_LAB = Path(__file__).resolve().parents[2] / "sample_sessions"
 #: replay speed and capture length: 12 s of capture at 25x = 5 minutes of the recording
 REPLAY_SPEED = 25.0
 CAPTURE_S = 12.0
+#: a file written into every demo output folder: only such a folder (or an empty one) is replaced by --force
+MARKER = ".effortface-demo"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``effortface demo``."""
     parser.add_argument("--out", metavar="DIR", help="output folder (default: effortface-demo-<time>)")
-    parser.add_argument("--force", action="store_true", help="replace an existing --out")
+    parser.add_argument("--force", action="store_true", help="replace an existing --out made by a previous demo (or empty)")
     parser.add_argument("--lab", default=str(SAMPLE_LAB), metavar="DIR", help="the sessions to use")
     parser.add_argument("--capture-seconds", type=float, default=CAPTURE_S, metavar="S",
                         help=f"length of the live capture step (default {CAPTURE_S:g})")
@@ -43,16 +48,57 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="face training rows per participant (default 200)")
 
 
+def _check_options(args: argparse.Namespace) -> None:
+    """UserError for a bad ``--capture-seconds`` or ``--max-rows``, before anything is made or removed."""
+    if not math.isfinite(args.capture_seconds) or args.capture_seconds <= 0:
+        raise UserError(f"--capture-seconds: expected seconds above 0, found {args.capture_seconds:g}")
+    if args.max_rows < MIN_ROWS_PER_PARTICIPANT:
+        raise UserError(f"--max-rows: expected at least {MIN_ROWS_PER_PARTICIPANT} (as effortface train), "
+                        f"found {args.max_rows}")
+
+
+def _contains(folder: Path, other: Path) -> bool:
+    """Whether ``other`` is ``folder`` or inside it (both resolved)."""
+    folder, other = folder.resolve(), other.resolve()
+    return other == folder or folder in other.parents
+
+
 def _out_dir(args: argparse.Namespace) -> Path:
-    """The output folder: a fresh timestamped one, or --out (refused if it exists without --force)."""
+    """The output folder: a fresh timestamped one, or --out (refused if it exists without --force).
+
+    ``--force`` replaces only a previous demo output (a folder holding :data:`MARKER`) or an empty
+    folder; never a file, another folder, the lab or the current directory. Nothing is removed here:
+    :func:`_replace_out` does it, once every option has been checked.
+    """
     if args.out is None:
         return Path(f"effortface-demo-{_dt.datetime.now():%Y%m%d-%H%M%S}")
     out = Path(args.out)
-    if out.exists() and not args.force:
+    if not out.exists() and not out.is_symlink():
+        return out
+    if not args.force:
         raise UserError(f"--out {out}: expected a new folder, found an existing one (pass --force)")
-    if out.exists():
-        shutil.rmtree(out)
+    if out.is_symlink() or not out.is_dir():
+        raise UserError(f"--out {out}: expected a folder made by effortface demo, found "
+                        f"{'a symbolic link' if out.is_symlink() else 'a file'} (not replaced)")
+    lab = Path(getattr(args, "lab", None) or SAMPLE_LAB)
+    for name, protected in (("the current directory", Path.cwd()), ("the --lab folder", lab),
+                            ("the sample lab", SAMPLE_LAB)):
+        if protected.exists() and _contains(out, protected):
+            raise UserError(f"--out {out}: expected a folder made by effortface demo, found {name} "
+                            "or a folder holding it (not replaced)")
+    if not (out / MARKER).is_file() and any(out.iterdir()):
+        raise UserError(f"--out {out}: expected a folder made by effortface demo (with {MARKER}) or an "
+                        "empty folder, found other files (not replaced)")
     return out
+
+
+def _replace_out(out: Path) -> None:
+    """Remove a previous demo output that :func:`_out_dir` accepted, then make ``out`` afresh with its marker."""
+    if out.is_dir():
+        shutil.rmtree(out)
+    out.mkdir(parents=True)
+    (out / MARKER).write_text("made by 'effortface demo'; 'effortface demo --force' may replace this folder\n",
+                              encoding="utf-8")
 
 
 def _say(step: str, text: str) -> None:
@@ -149,13 +195,14 @@ def run(args: argparse.Namespace) -> int:
     from annotate.blendshapes import DEFAULT_SET
     from train.report import _md
 
+    _check_options(args)
     lab = Path(args.lab)
     sessions = list_sessions(lab)
     if not sessions:
         raise UserError(f"--lab {lab}: expected session folders, found none "
                         "(run python sample_sessions/generate.py)")
     out = _out_dir(args)
-    out.mkdir(parents=True)
+    _replace_out(out)
     t0 = time.monotonic()
     _say("capture", f"replaying {sessions[0].name}'s strap at {REPLAY_SPEED:g}x into effortface capture")
     captured = capture_step(sessions[0], out, args.capture_seconds)

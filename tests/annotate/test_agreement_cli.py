@@ -80,3 +80,59 @@ def test_bad_input_is_one_line_and_status_2(message: str, argv, tmp_path: Path,
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1
     assert re.search(message, err), err
+
+
+def _write(tmp_path: Path, name: str, rows: str) -> str:
+    p = tmp_path / name
+    p.write_text("pose_id,rater,blendshape,weight\n" + rows)
+    return str(p)
+
+
+@pytest.mark.parametrize(("message", "rows"), [
+    # no pose rated by two raters (was a ValueError traceback from mean_abs_disagreement_pct)
+    (r"ratings \(.*noverlap.csv\): expected at least one pose and blendshape rated by two raters, found none",
+     "p1,R1,mouth_open,0.5\np2,R2,mouth_open,0.6\n"),
+    # R3 shares a single rating with R1 and R2: no Bland-Altman for those pairs (was a ValueError)
+    (r"expected raters R1 and R3 to rate at least 2 pose blendshapes in common \(for Bland-Altman\), found 1",
+     ("p1,R1,mouth_open,0.5\np1,R2,mouth_open,0.6\np2,R1,mouth_open,0.2\np2,R2,mouth_open,0.3\n"
+      "p2,R3,mouth_open,0.4\n")),
+])
+def test_ratings_without_overlap_are_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                              message: str, rows: str) -> None:
+    assert main(["agreement", "--ratings", _write(tmp_path, "noverlap.csv", rows)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+    assert re.search(message, err), err
+
+
+def test_a_blendshape_no_two_raters_share_is_reported_as_nan(tmp_path: Path,
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """Only one rater rated eye_squint: its row is NaN, the rest of the report is computed."""
+    rows = ("p1,R1,mouth_open,0.5\np1,R2,mouth_open,0.6\np2,R1,mouth_open,0.2\np2,R2,mouth_open,0.4\n"
+            "p1,R1,eye_squint,0.3\n")
+    assert main(["agreement", "--ratings", _write(tmp_path, "partial.csv", rows)]) == 0
+    out = capsys.readouterr().out
+    assert re.search(r"eye_squint\s+2\s+nan\s+nan\s+nan\s+nan", out), out
+    assert re.search(r"mouth_open\s+2\s+15\.0", out), out
+
+
+@pytest.mark.parametrize(("message", "plot"), [
+    (r"--plot .*p\.txt: expected a path ending in \.png, found '\.txt'", lambda t: t / "p.txt"),
+    (r"--plot .*nonexistent/x\.png: expected an existing folder for the PNG, found nothing at '.*nonexistent'",
+     lambda t: t / "nonexistent" / "x.png"),
+    (r"--plot .*afile/x\.png: expected an existing folder for the PNG, found a file at '.*afile'",
+     lambda t: t / "afile" / "x.png"),
+    (r"--plot .*dir\.png: expected a new PNG file, found a folder", lambda t: t / "dir.png"),
+    (r"--plot /proc/x\.png: expected a writable PNG path, found ", lambda t: Path("/proc/x.png")),
+])
+def test_bad_plot_paths_are_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str], message: str, plot) -> None:
+    pytest.importorskip("matplotlib")
+    (tmp_path / "afile").write_text("keep")
+    (tmp_path / "dir.png").mkdir()
+    target = plot(tmp_path)
+    assert main(["agreement", str(SAMPLES), "--plot", str(target)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+    assert re.search(message, err), err
+    assert (tmp_path / "afile").read_text() == "keep" and not list((tmp_path / "dir.png").iterdir())
+    assert not (tmp_path / "p.txt").exists()

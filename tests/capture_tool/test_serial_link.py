@@ -144,8 +144,10 @@ def test_real_ant_stick_needs_the_key_replays_do_not(monkeypatch, tmp_path) -> N
         assert device_startup_frames("ant", rp.path) == []  # a replay: no key needed
     assert device_startup_frames("ant", "replay://x.serlog") == []
     assert device_startup_frames("hxm", "/dev/ttyUSB0") == []
+    stick = tmp_path / "ttyUSB0"  # an existing port path: a missing one is reported before the key
+    stick.touch()
     with pytest.raises(DeviceError, match="ANT\\+ Adopter") as err:
-        device_startup_frames("ant", "/dev/ttyUSB0")
+        device_startup_frames("ant", str(stick))
     assert err.value.reason is DeviceErrorReason.NO_KEY
     monkeypatch.setenv(ENV_VAR, "01 02 03 04 05 06 07 08")
-    assert device_startup_frames("ant", "/dev/ttyUSB0") == open_sequence(bytes(range(1, 9)))
+    assert device_startup_frames("ant", str(stick)) == open_sequence(bytes(range(1, 9)))

@@ -28,6 +28,7 @@ def test_demo_runs_the_whole_pipeline(lab, tmp_path, capsys):
     printed = capsys.readouterr().out.strip().splitlines()
     assert printed[-1] == f"report: {out / 'model' / 'report' / 'report.md'}"
     assert (out / "model" / "report" / "report.md").is_file()
+    assert (out / ".effortface-demo").is_file()  # marks it as replaceable by --force
     # capture through the pseudo-terminal recorded real decoded samples, and decode agrees
     captured = next((out / "captured").iterdir())
     live = pd.read_csv(captured / "heart_rate.csv")
@@ -56,11 +57,94 @@ def test_demo_needs_sessions(tmp_path, capsys):
 def test_default_out_is_a_fresh_timestamped_folder(tmp_path, monkeypatch):
     import argparse
 
-    from effortface.commands.demo import _out_dir
+    from effortface.commands.demo import MARKER, _out_dir, _replace_out
 
     monkeypatch.chdir(tmp_path)
     out = _out_dir(argparse.Namespace(out=None, force=False))
     assert out.name.startswith("effortface-demo-") and not out.exists()
     forced = tmp_path / "old"
     (forced / "x").mkdir(parents=True)
-    assert _out_dir(argparse.Namespace(out=str(forced), force=True)) == forced and not forced.exists()
+    (forced / MARKER).write_text("")  # a previous demo output
+    assert _out_dir(argparse.Namespace(out=str(forced), force=True)) == forced
+    assert (forced / "x").is_dir()  # nothing removed until every option is checked
+    _replace_out(forced)
+    assert [p.name for p in forced.iterdir()] == [MARKER]
+
+
+def _precious(folder: Path) -> dict[str, bytes]:
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "model.json").write_bytes(b"{}")
+    (folder / "sub").mkdir(exist_ok=True)
+    (folder / "sub" / "data.csv").write_bytes(b"a,b\n1,2\n")
+    return _snapshot(folder)
+
+
+def _snapshot(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def _one_line(err: str) -> str:
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+@pytest.mark.parametrize(("options", "message"), [
+    (["--capture-seconds", "0"], "--capture-seconds: expected seconds above 0, found 0"),
+    (["--capture-seconds", "-1"], "--capture-seconds: expected seconds above 0, found -1"),
+    (["--capture-seconds", "nan"], "--capture-seconds: expected seconds above 0, found nan"),
+    (["--max-rows", "-1"], "--max-rows: expected at least 20 (as effortface train), found -1"),
+    (["--max-rows", "19"], "--max-rows: expected at least 20 (as effortface train), found 19"),
+])
+def test_bad_options_are_refused_before_out_is_touched(lab, tmp_path, capsys, options, message):
+    """A bad option is named up front: --force removes nothing and no half-made --out is left."""
+    kept = tmp_path / "labcopy2"
+    before = _precious(kept)
+    assert main(["demo", "--out", str(kept), "--force", *options]) == 2
+    assert message in _one_line(capsys.readouterr().err)
+    assert _snapshot(kept) == before
+    fresh = tmp_path / "fresh"
+    assert main(["demo", "--out", str(fresh), *options]) == 2
+    assert message in _one_line(capsys.readouterr().err)
+    assert not fresh.exists()
+
+
+def test_force_refuses_a_folder_not_made_by_demo(lab, tmp_path, capsys):
+    kept = tmp_path / "labcopy2"
+    before = _precious(kept)
+    assert main(["demo", "--out", str(kept), "--force"]) == 2
+    line = _one_line(capsys.readouterr().err)
+    assert f"--out {kept}: expected a folder made by effortface demo (with .effortface-demo) or an empty " \
+           "folder, found other files (not replaced)" in line
+    assert _snapshot(kept) == before
+
+
+def test_force_refuses_a_file(lab, tmp_path, capsys):
+    afile = tmp_path / "afile"
+    afile.write_bytes(b"keep")
+    assert main(["demo", "--out", str(afile), "--force"]) == 2
+    assert f"--out {afile}: expected a folder made by effortface demo, found a file (not replaced)" \
+        in _one_line(capsys.readouterr().err)
+    assert afile.read_bytes() == b"keep"
+
+
+def test_force_never_replaces_the_lab_or_the_current_directory(tmp_path, monkeypatch, capsys):
+    from capture_tool.session import Participant, SessionInfo, create_session
+    from effortface.commands.demo import MARKER
+
+    fake_lab = tmp_path / "lab"
+    create_session(fake_lab, SessionInfo("P01_20260101-100000_cardio", Participant("P01"), complete=True))
+    (fake_lab / MARKER).write_text("")  # even with the marker
+    before = _snapshot(fake_lab)
+    for out in (fake_lab, tmp_path):
+        assert main(["demo", "--lab", str(fake_lab), "--out", str(out), "--force"]) == 2
+        assert "(not replaced)" in _one_line(capsys.readouterr().err)
+    assert _snapshot(fake_lab) == before
+    work = tmp_path / "work"
+    work.mkdir()
+    (work / MARKER).write_text("")
+    (work / "mine.txt").write_text("mine")
+    monkeypatch.chdir(work)
+    assert main(["demo", "--lab", str(fake_lab), "--out", ".", "--force"]) == 2
+    assert "found the current directory" in _one_line(capsys.readouterr().err)
+    assert (work / "mine.txt").read_text() == "mine"

@@ -104,10 +104,52 @@ BAD = {
         lambda f: _edit_npz(f, lambda a: a.pop("dual_coef_eye_squint")),
     r"svr.npz: expected a numpy .npz without pickles":
         lambda f: _edit_npz(f, lambda a: a.update(intercept=np.array([{"x": 1}], dtype=object))),
-    r"svr.npz: SVR 1: expected one dual coefficient per support vector":
+    r"svr.npz: dual_coef_mouth_open: expected shape \(\d+,\) \(one per support vector\), found \(1,\)":
         lambda f: _edit_npz(f, lambda a: a.update(dual_coef_mouth_open=np.ones(1))),
-    r"svr.npz: support_vectors: expected shape \(n, 4\)":
+    r"svr.npz: support_vectors_brow_lower: expected shape \(n, 4\), found \(2, 3\)":
         lambda f: _edit_npz(f, lambda a: a.update(support_vectors_brow_lower=np.ones((2, 3)))),
+    # audit (fz/): a name given as a list/object raised TypeError (unhashable) in _read_blendshapes
+    r"model.json.blendshapes\[0\].name: expected str, found list":
+        lambda f: _edit_json(f, lambda d: d["blendshapes"][0].update(name=["a"])),
+    r"model.json.blendshapes\[1\].name: expected str, found dict":
+        lambda f: _edit_json(f, lambda d: d["blendshapes"][1].update(name={})),
+    r"model.json.blendshapes\[2\]: expected an object \{name, drives, arkit\}, found str":
+        lambda f: _edit_json(f, lambda d: d["blendshapes"].__setitem__(2, "eye_squint")),
+    r"model.json.blendshapes\[0\].drives: expected str, found list":
+        lambda f: _edit_json(f, lambda d: d["blendshapes"][0].update(drives=[])),
+    # audit: arkit entries that are null/number/list loaded, then crashed --format livelink
+    r"model.json.blendshapes\[0\].arkit: expected ARKit blendshape names \(strings\), found None":
+        lambda f: _edit_json(f, lambda d: d["blendshapes"][0]["arkit"].__setitem__(0, None)),
+    r"model.json.blendshapes\[1\].arkit: expected ARKit blendshape names \(strings\), found -1":
+        lambda f: _edit_json(f, lambda d: d["blendshapes"][1]["arkit"].__setitem__(0, -1)),
+    r"model.json.blendshapes\[3\].arkit: expected ARKit blendshape names \(strings\), found \[\]":
+        lambda f: _edit_json(f, lambda d: d["blendshapes"][3]["arkit"].append([])),
+    r"model.json.blendshapes\[0\].arkit: expected list, found str 'x'":
+        lambda f: _edit_json(f, lambda d: d["blendshapes"][0].update(arkit="x")),
+    # audit: an empty svr.npz raised EOFError in _read_npz
+    r"svr.npz: expected a numpy .npz without pickles, found No data left in file":
+        lambda f: (f / "svr.npz").write_bytes(b""),
+    # audit: reshaped arrays were accepted
+    r"svr.npz: intercept: expected shape \(4,\) \(one per blendshape\), found \(4, 1\)":
+        lambda f: _edit_npz(f, lambda a: a.update(intercept=a["intercept"].reshape(-1, 1))),
+    r"svr.npz: dual_coef_eye_squint: expected shape \(\d+,\) \(one per support vector\), found \(\d+, 1\)":
+        lambda f: _edit_npz(f, lambda a: a.update(dual_coef_eye_squint=a["dual_coef_eye_squint"][:, None])),
+    r"svr.npz: support_vectors_mouth_open: expected shape \(n, 4\), found \(4, \d+\)":
+        lambda f: _edit_npz(f, lambda a: a.update(support_vectors_mouth_open=a["support_vectors_mouth_open"].T)),
+    # audit: negative or huge NHR coefficients were accepted (SCIENCE.md 3: all three are positive)
+    r"model.json.nhr.coefficients.t_root: expected a value above 0 and at most 1e\+06, found -1":
+        lambda f: _edit_json(f, lambda d: d["nhr"]["coefficients"].update(t_root=-1)),
+    r"model.json.nhr.coefficients.c_inc: expected a value above 0 and at most 1e\+06, found 0":
+        lambda f: _edit_json(f, lambda d: d["nhr"]["coefficients"].update(c_inc=0)),
+    r"model.json.nhr.coefficients.c_dec: expected a value above 0 and at most 1e\+06, found 1e\+308":
+        lambda f: _edit_json(f, lambda d: d["nhr"]["coefficients"].update(c_dec=1e308)),
+    r"model.json.nhr.tl_regression.t_root: expected a value from -1e\+06 to 1e\+06 at training level 0, "
+    r"found 1e\+308":
+        lambda f: _edit_json(f, lambda d: d["nhr"]["tl_regression"]["t_root"].update(intercept=1e308)),
+    r"model.json.nhr.tl_regression.t_root: expected a value from -1e\+06 to 1e\+06 at training level 10, found inf":
+        lambda f: _edit_json(f, lambda d: d["nhr"]["tl_regression"]["t_root"].update(slope=1e308)),
+    r"model.json.nhr.tl_regression.c_dec: expected a value from -1e\+06 to 1e\+06 at training level 10, found inf":
+        lambda f: _edit_json(f, lambda d: d["nhr"]["tl_regression"]["c_dec"].update(slope=1e308)),
 }
 
 

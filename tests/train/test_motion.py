@@ -206,3 +206,115 @@ def test_any_names_and_channel_order(tmp_path: Path) -> None:
         assert motion.fps == 50.0
         x, y, z = expected_y_up
         np.testing.assert_allclose(motion.positions_m[0, 1], [z, x, y], atol=1e-12)
+
+
+# --------------------------------------------------------------------------------------------
+# bad skeletons and values (audit: parentsself.npz hang, parents99.npz IndexError, NaN frames,
+# empty.npz EOFError, fps0.npz named cutoff_hz, onejoint.bvh asked for a missing option)
+
+AMP = "motion/amp_humanoid_walk.npz"
+
+
+def _npz_variant(shared_data: Path, tmp_path: Path, **changes) -> Path:
+    """A copy of the AMP walk clip with some arrays replaced (values may be callables of the old)."""
+    with np.load(shared_data / AMP, allow_pickle=False) as npz:
+        data = {k: npz[k] for k in npz.files}
+    for key, value in changes.items():
+        data[key] = value(data[key].copy()) if callable(value) else value
+    out = tmp_path / "bad.npz"
+    np.savez(out, **data)
+    return out
+
+
+def _set(index, value):
+    def edit(a: np.ndarray) -> np.ndarray:
+        a[index] = value
+        return a
+    return edit
+
+
+BAD_NPZ = {
+    r"bad\.npz: parent_indices: expected -1 or the index of an earlier joint .*joint 0 with parent 0":
+        dict(parent_indices=_set(0, 0)),
+    r"bad\.npz: parent_indices: .*joint 3 with parent 3": dict(parent_indices=_set(3, 3)),
+    r"bad\.npz: parent_indices: .*joint 2 with parent 5": dict(parent_indices=_set(2, 5)),
+    r"bad\.npz: parent_indices: .*joint 1 with parent 99": dict(parent_indices=_set(1, 99)),
+    r"bad\.npz: parent_indices: .*joint 1 with parent -7": dict(parent_indices=_set(1, -7)),
+    r"bad\.npz: parent_indices: expected a 1-D array of integers": dict(
+        parent_indices=lambda a: a.astype(str)),
+    r"bad\.npz: root_translation: expected finite numbers, found nan at frame 7":
+        dict(root_translation=_set((7, 1), np.nan)),
+    r"bad\.npz: rotation_xyzw_local: expected finite numbers, found inf at frame 3":
+        dict(rotation_xyzw_local=_set((3, 2, 0), np.inf)),
+    r"bad\.npz: rotation_xyzw_local: expected unit quaternions, found \(0, 0, 0, 0\) at frame 4":
+        dict(rotation_xyzw_local=_set((4, 1), 0.0)),
+    r"bad\.npz: local_translation: expected finite numbers, found nan": dict(
+        local_translation=_set((2, 0), np.nan)),
+    r"bad\.npz: fps: expected one positive frame rate, found 0": dict(fps=np.array(0)),
+    r"bad\.npz: fps: expected one positive frame rate, found -30": dict(fps=np.array(-30.0)),
+    r"bad\.npz: fps: expected one positive frame rate, found nan": dict(fps=np.array(np.nan)),
+    r"bad\.npz: fps: expected one positive frame rate, found \[30, 60\]": dict(fps=np.array([30, 60])),
+    r"bad\.npz: fps: expected one positive frame rate, found abc": dict(fps=np.array("abc")),
+    r"bad\.npz: root_translation: expected numbers, found <U": dict(
+        root_translation=lambda a: a.astype(str)),
+}
+
+
+@pytest.mark.parametrize(("match", "changes"), list(BAD_NPZ.items()), ids=list(range(len(BAD_NPZ))))
+def test_bad_npz_content_is_named(shared_data: Path, tmp_path: Path, match: str, changes: dict) -> None:
+    """Cyclic/out-of-range parents (which hung or raised IndexError), NaN values and bad fps."""
+    with pytest.raises(MotionFormatError, match=match):
+        read_npz_motion(_npz_variant(shared_data, tmp_path, **changes))
+
+
+def test_empty_and_npy_files_are_named(tmp_path: Path) -> None:
+    """A 0-byte .npz raised EOFError; a plain .npy array under .npz broke the context manager."""
+    (tmp_path / "empty.npz").write_bytes(b"")
+    with pytest.raises(MotionFormatError, match=r"empty\.npz: expected a readable \.npz motion file"):
+        read_motion(tmp_path / "empty.npz")
+    np.save(tmp_path / "one.npy", np.zeros(3))
+    (tmp_path / "one.npy").rename(tmp_path / "one.npz")
+    with pytest.raises(MotionFormatError, match=r"one\.npz: expected a \.npz archive of arrays"):
+        read_motion(tmp_path / "one.npz")
+
+
+BAD_BVH_VALUES = {
+    r"bad\.bvh: line 188: expected finite numbers in frame 0, found nan": ("-0.0035 15.8971", "nan 15.8971"),
+    r"bad\.bvh: line 188: expected finite numbers in frame 0, found inf": ("-0.0035 15.8971", "-0.0035 inf"),
+    r"bad\.bvh: line 4: expected an OFFSET number \(finite\), found 'nan'":
+        ("OFFSET 0.00000 0.00000 0.00000", "OFFSET nan 0 0"),
+    r"bad\.bvh: line 186: expected 'Frames: <number>', found 'Frames: inf'": ("Frames: 439", "Frames: inf"),
+    r"bad\.bvh: line 186: expected 'Frames: <number>', found 'Frames: nan'": ("Frames: 439", "Frames: nan"),
+}
+
+
+@pytest.mark.parametrize(("match", "edit"), list(BAD_BVH_VALUES.items()), ids=list(range(len(BAD_BVH_VALUES))))
+def test_non_finite_bvh_values_are_named(shared_data: Path, tmp_path: Path, match: str,
+                                         edit: tuple[str, str]) -> None:
+    """A NaN frame used to turn almost every output row into NaN; now the file and line are named."""
+    with pytest.raises(MotionFormatError, match=match):
+        read_bvh(_bvh_variant(shared_data, tmp_path, *edit))
+
+
+def test_undetectable_bvh_unit_names_the_file(tmp_path: Path) -> None:
+    """A 1-unit-tall skeleton: say what the file lacks, not to pass an option the CLI lacks."""
+    path = tmp_path / "tiny.bvh"
+    path.write_text(_tiny_bvh("XYZ", "0 0 0 0 0 0 0 0 0").replace("OFFSET 0 0.7 0", "OFFSET 0 0.05 0")
+                    .replace("OFFSET 0 0.5 0", "OFFSET 0 0.05 0"))
+    with pytest.raises(MotionFormatError, match=r"tiny\.bvh: expected a skeleton whose rest pose is "
+                                                r"1\.1-2\.3 m tall .*found a rest-pose height of 0\.1 file units"):
+        read_bvh(path)
+    assert read_bvh(path, unit_m=10.0).positions_m.shape == (1, 3, 3)
+
+
+@pytest.mark.parametrize(("match", "kw"), [
+    (r"cycle: parent_indices: .*joint 0 with parent 1", dict(parents=(1, 0))),
+    (r"cycle: parent_indices: .*joint 1 with parent 9", dict(parents=(-1, 9))),
+    (r"cycle: positions_m: expected finite numbers, found nan at frame 2", dict(
+        parents=(-1, 0), positions_m=np.where(np.arange(5)[:, None, None] == 2, np.nan, np.zeros((5, 2, 3))))),
+    (r"fps: expected a positive number, got nan", dict(parents=(-1, 0), fps=float("nan"))),
+], ids=["cycle", "range", "nan", "fps-nan"])
+def test_motion_from_positions_checks_skeleton_and_values(match: str, kw: dict) -> None:
+    args = dict(positions_m=np.zeros((5, 2, 3)), fps=30.0) | kw
+    with pytest.raises(UserError, match=match):
+        motion_from_positions(joint_names=("a", "b"), source="cycle", **args)

@@ -158,3 +158,42 @@ def test_stack_bodies_refuses_mixed_skeletons(shared_data: Path) -> None:
         stack_bodies(bodies)
     with pytest.raises(UserError, match=r"bodies: expected at least one body, got none"):
         stack_bodies([])
+
+
+BAD_MAPPING_VALUES = {"ints": [1, 2], "int": 5, "null": None, "short": ["Hips"],
+                      "nested": ["Hips", [["a"]]], "empty-list": ["Hips", []], "dict": {"a": "b"}}
+
+
+@pytest.mark.parametrize("value", BAD_MAPPING_VALUES.values(), ids=list(BAD_MAPPING_VALUES))
+def test_mapping_file_value_types_are_named(tmp_path: Path, value) -> None:
+    """{"trunk": [1, 2]} raised TypeError in _resolve_end; now the file and segment are named."""
+    path = tmp_path / "map.json"
+    path.write_text(json.dumps({"trunk": value}))
+    with pytest.raises(SegmentMappingError, match=r"map\.json: expected \[proximal, distal\] joint names "
+                                                  r".*bad entries: trunk$"):
+        map_skeleton(_names("Unreal"), path)
+
+
+@pytest.mark.parametrize("value", [(1, 2), ("pelvis", 3), ("pelvis",), None], ids=["ints", "int", "short", "none"])
+def test_mapping_dict_value_types_are_named(value) -> None:
+    if value is None:
+        with pytest.raises(SegmentMappingError, match=r"mapping: expected a mapping segment"):
+            map_skeleton(_names("Unreal"), ["trunk"])  # type: ignore[arg-type]
+        return
+    with pytest.raises(SegmentMappingError, match=r"mapping: trunk: expected \(proximal, distal\) joint names"):
+        map_skeleton(_names("Unreal"), {"trunk": value})
+
+
+@pytest.mark.parametrize("parents", [[0, 0, 1, 2], [-1, 2, 1, 2], [-1, 0, 99, 2]], ids=["self", "cycle", "range"])
+def test_build_body_refuses_a_parent_cycle(tmp_path: Path, parents: list[int]) -> None:
+    """A cyclic parent list looped forever in _ancestors (the parentsself.npz hang)."""
+    names = ["root", "chest", "skull", "skull_top"] + [
+        f"{s}_{p}" for s in "LR" for p in ("sh", "el", "wr", "fi", "hip", "kn", "an", "toe")]
+    mapping = {"head": ["skull_top", "skull"], "trunk": ["chest", ["L_hip", "R_hip"]]}
+    for side, s in (("left", "L"), ("right", "R")):
+        for seg, a, b in (("upper_arm", "sh", "el"), ("forearm", "el", "wr"), ("hand", "wr", "fi"),
+                          ("thigh", "hip", "kn"), ("shank", "kn", "an"), ("foot", "an", "toe")):
+            mapping[f"{side}_{seg}"] = [f"{s}_{a}", f"{s}_{b}"]
+    full = parents + [1, 4, 5, 6, 0, 8, 9, 10] + [1, 12, 13, 14, 0, 16, 17, 18]
+    with pytest.raises(UserError, match=r"parents: expected a tree of 20 joints \(indices -1 to 19, no cycles\)"):
+        build_body(names, full, 60.0, "female", mapping=mapping)

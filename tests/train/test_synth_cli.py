@@ -172,3 +172,109 @@ def test_user_mapping_file_maps_unknown_joints(shared_data: Path, tmp_path: Path
     for key in ("w_per_kg", "hr_bpm", "eye_squint"):
         np.testing.assert_allclose([float(r[key]) for r in a], [float(r[key]) for r in b],
                                    rtol=1e-8, err_msg=key)
+
+
+AMP = "motion/amp_humanoid_walk.npz"
+
+
+def _npz_with(shared_data: Path, tmp_path: Path, name: str, **changes) -> Path:
+    """A copy of the AMP walk clip with arrays replaced (callables edit a copy of the old array)."""
+    with np.load(shared_data / AMP, allow_pickle=False) as npz:
+        data = {k: npz[k] for k in npz.files}
+    for key, value in changes.items():
+        data[key] = value(data[key].copy()) if callable(value) else value
+    np.savez(tmp_path / name, **data)
+    return tmp_path / name
+
+
+def _first(value):
+    def edit(a: np.ndarray) -> np.ndarray:
+        a.flat[0] = value
+        return a
+    return edit
+
+
+def _map(tmp_path: Path, value) -> str:
+    import json
+
+    (tmp_path / "map.json").write_text(json.dumps({"trunk": value}))
+    return str(tmp_path / "map.json")
+
+
+BAD_AUDIT = {
+    # item 1: parentsself.npz hung forever, parents99.npz raised IndexError
+    r"parentsself\.npz: parent_indices: expected -1 or the index of an earlier joint":
+        lambda d, t: [str(_npz_with(d, t, "parentsself.npz", parent_indices=_first(0)))],
+    r"parents99\.npz: parent_indices: .*parent 99":
+        lambda d, t: [str(_npz_with(d, t, "parents99.npz", parent_indices=_first(99)))],
+    # item 2: NaN values gave NaN output rows
+    r"nan\.npz: root_translation: expected finite numbers, found nan at frame 0":
+        lambda d, t: [str(_npz_with(d, t, "nan.npz", root_translation=_first(np.nan)))],
+    r"nanvals\.bvh: line 188: expected finite numbers in frame 0, found nan":
+        lambda d, t: [str(_bvh_with(d, t, "nanvals.bvh", "-0.0035 15.8971", "nan 15.8971"))],
+    # item 3: tracebacks and misleading messages
+    r"empty\.npz: expected a readable \.npz motion file":
+        lambda d, t: [str(_touch(t / "empty.npz"))],
+    r"fps0\.npz: fps: expected one positive frame rate, found 0":
+        lambda d, t: [str(_npz_with(d, t, "fps0.npz", fps=np.array(0.0)))],
+    r"map\.json: expected \[proximal, distal\] joint names .*bad entries: trunk":
+        lambda d, t: [str(d / AMP), "--mapping", _map(t, [1, 2])],
+    r"onejoint\.bvh: expected a skeleton whose rest pose is 1\.1-2\.3 m tall":
+        lambda d, t: [str(_onejoint(t))],
+    r"--out .*: expected a file path, found a folder":
+        lambda d, t: [str(d / AMP), "--out", str(t), "--force"],
+    r"--out /proc/x\.csv: expected a writable file":
+        lambda d, t: [str(d / AMP), "--out", "/proc/x.csv"],
+}
+
+
+def _touch(path: Path) -> Path:
+    path.write_bytes(b"")
+    return path
+
+
+def _bvh_with(shared_data: Path, tmp_path: Path, name: str, old: str, new: str) -> Path:
+    text = (shared_data / JJ).read_text()
+    assert old in text
+    (tmp_path / name).write_text(text.replace(old, new, 1))
+    return tmp_path / name
+
+
+def _onejoint(tmp_path: Path) -> Path:
+    path = tmp_path / "onejoint.bvh"
+    path.write_text("HIERARCHY\nROOT hips\n{\n  OFFSET 0 0 0\n  CHANNELS 3 Xposition Yposition Zposition\n"
+                    "  End Site\n  {\n    OFFSET 0 1 0\n  }\n}\nMOTION\nFrames: 2\nFrame Time: 0.01\n"
+                    "0 0 0\n0 0 0\n")
+    return path
+
+
+@pytest.mark.parametrize(("message", "extra"), BAD_AUDIT.items(), ids=list(range(len(BAD_AUDIT))))
+def test_audit_bad_inputs_are_one_line_exit_2(shared_data: Path, tmp_path: Path, capsys, message: str,
+                                              extra) -> None:
+    """Inputs from the CLI audit that hung, raised tracebacks, gave NaN rows or misleading text."""
+    args = extra(shared_data, tmp_path)
+    if "--out" not in args:
+        args += ["--out", str(tmp_path / "out.csv")]
+    status = main(["synth", "default", *args])
+    err = capsys.readouterr().err
+    assert status == 2
+    assert err.count("\n") == 1 and err.startswith("effortface synth: error: "), err
+    assert re.search(message, err), err
+    assert not (tmp_path / "out.csv").exists()
+
+
+@pytest.mark.parametrize("arkit", [None, 3, ["jawOpen"]], ids=["null", "number", "list"])
+def test_livelink_bad_arkit_entry_is_one_line(shared_data: Path, tmp_path: Path, capsys, arkit) -> None:
+    """An arkit entry that is not a string loaded fine, then crashed --format livelink."""
+    import json
+
+    folder = write_bundle(make_bundle(), tmp_path / "model")
+    doc = json.loads((folder / "model.json").read_text())
+    doc["blendshapes"][1]["arkit"] = [arkit]
+    (folder / "model.json").write_text(json.dumps(doc))
+    out = tmp_path / "take.csv"
+    status = main(["synth", str(folder), str(shared_data / AMP), "--out", str(out), "--format", "livelink"])
+    err = capsys.readouterr().err
+    assert status == 2 and err.count("\n") == 1, err
+    assert re.search(r"model\.json\.blendshapes\[1\]\.arkit: expected ARKit blendshape names", err), err
+    assert not out.exists()

@@ -72,6 +72,11 @@ def _sessions(table: pd.DataFrame, root: Path, spoil: str) -> list[str]:
     return [str(root)]
 
 
+def _existing(folder: Path) -> Path:
+    folder.mkdir()
+    return folder
+
+
 def _csv(t: pd.DataFrame, path: Path) -> str:
     t.to_csv(path, index=False)
     return str(path)
@@ -88,7 +93,7 @@ BAD = {
     "contradictory participant": (
         lambda t, d: _sessions(t, d / "lab", "contradictory"), r"participant P01: expected one sex"),
     "existing --out without --force": (
-        lambda t, d: ["--table", str(write_table(t, d / "ok.csv")), "--out", str(d)],
+        lambda t, d: ["--table", str(write_table(t, d / "ok.csv")), "--out", str(_existing(d / "old"))],
         r"--out \S+: expected a new model folder, found an existing one \(pass --force"),
     "neither sessions nor table": (lambda t, d: [], r"expected session folders or --table CSV .*found neither"),
     "unknown rater": (

@@ -86,6 +86,27 @@ def evaluate_bundle(model_dir: str | Path, table: pd.DataFrame, source: str = "t
     return Evaluation(pd.DataFrame(hr_rows), pd.DataFrame(face_rows))
 
 
+def check_model_dir(model: str) -> Path:
+    """The MODEL_DIR argument as a Path, or UserError (one line) if it is not a model folder.
+
+    ``default`` (the built-in rule model other commands accept) is refused by name: it has no
+    fitted heart-rate or face models to score.
+
+    Raises
+    ------
+    UserError
+        For ``default``, a missing path, or a file.
+    """
+    expected = f"{model}: expected a model folder written by 'effortface train' (model.json, svr.npz)"
+    if model == "default":
+        raise UserError(f"{expected}, found 'default' (the built-in rule model has no fitted models "
+                        "to evaluate)")
+    path = Path(model)
+    if not path.is_dir():
+        raise UserError(f"{expected}, found {'a file' if path.exists() else 'no such folder'}")
+    return path
+
+
 def run(args: argparse.Namespace) -> int:
     """Entry point of ``effortface evaluate``."""
     from train.bundle import read_bundle
@@ -94,6 +115,7 @@ def run(args: argparse.Namespace) -> int:
     if bool(args.inputs) == bool(args.table):
         raise UserError("inputs: expected session folders or --table CSV (one of the two), found "
                         + ("both" if args.inputs else "neither"))
+    check_model_dir(args.model)
     shapes = read_bundle(args.model).blendshapes
     if args.table:
         table, source = read_table(args.table, shapes), str(args.table)

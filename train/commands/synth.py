@@ -131,21 +131,54 @@ def livelink_csv(curves: Mapping[str, np.ndarray], blendshapes: BlendshapeSet) -
     return buf.getvalue()
 
 
-def write_output(path: Path, text: str, force: bool) -> None:
-    """Write an output file atomically; refuse an existing file unless ``force`` (UserError)."""
+def check_output(path: Path, force: bool) -> None:
+    """Raise a UserError naming ``--out`` unless ``path`` can be (re)written as a file.
+
+    Parameters
+    ----------
+    path : Path
+        The ``--out`` file.
+    force : bool
+        Whether an existing file may be replaced.
+    """
+    if path.is_dir():
+        raise UserError(f"--out {path}: expected a file path, found a folder")
     if path.exists() and not force:
         raise UserError(f"--out {path}: expected a new file, found an existing one "
                         "(use --force to replace it)")
     if not path.parent.is_dir():
         raise UserError(f"--out {path}: expected an existing folder, found no {path.parent}")
-    atomic_write_text(path, text)
+
+
+def write_output(path: Path, text: str, force: bool) -> None:
+    """Write an output file atomically; refuse an existing file unless ``force`` (UserError).
+
+    Parameters
+    ----------
+    path : Path
+        The ``--out`` file.
+    text : str
+        The file's content.
+    force : bool
+        Whether an existing file may be replaced.
+
+    Raises
+    ------
+    UserError
+        A folder, an existing file without ``force``, a missing folder or a failed write (one
+        line naming ``--out``).
+    """
+    check_output(path, force)
+    try:
+        atomic_write_text(path, text)
+    except OSError as exc:
+        raise UserError(f"--out {path}: expected a writable file, found {exc.strerror or exc}") from None
 
 
 def run(args: argparse.Namespace) -> int:
     """Synthesize and write the curves; return 0."""
     out = Path(args.out)
-    if out.exists() and not args.force:
-        write_output(out, "", force=False)  # fail before the work
+    check_output(out, args.force)  # fail before the work
     model = load_model(args.model_dir)
     character = _character(args, model)
     curves = model.synthesize(args.motion, character, mapping=args.mapping)

@@ -21,8 +21,9 @@ import pandas as pd
 from annotate.blendshapes import BlendshapeSet, load_blendshape_set
 from capture_tool.errors import UserError
 from train.dataset import blendshape_columns, hr_series, prepare, read_table, sessions_table
-from train.face_fit import GRIDS, FaceFitConfig, fit_face_models, held_out_scores, protocol_scores
-from train.hr_fit import evaluate_hr_models
+from train.face_fit import (GRIDS, MIN_ROWS_PER_PARTICIPANT, FaceFitConfig, check_face_table,
+                            fit_face_models, held_out_scores, protocol_scores)
+from train.hr_fit import check_hr_series, evaluate_hr_models
 
 
 
@@ -44,16 +45,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def check_inputs(args: argparse.Namespace) -> None:
-    """UserError for contradictory or missing inputs, and for an existing --out without --force."""
+    """UserError for contradictory or missing inputs, and for an --out that would lose data.
+
+    See :func:`train.export.check_model_target`: an existing --out needs --force, and --force
+    replaces only a model folder (or an empty one) that is not the current directory or an input.
+    """
+    from train.export import check_model_target  # lazy: onnx loads slowly
+
     if bool(args.inputs) == bool(args.table):
         raise UserError("inputs: expected session folders or --table CSV (one of the two), found "
                         + ("both" if args.inputs else "neither"))
-    if args.max_rows < 20:
-        raise UserError(f"--max-rows: expected at least 20, found {args.max_rows}")
-    out = Path(args.out)
-    if out.exists() and not args.force:
-        raise UserError(f"--out {out}: expected a new model folder, found an existing one "
-                        "(pass --force to replace it)")
+    if args.max_rows < MIN_ROWS_PER_PARTICIPANT:
+        raise UserError(f"--max-rows: expected at least {MIN_ROWS_PER_PARTICIPANT}, found {args.max_rows}")
+    check_model_target(args.out, force=args.force, inputs=args.inputs or [args.table])
 
 
 def load_table(args: argparse.Namespace, blendshapes: BlendshapeSet) -> tuple[pd.DataFrame, list[str]]:
@@ -104,6 +108,7 @@ def run_training(table: pd.DataFrame, blendshapes: BlendshapeSet, out: str | Pat
     from train.pipeline import export_training
 
     config = config or FaceFitConfig()
+    prepared, series = check_training_data(table, blendshapes, ", ".join(sources) or "table", config)
     steps = tqdm(total=5, desc="train", unit="step", file=sys.stderr, disable=not progress)
 
     def step(label: str) -> None:
@@ -112,8 +117,6 @@ def run_training(table: pd.DataFrame, blendshapes: BlendshapeSet, out: str | Pat
         steps.update()
 
     steps.set_postfix_str("heart-rate models")
-    prepared = prepare(table, source=", ".join(sources) or "table")
-    series = hr_series(prepared)
     hr_eval = evaluate_hr_models(series)
     step("face SVR grid search")
     face = _fit_face(prepared, blendshapes, config, progress)
@@ -129,6 +132,40 @@ def run_training(table: pd.DataFrame, blendshapes: BlendshapeSet, out: str | Pat
     step("done")
     steps.close()
     return TrainingResult(model_dir, report, bundle.metrics)
+
+
+def check_training_data(table: pd.DataFrame, blendshapes: BlendshapeSet, source: str,
+                        config: FaceFitConfig) -> tuple[pd.DataFrame, list[Any]]:
+    """Prepare the table and refuse data the models cannot be fitted on, before any progress shows.
+
+    Parameters
+    ----------
+    table : DataFrame
+        Long training table.
+    blendshapes : BlendshapeSet
+        The blendshape set.
+    source : str
+        The table or sessions, for messages.
+    config : FaceFitConfig
+        Face-fit settings (its subsampling).
+
+    Returns
+    -------
+    prepared : DataFrame
+        From :func:`train.dataset.prepare`.
+    series : list of HrSeries
+        From :func:`train.dataset.hr_series`.
+
+    Raises
+    ------
+    UserError
+        One line naming the source and what is missing (participants, heart rate, annotations).
+    """
+    prepared = prepare(table, source=source)
+    series = hr_series(prepared)
+    check_hr_series(series, source)
+    check_face_table(prepared, blendshapes.names, source, config)
+    return prepared, series
 
 
 def _fit_face(prepared: pd.DataFrame, blendshapes: BlendshapeSet, config: FaceFitConfig,
