@@ -145,7 +145,10 @@ def _read_raw(path: Path) -> list[Chunk]:
     if timing is None:
         return [(0.0, blob)] if blob else []
     rows = _read_timing_rows(timing)
-    if rows and not _is_number(rows[0][0]):
+    if not rows:
+        raise SessionFormatError(f"{timing}: expected the arrival times of {path.name}'s bytes, found an "
+                                 "empty file (move it away to decode without times)")
+    if not _is_number(rows[0][0]):
         return _chunks_from_starts(blob, rows, _offset_column(rows[0], path, timing), timing)
     return _chunks_from_ends(blob, rows, timing)
 

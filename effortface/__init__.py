@@ -1,3 +1,8 @@
 """effortface: the face of physical effort, from capture to a runtime that animates characters."""
 
+from pathlib import Path
+
 __version__ = "0.1.0"
+
+#: the simulated lab shipped beside the package (the default of ``effortface app`` and ``demo``)
+SAMPLE_LAB = Path(__file__).resolve().parents[1] / "sample_sessions"

@@ -86,6 +86,11 @@ class HrCoefficients:
         """JSON-ready dictionary."""
         return dataclasses.asdict(self)
 
+    @classmethod
+    def from_nhr_params(cls, params: NhrParams) -> HrCoefficients:
+        """The same model from the runtime's scalar :class:`~train.physiology.NhrParams`."""
+        return cls(float(params.t_root), float(params.c_inc), float(params.c_dec))
+
     def to_nhr_params(self) -> NhrParams:
         """The same model as the runtime's :class:`~train.physiology.NhrParams`."""
         return NhrParams(self.t_root_w_per_kg, self.c_inc, self.c_dec)
@@ -113,10 +118,9 @@ class TlRegression:
     c_dec: LinearFit
 
     def at(self, training_level: float) -> HrCoefficients:
-        """Coefficients for a character of ``training_level`` (factors floored at 0)."""
-        return HrCoefficients(self.t_root.at(training_level),
-                              max(self.c_inc.at(training_level), 0.0),
-                              max(self.c_dec.at(training_level), 0.0))
+        """Coefficients for a character of ``training_level`` (factors floored at 0, as the runtime)."""
+        return HrCoefficients.from_nhr_params(
+            NhrParams.from_training_level(training_level, self.to_nhr_regression()))
 
     def to_nhr_regression(self) -> NhrRegression:
         """The runtime's :class:`~train.physiology.NhrRegression` ``(intercept, slope)`` pairs."""

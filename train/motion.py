@@ -646,7 +646,8 @@ def _bvh_scale(
 ) -> float:
     """Metres per file unit: ``unit_m`` if given (checked), else detected from the rest pose."""
     if unit_m is not None:
-        if not unit_m > 0:
+        if isinstance(unit_m, bool) or not (isinstance(unit_m, (int, float)) and math.isfinite(unit_m)
+                                            and unit_m > 0):
             raise UserError(f"unit_m: expected a positive length in metres, got {unit_m!r}")
         return float(unit_m)
     rest = np.zeros_like(offsets)
@@ -660,7 +661,7 @@ def _bvh_scale(
         lo, hi = STATURE_RANGE_M
         raise MotionFormatError(
             f"{path}: expected a skeleton whose rest pose is {lo}-{hi} m tall in one of the units "
-            f"{', '.join(n for n, _ in BVH_UNITS_M)}, found a rest-pose height of {height:.4g} file units"
+            f"{', '.join(n for n, _ in BVH_UNITS_M)}, found a rest-pose height of {height:.4g} file units (give the unit: --unit-m M)"
         ) from None
 
 

@@ -263,10 +263,16 @@ class NhrParams:
     @classmethod
     def from_training_level(cls, training_level: Any,
                             regression: NhrRegression = PAPER_REGRESSION) -> NhrParams:
-        """Coefficients for a training level (scalar or array) from a TL regression."""
+        """Coefficients for a training level (scalar or array) from a TL regression.
+
+        The rates ``c_inc`` and ``c_dec`` are floored at 0 **(choice)**: a regression fitted on a
+        lab's training levels can cross zero when extrapolated (a steep negative c_inc slope reaching
+        TL 10), and a negative rate would make heart rate fall under effort. At 0 NHR holds instead.
+        """
         tl = np.asarray(training_level, dtype=float)
-        vals = [a + b * tl for a, b in (regression.t_root, regression.c_inc, regression.c_dec)]
-        return cls(*(float(v) if v.ndim == 0 else v for v in vals))
+        t_root = regression.t_root[0] + regression.t_root[1] * tl
+        rates = [np.maximum(a + b * tl, 0.0) for a, b in (regression.c_inc, regression.c_dec)]
+        return cls(*(float(v) if v.ndim == 0 else v for v in (t_root, *rates)))
 
 
 def nhr_step(nhr: Any, w_per_kg: Any, params: NhrParams, dt_s: float = 1.0) -> np.ndarray:

@@ -13,7 +13,9 @@ from typing import Any
 import pandas as pd
 
 from annotate.blendshapes import BlendshapeSet
-from train.face_fit import FaceFitConfig
+from train.dataset import hr_series, prepare
+from train.face_fit import FaceFitConfig, check_face_table
+from train.hr_fit import check_hr_series
 
 REPORT_DIR = "report"
 
@@ -117,3 +119,37 @@ def report_header(prov: dict[str, Any], model_dir: Path) -> dict[str, Any]:
     keys = ("created_utc", "sources", "participants", "n_sessions", "n_seconds", "n_face_rows",
             "rater_policy", "cv")
     return {"model": str(model_dir), **{k: prov[k] for k in keys}}
+
+
+def check_training_data(table: pd.DataFrame, blendshapes: BlendshapeSet, source: str,
+                        config: FaceFitConfig) -> tuple[pd.DataFrame, list[Any]]:
+    """Prepare the table and refuse data the models cannot be fitted on, before any progress shows.
+
+    Parameters
+    ----------
+    table : DataFrame
+        Long training table.
+    blendshapes : BlendshapeSet
+        The blendshape set.
+    source : str
+        The table or sessions, for messages.
+    config : FaceFitConfig
+        Face-fit settings (its subsampling).
+
+    Returns
+    -------
+    prepared : DataFrame
+        From :func:`train.dataset.prepare`.
+    series : list of HrSeries
+        From :func:`train.dataset.hr_series`.
+
+    Raises
+    ------
+    UserError
+        One line naming the source and what is missing (participants, heart rate, annotations).
+    """
+    prepared = prepare(table, source=source)
+    series = hr_series(prepared)
+    check_hr_series(series, source)
+    check_face_table(prepared, blendshapes.names, source, config)
+    return prepared, series

@@ -25,10 +25,11 @@ from annotate.blendshapes import DEFAULT_SET, BlendshapeSet
 from capture_tool.errors import UserError
 from capture_tool.fileio import refuse_overwrite
 from capture_tool.session import list_sessions, parse_session_id, read_session_info
-from train.dataset import ANNOTATIONS_DIR, hr_series, prepare, read_table, sessions_table
+from train.dataset import ANNOTATIONS_DIR, prepare, read_table, sessions_table
 from train.face_fit import (GRIDS, MIN_ROWS_PER_PARTICIPANT, FaceFitConfig, FaceModelFit,
                             held_out_scores, protocol_scores)
 from train.hr_fit import HrEvaluation, HrSeries, evaluate_hr_models
+from train.pipeline import check_training_data
 
 #: the paper's heart-rate results (section 3 of SCIENCE.md), shown beside ours
 PAPER_HR = {"per_participant": {"r": 0.88, "rmse_pct": 19.0},
@@ -249,8 +250,7 @@ def train_models(table: pd.DataFrame, blendshapes: BlendshapeSet, settings: Trai
             raise Cancelled(text)
         progress(_STEP_FRACTION[name], text)
 
-    prepared = prepare(table, source=", ".join(sources) or "table")
-    series = hr_series(prepared)
+    prepared, series = check_training_data(table, blendshapes, ", ".join(sources) or "table", config)
     step("prepare", "heart-rate models")
     hr_eval = evaluate_hr_models(series)
     step("hr", "face SVR grid search")

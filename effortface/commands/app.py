@@ -6,8 +6,9 @@ import argparse
 from pathlib import Path
 
 from capture_tool.errors import UserError
+from effortface import SAMPLE_LAB
 
-#: the folder opened when no DIR is given (relative to the current directory)
+#: the folder opened when no DIR is given (relative to the current directory; see :func:`default_dir`)
 DEFAULT_DIR = "sample_sessions"
 
 
@@ -19,10 +20,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--stage", default="capture", help="stage to show (with --screenshot)")
 
 
+def default_dir() -> str:
+    """``sample_sessions`` in the current directory, else the shipped lab, else the relative name."""
+    if Path(DEFAULT_DIR).is_dir() or not SAMPLE_LAB.is_dir():
+        return DEFAULT_DIR
+    return str(SAMPLE_LAB)
+
+
 def run(args: argparse.Namespace) -> int:
     """Open the main window (imports Qt only here)."""
     if args.dir is None:
-        args.dir = DEFAULT_DIR
+        args.dir = default_dir()
     elif not Path(args.dir).exists():
         raise UserError(f"DIR {args.dir}: expected a folder of sessions, found nothing")
     from effortface.app import main

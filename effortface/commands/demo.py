@@ -27,9 +27,9 @@ from pathlib import Path
 import pandas as pd
 
 from capture_tool.errors import UserError
+from effortface import SAMPLE_LAB
 from train.face_fit import MIN_ROWS_PER_PARTICIPANT
 
-SAMPLE_LAB = Path(__file__).resolve().parents[2] / "sample_sessions"
 #: replay speed and capture length: 12 s of capture at 25x = 5 minutes of the recording
 REPLAY_SPEED = 25.0
 CAPTURE_S = 12.0

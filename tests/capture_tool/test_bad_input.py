@@ -182,6 +182,13 @@ def test_timing_csv_with_only_a_header(tmp_path) -> None:
         read_timed_capture(raw)
 
 
+@pytest.mark.parametrize("content", [b"", b"\n\n"], ids=["empty", "blank lines"])
+def test_empty_timing_csv_is_refused_not_read_as_time_zero(tmp_path, capsys, content) -> None:
+    raw = _raw(tmp_path, content)
+    line = _one_error_line(capsys, ["decode", "--protocol", "ant", raw])
+    assert "r-timing.csv: expected the arrival times of r.bin's bytes, found an empty file" in line
+
+
 def test_timing_offsets_out_of_order_name_the_line(tmp_path) -> None:
     raw = _raw(tmp_path, b"host_time_s,byte_offset_x\n0.1,500\n0.2,10\n0.3,1000\n")
     with pytest.raises(SessionFormatError, match=r"r-timing.csv: line 3: expected an offset >= 500"):

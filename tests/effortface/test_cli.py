@@ -58,6 +58,18 @@ def test_an_existing_folder_or_an_option_still_opens_the_app(tmp_path, capsys, o
                                                  ("sample_sessions", "capture")]
 
 
+def test_app_without_dir_outside_the_repo_opens_the_shipped_lab(tmp_path, monkeypatch, opened) -> None:
+    """No DIR: ./sample_sessions when the current directory has one, else the lab shipped with effortface."""
+    from effortface import SAMPLE_LAB
+
+    monkeypatch.chdir(tmp_path)
+    assert main([]) == 0
+    (tmp_path / "sample_sessions").mkdir()
+    assert main(["app"]) == 0
+    assert [a.dir for a in opened] == [str(SAMPLE_LAB), "sample_sessions"]
+    assert SAMPLE_LAB.is_dir() and any(SAMPLE_LAB.glob("*/session.json"))
+
+
 def test_app_on_a_missing_folder_is_refused(tmp_path, capsys, opened) -> None:
     missing, png = tmp_path / "nonexistent" / "dir", tmp_path / "x.png"
     assert main(["app", str(missing), "--screenshot", str(png)]) == 2

@@ -56,6 +56,20 @@ def test_hr_stays_within_rest_and_max() -> None:
         assert hr.max() > params.hr_rest_bpm + 0.5 * (params.hr_max_bpm - params.hr_rest_bpm)
 
 
+def test_extrapolated_rates_are_floored_at_zero() -> None:
+    # A lab regression whose c_inc crosses zero before TL 10 (seen on real fits) must never make
+    # NHR fall under effort: the rates are floored at 0, scalar and batched alike, t_root is not.
+    steep = ph.NhrRegression(t_root=(8.0, -1.0), c_inc=(0.006, -0.001), c_dec=(0.001, -0.0002))
+    at10 = ph.NhrParams.from_training_level(10.0, steep)
+    assert (at10.t_root, at10.c_inc, at10.c_dec) == pytest.approx((-2.0, 0.0, 0.0))
+    batched = ph.NhrParams.from_training_level(np.array([0.0, 10.0]), steep)
+    assert batched.c_inc == pytest.approx([0.006, 0.0]) and batched.c_dec == pytest.approx([0.001, 0.0])
+    nhr = 0.3
+    for _ in range(60):
+        nhr = float(ph.nhr_step(nhr, 20.0, at10))
+    assert nhr == pytest.approx(0.3)
+
+
 def test_constant_work_tends_to_bounds() -> None:
     assert _run(0.0, 30.0, 3600, tl=2.0) > 0.98
     assert _run(1.0, 0.0, 3600, tl=2.0) < 0.05

@@ -56,6 +56,19 @@ def test_synth_character_options_and_bundle(shared_data: Path, tmp_path: Path) -
     # the way from below average (79-84, mid 81.5) to average (74-78, mid 76) = 78.2 bpm
 
 
+def test_unit_m_overrides_the_detected_bvh_unit(shared_data: Path, tmp_path: Path) -> None:
+    """--unit-m 0.05644 equals CMU's detected unit; a larger unit makes a larger, harder-working body."""
+    out = {name: tmp_path / f"{name}.csv" for name in ("auto", "cmu", "big")}
+    clip = str(shared_data / JJ)
+    assert main(["synth", "default", clip, "--out", str(out["auto"])]) == 0
+    assert main(["synth", "default", clip, "--out", str(out["cmu"]), "--unit-m", "0.05644"]) == 0
+    assert main(["synth", "default", clip, "--out", str(out["big"]), "--unit-m", "0.07"]) == 0
+    auto, cmu, big = (_rows(out[k]) for k in ("auto", "cmu", "big"))
+    assert auto == cmu
+    w_auto = np.mean([float(r["w_per_kg"]) for r in auto])
+    assert np.mean([float(r["w_per_kg"]) for r in big]) > 1.2 * w_auto
+
+
 def test_livelink_output(shared_data: Path, tmp_path: Path) -> None:
     out = tmp_path / "take.csv"
     assert main(["synth", "default", str(shared_data / JJ), "--out", str(out),
@@ -219,12 +232,18 @@ BAD_AUDIT = {
         lambda d, t: [str(_npz_with(d, t, "fps0.npz", fps=np.array(0.0)))],
     r"map\.json: expected \[proximal, distal\] joint names .*bad entries: trunk":
         lambda d, t: [str(d / AMP), "--mapping", _map(t, [1, 2])],
-    r"onejoint\.bvh: expected a skeleton whose rest pose is 1\.1-2\.3 m tall":
+    r"onejoint\.bvh: expected a skeleton whose rest pose is 1\.1-2\.3 m tall.*--unit-m M":
         lambda d, t: [str(_onejoint(t))],
     r"--out .*: expected a file path, found a folder":
         lambda d, t: [str(d / AMP), "--out", str(t), "--force"],
     r"--out /proc/x\.csv: expected a writable file":
         lambda d, t: [str(d / AMP), "--out", "/proc/x.csv"],
+    r"--unit-m: expected a length in metres above 0, found 0$":
+        lambda d, t: [str(d / JJ), "--unit-m", "0"],
+    r"--unit-m: expected a length in metres above 0, found nan":
+        lambda d, t: [str(d / JJ), "--unit-m", "nan"],
+    r"--unit-m: expected a length in metres above 0, found inf":
+        lambda d, t: [str(d / JJ), "--unit-m", "inf"],
 }
 
 

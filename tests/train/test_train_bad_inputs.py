@@ -202,6 +202,19 @@ def test_hr_check_and_face_check_raise_user_errors(table):
         check_face_table(prepared.assign(eye_squint=np.nan), ["mouth_open", "eye_squint"], "lab")
 
 
+def test_train_stage_refuses_too_few_participants_before_any_progress(table):
+    """The Train stage's worker runs the same checks as the command line, before its first step."""
+    from annotate.blendshapes import DEFAULT_SET
+    from capture_tool.errors import UserError
+    from train.train_session import TrainSettings, train_models
+
+    steps: list[str] = []
+    with pytest.raises(UserError, match=r"^lab: expected sessions of at least 3 participants.*found 2"):
+        train_models(table[table["participant"] != "P03"], DEFAULT_SET, TrainSettings(), ["lab"],
+                     lambda fraction, text: steps.append(text))
+    assert steps == []
+
+
 # --------------------------------------------------------------------------- evaluate (items 3, 5)
 
 

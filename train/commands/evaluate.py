@@ -67,14 +67,14 @@ def evaluate_bundle(model_dir: str | Path, table: pd.DataFrame, source: str = "t
     if missing:
         raise UserError(f"{source}: expected the model's blendshape columns {', '.join(missing)}, "
                         f"found {', '.join(table.columns)}")
-    from train.physiology import EpocParams
+    from train.physiology import EpocParams, NhrParams
     prepared = prepare(table, bundle.physiology["hr_max_formula"], EpocParams(**bundle.physiology["epoc"]),
                        source)
     reg = bundle.nhr_regression
     hr_rows = []
     for s in hr_series(prepared):
         tl = s.training_level
-        coef = HrCoefficients(*(a + b * tl for a, b in (reg.t_root, reg.c_inc, reg.c_dec)))
+        coef = HrCoefficients.from_nhr_params(NhrParams.from_training_level(tl, reg))
         hr_rows.append(dataclasses.asdict(score_series(s, simulate_series(s, coef), "tl_regression")))
     e = expressiveness(prepared, names).loc[prepared["participant"]].to_numpy(float)
     x = prepared[["w_per_kg", "p_per_kg", "nhr", "epoc_norm"]].to_numpy(float)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import csv
 import io
+import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -21,6 +22,7 @@ import numpy as np
 from annotate.blendshapes import BlendshapeSet
 from capture_tool.errors import UserError
 from capture_tool.fileio import atomic_write_text
+from train.motion import read_motion
 from train.runtime import Character, FaceModel, load_model
 
 #: Live Link Face CSV columns after Timecode and BlendShapeCount: the 52 ARKit blendshapes in the
@@ -64,6 +66,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--load-back", type=float, default=0.0, metavar="KG", help="on the back")
     parser.add_argument("--mapping", default=None, metavar="JSON",
                         help="joint-to-segment mapping file (default: built-in conventions)")
+    parser.add_argument("--unit-m", type=float, default=None, metavar="M",
+                        help="BVH length unit in metres (default: detected from the rest pose; "
+                             "CMU cgspeed 0.05644)")
 
 
 def _expressiveness(text: str | None, n: int) -> tuple[float, ...]:
@@ -181,7 +186,10 @@ def run(args: argparse.Namespace) -> int:
     check_output(out, args.force)  # fail before the work
     model = load_model(args.model_dir)
     character = _character(args, model)
-    curves = model.synthesize(args.motion, character, mapping=args.mapping)
+    if args.unit_m is not None and not (math.isfinite(args.unit_m) and args.unit_m > 0):
+        raise UserError(f"--unit-m: expected a length in metres above 0, found {args.unit_m:g}")
+    motion = read_motion(args.motion, unit_m=args.unit_m)
+    curves = model.synthesize(motion, character, mapping=args.mapping)
     text = (livelink_csv(curves, model.blendshapes) if args.format == "livelink"
             else curves_csv(curves, model.columns))
     write_output(out, text, args.force)

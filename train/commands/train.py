@@ -20,10 +20,10 @@ import pandas as pd
 
 from annotate.blendshapes import BlendshapeSet, load_blendshape_set
 from capture_tool.errors import UserError
-from train.dataset import blendshape_columns, hr_series, prepare, read_table, sessions_table
-from train.face_fit import (GRIDS, MIN_ROWS_PER_PARTICIPANT, FaceFitConfig, check_face_table,
-                            fit_face_models, held_out_scores, protocol_scores)
-from train.hr_fit import check_hr_series, evaluate_hr_models
+from train.dataset import blendshape_columns, read_table, sessions_table
+from train.face_fit import (GRIDS, MIN_ROWS_PER_PARTICIPANT, FaceFitConfig, fit_face_models,
+                            held_out_scores, protocol_scores)
+from train.hr_fit import evaluate_hr_models
 
 
 
@@ -105,7 +105,7 @@ def run_training(table: pd.DataFrame, blendshapes: BlendshapeSet, out: str | Pat
     """
     from tqdm import tqdm
 
-    from train.pipeline import export_training
+    from train.pipeline import check_training_data, export_training
 
     config = config or FaceFitConfig()
     prepared, series = check_training_data(table, blendshapes, ", ".join(sources) or "table", config)
@@ -132,40 +132,6 @@ def run_training(table: pd.DataFrame, blendshapes: BlendshapeSet, out: str | Pat
     step("done")
     steps.close()
     return TrainingResult(model_dir, report, bundle.metrics)
-
-
-def check_training_data(table: pd.DataFrame, blendshapes: BlendshapeSet, source: str,
-                        config: FaceFitConfig) -> tuple[pd.DataFrame, list[Any]]:
-    """Prepare the table and refuse data the models cannot be fitted on, before any progress shows.
-
-    Parameters
-    ----------
-    table : DataFrame
-        Long training table.
-    blendshapes : BlendshapeSet
-        The blendshape set.
-    source : str
-        The table or sessions, for messages.
-    config : FaceFitConfig
-        Face-fit settings (its subsampling).
-
-    Returns
-    -------
-    prepared : DataFrame
-        From :func:`train.dataset.prepare`.
-    series : list of HrSeries
-        From :func:`train.dataset.hr_series`.
-
-    Raises
-    ------
-    UserError
-        One line naming the source and what is missing (participants, heart rate, annotations).
-    """
-    prepared = prepare(table, source=source)
-    series = hr_series(prepared)
-    check_hr_series(series, source)
-    check_face_table(prepared, blendshapes.names, source, config)
-    return prepared, series
 
 
 def _fit_face(prepared: pd.DataFrame, blendshapes: BlendshapeSet, config: FaceFitConfig,
