@@ -1,4 +1,4 @@
-"""The reliability report: ICCs against Shrout & Fleiss 1979, alpha against Krippendorff 2011 and a
+"""The reliability report: ICCs against Shrout & Fleiss 1979 and pingouin, alpha against Krippendorff 2011 and a
 hand implementation, Bland-Altman, flagged poses, ratings gathered from key-frames, proposed poses."""
 
 from __future__ import annotations
@@ -55,6 +55,22 @@ def test_icc_on_the_sample_raters_matches_an_independent_fit() -> None:
     expected_a = (ms_rows - a.ms_error) / (ms_rows + (k - 1) * a.ms_error + k / n * (ms_cols - a.ms_error))
     assert ag.icc_a1(x) == pytest.approx(expected_a, rel=1e-10)
     assert 0.8 < ag.icc_a1(x) < ag.icc_c1(x) < 0.95  # raters are biased a little: consistency > agreement
+
+
+@pytest.mark.filterwarnings("ignore::DeprecationWarning", "ignore::FutureWarning")
+def test_iccs_match_pingouin_on_the_sample_raters_and_shrout_fleiss() -> None:
+    """ICC(A,1) and ICC(C,1) equal pingouin's (single rater, two-way; ICC2 and ICC3 before 0.7)."""
+    import pandas as pd
+    import pingouin as pg  # the test extra installs it
+
+    cube, *_ = ag.ratings_cube(read_ratings(RATINGS))
+    for x in (SF_TABLE, cube.reshape(-1, cube.shape[2]), cube[:, 1, :]):
+        n, k = x.shape
+        long = pd.DataFrame({"target": np.repeat(np.arange(n), k), "rater": np.tile(np.arange(k), n),
+                             "rating": x.ravel()})
+        icc = pg.intraclass_corr(long, targets="target", raters="rater", ratings="rating").set_index("Type")
+        assert ag.icc_a1(x) == pytest.approx(icc.loc["ICC(A,1)", "ICC"], abs=1e-12)
+        assert ag.icc_c1(x) == pytest.approx(icc.loc["ICC(C,1)", "ICC"], abs=1e-12)
 
 
 def _alpha_interval_by_hand(x: np.ndarray) -> float:
