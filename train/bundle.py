@@ -296,6 +296,9 @@ def _read_physiology(doc: dict[str, Any], where: str) -> dict[str, Any]:
     fields = [f.name for f in dataclasses.fields(EpocParams)]
     epoc_vals = {k: _number(epoc, k, f"{where}.physiology.epoc", positive=k != "threshold")
                  for k in fields}
+    if not 0.0 <= epoc_vals["threshold"] < 1.0:
+        raise BundleFormatError(f"{where}.physiology.epoc.threshold: expected a fraction of VO2max from 0 "
+                                f"to below 1, found {epoc_vals['threshold']:g}")
     return {"hr_max_formula": formula, "update_period_s": period, "epoc": epoc_vals}
 
 

@@ -150,6 +150,10 @@ BAD = {
         lambda f: _edit_json(f, lambda d: d["nhr"]["tl_regression"]["t_root"].update(slope=1e308)),
     r"model.json.nhr.tl_regression.c_dec: expected a value from -1e\+06 to 1e\+06 at training level 10, found inf":
         lambda f: _edit_json(f, lambda d: d["nhr"]["tl_regression"]["c_dec"].update(slope=1e308)),
+    r"model.json.physiology.epoc.threshold: expected a fraction of VO2max from 0 to below 1, found 1\.5":
+        lambda f: _edit_json(f, lambda d: d["physiology"]["epoc"].update(threshold=1.5)),
+    r"model.json.physiology.epoc.tau_s: expected a positive finite number, found 0":
+        lambda f: _edit_json(f, lambda d: d["physiology"]["epoc"].update(tau_s=0)),
 }
 
 
