@@ -13,6 +13,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any
 
+from capture_tool.errors import UserError
+
 
 def refuse_overwrite(path: str | os.PathLike, *, overwrite: bool = False, what: str = "file",
                      hint: str = "") -> Path:
@@ -37,6 +39,44 @@ def refuse_overwrite(path: str | os.PathLike, *, overwrite: bool = False, what: 
     path = Path(path)
     if path.exists() and not overwrite:
         raise FileExistsError(f"{path}: {what} exists; refusing to overwrite{hint}")
+    return path
+
+
+def check_new_png(option: str, value: str | os.PathLike) -> Path:
+    """A new ``.png`` path in an existing writable folder, for an option such as ``--plot``.
+
+    Checked before any work is done, so a bad path costs nothing.
+
+    Parameters
+    ----------
+    option : str
+        The option's name, for the message (``"--plot"``, ``"--screenshot"``).
+    value : path-like
+        The path given.
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    UserError
+        One line naming the option and the path: not ``.png``, a folder, an existing file (never
+        overwritten), a missing or read-only folder.
+    """
+    path = Path(value)
+    if path.suffix.lower() != ".png":
+        raise UserError(f"{option} {value}: expected a path ending in .png, found {path.suffix or 'no suffix'!r}")
+    if path.is_dir():
+        raise UserError(f"{option} {value}: expected a new PNG file, found a folder")
+    if path.exists() or path.is_symlink():
+        raise UserError(f"{option} {value}: expected a new file, found one exists (not overwritten)")
+    folder = path.parent
+    if not folder.is_dir():
+        raise UserError(f"{option} {value}: expected an existing folder for the PNG, found "
+                        f"{'a file' if folder.exists() else 'nothing'} at {str(folder)!r}")
+    if not os.access(folder, os.W_OK):
+        raise UserError(f"{option} {value}: expected a writable folder, found {str(folder)!r} read-only")
     return path
 
 

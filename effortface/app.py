@@ -22,6 +22,7 @@ from types import TracebackType
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from capture_tool.errors import UserError
+from capture_tool.fileio import check_new_png
 from capture_tool.gui.gui_gc import collect_in_gui_thread
 
 log = logging.getLogger("effortface.app")
@@ -322,14 +323,7 @@ def _error_dialog(parent: QtWidgets.QWidget | None, summary: str, details: str) 
 
 # ---------------------------------------------------------------------------------- entry point
 def _check_screenshot_path(path: str) -> Path:
-    out = Path(path)
-    if out.suffix.lower() != ".png":
-        raise UserError(f"--screenshot: expected a path ending in .png, found {path!r}")
-    if out.exists():
-        raise UserError(f"--screenshot: expected a new file, found existing {path!r} (delete it first)")
-    if not out.parent.is_dir():
-        raise UserError(f"--screenshot: expected an existing folder for {path!r}, found none")
-    return out
+    return check_new_png("--screenshot", path)
 
 
 def _check_dir(path: str) -> Path:

@@ -11,12 +11,12 @@ flagged poses. ``--plot PNG`` also draws the Bland-Altman plot.
 from __future__ import annotations
 
 import argparse
-import os
 from pathlib import Path
 
 from annotate.agreement import FLAG_PCT, agreement_report, format_report, gather_ratings, save_bland_altman_png
 from annotate.reliability import read_ratings
 from capture_tool.errors import UserError
+from capture_tool.fileio import check_new_png
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -60,17 +60,4 @@ def run(args: argparse.Namespace) -> int:
 
 def _check_plot(value: str) -> Path:
     """``--plot``: a new ``.png`` file in an existing folder (checked before any work is done)."""
-    path = Path(value)
-    if path.suffix.lower() != ".png":
-        raise UserError(f"--plot {value}: expected a path ending in .png, found {path.suffix or 'no suffix'!r}")
-    if path.is_dir():
-        raise UserError(f"--plot {value}: expected a new PNG file, found a folder")
-    if path.exists() or path.is_symlink():
-        raise UserError(f"--plot {value}: expected a new file, found one exists (not overwritten)")
-    folder = path.parent
-    if not folder.is_dir():
-        raise UserError(f"--plot {value}: expected an existing folder for the PNG, found "
-                        f"{'a file' if folder.exists() else 'nothing'} at {str(folder)!r}")
-    if not os.access(folder, os.W_OK):
-        raise UserError(f"--plot {value}: expected a writable folder, found {str(folder)!r} read-only")
-    return path
+    return check_new_png("--plot", value)

@@ -55,9 +55,10 @@ def test_screenshot_renders_each_stage(qapp, tmp_path, sessions, settings, stage
 
 @pytest.mark.parametrize(("message", "kwargs"), [
     (r"--stage: expected one of capture, annotate, train, synthesize, found 'paint'", {"stage": "paint"}),
-    (r"--screenshot: expected a path ending in \.png, found '.*shot\.jpg'", {"screenshot": "shot.jpg"}),
-    (r"--screenshot: expected a new file, found existing '.*old\.png'", {"screenshot": "old.png"}),
-    (r"--screenshot: expected an existing folder for '.*nowhere/x\.png'", {"screenshot": "nowhere/x.png"}),
+    (r"--screenshot .*shot\.jpg: expected a path ending in \.png, found '\.jpg'", {"screenshot": "shot.jpg"}),
+    (r"--screenshot .*old\.png: expected a new file, found one exists", {"screenshot": "old.png"}),
+    (r"--screenshot .*nowhere/x\.png: expected an existing folder for the PNG, found nothing",
+     {"screenshot": "nowhere/x.png"}),
     (r"DIR: expected a folder of sessions, found a file '.*old\.png'", {"dir": "old.png"}),
 ])
 def test_bad_options_are_user_errors(qapp, tmp_path, settings, message, kwargs) -> None:
