@@ -29,6 +29,7 @@ import struct
 from pathlib import Path
 
 from capture_tool.errors import SessionFormatError, UserError, not_text_error
+from capture_tool.fileio import not_a_file
 from capture_tool.serlog import MAGIC as SERLOG_MAGIC
 from capture_tool.serlog import read_serlog
 
@@ -93,9 +94,8 @@ def check_capture_file(path: str | os.PathLike) -> Path:
         If it is missing, a folder or not a regular file.
     """
     path = Path(path)
-    if not path.is_file():
-        found = ("nothing (no such file)" if not path.exists() else "a folder" if path.is_dir()
-                 else "a special file (FIFO, device or socket)")
+    found = not_a_file(path)
+    if found:
         raise UserError(f"{path}: expected a readable capture file, found {found}")
     return path
 

@@ -42,6 +42,23 @@ def refuse_overwrite(path: str | os.PathLike, *, overwrite: bool = False, what: 
     return path
 
 
+def not_a_file(path: str | os.PathLike) -> str | None:
+    """None if ``path`` is an existing regular file, else what is there, for a refusal message.
+
+    Returns
+    -------
+    str or None
+        ``"nothing (no such file)"``, ``"a folder"`` or ``"a special file (FIFO, device or socket)"``
+        (which would block or read forever).
+    """
+    path = Path(path)
+    if path.is_file():
+        return None
+    if not path.exists():
+        return "nothing (no such file)"
+    return "a folder" if path.is_dir() else "a special file (FIFO, device or socket)"
+
+
 def check_new_png(option: str, value: str | os.PathLike) -> Path:
     """A new ``.png`` path in an existing writable folder, for an option such as ``--plot``.
 

@@ -20,10 +20,11 @@ from typing import Any
 from capture_tool import __version__
 from capture_tool.camera import CameraSource, index_video, rewrite_video
 from capture_tool.errors import SessionFormatError
+from capture_tool.fileio import not_a_file
 from capture_tool.hr_csv import HR_CSV_HEADER, read_hr_csv
-from capture_tool.protocols import PROTOCOLS, DeviceEvent, HrSample, get_decoder
+from capture_tool.protocols import DeviceEvent, HrSample, get_decoder, header_protocol
 from capture_tool.serial_link import SerialLink, check_port_exists, is_simulated_port
-from capture_tool.serlog import DATA, EVENT, Serlog, read_serlog
+from capture_tool.serlog import DATA, EVENT, read_serlog
 from capture_tool.session import (
     EVENTS_CSV,
     EVENTS_HEADER,
@@ -378,8 +379,8 @@ def _present(path: Path) -> bool:
     """True if a session file exists; SessionFormatError if it is a folder or not a regular file."""
     if not path.exists():
         return False
-    if not path.is_file():
-        found = "a folder" if path.is_dir() else "a special file"
+    found = not_a_file(path)
+    if found:
         raise SessionFormatError(f"{path}: expected a file, found {found}")
     return True
 
@@ -427,7 +428,7 @@ def decode_serlog(path: str | os.PathLike, notes: list[str] | None = None) -> li
         If the file is not a serial log or its header names no known protocol.
     """
     log = read_serlog(path)
-    decoder = get_decoder(_header_protocol(log))
+    decoder = get_decoder(header_protocol(log.header, log.path))
     out: list[HrSample] = []
     for rec in log.records:
         if rec.kind == DATA:
@@ -438,15 +439,6 @@ def decode_serlog(path: str | os.PathLike, notes: list[str] | None = None) -> li
     if corrupt and notes is not None:
         notes.append(f"{log.path.name}: skipped {corrupt} corrupt event record(s)")
     return out + decoder.finish()
-
-
-def _header_protocol(log: Serlog) -> str:
-    """The protocol a serial log's header names; SessionFormatError naming the file if unknown."""
-    protocol = log.header.get("protocol")
-    if not isinstance(protocol, str) or protocol not in PROTOCOLS:
-        raise SessionFormatError(f"{log.path}: header field 'protocol': expected one of "
-                                 f"{', '.join(sorted(PROTOCOLS))}, found {protocol!r}")
-    return protocol
 
 
 def _stage_heart_rate(folder: Path, repairs: _Repairs) -> None:

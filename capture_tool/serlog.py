@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import BinaryIO
 
 from capture_tool.errors import SessionFormatError
+from capture_tool.fileio import not_a_file
 
 MAGIC = b"EFSERLOG 1\n"
 DATA, EVENT = 0, 1
@@ -138,8 +139,8 @@ def _check_file(path: str | os.PathLike) -> Path:
         If it is missing, a folder, or not a regular file (a FIFO, a device...).
     """
     path = Path(path)
-    if not path.is_file():
-        found = "nothing" if not path.exists() else "a folder" if path.is_dir() else "a special file"
+    found = not_a_file(path)
+    if found:
         raise SessionFormatError(f"{path}: expected a .serlog file, found {found}")
     return path
 

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from capture_tool.errors import UserError
+from train.motion import check_parents
 
 TABLES_CSV = Path(__file__).with_name("data") / "segment_inertia_tables.csv"
 
@@ -421,10 +422,7 @@ def _end_weights(ends: Sequence[tuple[int, ...]], n_joints: int) -> np.ndarray:
 def _ancestors(j: int, parents: np.ndarray) -> list[int]:
     """``j`` and its ancestors, nearest first."""
     out: list[int] = []
-    while j >= 0:
-        if j >= len(parents) or len(out) >= len(parents):
-            raise UserError(f"parents: expected a tree of {len(parents)} joints (indices -1 to "
-                            f"{len(parents) - 1}, no cycles), found the chain {out + [j]}")
+    while j >= 0:  # ends: build_body checked that every parent comes before its child
         out.append(j)
         j = int(parents[j])
     return out
@@ -488,7 +486,7 @@ def build_body(
     table = read_deleva_table(sex)
     if not isinstance(loads, Loads):
         raise UserError(f"loads: expected a Loads instance, got {type(loads).__name__}")
-    parents = np.asarray(parents, dtype=int)
+    parents = check_parents(np.asarray(parents, dtype=int), "skeleton")
     convention, resolved = map_skeleton(joint_names, mapping)
     names = REQUIRED_SEGMENTS
     params = [table[SEGMENT_ROWS[s]] for s in names]

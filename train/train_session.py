@@ -296,13 +296,12 @@ def export_outcome(outcome: TrainingOutcome, out_dir: str | os.PathLike, *,
     """
     from train.pipeline import export_training
 
-    out = refuse_overwrite(out_dir, overwrite=overwrite, what="model folder")
     o = outcome
     model_dir, _, _ = export_training(
         prepared=o.prepared, series=o.series, hr_eval=o.hr_eval, face=o.face,
         held_out=o.held_out, protocols=o.protocols, protocol_predictions=o.protocol_predictions,
         blendshapes=o.blendshapes, sources=o.sources, rater_policy=o.settings.rater_policy,
-        config=o.settings.config(), out=out, force=overwrite)
+        config=o.settings.config(), out=Path(out_dir), force=overwrite)
     return model_dir
 
 

@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 from capture_tool.errors import UserError
-from capture_tool.protocols import PROTOCOLS
+from capture_tool.protocols import PROTOCOLS, check_protocol
 from capture_tool.recorder import Recorder
 from capture_tool.session import Participant
 
@@ -62,8 +62,7 @@ def run(args: argparse.Namespace) -> int:
     """Record until the duration or a stop signal; print the session folder."""
     if args.duration is not None and not args.duration > 0:
         raise UserError(f"--duration: expected seconds above 0, found {args.duration}")
-    if args.protocol not in PROTOCOLS:
-        raise UserError(f"--protocol: expected one of {', '.join(sorted(PROTOCOLS))}, found {args.protocol!r}")
+    check_protocol(args.protocol)
     if args.camera is not None and args.camera < 0:
         raise UserError(f"--camera: expected a camera index >= 0, found {args.camera}")
     recorder = Recorder(args.out, _participant(args), args.port, args.protocol, _video_source(args), label=args.label)

@@ -18,9 +18,9 @@ from pathlib import Path
 from typing import TextIO
 
 from capture_tool.captures import check_capture_file, read_timed_capture
-from capture_tool.errors import SessionFormatError, UserError
+from capture_tool.errors import UserError
 from capture_tool.hr_csv import HR_CSV_HEADER, format_hr_row
-from capture_tool.protocols import PROTOCOLS, Decoder, HrSample, get_decoder
+from capture_tool.protocols import PROTOCOLS, Decoder, HrSample, check_protocol, get_decoder, header_protocol
 from capture_tool.serlog import is_serlog, read_serlog_header
 
 
@@ -72,10 +72,11 @@ def file_protocol(path: str | os.PathLike, given: str | None) -> str:
         If ``given`` is not a protocol, the file is missing or not a regular file, a ``.serlog``
         is malformed, or none is given and the file is not a ``.serlog`` naming a protocol.
     """
-    if given is not None and given not in PROTOCOLS:
-        raise UserError(f"--protocol: expected one of {', '.join(sorted(PROTOCOLS))}, found {given!r}")
+    if given is not None:
+        check_protocol(given)
     path = check_capture_file(path)
-    named = read_serlog_header(path).get("protocol") if _looks_like_serlog(path) else None
+    header = read_serlog_header(path) if _looks_like_serlog(path) else {}
+    named = header.get("protocol")
     if given is not None:
         if named is not None and named != given:
             print(f"note: {path} was recorded as {named!r}; decoding as --protocol {given}", file=sys.stderr)
@@ -83,10 +84,7 @@ def file_protocol(path: str | os.PathLike, given: str | None) -> str:
     if named is None:
         raise UserError(f"--protocol: expected one of {', '.join(sorted(PROTOCOLS))} for {path}, found none "
                         "(only a .serlog names its own protocol)")
-    if not isinstance(named, str) or named not in PROTOCOLS:
-        raise SessionFormatError(f"{path}: header field 'protocol': expected one of "
-                                 f"{', '.join(sorted(PROTOCOLS))}, found {named!r}")
-    return named
+    return header_protocol(header, path)
 
 
 def _looks_like_serlog(path: Path) -> bool:

@@ -10,9 +10,11 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
+import os
+from collections.abc import Mapping
 from typing import ClassVar
 
-from capture_tool.errors import UserError
+from capture_tool.errors import SessionFormatError, UserError
 
 #: protocol name -> module in this package that defines ``DECODER`` (a Decoder subclass)
 PROTOCOLS: dict[str, str] = {
@@ -141,6 +143,13 @@ class Decoder:
         raise NotImplementedError
 
 
+def check_protocol(protocol: str) -> str:
+    """``protocol`` if it is one of :data:`PROTOCOLS`, else a UserError naming ``--protocol``."""
+    if protocol not in PROTOCOLS:
+        raise UserError(f"--protocol: expected one of {', '.join(sorted(PROTOCOLS))}, found {protocol!r}")
+    return protocol
+
+
 def get_decoder(protocol: str, **options: object) -> Decoder:
     """Return a fresh decoder for ``protocol``.
 
@@ -156,9 +165,27 @@ def get_decoder(protocol: str, **options: object) -> Decoder:
     UserError
         If the protocol is unknown.
     """
-    if protocol not in PROTOCOLS:
-        raise UserError(
-            f"--protocol: expected one of {', '.join(sorted(PROTOCOLS))}, found {protocol!r}"
-        )
-    module = importlib.import_module(PROTOCOLS[protocol])
+    module = importlib.import_module(PROTOCOLS[check_protocol(protocol)])
     return module.DECODER(**options)
+
+
+def header_protocol(header: Mapping[str, object], path: str | os.PathLike) -> str:
+    """The protocol a ``.serlog`` header names.
+
+    Parameters
+    ----------
+    header : mapping
+        The parsed header line.
+    path : path-like
+        The serial log, named in the message.
+
+    Raises
+    ------
+    SessionFormatError
+        If the header's ``protocol`` is missing or not one of :data:`PROTOCOLS`.
+    """
+    protocol = header.get("protocol")
+    if not isinstance(protocol, str) or protocol not in PROTOCOLS:
+        raise SessionFormatError(f"{path}: header field 'protocol': expected one of "
+                                 f"{', '.join(sorted(PROTOCOLS))}, found {protocol!r}")
+    return protocol

@@ -80,15 +80,21 @@ def test_game_skeleton_conventions(convention: str) -> None:
     assert "hand" in names[lhand].lower() and "l" in names[lhand].lower()
 
 
-def test_user_mapping_file(tmp_path: Path) -> None:
-    """A JSON file maps an unknown naming; lists average joints (the trunk's hip mid-point)."""
+def _custom_skeleton() -> tuple[list[str], dict[str, list]]:
+    """Joint names no built-in convention knows, and the user mapping that maps them."""
     names = ["root", "chest", "skull", "skull_top"] + [
         f"{s}_{p}" for s in "LR" for p in ("sh", "el", "wr", "fi", "hip", "kn", "an", "toe")]
-    mapping = {"head": ["skull_top", "skull"], "trunk": ["chest", ["L_hip", "R_hip"]]}
+    mapping: dict[str, list] = {"head": ["skull_top", "skull"], "trunk": ["chest", ["L_hip", "R_hip"]]}
     for side, s in (("left", "L"), ("right", "R")):
         for seg, a, b in (("upper_arm", "sh", "el"), ("forearm", "el", "wr"), ("hand", "wr", "fi"),
                           ("thigh", "hip", "kn"), ("shank", "kn", "an"), ("foot", "an", "toe")):
             mapping[f"{side}_{seg}"] = [f"{s}_{a}", f"{s}_{b}"]
+    return names, mapping
+
+
+def test_user_mapping_file(tmp_path: Path) -> None:
+    """A JSON file maps an unknown naming; lists average joints (the trunk's hip mid-point)."""
+    names, mapping = _custom_skeleton()
     path = tmp_path / "map.json"
     path.write_text(json.dumps(mapping))
     parents = [-1, 0, 1, 2] + [1, 4, 5, 6, 0, 8, 9, 10] + [1, 12, 13, 14, 0, 16, 17, 18]
@@ -187,13 +193,7 @@ def test_mapping_dict_value_types_are_named(value) -> None:
 @pytest.mark.parametrize("parents", [[0, 0, 1, 2], [-1, 2, 1, 2], [-1, 0, 99, 2]], ids=["self", "cycle", "range"])
 def test_build_body_refuses_a_parent_cycle(tmp_path: Path, parents: list[int]) -> None:
     """A cyclic parent list looped forever in _ancestors (the parentsself.npz hang)."""
-    names = ["root", "chest", "skull", "skull_top"] + [
-        f"{s}_{p}" for s in "LR" for p in ("sh", "el", "wr", "fi", "hip", "kn", "an", "toe")]
-    mapping = {"head": ["skull_top", "skull"], "trunk": ["chest", ["L_hip", "R_hip"]]}
-    for side, s in (("left", "L"), ("right", "R")):
-        for seg, a, b in (("upper_arm", "sh", "el"), ("forearm", "el", "wr"), ("hand", "wr", "fi"),
-                          ("thigh", "hip", "kn"), ("shank", "kn", "an"), ("foot", "an", "toe")):
-            mapping[f"{side}_{seg}"] = [f"{s}_{a}", f"{s}_{b}"]
+    names, mapping = _custom_skeleton()
     full = parents + [1, 4, 5, 6, 0, 8, 9, 10] + [1, 12, 13, 14, 0, 16, 17, 18]
-    with pytest.raises(UserError, match=r"parents: expected a tree of 20 joints \(indices -1 to 19, no cycles\)"):
+    with pytest.raises(UserError, match=r"skeleton: parent_indices: expected -1 or the index of an earlier joint"):
         build_body(names, full, 60.0, "female", mapping=mapping)
