@@ -3,7 +3,7 @@
 Statistics, each per blendshape (poses x raters) and overall (pose-blendshape items x raters):
 
 - **mean absolute disagreement** in % of the weight range [0, 1] (the paper's 11 % figure), per pose,
-  per blendshape and overall: :func:`annotate.reliability.mean_abs_disagreement_pct`;
+  per blendshape and overall: :func:`effortface.annotate.reliability.mean_abs_disagreement_pct`;
 - **ICC(A,1)** (absolute agreement) and **ICC(C,1)** (consistency), single rater, two-way model,
   McGraw & Wong 1996 (Shrout & Fleiss 1979 ICC(2,1) and ICC(3,1)), from the ANOVA mean squares;
 - **Krippendorff's alpha**, interval metric, from the ``krippendorff`` package (missing ratings allowed);
@@ -33,14 +33,14 @@ from pathlib import Path
 
 import numpy as np
 
-from annotate.blendshapes import DEFAULT_SET, BlendshapeSet
-from annotate.keyframes import read_annotations
-from annotate.reliability import (Pose, Rating, mean_abs_disagreement_pct, read_poses, read_ratings)
-from annotate.video_index import FrameTimes
-from capture_tool.errors import UserError
-from capture_tool.fileio import refuse_overwrite
-from capture_tool.figures import agg_figure
-from capture_tool.session import Session, list_sessions, read_session
+from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
+from effortface.annotate.keyframes import read_annotations
+from effortface.annotate.reliability import (Pose, Rating, mean_abs_disagreement_pct, read_poses, read_ratings)
+from effortface.annotate.video_index import FrameTimes
+from effortface.core.errors import UserError
+from effortface.core.fileio import refuse_overwrite
+from effortface.core.figures import agg_figure
+from effortface.capture_tool.session import Session, list_sessions, read_session
 
 #: poses whose mean absolute disagreement is above this (% of the weight range) are flagged
 FLAG_PCT = 15.0

@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from annotate.keyframes import RaterAnnotations
-from capture_tool.fileio import atomic_write_text, refuse_overwrite
-from annotate.video_index import FrameTimes
+from effortface.annotate.keyframes import RaterAnnotations
+from effortface.core.fileio import atomic_write_text, refuse_overwrite
+from effortface.annotate.video_index import FrameTimes
 
 
 def weights_table(annotations: RaterAnnotations, times: FrameTimes) -> tuple[list[str], np.ndarray]:

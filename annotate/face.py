@@ -20,7 +20,7 @@ from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
-from annotate.blendshapes import DEFAULT_SET, BlendshapeSet
+from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
 
 #: default skin colour (BGR)
 SKIN_BGR = (150, 180, 225)

@@ -32,9 +32,9 @@ from pathlib import Path
 
 import numpy as np
 
-from annotate.blendshapes import DEFAULT_SET, BlendshapeSet
-from capture_tool.errors import SessionFormatError, UserError
-from capture_tool.fileio import atomic_write_text, refuse_overwrite
+from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
+from effortface.core.errors import SessionFormatError, UserError
+from effortface.core.fileio import atomic_write_text, refuse_overwrite
 
 SCHEMA_VERSION = 1
 INTERPOLATIONS = ("hold", "linear", "smooth")

@@ -19,8 +19,8 @@ import os
 from collections.abc import Iterable
 from pathlib import Path
 
-from capture_tool.errors import SessionFormatError
-from capture_tool.fileio import refuse_overwrite
+from effortface.core.errors import SessionFormatError
+from effortface.core.fileio import refuse_overwrite
 
 POSES_HEADER = ("pose_id", "session_id", "frame", "t_s")
 RATINGS_HEADER = ("pose_id", "rater", "blendshape", "weight")

@@ -22,11 +22,11 @@ from typing import Any
 
 import numpy as np
 
-from annotate.blendshapes import DEFAULT_SET, BlendshapeSet
-from annotate.keyframes import INTERPOLATIONS, Keyframe, KeyframeTrack, RaterAnnotations, read_annotations
-from annotate.video_index import FrameTimes
-from capture_tool.errors import UserError
-from capture_tool.session import Session, read_session
+from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
+from effortface.annotate.keyframes import INTERPOLATIONS, Keyframe, KeyframeTrack, RaterAnnotations, read_annotations
+from effortface.annotate.video_index import FrameTimes
+from effortface.core.errors import UserError
+from effortface.capture_tool.session import Session, read_session
 
 EVENTS = ("frame_changed", "blendshape_changed", "keys_changed", "saved", "pass_done")
 ANNOTATIONS_DIR = "annotations"
@@ -338,7 +338,7 @@ class BlindRound:
     """
 
     def __init__(self, lab_dir: str | os.PathLike, rater: str, blendshapes: BlendshapeSet = DEFAULT_SET) -> None:
-        from annotate.reliability import read_poses, read_ratings
+        from effortface.annotate.reliability import read_poses, read_ratings
 
         self.lab_dir = Path(lab_dir)
         self.rater = check_rater(rater)
@@ -377,7 +377,7 @@ class BlindRound:
             For an unknown pose or blendshape, a weight outside [0, 1], a rating the lab file
             already holds, or a finished round (the rater has seen the report).
         """
-        from annotate.reliability import Rating, write_ratings
+        from effortface.annotate.reliability import Rating, write_ratings
 
         if pose_id not in {p.pose_id for p in self.poses}:
             raise UserError(f"pose: expected one of the pose set, found {pose_id!r}")

@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from capture_tool.errors import UserError
-from capture_tool.session import VIDEO_AVI, read_session
+from effortface.core.errors import UserError
+from effortface.capture_tool.session import VIDEO_AVI, read_session
 
 
 def _cv2() -> Any:

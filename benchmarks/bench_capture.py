@@ -30,9 +30,9 @@ import numpy as np
 import psutil
 import serial
 
-from capture_tool.captures import read_timed_capture
-from capture_tool.protocols import get_decoder
-from capture_tool.replay import PtyReplay, TimedChunk, start_replay_thread
+from effortface.capture_tool.captures import read_timed_capture
+from effortface.capture_tool.protocols import get_decoder
+from effortface.capture_tool.replay import PtyReplay, TimedChunk, start_replay_thread
 
 ROOT = Path(__file__).resolve().parents[1]
 HXM = ROOT.parent / "shared" / "data" / "serial" / "zephyr-bt" / "120-second-bt-stream-hxm.dat"

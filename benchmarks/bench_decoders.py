@@ -24,8 +24,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from capture_tool.protocols import get_decoder  # noqa: E402
-from capture_tool.protocols.encode import encode_hrmi_reply, encode_line  # noqa: E402
+from effortface.capture_tool.protocols import get_decoder  # noqa: E402
+from effortface.capture_tool.protocols.encode import encode_hrmi_reply, encode_line  # noqa: E402
 
 SERIAL = ROOT.parent / "shared" / "data" / "serial"
 

@@ -35,12 +35,12 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from annotate.blendshapes import DEFAULT_SET  # noqa: E402
-from train.bundle import ModelBundle, write_bundle  # noqa: E402
-from train.face import SvrModel  # noqa: E402
-from train.motion import Motion, read_motion  # noqa: E402
-from train.physiology import NhrParams, NhrRegression  # noqa: E402
-from train.runtime import Character, FaceModel, load_model  # noqa: E402
+from effortface.core.blendshapes import DEFAULT_SET  # noqa: E402
+from effortface.train.bundle import ModelBundle, write_bundle  # noqa: E402
+from effortface.train.face import SvrModel  # noqa: E402
+from effortface.train.motion import Motion, read_motion  # noqa: E402
+from effortface.train.physiology import NhrParams, NhrRegression  # noqa: E402
+from effortface.train.runtime import Character, FaceModel, load_model  # noqa: E402
 
 CLIP = ROOT.parent / "shared" / "data" / "motion" / "cmu_13_29_jumping_jacks_120fps.bvh"
 

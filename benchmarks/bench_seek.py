@@ -5,7 +5,7 @@ and the frame number burnt in, through the project's own AVI writer), with a ``v
 of jittered 30 fps arrival times. Measured in one process:
 
 - **random seek** (the target: median under 30 ms): ``VideoIndex.get(frame)`` on a cold cache at
-  random frames, against two baselines: ``capture_tool.camera.read_frame`` (open the file, seek,
+  random frames, against two baselines: ``effortface.capture_tool.camera.read_frame`` (open the file, seek,
   decode: what a naive viewer does) and plain sequential decoding (the decoder's floor per frame);
 - **stepping with the arrow key held**: the real Annotate stage (offscreen) receives a Right key
   every 33.3 ms (30 Hz key repeat); each step decodes (or takes from the cache), shows the frame and
@@ -31,10 +31,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 
-from annotate.face import render_face  # noqa: E402
-from annotate.video_index import VideoIndex  # noqa: E402
-from capture_tool.camera import open_avi_writer, read_frame  # noqa: E402
-from capture_tool.session import FrameTimeWriter, Participant, SessionInfo, create_session  # noqa: E402
+from effortface.annotate.face import render_face  # noqa: E402
+from effortface.annotate.video_index import VideoIndex  # noqa: E402
+from effortface.capture_tool.camera import open_avi_writer, read_frame  # noqa: E402
+from effortface.capture_tool.session import FrameTimeWriter, Participant, SessionInfo, create_session  # noqa: E402
 
 SIZE = (640, 480)
 FPS = 30.0
@@ -71,7 +71,7 @@ def bench_random_seek(folder: Path, n_seeks: int) -> dict[str, tuple[float, floa
     """Median and p95 latency (ms) of random exact seeks, VideoIndex vs baselines."""
     import cv2
 
-    from capture_tool.session import read_video_frames
+    from effortface.capture_tool.session import read_video_frames
 
     video_path = folder / "video.avi"
     frame_times = read_video_frames(folder / "video_frames.csv")
@@ -106,7 +106,7 @@ def bench_stepping(folder: Path, n_steps: int, cache_frames: int, rate_hz: float
     from PySide6 import QtCore, QtWidgets
     from PySide6.QtTest import QTest
 
-    from annotate.gui.annotate_stage import QtAnnotateStage
+    from effortface.annotate.gui.annotate_stage import QtAnnotateStage
 
     app = QtWidgets.QApplication.instance() or QtWidgets.QApplication([])
     stage = QtAnnotateStage(folder.parent, cache_frames=cache_frames)

@@ -25,16 +25,16 @@ if str(ROOT) not in sys.path:
 
 import numpy as np  # noqa: E402
 
-from annotate.blendshapes import DEFAULT_SET  # noqa: E402
-from train.dataset import prepare, sessions_table, synthetic_table  # noqa: E402
-from train.face_fit import GRIDS, FaceFitConfig, face_data, grid_search, subsample  # noqa: E402
+from effortface.core.blendshapes import DEFAULT_SET  # noqa: E402
+from effortface.train.dataset import prepare, sessions_table, synthetic_table  # noqa: E402
+from effortface.train.face_fit import GRIDS, FaceFitConfig, face_data, grid_search, subsample  # noqa: E402
 
 SAMPLE_LAB = ROOT / "sample_sessions"
 
 
 def bench_full(table, label: str) -> float:
     """Wall time of a whole training run (export and report included)."""
-    from train.commands.train import run_training
+    from effortface.train.commands.train import run_training
 
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
@@ -44,9 +44,9 @@ def bench_full(table, label: str) -> float:
 
 def bench_growth(sizes: list[tuple[int, int]]) -> None:
     """Fit time against participant-seconds on synthetic labs."""
-    from train.face_fit import fit_face_models, protocol_scores
-    from train.hr_fit import evaluate_hr_models
-    from train.dataset import hr_series
+    from effortface.train.face_fit import fit_face_models, protocol_scores
+    from effortface.train.hr_fit import evaluate_hr_models
+    from effortface.train.dataset import hr_series
 
     print("\n2. growth with participant-seconds (synthetic labs, 2 sessions each, small grid)")
     print(f"{'participants':>12} {'seconds':>8} {'part-s':>8} {'prepare':>8} {'HR eval':>8} {'face+protocols':>15} {'total s':>8}")

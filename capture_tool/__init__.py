@@ -1,3 +1,1 @@
 """Stage 1, capture: heart-rate straps over serial ports, webcam video, crash-safe session folders."""
-
-__version__ = "0.1.0"

@@ -17,8 +17,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from capture_tool.errors import DeviceError, DeviceErrorReason, UserError
-from capture_tool.session import FrameTimeWriter
+from effortface.core.errors import DeviceError, DeviceErrorReason, UserError
+from effortface.capture_tool.session import FrameTimeWriter
 
 FOURCC = "MJPG"
 _STOP = object()

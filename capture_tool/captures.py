@@ -2,7 +2,7 @@
 
 Formats, chosen by magic number first, then by suffix:
 
-- ``.serlog`` (our own format, :mod:`capture_tool.serlog`): every read with its host time.
+- ``.serlog`` (our own format, :mod:`effortface.capture_tool.serlog`): every read with its host time.
 - libpcap (``.pcap``, magic ``a1b2c3d4`` or ``a1b23c4d`` in either byte order): each record's payload
   is one raw read from the device (libant's ``PcapLogger`` writes them with link type 1), stamped
   with the record time.
@@ -28,10 +28,10 @@ import os
 import struct
 from pathlib import Path
 
-from capture_tool.errors import SessionFormatError, UserError, not_text_error
-from capture_tool.fileio import not_a_file
-from capture_tool.serlog import MAGIC as SERLOG_MAGIC
-from capture_tool.serlog import read_serlog
+from effortface.core.errors import SessionFormatError, UserError, not_text_error
+from effortface.core.fileio import not_a_file
+from effortface.capture_tool.serlog import MAGIC as SERLOG_MAGIC
+from effortface.capture_tool.serlog import read_serlog
 
 Chunk = tuple[float, bytes]
 RAW_SUFFIXES = (".dat", ".bin", ".raw", ".txt", "")

@@ -1,6 +1,6 @@
 """The ``heart_rate.csv`` row format: ``t_s,hr_bpm,rr_ms,beat_count,device,valid``.
 
-One row per :class:`~capture_tool.protocols.HrSample`. ``rr_ms`` holds the sample's R-R intervals
+One row per :class:`~effortface.capture_tool.protocols.HrSample`. ``rr_ms`` holds the sample's R-R intervals
 joined by one space (empty if none); ``hr_bpm`` is empty when the sample is invalid (contact loss is
 ``valid=0``, never 0 bpm); ``beat_count`` is empty when the strap has no beat counter.
 Shared by ``effortface decode`` and the recorder.
@@ -12,8 +12,8 @@ import csv
 import os
 from pathlib import Path
 
-from capture_tool.errors import SessionFormatError, not_text_error
-from capture_tool.protocols import HrSample
+from effortface.core.errors import SessionFormatError, not_text_error
+from effortface.capture_tool.protocols import HrSample
 
 HR_CSV_COLUMNS = ("t_s", "hr_bpm", "rr_ms", "beat_count", "device", "valid")
 HR_CSV_HEADER = ",".join(HR_CSV_COLUMNS)

@@ -17,15 +17,15 @@ import time
 from pathlib import Path
 from typing import Any
 
-from capture_tool import __version__
-from capture_tool.camera import CameraSource, index_video, rewrite_video
-from capture_tool.errors import SessionFormatError
-from capture_tool.fileio import not_a_file
-from capture_tool.hr_csv import HR_CSV_HEADER, read_hr_csv
-from capture_tool.protocols import DeviceEvent, HrSample, get_decoder, header_protocol
-from capture_tool.serial_link import SerialLink, check_port_exists, is_simulated_port
-from capture_tool.serlog import DATA, EVENT, read_serlog
-from capture_tool.session import (
+from effortface.core.version import __version__
+from effortface.capture_tool.camera import CameraSource, index_video, rewrite_video
+from effortface.core.errors import SessionFormatError
+from effortface.core.fileio import not_a_file
+from effortface.capture_tool.hr_csv import HR_CSV_HEADER, read_hr_csv
+from effortface.capture_tool.protocols import DeviceEvent, HrSample, get_decoder, header_protocol
+from effortface.capture_tool.serial_link import SerialLink, check_port_exists, is_simulated_port
+from effortface.capture_tool.serlog import DATA, EVENT, read_serlog
+from effortface.capture_tool.session import (
     EVENTS_CSV,
     EVENTS_HEADER,
     FRAMES_HEADER,
@@ -77,7 +77,7 @@ def device_startup_frames(protocol: str, port: str) -> list[bytes]:
     if protocol != "ant" or is_simulated_port(port):
         return []
     check_port_exists(port)
-    from capture_tool.protocols.ant_stick import load_network_key, open_sequence
+    from effortface.capture_tool.protocols.ant_stick import load_network_key, open_sequence
 
     return open_sequence(load_network_key())
 

@@ -7,7 +7,7 @@ pulling the stick out looks like to the reader: its next read fails with ``EIO``
 re-pointed at a new pseudo-terminal is a fair replug (the reader re-opens the same path).
 
 Sources: a ``.serlog`` (data records; link events are not replayed), a ``.pcap``, or a raw capture
-with its timing file, all read by :mod:`capture_tool.captures`.
+with its timing file, all read by :mod:`effortface.capture_tool.captures`.
 """
 
 from __future__ import annotations
@@ -23,8 +23,8 @@ import time
 import tty
 from pathlib import Path
 
-from capture_tool.errors import UserError
-from capture_tool.captures import read_timed_capture
+from effortface.core.errors import UserError
+from effortface.capture_tool.captures import read_timed_capture
 
 
 @dataclasses.dataclass(frozen=True)
@@ -42,7 +42,7 @@ def load_timed_chunks(path: str | os.PathLike) -> list[TimedChunk]:
     ----------
     path : path-like
         A ``.serlog``, a ``.pcap``, or a raw capture with its timing file
-        (:func:`capture_tool.captures.read_timed_capture`).
+        (:func:`effortface.capture_tool.captures.read_timed_capture`).
 
     Raises
     ------

@@ -21,10 +21,10 @@ from typing import Any
 import serial
 import serial.tools.list_ports
 
-from capture_tool.errors import DeviceError, DeviceErrorReason
-from capture_tool.protocols import Decoder, DeviceEvent
-from capture_tool.serlog import SerlogWriter
-from capture_tool.urlhandler import register as _register_urls
+from effortface.core.errors import DeviceError, DeviceErrorReason
+from effortface.capture_tool.protocols import Decoder, DeviceEvent
+from effortface.capture_tool.serlog import SerlogWriter
+from effortface.capture_tool.urlhandler import register as _register_urls
 
 _register_urls()
 

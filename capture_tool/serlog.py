@@ -22,8 +22,8 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import BinaryIO
 
-from capture_tool.errors import SessionFormatError
-from capture_tool.fileio import not_a_file
+from effortface.core.errors import SessionFormatError
+from effortface.core.fileio import not_a_file
 
 MAGIC = b"EFSERLOG 1\n"
 DATA, EVENT = 0, 1

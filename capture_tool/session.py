@@ -4,9 +4,9 @@ A session is a folder named ``<participant-code>_<YYYYmmdd-HHMMSS>[_<label>]`` h
 
     session.json              schema_version, session_id, complete, created_utc, participant,
                               devices, software, optional recovered / stats
-    heart_rate.csv            t_s,hr_bpm,rr_ms,beat_count,device,valid   (capture_tool.hr_csv)
+    heart_rate.csv            t_s,hr_bpm,rr_ms,beat_count,device,valid   (effortface.capture_tool.hr_csv)
     events.csv                t_s,kind,label,value
-    serial/<device>.serlog    every raw byte received (capture_tool.serlog)
+    serial/<device>.serlog    every raw byte received (effortface.capture_tool.serlog)
     video.avi                 MJPG video
     video_frames.csv          frame,t_s
 
@@ -26,10 +26,10 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any, TextIO
 
-from capture_tool.errors import SessionFormatError, UserError, not_text_error
-from capture_tool.fileio import refuse_overwrite, write_json_atomic  # noqa: F401  (re-exported for callers)
-from capture_tool.hr_csv import HR_CSV_HEADER, format_hr_row, read_hr_csv
-from capture_tool.protocols import HrSample
+from effortface.core.errors import SessionFormatError, UserError, not_text_error
+from effortface.core.fileio import refuse_overwrite, write_json_atomic  # noqa: F401  (re-exported for callers)
+from effortface.capture_tool.hr_csv import HR_CSV_HEADER, format_hr_row, read_hr_csv
+from effortface.capture_tool.protocols import HrSample
 
 SCHEMA_VERSION = 1
 SESSION_JSON = "session.json"
@@ -206,7 +206,7 @@ class SessionInfo:
     devices : dict
         ``{"heart_rate": {protocol, port, settings...}, "camera": {source, width, height, fps, codec}}``.
     complete : bool
-        False until a clean stop (or :func:`capture_tool.recorder.recover_session`).
+        False until a clean stop (or :func:`effortface.capture_tool.recorder.recover_session`).
     created_utc : str
         ISO 8601 UTC time of creation.
     software : dict
@@ -414,7 +414,7 @@ class FrameTimeWriter(_LineWriter):
 
 
 class HrWriter(_LineWriter):
-    """Writer of ``heart_rate.csv`` rows in the :mod:`capture_tool.hr_csv` format."""
+    """Writer of ``heart_rate.csv`` rows in the :mod:`effortface.capture_tool.hr_csv` format."""
 
     def __init__(self, path: str | os.PathLike, *, append: bool = False) -> None:
         super().__init__(path, HR_CSV_HEADER, append=append)

@@ -2,7 +2,7 @@
 
 from pathlib import Path
 
-__version__ = "0.1.0"
+from effortface.core.version import __version__
 
 #: the simulated lab shipped beside the package (the default of ``effortface app`` and ``demo``)
 SAMPLE_LAB = Path(__file__).resolve().parents[1] / "sample_sessions"

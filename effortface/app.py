@@ -21,9 +21,9 @@ from types import TracebackType
 
 from PySide6 import QtCore, QtGui, QtWidgets
 
-from capture_tool.errors import UserError
-from capture_tool.fileio import check_new_png
-from capture_tool.gui.gui_gc import collect_in_gui_thread
+from effortface.core.errors import UserError
+from effortface.core.fileio import check_new_png
+from effortface.core.gui.gui_gc import collect_in_gui_thread
 
 log = logging.getLogger("effortface.app")
 
@@ -48,11 +48,11 @@ def guard_refcounts() -> bool:
 
     Every void Qt call made from Python drops a reference to None (and ``Signal.emit`` one to
     True); a window that redraws for minutes would abort with "Fatal Python error: none_dealloc".
-    The Annotate stage's guard (:mod:`annotate.gui.qt_compat`) detects the bug and neutralises it
+    The Annotate stage's guard (:mod:`effortface.core.gui.qt_compat`) detects the bug and neutralises it
     process-wide; PySide6 below 6.12 does not have it. Returns whether the guard is on.
     """
     try:
-        from annotate.gui.qt_compat import guard_none_refcount
+        from effortface.core.gui.qt_compat import guard_none_refcount
     except ImportError:  # pragma: no cover - the annotate GUI is part of the distribution
         return False
     return guard_none_refcount()
@@ -101,7 +101,7 @@ class QtPlaceholderStage(QtWidgets.QWidget):
 
 def describe_sessions(sessions_dir: Path) -> list[str]:
     """One line per session in ``sessions_dir`` (id, participant, complete or not)."""
-    from capture_tool.session import list_sessions, read_session_info
+    from effortface.capture_tool.session import list_sessions, read_session_info
 
     if not sessions_dir.is_dir():
         return [f"(no folder {sessions_dir} yet: Capture creates it with the first recording)"]
@@ -127,20 +127,20 @@ def make_stage(key: str, sessions_dir: Path, settings: QtCore.QSettings) -> QtWi
         a :class:`QtPlaceholderStage`).
     """
     if key == "capture":
-        from capture_tool.gui.capture_stage import CaptureController, QtCaptureStage
+        from effortface.capture_tool.gui.capture_stage import CaptureController, QtCaptureStage
 
         return QtCaptureStage(CaptureController(sessions_dir), settings)
     if key == "annotate":
-        from annotate.gui.annotate_stage import QtAnnotateStage
+        from effortface.annotate.gui.annotate_stage import QtAnnotateStage
 
         return QtAnnotateStage(sessions_dir, settings)
     if key == "train":
-        from train.gui.train_stage import QtTrainStage
-        from train.train_session import TrainSession
+        from effortface.train.gui.train_stage import QtTrainStage
+        from effortface.train.train_session import TrainSession
 
         return QtTrainStage(TrainSession(sessions_dir))
-    from train.gui.synth_stage import QtSynthStage
-    from train.synth_session import SynthSession
+    from effortface.train.gui.synth_stage import QtSynthStage
+    from effortface.train.synth_session import SynthSession
 
     return QtSynthStage(SynthSession(background=True), motion_dir=sessions_dir)
 

@@ -2,7 +2,7 @@
 
 Each sub-command lives in its own module exposing ``add_arguments(parser)`` and ``run(args) -> int``;
 only the chosen one is imported, so ``effortface decode`` never pays for Qt or scikit-learn.
-A :class:`~capture_tool.errors.UserError` becomes one line on stderr and exit status 2; so does, as a
+A :class:`~effortface.core.errors.UserError` becomes one line on stderr and exit status 2; so does, as a
 last resort, an :class:`OSError` naming a path (a file or folder a command could not read or write).
 A first argument that is neither a command, an option nor an existing folder is refused the same way.
 """
@@ -15,20 +15,20 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from capture_tool.errors import UserError
+from effortface.core.errors import UserError
 
 #: sub-command -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
     "app": ("effortface.commands.app", "the Qt application, opened on DIR (default: sample_sessions)"),
-    "ports": ("capture_tool.commands.ports", "serial ports and cameras found"),
-    "capture": ("capture_tool.commands.capture", "record a strap (and video) into a session folder"),
-    "replay": ("capture_tool.commands.replay", "open a simulated port, print its path, replay LOG"),
-    "decode": ("capture_tool.commands.decode", "raw bytes or .serlog -> heart-rate CSV on stdout"),
-    "recover": ("capture_tool.commands.recover", "finish a session that a crash left incomplete"),
-    "agreement": ("annotate.commands.agreement", "inter-rater agreement report"),
-    "train": ("train.commands.train", "fit the heart-rate and face models, export a bundle"),
-    "evaluate": ("train.commands.evaluate", "re-score a model bundle on sessions or a table"),
-    "synth": ("train.commands.synth", "synthesize face curves from a motion clip"),
+    "ports": ("effortface.capture_tool.commands.ports", "serial ports and cameras found"),
+    "capture": ("effortface.capture_tool.commands.capture", "record a strap (and video) into a session folder"),
+    "replay": ("effortface.capture_tool.commands.replay", "open a simulated port, print its path, replay LOG"),
+    "decode": ("effortface.capture_tool.commands.decode", "raw bytes or .serlog -> heart-rate CSV on stdout"),
+    "recover": ("effortface.capture_tool.commands.recover", "finish a session that a crash left incomplete"),
+    "agreement": ("effortface.annotate.commands.agreement", "inter-rater agreement report"),
+    "train": ("effortface.train.commands.train", "fit the heart-rate and face models, export a bundle"),
+    "evaluate": ("effortface.train.commands.evaluate", "re-score a model bundle on sessions or a table"),
+    "synth": ("effortface.train.commands.synth", "synthesize face curves from a motion clip"),
     "demo": ("effortface.commands.demo", "the whole pipeline on sample_sessions"),
 }
 

@@ -31,13 +31,13 @@ if str(HERE.parent) not in sys.path:  # run as a script: make the project import
 
 import numpy as np  # noqa: E402
 
-from annotate.blendshapes import DEFAULT_SET  # noqa: E402
-from annotate.reliability import Pose, write_poses, write_ratings  # noqa: E402
-from capture_tool.protocols import get_decoder  # noqa: E402
+from effortface.core.blendshapes import DEFAULT_SET  # noqa: E402
+from effortface.annotate.reliability import Pose, write_poses, write_ratings  # noqa: E402
+from effortface.capture_tool.protocols import get_decoder  # noqa: E402
 from effortface import __version__  # noqa: E402
-from capture_tool.recorder import decode_serlog  # noqa: E402
-from capture_tool.serlog import DATA, SerlogWriter, read_serlog  # noqa: E402
-from capture_tool.session import (  # noqa: E402
+from effortface.capture_tool.recorder import decode_serlog  # noqa: E402
+from effortface.capture_tool.serlog import DATA, SerlogWriter, read_serlog  # noqa: E402
+from effortface.capture_tool.session import (  # noqa: E402
     EVENTS_CSV, HEART_RATE_CSV, SERIAL_DIR, VIDEO_AVI, VIDEO_FRAMES_CSV, Event, EventWriter,
     FrameTimeWriter, HrWriter, Participant, SessionInfo, create_session, write_json_atomic,
 )
@@ -325,7 +325,7 @@ def write_lab_truth(out: Path, plans: Sequence[SessionPlan], seed: int) -> None:
 def write_reliability(out: Path, made: dict[str, dict], seed: int) -> float:
     """18 poses (3 from each first-week session, see ``POSE_SESSION_INDICES``) and the three
     raters' blind ratings; return the disagreement %."""
-    from annotate.reliability import mean_abs_disagreement_pct
+    from effortface.annotate.reliability import mean_abs_disagreement_pct
 
     poses: list[Pose] = []
     truth_by_pose: dict[str, np.ndarray] = {}

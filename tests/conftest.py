@@ -10,7 +10,10 @@ import pytest
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED_DATA = ROOT.parent / "shared" / "data"
+#: The real captures, clips and recordings the tests need: a copy of ../shared/data kept in the
+#: repository (tests/data, about 3 MB, with its licences and provenance), so that a fresh clone runs
+#: every test without ../shared. tests/test_test_data.py checks the copy against its SHA256SUMS.
+SHARED_DATA = ROOT / "tests" / "data"
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
@@ -20,7 +23,7 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 
 @pytest.fixture(scope="session")
 def shared_data() -> Path:
-    """The real captures, clips and recordings in ../shared/data (skip if absent)."""
+    """The real captures, clips and recordings in tests/data (skip, saying so, if absent)."""
     if not SHARED_DATA.is_dir():
         pytest.skip(f"real data folder not found: {SHARED_DATA}")
     return SHARED_DATA
@@ -48,7 +51,7 @@ def _gc_in_gui_thread(request: pytest.FixtureRequest):
         yield
         return
     request.getfixturevalue("qapp")
-    from capture_tool.gui.gui_gc import collect_in_gui_thread
+    from effortface.core.gui.gui_gc import collect_in_gui_thread
 
     with collect_in_gui_thread(interval_s=0.5):
         yield

@@ -1,8 +1,11 @@
 """The architecture rules of DESIGN.md, enforced (napari/MNE style).
 
-- Qt (PySide6, pyqtgraph) only in ``*/gui/`` and ``effortface/app.py``.
-- Data flows one way: capture_tool <- annotate <- train <- effortface.
-- ``train/runtime.py`` and everything it imports use numpy and scipy only.
+- One installed namespace: everything is ``effortface.*``; no code imports a top-level
+  ``capture_tool``, ``annotate`` or ``train`` (a PyPI package or a user's ``train.py`` could shadow it).
+- Layers: core <- capture_tool <- annotate <- train <- front door (cli, app, commands, runtime).
+- Qt (PySide6, pyqtgraph) only in ``gui/`` folders and ``effortface/app.py``; no other module imports a
+  ``gui`` module.
+- ``effortface.runtime`` and everything it imports use numpy and scipy only.
 """
 
 from __future__ import annotations
@@ -16,25 +19,46 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ["capture_tool", "annotate", "train", "effortface"]
+#: folder in the repository -> the layer's module prefix
+FOLDERS = {"effortface/core": "effortface.core", "capture_tool": "effortface.capture_tool",
+           "annotate": "effortface.annotate", "train": "effortface.train", "effortface": "effortface"}
+#: layer -> the layers it may import (its own included)
+LAYERS = ["effortface.core", "effortface.capture_tool", "effortface.annotate", "effortface.train", "effortface"]
 QT = {"PySide6", "pyqtgraph", "shiboken6", "PyQt5", "PyQt6"}
-UPSTREAM = {"capture_tool": set(), "annotate": {"capture_tool"},
-            "train": {"capture_tool", "annotate"}, "effortface": set(PACKAGES)}
+OLD_TOP_LEVEL = {"capture_tool", "annotate", "train"}
 
 
 def _imports(path: Path) -> set[str]:
+    """Every absolute module name imported anywhere in ``path`` (function-level imports included)."""
     tree = ast.parse(path.read_text(encoding="utf-8"))
     names: set[str] = set()
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
-            names.update(a.name.split(".")[0] for a in node.names)
+            names.update(a.name for a in node.names)
         elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            names.add(node.module.split(".")[0])
+            names.add(node.module)
+            names.update(f"{node.module}.{a.name}" for a in node.names)
     return names
 
 
+def _layer_of(path: Path) -> str:
+    rel = path.relative_to(ROOT).as_posix()
+    return next(layer for folder, layer in FOLDERS.items() if rel.startswith(folder + "/"))
+
+
 def _sources() -> list[Path]:
-    return [p for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py")]
+    """Source files, each once (the links effortface/capture_tool etc. are not followed twice)."""
+    out = [p for folder in ("capture_tool", "annotate", "train") for p in (ROOT / folder).rglob("*.py")]
+    out += [p for p in (ROOT / "effortface").rglob("*.py")
+            if p.relative_to(ROOT / "effortface").parts[0] not in OLD_TOP_LEVEL]
+    return sorted(out)
+
+
+def _layer_index(module: str) -> int | None:
+    for i, layer in enumerate(LAYERS):
+        if module == layer or module.startswith(layer + "."):
+            return i
+    return None
 
 
 @pytest.mark.parametrize("path", _sources(), ids=lambda p: str(p.relative_to(ROOT)))
@@ -42,43 +66,51 @@ def test_qt_only_in_gui(path: Path) -> None:
     rel = path.relative_to(ROOT)
     if "gui" in rel.parts or rel.as_posix() == "effortface/app.py":
         return
-    assert not (_imports(path) & QT), f"{rel} imports Qt outside gui/"
+    names = _imports(path)
+    assert not {n.split(".")[0] for n in names} & QT, f"{rel} imports Qt outside gui/"
+    gui = sorted(n for n in names if n.startswith("effortface.") and ".gui" in n and n != "effortface.app")
+    assert rel.parts[0] == "effortface" and rel.parts[1] in ("commands",) or not gui, \
+        f"{rel} imports GUI module(s) {gui} outside gui/"
 
 
 @pytest.mark.parametrize("path", _sources(), ids=lambda p: str(p.relative_to(ROOT)))
 def test_imports_flow_one_way(path: Path) -> None:
     rel = path.relative_to(ROOT)
-    pkg = rel.parts[0]
-    allowed = UPSTREAM[pkg] | {pkg}
-    bad = (_imports(path) & set(PACKAGES)) - allowed
-    assert not bad, f"{rel} imports downstream package(s) {sorted(bad)}"
+    own = LAYERS.index(_layer_of(path))
+    names = _imports(path)
+    old = sorted(n for n in names if n.split(".")[0] in OLD_TOP_LEVEL)
+    assert not old, f"{rel} imports the old top-level module(s) {old}: use effortface.*"
+    bad = sorted(n for n in names if (i := _layer_index(n)) is not None and i > own)
+    assert not bad, f"{rel} ({LAYERS[own]}) imports downstream module(s) {bad}"
 
 
-def _new_top_modules(statement: str) -> set[str]:
+def _new_top_modules(statement: str, cwd: Path) -> set[str]:
     """Top-level modules that ``statement`` adds to ``sys.modules`` in a fresh interpreter."""
     code = (
         "import sys, json; before = set(sys.modules);"
         f"{statement};"
         "print(json.dumps(sorted({m.split('.')[0] for m in set(sys.modules) - before})))"
     )
-    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True,
+    out = subprocess.run([sys.executable, "-c", code], cwd=cwd, capture_output=True, text=True,
                          check=True)
     return set(json.loads(out.stdout.strip().splitlines()[-1]))
 
 
-def test_runtime_imports_numpy_scipy_only() -> None:
-    """What ``import train.runtime`` brings in is numpy, scipy (and what they drag), our own code."""
-    if not (ROOT / "train" / "runtime.py").exists():
-        pytest.skip("train/runtime.py not written yet")
+def test_runtime_imports_numpy_scipy_only(tmp_path: Path) -> None:
+    """``import effortface.runtime`` in a fresh interpreter, from a folder holding a user's own
+    ``train.py`` and ``annotate.py``, brings in numpy, scipy (and what they drag) and our own code."""
+    (tmp_path / "train.py").write_text("raise SystemExit('the user train.py was imported')\n")
+    (tmp_path / "annotate.py").write_text("raise SystemExit('the user annotate.py was imported')\n")
     # scipy.signal pulls a few helpers of its own (numpy.f2py's charset_normalizer...): allowed.
-    baseline = _new_top_modules("import numpy, scipy, scipy.signal, scipy.interpolate")
-    new = _new_top_modules("import train.runtime") - baseline
+    baseline = _new_top_modules("import numpy, scipy, scipy.signal, scipy.interpolate", tmp_path)
+    new = _new_top_modules("from effortface.runtime import load_model, Character, read_motion, "
+                           "motion_from_positions; load_model('default')", tmp_path) - baseline
     third_party = {m for m in new if m not in sys.stdlib_module_names and not m.startswith("_")}
-    assert third_party <= {"numpy", "scipy", *PACKAGES}, sorted(third_party)
+    assert third_party <= {"numpy", "scipy", "effortface"}, sorted(third_party)
     assert not (new & {"sklearn", "pandas", "cv2", "PySide6", "pyqtgraph", "onnx", "onnxruntime"})
 
 
 def test_import_linter_contracts() -> None:
-    """import-linter checks the layer contract in pyproject.toml (indirect imports included)."""
+    """import-linter checks the layer and runtime contracts in pyproject.toml (indirect imports too)."""
     lint = subprocess.run(["lint-imports", "--no-cache"], cwd=ROOT, capture_output=True, text=True)
     assert lint.returncode == 0, lint.stdout + lint.stderr

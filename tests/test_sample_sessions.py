@@ -15,13 +15,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from annotate.keyframes import read_annotations
-from annotate.reliability import mean_abs_disagreement_pct, read_poses, read_ratings
-from capture_tool.hr_csv import format_hr_row, read_hr_csv
-from capture_tool.protocols import get_decoder
-from capture_tool.recorder import decode_serlog
-from capture_tool.serlog import read_serlog
-from capture_tool.session import list_sessions, read_session, validate_session
+from effortface.annotate.keyframes import read_annotations
+from effortface.annotate.reliability import mean_abs_disagreement_pct, read_poses, read_ratings
+from effortface.capture_tool.hr_csv import format_hr_row, read_hr_csv
+from effortface.capture_tool.protocols import get_decoder
+from effortface.capture_tool.recorder import decode_serlog
+from effortface.capture_tool.serlog import read_serlog
+from effortface.capture_tool.session import list_sessions, read_session, validate_session
 
 from .capture_tool.capture_helpers import content, effortface, start_replay
 
@@ -87,11 +87,11 @@ def test_session_validates_and_opens_in_every_reader(session: Path) -> None:
 
 
 def test_motion_clip_opens_in_the_motion_reader_and_agrees_with_work_csv() -> None:
-    """The assembled squats clip sits in its squat set, and train.energy's w of it (with the
+    """The assembled squats clip sits in its squat set, and effortface.train.energy's w of it (with the
     participant's mass and back load) agrees with work.csv over that set within 25 %."""
-    from train.energy import work_and_power
-    from train.motion import read_motion
-    from train.segments import Loads, build_body
+    from effortface.train.energy import work_and_power
+    from effortface.train.motion import read_motion
+    from effortface.train.segments import Loads, build_body
 
     with_motion = [s for s in SESSIONS if (s / "motion").is_dir()]
     assert with_motion, "expected one strength session with motion/"
@@ -168,7 +168,7 @@ def _rows(folder: Path) -> int:
 # ------------------------------------------------------------------------- video
 @pytest.mark.parametrize("session", SESSIONS[:2], ids=_ids(SESSIONS[:2]))
 def test_video_has_one_frame_per_timestamp_never_a_nominal_rate(session: Path) -> None:
-    from capture_tool.camera import index_video, read_frame
+    from effortface.capture_tool.camera import index_video, read_frame
 
     s = read_session(session)
     assert index_video(s.video_path) == len(s.frame_times_s)
@@ -182,7 +182,7 @@ def test_video_has_one_frame_per_timestamp_never_a_nominal_rate(session: Path) -
 
 def test_video_shows_the_true_mouth_opening() -> None:
     """Frames whose true mouth_open is highest show far more open mouth than the lowest ones."""
-    from capture_tool.camera import read_frame
+    from effortface.capture_tool.camera import read_frame
 
     session = max(SESSIONS, key=lambda s: _true_weights(s)[1][:, 1].max())
     frames, truth = _true_weights(session)
@@ -231,7 +231,7 @@ def test_reliability_round_disagreement_is_near_the_papers() -> None:
 
 
 def test_training_stage_builds_its_table_from_the_lab() -> None:
-    from train.dataset import sessions_table
+    from effortface.train.dataset import sessions_table
 
     table = sessions_table([LAB])
     assert table["session"].nunique() == len(SESSIONS)

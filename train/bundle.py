@@ -22,11 +22,11 @@ from typing import Any
 
 import numpy as np
 
-from annotate.blendshapes import BlendshapeSet
-from capture_tool.errors import UserError
-from capture_tool.fileio import atomic_write, atomic_write_text
-from train.face import FEATURE_NAMES, FEATURE_UNITS, SvrModel
-from train.physiology import HR_MAX_FORMULAS, EpocParams, NhrParams, NhrRegression
+from effortface.core.blendshapes import BlendshapeSet
+from effortface.core.errors import UserError
+from effortface.core.fileio import atomic_write, atomic_write_text
+from effortface.train.face import FEATURE_NAMES, FEATURE_UNITS, SvrModel
+from effortface.train.physiology import HR_MAX_FORMULAS, EpocParams, NhrParams, NhrRegression
 
 SCHEMA_VERSION = 1
 MODEL_JSON = "model.json"

@@ -11,7 +11,7 @@ unseen-exercise protocol; default: the session id's label, e.g. ``cardio``), ``h
 From a session folder (:func:`session_table`), each second ``t_s = 0, 1, 2, ...`` gets:
 
 - ``w_per_kg``, ``p_per_kg`` from ``work.csv`` (previous value held), else from the clips of
-  ``motion/motion.json`` through :mod:`train.energy` (NaN where no clip covers the second);
+  ``motion/motion.json`` through :mod:`effortface.train.energy` (NaN where no clip covers the second);
 - ``hr_bpm``: valid strap samples linearly interpolated, empty across gaps longer than
   ``MAX_HR_GAP_S`` (choice);
 - blendshape weights from each rater's key-frames evaluated at the video frame nearest that second;
@@ -19,7 +19,7 @@ From a session folder (:func:`session_table`), each second ``t_s = 0, 1, 2, ...`
   name.
 
 :func:`prepare` then adds ``hr_rest_bpm``, ``hr_max_bpm``, ``nhr`` and ``epoc_norm`` (EPOC from the
-measured NHR through :mod:`train.physiology`'s recursion), the inputs of both models.
+measured NHR through :mod:`effortface.train.physiology`'s recursion), the inputs of both models.
 """
 
 from __future__ import annotations
@@ -33,14 +33,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from annotate.blendshapes import DEFAULT_SET, BlendshapeSet
-from annotate.keyframes import read_annotations
-from capture_tool.errors import UserError
-from capture_tool.fileio import refuse_overwrite
-from capture_tool.session import PARTICIPANT_RANGES, SEX_ALIASES  # the limits capture enforces
-from capture_tool.session import SEXES, Session, list_sessions, parse_session_id, read_session
-from train.hr_fit import HrSeries
-from train.physiology import (EpocParams, hr_max_bpm, hr_rest_bpm, epoc_step,
+from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
+from effortface.annotate.keyframes import read_annotations
+from effortface.core.errors import UserError
+from effortface.core.fileio import refuse_overwrite
+from effortface.capture_tool.session import PARTICIPANT_RANGES, SEX_ALIASES  # the limits capture enforces
+from effortface.capture_tool.session import SEXES, Session, list_sessions, parse_session_id, read_session
+from effortface.train.hr_fit import HrSeries
+from effortface.train.physiology import (EpocParams, hr_max_bpm, hr_rest_bpm, epoc_step,
                               vo2max_ml_per_kg_min, VO2_REST_ML_PER_KG_MIN)
 
 #: the long table's required columns, in order (blendshape columns follow)
@@ -197,7 +197,7 @@ def check_participants(table: pd.DataFrame, source: str) -> None:
     """DatasetError if a participant's sex/age/height/mass/TL is missing, implausible, or differs
     between rows.
 
-    The ranges are capture's (``capture_tool.session``): age 5-120 years, height 0.5-2.5 m, mass
+    The ranges are capture's (``effortface.capture_tool.session``): age 5-120 years, height 0.5-2.5 m, mass
     15-300 kg, TL 0-10, measured HR_rest 25-120 and HR_max 100-240 bpm; sex female or male.
 
     Raises
@@ -333,7 +333,7 @@ def _hr_per_second(s: Session, t: np.ndarray) -> np.ndarray:
 
 
 def _work(s: Session, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """w and p (W/kg) per second from work.csv, else from motion/ (train.energy)."""
+    """w and p (W/kg) per second from work.csv, else from motion/ (effortface.train.energy)."""
     path = s.path / WORK_CSV
     if path.is_file():
         try:
@@ -349,14 +349,14 @@ def _work(s: Session, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _work_from_motion(s: Session, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """w and p per second from the clips listed in ``motion/motion.json`` (train.energy).
+    """w and p per second from the clips listed in ``motion/motion.json`` (effortface.train.energy).
 
     Each entry gives ``path``, ``offset_s`` (clip time 0 in session time) and optional
     ``load_back_kg`` / ``load_left_kg`` / ``load_right_kg``; seconds no clip covers get NaN.
     """
-    from train.energy import work_and_power
-    from train.motion import read_motion
-    from train.segments import Loads, build_body
+    from effortface.train.energy import work_and_power
+    from effortface.train.motion import read_motion
+    from effortface.train.segments import Loads, build_body
 
     index = s.path / "motion" / "motion.json"
     try:
@@ -485,7 +485,7 @@ def _epoc(t_s: np.ndarray, nhr: np.ndarray, vo2max: float, params: EpocParams) -
 
 
 def hr_series(prepared: pd.DataFrame) -> list[HrSeries]:
-    """One :class:`~train.hr_fit.HrSeries` per session of a prepared table."""
+    """One :class:`~effortface.train.hr_fit.HrSeries` per session of a prepared table."""
     out = []
     for sid, rows in prepared.groupby("session", sort=False):
         f = rows.iloc[0]
@@ -515,7 +515,7 @@ def synthetic_table(n_participants: int = 6, seconds: int = 900, seed: int = 0,
     non-linear functions of power, NHR and fatigue times the expressiveness, with autocorrelated
     noise, so random-frame CV looks better than it is.
     """
-    from train.physiology import NhrParams, nhr_step  # local: only the generator needs them
+    from effortface.train.physiology import NhrParams, nhr_step  # local: only the generator needs them
 
     rng = np.random.default_rng(seed)
     rows = []

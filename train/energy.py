@@ -22,7 +22,7 @@ Choices (named parameters):
   the body's forward direction (from the hip joints and the vertical) made orthogonal to the long
   axis (the vertical when the segment points forward, as a foot does); transverse completes it.
 * The first two frames contribute no work (the first has no velocity).
-* Loads: point masses at the hand CMs, and on the back :data:`~train.segments.BACK_LOAD_OFFSET_M`
+* Loads: point masses at the hand CMs, and on the back :data:`~effortface.train.segments.BACK_LOAD_OFFSET_M`
   behind the trunk CM, added to that segment's energy. M stays the character's own mass.
 
 Paths: :func:`work_and_power` for a whole clip (zero-phase or causal), :class:`EnergyStream` one
@@ -38,9 +38,9 @@ from collections.abc import Sequence
 import numpy as np
 from scipy import signal
 
-from capture_tool.errors import UserError
-from train.motion import Motion
-from train.segments import BACK_LOAD_OFFSET_M, BodyModel, stack_bodies
+from effortface.core.errors import UserError
+from effortface.train.motion import Motion
+from effortface.train.segments import BACK_LOAD_OFFSET_M, BodyModel, stack_bodies
 
 #: Gravitational acceleration, m/s^2.
 G_M_PER_S2 = 9.81
@@ -213,7 +213,7 @@ def kinematic_energies(
     dt_s : float
         Frame interval in seconds.
     body : BodyModel
-        One body, or N bodies stacked by :func:`~train.segments.stack_bodies`.
+        One body, or N bodies stacked by :func:`~effortface.train.segments.stack_bodies`.
 
     Returns
     -------

@@ -9,7 +9,7 @@
   parity bound; ``onnx_dtype="float32"`` (for engines that only run float32) is checked at 1e-4,
   because float32 rounding alone measures about 6e-5 on the sample lab.
 - At export, predictions of scikit-learn, of the numpy runtime loading the written files
-  (:class:`train.face.SvrModel`) and of onnxruntime are compared on the training features and
+  (:class:`effortface.train.face.SvrModel`) and of onnxruntime are compared on the training features and
   random rows around them; the export fails (nothing is left at the target) if the runtime differs
   by more than 1e-9 or ONNX by more than 1e-5.
 - The folder is built beside the target and renamed into place, so a failed export never leaves a
@@ -29,14 +29,14 @@ import numpy as np
 import onnx
 from onnx import TensorProto, helper, numpy_helper
 
-from annotate.blendshapes import BlendshapeSet
-from capture_tool.errors import UserError
-from capture_tool.fileio import refuse_overwrite
-from train.bundle import ModelBundle, default_physiology, read_bundle, write_bundle
-from train.face import FEATURE_NAMES
-from train.face_fit import FaceModelFit
-from train.hr_fit import HrModelFit
-from train.physiology import NhrParams
+from effortface.core.blendshapes import BlendshapeSet
+from effortface.core.errors import UserError
+from effortface.core.fileio import refuse_overwrite
+from effortface.train.bundle import ModelBundle, default_physiology, read_bundle, write_bundle
+from effortface.train.face import FEATURE_NAMES
+from effortface.train.face_fit import FaceModelFit
+from effortface.train.hr_fit import HrModelFit
+from effortface.train.physiology import NhrParams
 
 FACE_ONNX = "face.onnx"
 MODEL_CARD = "MODEL_CARD.md"
@@ -60,7 +60,7 @@ class ExportError(UserError):
 def build_bundle(face: FaceModelFit, hr: HrModelFit, blendshapes: BlendshapeSet,
                  metrics: Mapping[str, Any], provenance: Mapping[str, Any],
                  physiology: Mapping[str, Any] | None = None) -> ModelBundle:
-    """The :class:`~train.bundle.ModelBundle` of a fit.
+    """The :class:`~effortface.train.bundle.ModelBundle` of a fit.
 
     Parameters
     ----------
@@ -74,7 +74,7 @@ def build_bundle(face: FaceModelFit, hr: HrModelFit, blendshapes: BlendshapeSet,
     metrics, provenance : mapping
         JSON-ready scores and data/software description.
     physiology : mapping, optional
-        Physiology choices (default: :func:`train.bundle.default_physiology`).
+        Physiology choices (default: :func:`effortface.train.bundle.default_physiology`).
 
     Returns
     -------

@@ -21,8 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from annotate.blendshapes import DEFAULT_SET, BlendshapeSet
-from capture_tool.errors import UserError
+from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
+from effortface.core.errors import UserError
 
 #: SVR input features, in order, and their units.
 FEATURE_NAMES = ("w_per_kg", "p_per_kg", "nhr", "epoc_norm")

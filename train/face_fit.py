@@ -1,6 +1,6 @@
 """Face models (SCIENCE.md section 5): expressiveness, four RBF epsilon-SVRs, evaluation like the paper.
 
-Input is the per-second training table of :mod:`train.dataset` (one row per participant-second with
+Input is the per-second training table of :mod:`effortface.train.dataset` (one row per participant-second with
 ``participant, session, t_s, w_per_kg, p_per_kg, nhr, epoc_norm``, an optional ``exercise`` and one
 column per blendshape, NaN where not annotated).
 
@@ -37,8 +37,8 @@ from sklearn.model_selection import GroupKFold, KFold, LeaveOneGroupOut
 from sklearn.preprocessing import StandardScaler
 from sklearn.svm import SVR
 
-from capture_tool.errors import UserError
-from train.face import FEATURE_NAMES
+from effortface.core.errors import UserError
+from effortface.train.face import FEATURE_NAMES
 
 #: the SVR inputs, in order (units: W/kg, W/kg, 1, 1): the runtime's own list
 FEATURES = FEATURE_NAMES

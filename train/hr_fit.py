@@ -33,8 +33,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from capture_tool.errors import UserError
-from train.physiology import NhrParams, NhrRegression, nhr_step
+from effortface.core.errors import UserError
+from effortface.train.physiology import NhrParams, NhrRegression, nhr_step
 
 #: default centred-difference span for dNHR, seconds (choice, see module docstring)
 DEFAULT_SMOOTH_S = 3
@@ -88,11 +88,11 @@ class HrCoefficients:
 
     @classmethod
     def from_nhr_params(cls, params: NhrParams) -> HrCoefficients:
-        """The same model from the runtime's scalar :class:`~train.physiology.NhrParams`."""
+        """The same model from the runtime's scalar :class:`~effortface.train.physiology.NhrParams`."""
         return cls(float(params.t_root), float(params.c_inc), float(params.c_dec))
 
     def to_nhr_params(self) -> NhrParams:
-        """The same model as the runtime's :class:`~train.physiology.NhrParams`."""
+        """The same model as the runtime's :class:`~effortface.train.physiology.NhrParams`."""
         return NhrParams(self.t_root_w_per_kg, self.c_inc, self.c_dec)
 
 
@@ -123,7 +123,7 @@ class TlRegression:
             NhrParams.from_training_level(training_level, self.to_nhr_regression()))
 
     def to_nhr_regression(self) -> NhrRegression:
-        """The runtime's :class:`~train.physiology.NhrRegression` ``(intercept, slope)`` pairs."""
+        """The runtime's :class:`~effortface.train.physiology.NhrRegression` ``(intercept, slope)`` pairs."""
         return NhrRegression(*((f.intercept, f.slope) for f in (self.t_root, self.c_inc, self.c_dec)))
 
     def as_dict(self) -> dict[str, dict[str, float]]:
@@ -266,7 +266,7 @@ def check_hr_series(series: Sequence[HrSeries], source: str = "table",
     Parameters
     ----------
     series : sequence of HrSeries
-        The sessions (from :func:`train.dataset.hr_series`).
+        The sessions (from :func:`effortface.train.dataset.hr_series`).
     source : str
         The table or sessions, for the message.
     smooth_s : int

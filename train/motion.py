@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from capture_tool.errors import UserError
+from effortface.core.errors import UserError
 
 #: CMU cgspeed ("MotionBuilder-friendly") BVH length unit: 1 unit = 1/0.45 inch = 0.05644 m.
 CMU_UNIT_M = 0.05644

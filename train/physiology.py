@@ -27,7 +27,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from capture_tool.errors import UserError
+from effortface.core.errors import UserError
 
 #: The resting-HR chart shipped with the package (copied from ../shared/data/tables).
 CHART_PATH = Path(__file__).resolve().parent / "data" / "resting_hr_chart.csv"

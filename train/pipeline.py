@@ -12,10 +12,11 @@ from typing import Any
 
 import pandas as pd
 
-from annotate.blendshapes import BlendshapeSet
-from train.dataset import hr_series, prepare
-from train.face_fit import FaceFitConfig, check_face_table
-from train.hr_fit import check_hr_series
+from effortface.core.blendshapes import BlendshapeSet
+from effortface.train.dataset import hr_series, prepare
+from effortface.train.face_fit import FaceFitConfig, check_face_table
+from effortface.train.hr_fit import check_hr_series
+from effortface.core.version import __version__
 
 REPORT_DIR = "report"
 
@@ -47,8 +48,8 @@ def export_training(*, prepared: pd.DataFrame, series: Any, hr_eval: Any, face: 
     -------
     model_dir, report_path, bundle
     """
-    from train.export import build_bundle, export_model
-    from train.report import write_report
+    from effortface.train.export import build_bundle, export_model
+    from effortface.train.report import write_report
 
     metrics = training_metrics(hr_eval, face, held_out, protocols)
     provenance = training_provenance(prepared, face, sources, rater_policy, config)
@@ -105,13 +106,8 @@ def training_provenance(prepared: pd.DataFrame, face: Any, sources: Sequence[str
 
 
 def _software_version() -> str:
-    """The installed effortface distribution's version (train may not import effortface)."""
-    from importlib import metadata
-
-    try:
-        return metadata.version("effortface")
-    except metadata.PackageNotFoundError:
-        return "unknown"
+    """The effortface version (the one string in :mod:`effortface.core.version`)."""
+    return __version__
 
 
 def report_header(prov: dict[str, Any], model_dir: Path) -> dict[str, Any]:
@@ -139,9 +135,9 @@ def check_training_data(table: pd.DataFrame, blendshapes: BlendshapeSet, source:
     Returns
     -------
     prepared : DataFrame
-        From :func:`train.dataset.prepare`.
+        From :func:`effortface.train.dataset.prepare`.
     series : list of HrSeries
-        From :func:`train.dataset.hr_series`.
+        From :func:`effortface.train.dataset.hr_series`.
 
     Raises
     ------

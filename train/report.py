@@ -1,6 +1,6 @@
 """The trainer's report: Markdown with PNG plots like the paper's Fig. 2 and Fig. 3, and metric tables.
 
-Figures come from :func:`capture_tool.figures.agg_figure` (Agg canvas, no pyplot), so the Train
+Figures come from :func:`effortface.core.figures.agg_figure` (Agg canvas, no pyplot), so the Train
 stage may write the report from its worker thread.
 """
 
@@ -14,10 +14,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from capture_tool.figures import agg_figure
-from train.export import hr_warnings
-from train.face_fit import FaceModelFit
-from train.hr_fit import HrEvaluation, HrSeries
+from effortface.core.figures import agg_figure
+from effortface.train.export import hr_warnings
+from effortface.train.face_fit import FaceModelFit
+from effortface.train.hr_fit import HrEvaluation, HrSeries
 
 REPORT_MD = "report.md"
 FIG2_PNG = "fig2_nhr.png"
@@ -62,7 +62,7 @@ def plot_fig3(fit: FaceModelFit, predictions: Mapping[str, np.ndarray], path: st
               session: str | None = None) -> Path:
     """Fig. 3: key-framed (blue) and predicted (red) weights of one session, per protocol and blendshape.
 
-    ``predictions`` is :func:`train.face_fit.protocol_scores`' second value. The session defaults to
+    ``predictions`` is :func:`effortface.train.face_fit.protocol_scores`' second value. The session defaults to
     the one with the most varied annotations.
     """
     d = fit.data

@@ -2,7 +2,7 @@
 
 ::
 
-    from train.runtime import load_model, Character
+    from effortface.train.runtime import load_model, Character
     model = load_model("models/default")           # a bundle folder, or "default" (rule model)
     hero = Character(age=30, sex="male", height_m=1.78, mass_kg=75, training_level=5,
                      expressiveness=(1, 1, 1, 1))
@@ -12,8 +12,8 @@
     crowd = model.stream_batch(characters, skeleton)
     weights = crowd.step(positions_m, dt_s)         # (N, J, 3) -> (N, B), SVR vectorised over N
 
-Per frame: joint positions -> work w and power p (train.energy) -> physiology (NHR once per
-simulated second, train.physiology) -> face model on [w, p, NHR, EPOC_norm] (train.face) ->
+Per frame: joint positions -> work w and power p (effortface.train.energy) -> physiology (NHR once per
+simulated second, effortface.train.physiology) -> face model on [w, p, NHR, EPOC_norm] (effortface.train.face) ->
 x expressiveness. ``synthesize(..., causal=True)`` uses the streaming (causal) energy filter, and
 then gives the same curves as stepping a stream over the same frames (tested); the default
 zero-phase filter is better for files.
@@ -31,15 +31,15 @@ from typing import Any
 
 import numpy as np
 
-from annotate.blendshapes import DEFAULT_SET, BlendshapeSet
-from capture_tool.errors import UserError
-from train.bundle import default_physiology, read_bundle
-from train.energy import EnergyCrowd, EnergyStream, work_and_power
-from train.face import RuleFaceModel, SvrModel, apply_expressiveness
-from train.motion import Motion, read_motion
-from train.physiology import (PAPER_REGRESSION, EpocParams, NhrRegression, PhysiologyParams,
+from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
+from effortface.core.errors import UserError
+from effortface.train.bundle import default_physiology, read_bundle
+from effortface.train.energy import EnergyCrowd, EnergyStream, work_and_power
+from effortface.train.face import RuleFaceModel, SvrModel, apply_expressiveness
+from effortface.train.motion import Motion, read_motion
+from effortface.train.physiology import (PAPER_REGRESSION, EpocParams, NhrRegression, PhysiologyParams,
                               PhysiologyState, simulate)
-from train.segments import BodyModel, Loads, build_body, check_mass
+from effortface.train.segments import BodyModel, Loads, build_body, check_mass
 
 #: Training levels accepted (choice): the paper's participants span 0-7.5 (the resting-HR chart's
 #: range, clamped above 7.5) and its Fig. 5 animates TL 10; at TL 10 the paper's c_inc is still
@@ -119,7 +119,7 @@ class Character:
                 _in_range(name, getattr(self, name), 25.0, 250.0, " bpm")
 
     def loads(self) -> Loads:
-        """The carried loads as :class:`train.segments.Loads`."""
+        """The carried loads as :class:`effortface.train.segments.Loads`."""
         return Loads(self.load_left_kg, self.load_right_kg, self.load_back_kg)
 
 
@@ -187,7 +187,7 @@ class FaceModel:
         Parameters
         ----------
         motion : path or Motion
-            A ``.bvh`` / ``.npz`` file or a :class:`train.motion.Motion`.
+            A ``.bvh`` / ``.npz`` file or a :class:`effortface.train.motion.Motion`.
         character : Character
             Who moves.
         mapping : dict or path, optional
@@ -231,7 +231,7 @@ class FaceModel:
         character : Character
         skeleton : Motion
             Joint names, parents and reference positions (e.g. a rest pose built with
-            :func:`train.motion.motion_from_positions`); its fps is the stream's nominal rate.
+            :func:`effortface.train.motion.motion_from_positions`); its fps is the stream's nominal rate.
         mapping : dict or path, optional
             A user joint-to-segment mapping.
         fps : float, optional
@@ -299,10 +299,10 @@ class CharacterStream:
 class CrowdStream:
     """N characters stepped together: physiology and the face model are vectorised over N.
 
-    Energies use one causal :class:`~train.energy.EnergyCrowd` vectorised over the characters
+    Energies use one causal :class:`~effortface.train.energy.EnergyCrowd` vectorised over the characters
     (each keeps its own body: mass, bone lengths, loads). Engines that compute work themselves call :meth:`step_work`. ``single_precision``
     evaluates an SVR face model in float32 (faster for big crowds, see
-    :meth:`train.face.SvrModel.predict`).
+    :meth:`effortface.train.face.SvrModel.predict`).
     """
 
     def __init__(self, model: FaceModel, characters: Sequence[Character], skeleton: Motion, *,
@@ -349,7 +349,7 @@ def load_model(path: str | os.PathLike | None = "default") -> FaceModel:
     Parameters
     ----------
     path : path, "default" or None
-        A folder with ``model.json`` and ``svr.npz`` (see :mod:`train.bundle`).
+        A folder with ``model.json`` and ``svr.npz`` (see :mod:`effortface.train.bundle`).
 
     Returns
     -------

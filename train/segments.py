@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from capture_tool.errors import UserError
-from train.motion import check_parents
+from effortface.core.errors import UserError
+from effortface.train.motion import check_parents
 
 TABLES_CSV = Path(__file__).with_name("data") / "segment_inertia_tables.csv"
 

@@ -1,6 +1,6 @@
 """The Synthesize stage's model (Qt-free): a clip, a model, a character, the curves and a play head.
 
-The widgets of :mod:`train.gui.synth_stage` call :class:`SynthSession` methods and listen to its
+The widgets of :mod:`effortface.train.gui.synth_stage` call :class:`SynthSession` methods and listen to its
 plain callbacks; a QTimer calls :meth:`SynthSession.advance` with the wall time elapsed, so the play
 head moves in real time whatever the frame rate of the display (STYLE.md L3).
 
@@ -8,7 +8,7 @@ Curves are recomputed for the whole clip whenever the character or the model cha
 for the GUI, on a worker thread whose newest result :meth:`SynthSession.poll` applies (a looped
 2-minute clip through an SVR bundle takes about 0.1 s); the work and power of the clip depend only on the body
 (mass, sex, loads), so they are cached and reused when only the training level, age, height or
-expressiveness change. ``loops`` repeats the clip end to end (:func:`train.energy.looped`: the work
+expressiveness change. ``loops`` repeats the clip end to end (:func:`effortface.train.energy.looped`: the work
 window runs across the seam, which is not re-filtered), so that a short clip shows heart rate and
 fatigue building up over minutes.
 """
@@ -23,13 +23,13 @@ from typing import Any
 
 import numpy as np
 
-from capture_tool.errors import UserError
-from capture_tool.fileio import refuse_overwrite
-from train.commands.synth import write_output, curves_csv, livelink_csv
-from train.energy import EnergyCurves, looped, work_and_power
-from train.motion import Motion, read_motion
-from train.runtime import Character, FaceModel, load_model
-from train.train_session import Emitter
+from effortface.core.errors import UserError
+from effortface.core.fileio import refuse_overwrite
+from effortface.train.commands.synth import write_output, curves_csv, livelink_csv
+from effortface.train.energy import EnergyCurves, looped, work_and_power
+from effortface.train.motion import Motion, read_motion
+from effortface.train.runtime import Character, FaceModel, load_model
+from effortface.core.events import Emitter
 
 EXPORT_FORMATS = ("csv", "livelink")
 MOTION_SUFFIXES = (".bvh", ".npz")
@@ -78,14 +78,14 @@ class SynthSession:
     model : str, path or FaceModel
         ``"default"`` (the built-in rule model) or a bundle folder.
     character : Character, optional
-        Who moves (default: :class:`train.runtime.Character` defaults).
+        Who moves (default: :class:`effortface.train.runtime.Character` defaults).
     background : bool
         Recompute curves on a worker thread (the GUI: a 2-minute clip through an SVR bundle takes
         about 0.1 s); :meth:`poll` then applies the newest result. False computes at once.
 
     Notes
     -----
-    Callbacks (each an :class:`~train.train_session.Emitter`): ``model_changed()``,
+    Callbacks (each an :class:`~effortface.core.events.Emitter`): ``model_changed()``,
     ``motion_changed()``, ``curves_changed()``, ``character_changed()``, ``position_changed(frame)``,
     ``playing_changed(playing)``, ``status_changed(text, is_error)``.
     """

@@ -1,10 +1,10 @@
 """The Train stage's model (Qt-free): pick data, train in a worker thread, show, export, compare.
 
-The widgets of :mod:`train.gui.train_stage` call :class:`TrainSession` methods and listen to its
+The widgets of :mod:`effortface.train.gui.train_stage` call :class:`TrainSession` methods and listen to its
 plain callbacks (:class:`Emitter`); a QTimer calls :meth:`TrainSession.poll`, which drains the
 worker's queue on the GUI thread (STYLE.md L3, L5). The training itself is the headless lab's
-(:mod:`train.dataset`, :mod:`train.hr_fit`, :mod:`train.face_fit`, :mod:`train.export`,
-:mod:`train.report`), run step by step so that it reports progress and can be cancelled between
+(:mod:`effortface.train.dataset`, :mod:`effortface.train.hr_fit`, :mod:`effortface.train.face_fit`, :mod:`effortface.train.export`,
+:mod:`effortface.train.report`), run step by step so that it reports progress and can be cancelled between
 cross-validation folds.
 """
 
@@ -21,15 +21,16 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from annotate.blendshapes import DEFAULT_SET, BlendshapeSet
-from capture_tool.errors import UserError
-from capture_tool.fileio import refuse_overwrite
-from capture_tool.session import list_sessions, parse_session_id, read_session_info
-from train.dataset import ANNOTATIONS_DIR, prepare, read_table, sessions_table
-from train.face_fit import (GRIDS, MIN_ROWS_PER_PARTICIPANT, FaceFitConfig, FaceModelFit,
+from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
+from effortface.core.events import Emitter
+from effortface.core.errors import UserError
+from effortface.core.fileio import refuse_overwrite
+from effortface.capture_tool.session import list_sessions, parse_session_id, read_session_info
+from effortface.train.dataset import ANNOTATIONS_DIR, prepare, read_table, sessions_table
+from effortface.train.face_fit import (GRIDS, MIN_ROWS_PER_PARTICIPANT, FaceFitConfig, FaceModelFit,
                             held_out_scores, protocol_scores)
-from train.hr_fit import HrEvaluation, HrSeries, evaluate_hr_models
-from train.pipeline import check_training_data
+from effortface.train.hr_fit import HrEvaluation, HrSeries, evaluate_hr_models
+from effortface.train.pipeline import check_training_data
 
 #: the paper's heart-rate results (section 3 of SCIENCE.md), shown beside ours
 PAPER_HR = {"per_participant": {"r": 0.88, "rmse_pct": 19.0},
@@ -40,22 +41,6 @@ _STEP_FRACTION = {"prepare": 0.05, "hr": 0.2, "folds": 0.8, "held_out": 0.85, "p
 ANY = "any"
 #: the background jobs that :meth:`TrainSession.cancel` can stop (an export always finishes)
 CANCELLABLE_JOBS = ("train", "compare")
-
-
-class Emitter:
-    """A Qt-free signal: ``connect(fn)`` then ``emit(*args)`` calls every connected function."""
-
-    def __init__(self) -> None:
-        self._slots: list[Callable[..., Any]] = []
-
-    def connect(self, fn: Callable[..., Any]) -> None:
-        """Call ``fn(*args)`` on every :meth:`emit`."""
-        self._slots.append(fn)
-
-    def emit(self, *args: Any) -> None:
-        """Call the connected functions in order."""
-        for fn in list(self._slots):
-            fn(*args)
 
 
 class Cancelled(Exception):
@@ -126,7 +111,7 @@ class TrainSettings:
     rater_policy : str
         ``"mean"`` of the raters or one rater's name.
     grid : str
-        A key of :data:`train.face_fit.GRIDS`.
+        A key of :data:`effortface.train.face_fit.GRIDS`.
     cv : {"lopo", "kfold"}
         Leave-one-participant-out (the paper's honest protocol) or random-frame K-fold.
     max_rows_per_participant : int
@@ -267,7 +252,7 @@ def _fit_face(prepared: pd.DataFrame, blendshapes: BlendshapeSet, config: FaceFi
               step: Callable[[str, str], None], cancelled: Callable[[], bool],
               progress: ProgressFn) -> FaceModelFit:
     """The face grid search with a progress report (and a cancel check) after each fold."""
-    from train.face_fit import fit_face_models
+    from effortface.train.face_fit import fit_face_models
 
     n_people = prepared["participant"].nunique()
     n_folds = min(n_people, config.max_folds) if config.cv == "lopo" else config.n_splits
@@ -294,7 +279,7 @@ def export_outcome(outcome: TrainingOutcome, out_dir: str | os.PathLike, *,
     FileExistsError
         If ``out_dir`` exists and ``overwrite`` is False.
     """
-    from train.pipeline import export_training
+    from effortface.train.pipeline import export_training
 
     o = outcome
     model_dir, _, _ = export_training(
@@ -324,9 +309,9 @@ def compare_bundle(path: str | os.PathLike, session_rows: pd.DataFrame) -> Bundl
     The character is the session's participant, with the expressiveness of their key-frames
     (the maximal key-framed weight of each blendshape, as in training).
     """
-    from train.bundle import read_bundle
-    from train.face_fit import expressiveness
-    from train.runtime import Character, load_model
+    from effortface.train.bundle import read_bundle
+    from effortface.train.face_fit import expressiveness
+    from effortface.train.runtime import Character, load_model
 
     model = load_model(path)
     met = read_bundle(Path(path)).metrics
@@ -541,7 +526,7 @@ class TrainSession:
         UserError
             If a folder is not a readable bundle.
         """
-        from train.bundle import read_bundle
+        from effortface.train.bundle import read_bundle
 
         ids: set[str] = set()
         for bundle in bundles:

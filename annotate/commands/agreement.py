@@ -1,6 +1,6 @@
 """``effortface agreement (SESSION | DIR | --ratings CSV)``: the inter-rater reliability report.
 
-Where the ratings come from (see :mod:`annotate.agreement`): ``--ratings CSV`` as given; a folder
+Where the ratings come from (see :mod:`effortface.annotate.agreement`): ``--ratings CSV`` as given; a folder
 with ``reliability/ratings.csv`` (the lab's blind round); otherwise every rater's key-frame curves at
 the pose frames (``reliability/poses.csv`` when present, else poses proposed from HR and phase
 extremes). Prints per pose, per blendshape and overall: mean absolute disagreement in % of the
@@ -13,10 +13,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from annotate.agreement import FLAG_PCT, agreement_report, format_report, gather_ratings, save_bland_altman_png
-from annotate.reliability import read_ratings
-from capture_tool.errors import UserError
-from capture_tool.fileio import check_new_png
+from effortface.annotate.agreement import FLAG_PCT, agreement_report, format_report, gather_ratings, save_bland_altman_png
+from effortface.annotate.reliability import read_ratings
+from effortface.core.errors import UserError
+from effortface.core.fileio import check_new_png
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -1,4 +1,4 @@
-"""``python -m annotate.gui [DIR] [--session NAME] [--rater R] [--screenshot PNG [--tab key|reliability]]``.
+"""``python -m effortface.annotate.gui [DIR] [--session NAME] [--rater R] [--screenshot PNG [--tab key|reliability]]``.
 
 The Annotate stage on its own window (the main application hosts the same widget). With
 ``--screenshot`` it renders offscreen-friendly, saves a PNG (never over an existing file) and exits.
@@ -12,13 +12,13 @@ from pathlib import Path
 
 from PySide6 import QtWidgets
 
-from annotate.gui.annotate_stage import QtAnnotateStage
+from effortface.annotate.gui.annotate_stage import QtAnnotateStage
 
 SIZE = (1400, 900)
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m annotate.gui", description="the Annotate stage alone")
+    p = argparse.ArgumentParser(prog="python -m effortface.annotate.gui", description="the Annotate stage alone")
     p.add_argument("dir", nargs="?", default="sample_sessions", help="folder of sessions")
     p.add_argument("--session", help="open this session folder name at start")
     p.add_argument("--rater", default="", help="rater code")

@@ -1,13 +1,13 @@
 """The Annotate stage: key-frame the blendshape weights from the video, check inter-rater agreement.
 
-:class:`QtAnnotateStage` (hosted by the main window, or run alone with ``python -m annotate.gui``)
+:class:`QtAnnotateStage` (hosted by the main window, or run alone with ``python -m effortface.annotate.gui``)
 holds the session browser, the rater code, the key-frame editor of the open session and the
 reliability round. :class:`QtKeyframeEditor` views one
-:class:`~annotate.session_model.AnnotationSession` (Qt-free: frame, blendshape, the rater's tracks,
-undo history, autosave) and a :class:`~annotate.video_index.VideoIndex` (frame-exact decode cache
+:class:`~effortface.annotate.session_model.AnnotationSession` (Qt-free: frame, blendshape, the rater's tracks,
+undo history, autosave) and a :class:`~effortface.annotate.video_index.VideoIndex` (frame-exact decode cache
 with prefetch): video and face preview side by side, the protocol panel, transport controls, heart
 rate and the curve editor on the session's time axis. Keyboard first: see
-:data:`~annotate.gui.protocol_panel.HELP_TEXT`. Every edit is saved at once (atomic write), so
+:data:`~effortface.annotate.gui.protocol_panel.HELP_TEXT`. Every edit is saved at once (atomic write), so
 closing never asks and a crash loses nothing. Editing the rater code hides the open session and the
 reliability round at once, until the new code is confirmed (blind raters never see another's keys
 or ratings). The session list is read again each time the stage is shown (and on F5 / Rescan), and
@@ -25,18 +25,18 @@ from typing import Any
 
 from PySide6 import QtCore, QtGui, QtWidgets
 
-from annotate.export import write_keyframes_json, write_weights_csv
-from annotate.face import render_face
-from annotate.gui.image_view import QtImageView
-from annotate.gui.protocol_panel import HELP_TEXT, QtProtocolPanel
-from annotate.gui.qt_compat import guard_none_refcount
-from annotate.gui.reliability_panel import QtReliabilityPanel
-from annotate.gui.timeline import QtTimeline
-from annotate.session_model import AnnotationSession, check_rater
-from annotate.video_index import VideoIndex
-from capture_tool.errors import UserError
-from capture_tool.gui.widgets import QtElidedLabel
-from capture_tool.session import list_sessions, read_session_info
+from effortface.annotate.export import write_keyframes_json, write_weights_csv
+from effortface.annotate.face import render_face
+from effortface.annotate.gui.image_view import QtImageView
+from effortface.annotate.gui.protocol_panel import HELP_TEXT, QtProtocolPanel
+from effortface.core.gui.qt_compat import guard_none_refcount
+from effortface.annotate.gui.reliability_panel import QtReliabilityPanel
+from effortface.annotate.gui.timeline import QtTimeline
+from effortface.annotate.session_model import AnnotationSession, check_rater
+from effortface.annotate.video_index import VideoIndex
+from effortface.core.errors import UserError
+from effortface.core.gui.widgets import QtElidedLabel
+from effortface.capture_tool.session import list_sessions, read_session_info
 
 SPEEDS = (0.25, 0.5, 1.0, 2.0, 4.0)
 #: the side panel (sessions, rater) is this wide, and may shrink to SIDE_MIN_WIDTH on a small screen

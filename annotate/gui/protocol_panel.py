@@ -1,6 +1,6 @@
 """The paper's protocol panel: one blendshape at a time in the fixed order, and its weight.
 
-:class:`QtProtocolPanel` views an :class:`~annotate.session_model.AnnotationSession`: the blendshape
+:class:`QtProtocolPanel` views an :class:`~effortface.annotate.session_model.AnnotationSession`: the blendshape
 list in annotation order (the current one highlighted, finished passes ticked), the next blendshape
 offered after a pass, a slider and a number box for the weight at the current frame (setting either
 sets a key), the interpolation of the key, Set / Delete key buttons and the four current weights.
@@ -12,8 +12,8 @@ import math
 
 from PySide6 import QtCore, QtWidgets
 
-from annotate.keyframes import INTERPOLATIONS
-from annotate.session_model import AnnotationSession
+from effortface.annotate.keyframes import INTERPOLATIONS
+from effortface.annotate.session_model import AnnotationSession
 
 HELP_TEXT = ("\u2190/\u2192 one frame (Shift: ten) \u00b7 Home/End \u00b7 0-9 key at weight 0.0-0.9, "
              "M at 1.0 \u00b7 \u2191/\u2193 weight \u00b10.05 \u00b7 K key at the box's weight \u00b7 "

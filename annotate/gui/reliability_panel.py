@@ -1,7 +1,7 @@
 """The reliability round: rate the pose set blind, then see the agreement report.
 
-:class:`QtReliabilityPanel` views a :class:`~annotate.session_model.BlindRound` (one rater's blind
-ratings of ``reliability/poses.csv``) and the lab's :class:`~annotate.agreement.AgreementReport`:
+:class:`QtReliabilityPanel` views a :class:`~effortface.annotate.session_model.BlindRound` (one rater's blind
+ratings of ``reliability/poses.csv``) and the lab's :class:`~effortface.annotate.agreement.AgreementReport`:
 per-pose and per-blendshape tables (mean absolute difference in % of the weight range, ICC(A,1),
 ICC(C,1), Krippendorff's alpha), flagged poses in red and the Bland-Altman plot of every rater
 pair. The report appears only once this rater has rated every pose, so nobody sees the others'
@@ -17,13 +17,13 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6 import QtCore, QtGui, QtWidgets
 
-from annotate.agreement import FLAG_PCT, N_POSES, AgreementReport, agreement_report, gather_ratings, propose_poses
-from annotate.gui.image_view import QtImageView
-from annotate.reliability import write_poses
-from annotate.session_model import BlindRound
-from capture_tool.camera import read_frame
-from capture_tool.errors import UserError
-from capture_tool.session import list_sessions, read_session
+from effortface.annotate.agreement import FLAG_PCT, N_POSES, AgreementReport, agreement_report, gather_ratings, propose_poses
+from effortface.annotate.gui.image_view import QtImageView
+from effortface.annotate.reliability import write_poses
+from effortface.annotate.session_model import BlindRound
+from effortface.capture_tool.camera import read_frame
+from effortface.core.errors import UserError
+from effortface.capture_tool.session import list_sessions, read_session
 
 _PAIR_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#8c564b", "#e377c2")
 _FLAG_BRUSH = QtGui.QBrush(QtGui.QColor("#f8d7da"))

@@ -1,6 +1,6 @@
 """Heart rate, phases and the curve editor under the video, on one session-time axis (pyqtgraph).
 
-:class:`QtTimeline` views an :class:`~annotate.session_model.AnnotationSession`:
+:class:`QtTimeline` views an :class:`~effortface.annotate.session_model.AnnotationSession`:
 
 - top plot: heart rate (valid samples; gaps where the strap lost contact) with the exercise
   phases shaded and named;
@@ -23,7 +23,7 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6 import QtCore, QtWidgets
 
-from annotate.session_model import AnnotationSession
+from effortface.annotate.session_model import AnnotationSession
 
 _CURRENT_PEN = pg.mkPen("#1f5fbf", width=2)
 _OTHER_PEN = pg.mkPen((120, 120, 120, 110), width=1)

@@ -15,10 +15,10 @@ import threading
 import time
 from pathlib import Path
 
-from capture_tool.errors import UserError
-from capture_tool.protocols import PROTOCOLS, check_protocol
-from capture_tool.recorder import Recorder
-from capture_tool.session import Participant
+from effortface.core.errors import UserError
+from effortface.capture_tool.protocols import PROTOCOLS, check_protocol
+from effortface.capture_tool.recorder import Recorder
+from effortface.capture_tool.session import Participant
 
 STATUS_INTERVAL_S = 5.0
 

@@ -1,6 +1,6 @@
 """``effortface decode [--protocol P] FILE``: recorded strap bytes -> heart-rate CSV on stdout.
 
-FILE is a ``.serlog``, a ``.pcap`` or a raw capture (see :mod:`capture_tool.captures`). A
+FILE is a ``.serlog``, a ``.pcap`` or a raw capture (see :mod:`effortface.capture_tool.captures`). A
 ``.serlog`` names its protocol in its header, so ``--protocol`` may be left out for one (given, it
 wins, with a note on stderr if it differs); a pcap or raw capture needs it. The file's chunks
 are fed to the decoder with their recorded arrival times, so ``t_s`` is seconds since the first
@@ -17,11 +17,11 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import TextIO
 
-from capture_tool.captures import check_capture_file, read_timed_capture
-from capture_tool.errors import UserError
-from capture_tool.hr_csv import HR_CSV_HEADER, format_hr_row
-from capture_tool.protocols import PROTOCOLS, Decoder, HrSample, check_protocol, get_decoder, header_protocol
-from capture_tool.serlog import is_serlog, read_serlog_header
+from effortface.capture_tool.captures import check_capture_file, read_timed_capture
+from effortface.core.errors import UserError
+from effortface.capture_tool.hr_csv import HR_CSV_HEADER, format_hr_row
+from effortface.capture_tool.protocols import PROTOCOLS, Decoder, HrSample, check_protocol, get_decoder, header_protocol
+from effortface.capture_tool.serlog import is_serlog, read_serlog_header
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

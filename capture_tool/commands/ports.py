@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from capture_tool.camera import list_cameras
-from capture_tool.serial_link import list_ports
+from effortface.capture_tool.camera import list_cameras
+from effortface.capture_tool.serial_link import list_ports
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

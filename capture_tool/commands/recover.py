@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from capture_tool.recorder import recover_session
+from effortface.capture_tool.recorder import recover_session
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -12,8 +12,8 @@ import math
 import signal
 import sys
 
-from capture_tool.errors import UserError
-from capture_tool.replay import open_pty_replay
+from effortface.core.errors import UserError
+from effortface.capture_tool.replay import open_pty_replay
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -1,9 +1,9 @@
 """The Capture stage: pre-flight, participant, live view, phases and markers, Record/Stop, sync test.
 
-:class:`QtCaptureStage` views a :class:`~capture_tool.gui.controller.CaptureController`: it calls
+:class:`QtCaptureStage` views a :class:`~effortface.capture_tool.gui.controller.CaptureController`: it calls
 its methods and draws what :meth:`~CaptureController.poll` returns on a QTimer. Starting, stopping
 and recovering block (devices open, threads join, files are re-indexed), so they run in
-:class:`~capture_tool.gui.jobs.Jobs` and the GUI thread never waits (STYLE.md L3, L5).
+:class:`~effortface.core.jobs.Jobs` and the GUI thread never waits (STYLE.md L3, L5).
 """
 
 from __future__ import annotations
@@ -13,14 +13,14 @@ from pathlib import Path
 import numpy as np
 from PySide6 import QtCore, QtWidgets
 
-from capture_tool.errors import UserError
-from capture_tool.gui.controller import CaptureController, HrRow, LiveUpdate
-from capture_tool.gui.jobs import JobResult, Jobs
-from capture_tool.gui.live_view import QtLiveView, format_bytes, format_elapsed
-from capture_tool.gui.participant_form import QtParticipantForm
-from capture_tool.gui.phases import PHASE_TITLES, QtPhasePanel
-from capture_tool.gui.preflight import DeviceChoice, QtPreflight
-from capture_tool.session import Event
+from effortface.core.errors import UserError
+from effortface.capture_tool.gui.controller import CaptureController, HrRow, LiveUpdate
+from effortface.core.jobs import JobResult, Jobs
+from effortface.capture_tool.gui.live_view import QtLiveView, format_bytes, format_elapsed
+from effortface.capture_tool.gui.participant_form import QtParticipantForm
+from effortface.capture_tool.gui.phases import PHASE_TITLES, QtPhasePanel
+from effortface.capture_tool.gui.preflight import DeviceChoice, QtPreflight
+from effortface.capture_tool.session import Event
 
 __all__ = ["CaptureController", "QtCaptureStage"]
 
@@ -481,7 +481,7 @@ class _RecoveryBar(QtWidgets.QFrame):
 
 def session_summary(folder: Path) -> str:
     """One line about a stopped session: id, duration, samples, frames, events (from its files)."""
-    from capture_tool.session import read_session
+    from effortface.capture_tool.session import read_session
 
     session = read_session(folder)
     stats = session.info.extra.get("stats", {})

@@ -1,4 +1,4 @@
-"""The Capture stage's model (Qt-free): drives a :class:`~capture_tool.recorder.Recorder`.
+"""The Capture stage's model (Qt-free): drives a :class:`~effortface.capture_tool.recorder.Recorder`.
 
 The widgets call :class:`CaptureController` methods and draw what :meth:`CaptureController.poll`
 returns on a QTimer; nothing here blocks for long or touches a widget (STYLE.md L3, L5). What
@@ -15,11 +15,11 @@ import statistics
 from pathlib import Path
 from typing import Any
 
-from capture_tool.errors import UserError
-from capture_tool.gui.preflight import DeviceChoice
-from capture_tool.gui.sync import flash_offset_s, video_brightness
-from capture_tool.recorder import Recorder, RecorderStatus, recover_session
-from capture_tool.session import (
+from effortface.core.errors import UserError
+from effortface.capture_tool.gui.preflight import DeviceChoice
+from effortface.capture_tool.gui.sync import flash_offset_s, video_brightness
+from effortface.capture_tool.recorder import Recorder, RecorderStatus, recover_session
+from effortface.capture_tool.session import (
     EVENTS_CSV,
     HEART_RATE_CSV,
     VIDEO_AVI,

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import time
 
-from capture_tool.errors import UserError
-from capture_tool.protocols import PROTOCOLS, get_decoder
+from effortface.core.errors import UserError
+from effortface.capture_tool.protocols import PROTOCOLS, get_decoder
 
 #: a decoder must explain at least this share of the bytes and give this many samples to be chosen
 MIN_ACCOUNTED = 0.8
@@ -23,7 +23,7 @@ def score_protocol(protocol: str, data: bytes) -> float:
     Parameters
     ----------
     protocol : str
-        A name of :data:`capture_tool.protocols.PROTOCOLS`.
+        A name of :data:`effortface.capture_tool.protocols.PROTOCOLS`.
     data : bytes
         The first bytes read from the port.
 

@@ -11,8 +11,8 @@ from typing import Any
 
 from PySide6 import QtCore, QtWidgets
 
-from capture_tool.errors import UserError
-from capture_tool.session import CODE_RULE, SEXES, Participant, make_session_id
+from effortface.core.errors import UserError
+from effortface.capture_tool.session import CODE_RULE, SEXES, Participant, make_session_id
 
 
 def preview_session_name(code: str, label: str = "", when: dt.datetime | None = None) -> str:
@@ -133,7 +133,7 @@ class QtParticipantForm(QtWidgets.QGroupBox):
         return ""
 
     def participant(self) -> Participant:
-        """The validated :class:`~capture_tool.session.Participant` built from the form.
+        """The validated :class:`~effortface.capture_tool.session.Participant` built from the form.
 
         Raises
         ------

@@ -1,7 +1,7 @@
 """Pre-flight: which strap port, protocol and camera; each device shown ready or missing.
 
 Opening ports and cameras can block for a second or more, so every check runs in
-:class:`~capture_tool.gui.jobs.Jobs` and the results are drained on a QTimer.
+:class:`~effortface.core.jobs.Jobs` and the results are drained on a QTimer.
 """
 
 from __future__ import annotations
@@ -13,9 +13,9 @@ from typing import Any
 
 from PySide6 import QtCore, QtWidgets
 
-from capture_tool.gui.detect import detect_protocol, read_first_bytes
-from capture_tool.gui.jobs import JobResult, Jobs
-from capture_tool.protocols import PROTOCOLS
+from effortface.capture_tool.gui.detect import detect_protocol, read_first_bytes
+from effortface.core.jobs import JobResult, Jobs
+from effortface.capture_tool.protocols import PROTOCOLS
 
 NO_VIDEO = "No video"
 VIDEO_FILE = "Video file..."
@@ -36,7 +36,7 @@ class DeviceChoice:
 
 def check_strap(port: str) -> str:
     """Open and close ``port`` (blocking); return a one-line 'ready' note or raise DeviceError."""
-    from capture_tool.serial_link import open_port
+    from effortface.capture_tool.serial_link import open_port
 
     open_port(port).close()
     return f"{port} opens"
@@ -55,7 +55,7 @@ def check_camera(camera: int | str) -> tuple[str, Any]:
     UserError, DeviceError
         If it cannot be opened.
     """
-    from capture_tool.camera import open_capture
+    from effortface.capture_tool.camera import open_capture
 
     cap = open_capture(camera)
     try:
@@ -68,14 +68,14 @@ def check_camera(camera: int | str) -> tuple[str, Any]:
 
 def found_ports() -> list[str]:
     """Serial port paths on this machine."""
-    from capture_tool.serial_link import list_ports
+    from effortface.capture_tool.serial_link import list_ports
 
     return [p["device"] for p in list_ports()]
 
 
 def found_cameras() -> list[int]:
     """Camera indices from ``/dev/video*``."""
-    from capture_tool.camera import list_cameras
+    from effortface.capture_tool.camera import list_cameras
 
     out = []
     for dev in list_cameras():

@@ -14,14 +14,14 @@ import os
 from collections.abc import Mapping
 from typing import ClassVar
 
-from capture_tool.errors import SessionFormatError, UserError
+from effortface.core.errors import SessionFormatError, UserError
 
 #: protocol name -> module in this package that defines ``DECODER`` (a Decoder subclass)
 PROTOCOLS: dict[str, str] = {
-    "ant": "capture_tool.protocols.ant",
-    "hxm": "capture_tool.protocols.hxm",
-    "hrmi": "capture_tool.protocols.hrmi",
-    "lines": "capture_tool.protocols.lines",
+    "ant": "effortface.capture_tool.protocols.ant",
+    "hxm": "effortface.capture_tool.protocols.hxm",
+    "hrmi": "effortface.capture_tool.protocols.hrmi",
+    "lines": "effortface.capture_tool.protocols.lines",
 }
 
 

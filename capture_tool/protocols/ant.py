@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from capture_tool.protocols import Decoder, HrSample
+from effortface.capture_tool.protocols import Decoder, HrSample
 
 SYNC = 0xA4
 #: largest DATA length we accept: an extended broadcast with every trailer is 20 bytes; longer
@@ -129,7 +129,7 @@ class AntDecoder(Decoder):
     ----------
     state : str
         Link state: ``"unknown"``, ``"searching"``, ``"tracking"``, ``"lost"`` or ``"closed"``.
-        Every change is also a :class:`~capture_tool.protocols.DeviceEvent` of kind ``"link"``.
+        Every change is also a :class:`~effortface.capture_tool.protocols.DeviceEvent` of kind ``"link"``.
     """
 
     name = "ant"

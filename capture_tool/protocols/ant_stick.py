@@ -21,9 +21,9 @@ import re
 from collections.abc import Mapping
 from pathlib import Path
 
-from capture_tool.errors import DeviceError, DeviceErrorReason, UserError
-from capture_tool.protocols.ant import HRM_DEVICE_TYPE, MSG_OPEN_CHANNEL
-from capture_tool.protocols.encode import encode_ant_frame
+from effortface.core.errors import DeviceError, DeviceErrorReason, UserError
+from effortface.capture_tool.protocols.ant import HRM_DEVICE_TYPE, MSG_OPEN_CHANNEL
+from effortface.capture_tool.protocols.encode import encode_ant_frame
 
 ENV_VAR = "EFFORTFACE_ANT_NETWORK_KEY"
 CONFIG_SECTION, CONFIG_KEY = "ant", "network_key"

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from capture_tool.protocols.ant import (
+from effortface.capture_tool.protocols.ant import (
     EXT_CHANNEL_ID,
     HRM_DEVICE_TYPE,
     MSG_BROADCAST,
@@ -17,7 +17,7 @@ from capture_tool.protocols.ant import (
     SYNC,
     ant_checksum,
 )
-from capture_tool.protocols.hxm import HXM_DLC, MSG_HXM, N_TIMESTAMPS, STX, crc8
+from effortface.capture_tool.protocols.hxm import HXM_DLC, MSG_HXM, N_TIMESTAMPS, STX, crc8
 
 
 def encode_ant_frame(msg_id: int, data: bytes) -> bytes:

@@ -20,8 +20,8 @@ from __future__ import annotations
 
 import re
 
-from capture_tool.protocols import HrSample
-from capture_tool.protocols.lines import LineDecoderBase
+from effortface.capture_tool.protocols import HrSample
+from effortface.capture_tool.protocols.lines import LineDecoderBase
 
 MAX_LINE = 200  # "255 255" + 32 values of 3 digits: a longer line is garbage
 _REPLY_RE = re.compile(rb"^(\d{1,3})((?: \d{1,3})+)$")

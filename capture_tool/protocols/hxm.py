@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from capture_tool.protocols import Decoder, HrSample
+from effortface.capture_tool.protocols import Decoder, HrSample
 
 STX = 0x02
 TERMINATORS = (0x03, 0x06, 0x15)  # ETX, ACK, NAK

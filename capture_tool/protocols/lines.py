@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import re
 
-from capture_tool.protocols import Decoder, HrSample
+from effortface.capture_tool.protocols import Decoder, HrSample
 
 MAX_LINE = 80
 PLAUSIBLE_HR_BPM = (20.0, 250.0)

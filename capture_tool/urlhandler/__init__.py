@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import serial
 
-PACKAGE = "capture_tool.urlhandler"
+PACKAGE = "effortface.capture_tool.urlhandler"
 
 
 def register() -> None:

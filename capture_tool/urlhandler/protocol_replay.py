@@ -4,7 +4,7 @@ The bytes of a ``.serlog`` (or raw capture with timing) become readable at their
 divided by ``speed``, counted from :meth:`Serial.open`. After ``unplug_after`` seconds of the
 recording, reads raise :class:`serial.SerialException` as a pulled USB stick does. Writes (poll
 bytes, ANT configuration) are accepted and counted in ``bytes_sent``. For in-process tests; use
-:mod:`capture_tool.replay` for a real pseudo-terminal that another process opens.
+:mod:`effortface.capture_tool.replay` for a real pseudo-terminal that another process opens.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import urllib.parse as urlparse
 
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException
 
-from capture_tool.errors import UserError
+from effortface.core.errors import UserError
 
 
 class Serial(SerialBase):
@@ -37,7 +37,7 @@ class Serial(SerialBase):
         if self._port is None:
             raise SerialException("Port must be configured before it can be used.")
         path = self.from_url(self.port)
-        from capture_tool.replay import load_timed_chunks
+        from effortface.capture_tool.replay import load_timed_chunks
 
         try:
             chunks = load_timed_chunks(path)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from capture_tool.errors import UserError
+from effortface.core.errors import UserError
 from effortface import SAMPLE_LAB
 
 #: the folder opened when no DIR is given (relative to the current directory; see :func:`default_dir`)

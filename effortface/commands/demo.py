@@ -26,9 +26,9 @@ from pathlib import Path
 
 import pandas as pd
 
-from capture_tool.errors import UserError
+from effortface.core.errors import UserError
 from effortface import SAMPLE_LAB
-from train.face_fit import MIN_ROWS_PER_PARTICIPANT
+from effortface.train.face_fit import MIN_ROWS_PER_PARTICIPANT
 
 #: replay speed and capture length: 12 s of capture at 25x = 5 minutes of the recording
 REPLAY_SPEED = 25.0
@@ -111,7 +111,7 @@ def _cli(*args: str) -> list[str]:
 
 def capture_step(session: Path, out: Path, seconds: float) -> Path:
     """Replay the session's strap log through a pseudo-terminal into ``effortface capture``."""
-    from capture_tool.session import read_session
+    from effortface.capture_tool.session import read_session
 
     s = read_session(session)
     logs = s.serlog_paths()
@@ -148,7 +148,7 @@ def _participant_options(p: object) -> list[str]:
 
 def decode_step(captured: Path, out: Path) -> tuple[int, int]:
     """Decode the captured raw bytes with ``effortface decode``; (decoded rows, recorded rows)."""
-    from capture_tool.session import read_session
+    from effortface.capture_tool.session import read_session
 
     s = read_session(captured)
     log = s.serlog_paths()[0]
@@ -166,8 +166,8 @@ def decode_step(captured: Path, out: Path) -> tuple[int, int]:
 
 def synth_step(model_dir: Path, lab: Path, out: Path) -> Path:
     """Face curves for a motion clip of the lab (or a session's work.csv) with the trained bundle."""
-    from capture_tool.session import list_sessions, read_session
-    from train.runtime import Character, load_model
+    from effortface.capture_tool.session import list_sessions, read_session
+    from effortface.train.runtime import Character, load_model
 
     model = load_model(model_dir)
     sessions = list_sessions(lab)
@@ -187,13 +187,13 @@ def synth_step(model_dir: Path, lab: Path, out: Path) -> Path:
 
 def run(args: argparse.Namespace) -> int:
     """Entry point of ``effortface demo``."""
-    from capture_tool.session import list_sessions
-    from train.commands.evaluate import evaluate_bundle
-    from train.commands.train import run_training
-    from train.dataset import sessions_table
-    from train.face_fit import FaceFitConfig
-    from annotate.blendshapes import DEFAULT_SET
-    from train.report import _md
+    from effortface.capture_tool.session import list_sessions
+    from effortface.train.commands.evaluate import evaluate_bundle
+    from effortface.train.commands.train import run_training
+    from effortface.train.dataset import sessions_table
+    from effortface.train.face_fit import FaceFitConfig
+    from effortface.core.blendshapes import DEFAULT_SET
+    from effortface.train.report import _md
 
     _check_options(args)
     lab = Path(args.lab)

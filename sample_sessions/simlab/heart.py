@@ -29,7 +29,7 @@ import dataclasses
 import numpy as np
 
 from sample_sessions.simlab.lab import Person, SessionPlan, work_at
-from train.physiology import hr_max_bpm, hr_rest_bpm
+from effortface.train.physiology import hr_max_bpm, hr_rest_bpm
 
 DT_S = 0.1  # integration step
 #: capacity: ``w_scale = W_SCALE_W_PER_KG + W_SCALE_PER_TL * TL`` (W/kg of demand), see above

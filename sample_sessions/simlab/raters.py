@@ -13,9 +13,9 @@ import dataclasses
 
 import numpy as np
 
-from annotate.blendshapes import DEFAULT_SET
-from annotate.keyframes import KeyframeTrack, RaterAnnotations
-from annotate.reliability import Pose, Rating
+from effortface.core.blendshapes import DEFAULT_SET
+from effortface.annotate.keyframes import KeyframeTrack, RaterAnnotations
+from effortface.annotate.reliability import Pose, Rating
 
 
 @dataclasses.dataclass(frozen=True)

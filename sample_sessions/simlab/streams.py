@@ -2,7 +2,7 @@
 
 Each ``*_chunks`` function returns ``[(t_s, bytes), ...]``: what one ``read()`` of the serial port
 would have returned and when. Encoding uses the project's own encoders
-(:mod:`capture_tool.protocols.encode`); the link's imperfections are simulated here:
+(:mod:`effortface.capture_tool.protocols.encode`); the link's imperfections are simulated here:
 
 - ANT+ (USB stick): a broadcast every 8070/32768 s, toggle bit every 4 messages, background page 2
   every 65th message; a missed message is an ``EVENT_RX_FAIL`` channel event, a long drop-out
@@ -24,7 +24,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from capture_tool.protocols.encode import (
+from effortface.capture_tool.protocols.encode import (
     encode_ant_broadcast,
     encode_ant_channel_event,
     encode_hrmi_reply,

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from annotate.face import render_face
+from effortface.annotate.face import render_face
 from sample_sessions.simlab.avi import write_mjpg_avi
 
 WIDTH, HEIGHT, FPS = 160, 120, 5.0

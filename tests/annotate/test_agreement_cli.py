@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from annotate.agreement import agreement_report, format_report, gather_ratings
-from annotate.reliability import read_ratings
+from effortface.annotate.agreement import agreement_report, format_report, gather_ratings
+from effortface.annotate.reliability import read_ratings
 from effortface.cli import main
 
 ROOT = Path(__file__).resolve().parents[2]

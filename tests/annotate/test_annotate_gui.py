@@ -16,10 +16,10 @@ import pytest
 from PySide6 import QtCore
 from PySide6.QtTest import QTest
 
-from annotate.agreement import agreement_report, gather_ratings
-from annotate.gui.annotate_stage import QtAnnotateStage
-from annotate.keyframes import read_annotations
-from annotate.reliability import read_ratings
+from effortface.annotate.agreement import agreement_report, gather_ratings
+from effortface.annotate.gui.annotate_stage import QtAnnotateStage
+from effortface.annotate.keyframes import read_annotations
+from effortface.annotate.reliability import read_ratings
 
 pytestmark = pytest.mark.qt_log_ignore("This plugin does not support propagateSizeHints")
 
@@ -283,7 +283,7 @@ ANNOTATOR = textwrap.dedent("""
     from pathlib import Path
     from PySide6 import QtCore, QtWidgets
     from PySide6.QtTest import QTest
-    from annotate.gui.annotate_stage import QtAnnotateStage
+    from effortface.annotate.gui.annotate_stage import QtAnnotateStage
     app = QtWidgets.QApplication([])
     lab, session = Path(sys.argv[1]), sys.argv[2]
     stage = QtAnnotateStage(lab)
@@ -329,7 +329,7 @@ def test_a_killed_annotator_loses_no_saved_key(lab: Path) -> None:
 def test_the_pyside_none_leak_is_guarded(qtbot, stage: QtAnnotateStage) -> None:
     import sys
 
-    from annotate.gui.qt_compat import pyside_leaks_none
+    from effortface.core.gui.qt_compat import pyside_leaks_none
 
     if pyside_leaks_none():  # PySide6 6.12.0 on CPython 3.11: void calls drop a reference to None
         assert sys.getrefcount(None) > 1 << 39

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from annotate.face import render_face
+from effortface.annotate.face import render_face
 
 SIZE = (320, 240)
 

@@ -8,15 +8,15 @@ import os
 import numpy as np
 import pytest
 
-from annotate.blendshapes import DEFAULT_SET
-from annotate.keyframes import (
+from effortface.core.blendshapes import DEFAULT_SET
+from effortface.annotate.keyframes import (
     AnnotationFormatError,
     Keyframe,
     KeyframeTrack,
     RaterAnnotations,
     read_annotations,
 )
-from capture_tool.errors import UserError
+from effortface.core.errors import UserError
 
 
 def _track(interp: str) -> KeyframeTrack:

@@ -7,7 +7,7 @@ import itertools
 import numpy as np
 import pytest
 
-from annotate.reliability import (
+from effortface.annotate.reliability import (
     Pose,
     Rating,
     mean_abs_disagreement_pct,
@@ -16,7 +16,7 @@ from annotate.reliability import (
     write_poses,
     write_ratings,
 )
-from capture_tool.errors import SessionFormatError
+from effortface.core.errors import SessionFormatError
 
 
 def test_disagreement_by_hand() -> None:

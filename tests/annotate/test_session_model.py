@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from annotate.export import write_keyframes_json, write_weights_csv
-from annotate.keyframes import read_annotations
-from annotate.reliability import read_ratings
-from annotate.session_model import AnnotationSession, BlindRound, annotation_path
-from capture_tool.errors import UserError
+from effortface.annotate.export import write_keyframes_json, write_weights_csv
+from effortface.annotate.keyframes import read_annotations
+from effortface.annotate.reliability import read_ratings
+from effortface.annotate.session_model import AnnotationSession, BlindRound, annotation_path
+from effortface.core.errors import UserError
 
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLES = ROOT / "sample_sessions"

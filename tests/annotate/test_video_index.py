@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from annotate.video_index import FrameTimes, VideoIndex
-from capture_tool.camera import open_avi_writer
-from capture_tool.errors import UserError
-from capture_tool.session import read_video_frames
+from effortface.annotate.video_index import FrameTimes, VideoIndex
+from effortface.capture_tool.camera import open_avi_writer
+from effortface.core.errors import UserError
+from effortface.capture_tool.session import read_video_frames
 
 ROOT = Path(__file__).resolve().parents[2]
 P01 = ROOT / "sample_sessions" / "P01_20260112-093000_cardio"

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import random
 
-from capture_tool.protocols import Decoder, HrSample, get_decoder
+from effortface.capture_tool.protocols import Decoder, HrSample, get_decoder
 
 #: chunkings every decoder must be indifferent to
 CHUNKINGS = ("1", "3", "random", "whole")

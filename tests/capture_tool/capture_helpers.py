@@ -10,9 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
-from capture_tool.captures import read_timed_capture
-from capture_tool.protocols import HrSample, get_decoder
-from capture_tool.serlog import SerlogWriter
+from effortface.capture_tool.captures import read_timed_capture
+from effortface.capture_tool.protocols import HrSample, get_decoder
+from effortface.capture_tool.serlog import SerlogWriter
 
 HXM_DAT = Path("serial/zephyr-bt/120-second-bt-stream-hxm.dat")
 BITS = 12  # frame numbers up to 4095, one 10 x 10 block per bit along the top of the image

@@ -9,13 +9,13 @@ from pathlib import Path
 
 import pytest
 
-from capture_tool.camera import open_capture
-from capture_tool.captures import find_timing_file, read_timed_capture
-from capture_tool.errors import SessionFormatError, UserError
-from capture_tool.hr_csv import HR_CSV_HEADER, read_hr_csv
-from capture_tool.recorder import decode_serlog
-from capture_tool.serlog import EVENT, SerlogWriter, _REC, read_serlog
-from capture_tool.session import EVENTS_HEADER, Participant, SessionInfo, read_events, read_session_info
+from effortface.capture_tool.camera import open_capture
+from effortface.capture_tool.captures import find_timing_file, read_timed_capture
+from effortface.core.errors import SessionFormatError, UserError
+from effortface.capture_tool.hr_csv import HR_CSV_HEADER, read_hr_csv
+from effortface.capture_tool.recorder import decode_serlog
+from effortface.capture_tool.serlog import EVENT, SerlogWriter, _REC, read_serlog
+from effortface.capture_tool.session import EVENTS_HEADER, Participant, SessionInfo, read_events, read_session_info
 from effortface.cli import main
 
 BINARY = bytes(range(128, 256)) * 4

@@ -6,9 +6,9 @@ import time
 
 import pytest
 
-from capture_tool.camera import CameraSource, index_video, read_frame, rewrite_video
-from capture_tool.errors import UserError
-from capture_tool.session import read_video_frames
+from effortface.capture_tool.camera import CameraSource, index_video, read_frame, rewrite_video
+from effortface.core.errors import UserError
+from effortface.capture_tool.session import read_video_frames
 
 from .capture_helpers import frame_number, make_numbered_video
 

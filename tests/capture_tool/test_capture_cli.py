@@ -12,9 +12,9 @@ from pathlib import Path
 import pytest
 import serial
 
-from capture_tool.camera import index_video, read_frame
-from capture_tool.replay import PtyReplay
-from capture_tool.session import read_session, validate_session
+from effortface.capture_tool.camera import index_video, read_frame
+from effortface.capture_tool.replay import PtyReplay
+from effortface.capture_tool.session import read_session, validate_session
 
 from .capture_helpers import (
     HXM_DAT,

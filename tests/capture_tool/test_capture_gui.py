@@ -15,14 +15,14 @@ import numpy as np
 import pytest
 from PySide6 import QtCore, QtWidgets
 
-from capture_tool.camera import index_video, read_frame
-from capture_tool.gui.controller import CaptureController, CsvTail, measure_sync, store_sync_result
-from capture_tool.gui.detect import detect_protocol
-from capture_tool.gui.live_view import hr_zones
-from capture_tool.gui.sync import flash_offset_s
-from capture_tool.hr_csv import read_hr_csv
-from capture_tool.replay import PtyReplay, TimedChunk, start_replay_thread
-from capture_tool.session import (
+from effortface.capture_tool.camera import index_video, read_frame
+from effortface.capture_tool.gui.controller import CaptureController, CsvTail, measure_sync, store_sync_result
+from effortface.capture_tool.gui.detect import detect_protocol
+from effortface.capture_tool.gui.live_view import hr_zones
+from effortface.capture_tool.gui.sync import flash_offset_s
+from effortface.capture_tool.hr_csv import read_hr_csv
+from effortface.capture_tool.replay import PtyReplay, TimedChunk, start_replay_thread
+from effortface.capture_tool.session import (
     Event,
     EventWriter,
     Participant,
@@ -112,7 +112,7 @@ def _fed(replay: PtyReplay) -> list[tuple[float, bytes]]:
 
 def _reference(parts: list[list[tuple[float, bytes]]], protocol: str = "hxm") -> list[tuple]:
     """Decode what was fed as the link does: one decoder, ``finish()`` at each unplug."""
-    from capture_tool.protocols import get_decoder
+    from effortface.capture_tool.protocols import get_decoder
 
     decoder = get_decoder(protocol)
     samples = []
@@ -434,7 +434,7 @@ def test_flash_offset_found_in_a_real_video(tmp_path) -> None:
 
 
 def test_controller_refuses_marks_without_recording(tmp_path) -> None:
-    from capture_tool.errors import UserError
+    from effortface.core.errors import UserError
 
     controller = CaptureController(tmp_path)
     with pytest.raises(UserError, match="expected a recording running"):

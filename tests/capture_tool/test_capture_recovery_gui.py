@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from PySide6 import QtCore
 
-from capture_tool.session import (
+from effortface.capture_tool.session import (
     EventWriter,
     Participant,
     SessionInfo,

@@ -9,9 +9,9 @@ import struct
 
 import pytest
 
-from capture_tool.captures import find_timing_file, read_timed_capture
-from capture_tool.errors import SessionFormatError, UserError
-from capture_tool.serlog import SerlogWriter
+from effortface.capture_tool.captures import find_timing_file, read_timed_capture
+from effortface.core.errors import SessionFormatError, UserError
+from effortface.capture_tool.serlog import SerlogWriter
 
 ZEPHYR = "serial/zephyr-bt/120-second-bt-stream-hxm.dat"
 

@@ -10,12 +10,12 @@ from pathlib import Path
 
 import pytest
 
-from capture_tool.captures import read_timed_capture
-from capture_tool.commands import decode as cmd
-from capture_tool.errors import SessionFormatError
-from capture_tool.hr_csv import HR_CSV_COLUMNS, format_hr_row, read_hr_csv
-from capture_tool.protocols import HrSample
-from capture_tool.serlog import SerlogWriter, read_serlog
+from effortface.capture_tool.captures import read_timed_capture
+from effortface.capture_tool.commands import decode as cmd
+from effortface.core.errors import SessionFormatError
+from effortface.capture_tool.hr_csv import HR_CSV_COLUMNS, format_hr_row, read_hr_csv
+from effortface.capture_tool.protocols import HrSample
+from effortface.capture_tool.serlog import SerlogWriter, read_serlog
 from effortface.cli import main
 
 HXM = "serial/zephyr-bt/120-second-bt-stream-hxm.dat"

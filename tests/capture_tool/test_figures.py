@@ -9,7 +9,7 @@ def test_agg_figure_draws_from_a_worker_thread_without_pyplot(tmp_path) -> None:
     png = tmp_path / "fig.png"
     code = textwrap.dedent(f"""
         import sys, threading
-        from capture_tool.figures import agg_figure
+        from effortface.core.figures import agg_figure
 
         def draw():
             fig = agg_figure((3, 2), layout="constrained")

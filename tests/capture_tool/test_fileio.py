@@ -2,7 +2,7 @@
 
 import pytest
 
-from capture_tool.fileio import atomic_write, refuse_overwrite, write_json_atomic
+from effortface.core.fileio import atomic_write, refuse_overwrite, write_json_atomic
 
 
 def test_a_failed_write_leaves_the_old_file_and_no_temp_file(tmp_path) -> None:

@@ -3,7 +3,7 @@
 import gc
 import threading
 
-from capture_tool.gui.gui_gc import collect_in_gui_thread
+from effortface.core.gui.gui_gc import collect_in_gui_thread
 
 
 class _Cycle:

@@ -10,10 +10,10 @@ from __future__ import annotations
 import queue
 import time
 
-from capture_tool.protocols import HrSample, get_decoder
-from capture_tool.recorder import device_startup_frames
-from capture_tool.serial_link import SerialLink
-from capture_tool.serlog import read_serlog
+from effortface.capture_tool.protocols import HrSample, get_decoder
+from effortface.capture_tool.recorder import device_startup_frames
+from effortface.capture_tool.serial_link import SerialLink
+from effortface.capture_tool.serlog import read_serlog
 
 
 def test_a_worn_strap_gives_plausible_heart_rate(hr_port, hr_protocol, tmp_path):

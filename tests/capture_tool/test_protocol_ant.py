@@ -8,11 +8,11 @@ import json
 
 import pytest
 
-from capture_tool.captures import read_timed_capture
-from capture_tool.errors import DeviceError, DeviceErrorReason, UserError
-from capture_tool.protocols import ant_stick
-from capture_tool.protocols.ant import parse_hr_page
-from capture_tool.protocols.encode import (
+from effortface.capture_tool.captures import read_timed_capture
+from effortface.core.errors import DeviceError, DeviceErrorReason, UserError
+from effortface.capture_tool.protocols import ant_stick
+from effortface.capture_tool.protocols.ant import parse_hr_page
+from effortface.capture_tool.protocols.encode import (
     encode_ant_broadcast,
     encode_ant_channel_event,
     encode_ant_frame,

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import pytest
 
-from capture_tool.protocols import get_decoder
-from capture_tool.protocols.encode import encode_hrmi_reply
-from capture_tool.protocols.hrmi import HrmiDecoder, poll_command
+from effortface.capture_tool.protocols import get_decoder
+from effortface.capture_tool.protocols.encode import encode_hrmi_reply
+from effortface.capture_tool.protocols.hrmi import HrmiDecoder, poll_command
 from tests.capture_tool._decode_helpers import CHUNKINGS, decode
 
 # replies to G1 once a second from a strap beating at its own pace (count = values computed)

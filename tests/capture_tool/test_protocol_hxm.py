@@ -7,8 +7,8 @@ import json
 
 import pytest
 
-from capture_tool.protocols.encode import encode_hxm_packet, encode_zephyr_frame, hxm_stream
-from capture_tool.protocols.hxm import crc8, parse_hxm_payload
+from effortface.capture_tool.protocols.encode import encode_hxm_packet, encode_zephyr_frame, hxm_stream
+from effortface.capture_tool.protocols.hxm import crc8, parse_hxm_payload
 from tests.capture_tool._decode_helpers import CHUNKINGS, decode
 
 HXM = "serial/zephyr-bt/120-second-bt-stream-hxm.dat"

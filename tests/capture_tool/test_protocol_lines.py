@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from capture_tool.protocols import HrSample, get_decoder
-from capture_tool.protocols.encode import encode_line
+from effortface.capture_tool.protocols import HrSample, get_decoder
+from effortface.capture_tool.protocols.encode import encode_line
 from tests.capture_tool._decode_helpers import CHUNKINGS, decode
 
 PULSESENSOR = b"S512\r\nS530\r\nB72\r\nQ833\r\nS500\r\nB75\r\nQ800\r\nS490\r\n"

@@ -7,12 +7,12 @@ import time
 
 import pytest
 
-from capture_tool.camera import index_video, read_frame
-from capture_tool.errors import DeviceError
-from capture_tool.protocols.encode import hxm_stream
-from capture_tool.recorder import Recorder
-from capture_tool.serlog import read_serlog
-from capture_tool.session import Participant, read_session, validate_session
+from effortface.capture_tool.camera import index_video, read_frame
+from effortface.core.errors import DeviceError
+from effortface.capture_tool.protocols.encode import hxm_stream
+from effortface.capture_tool.recorder import Recorder
+from effortface.capture_tool.serlog import read_serlog
+from effortface.capture_tool.session import Participant, read_session, validate_session
 
 from .capture_helpers import content, decode, frame_number, hxm_chunks, make_numbered_video, write_serlog
 

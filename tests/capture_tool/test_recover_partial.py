@@ -13,16 +13,16 @@ from pathlib import Path
 
 import pytest
 
-from capture_tool import recorder
-from capture_tool.camera import index_video, read_frame
-from capture_tool.errors import SessionFormatError
-from capture_tool.recorder import (
+from effortface.capture_tool import recorder
+from effortface.capture_tool.camera import index_video, read_frame
+from effortface.core.errors import SessionFormatError
+from effortface.capture_tool.recorder import (
     UNRECOVERABLE_AVI,
     UNRECOVERABLE_FRAMES_CSV,
     decode_serlog,
     recover_session,
 )
-from capture_tool.session import (
+from effortface.capture_tool.session import (
     EventWriter,
     FrameTimeWriter,
     HrWriter,

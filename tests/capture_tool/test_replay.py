@@ -7,9 +7,9 @@ import threading
 import pytest
 import serial
 
-import capture_tool.serial_link  # noqa: F401  (registers replay://)
-from capture_tool.errors import UserError
-from capture_tool.replay import PtyReplay, TimedChunk, load_timed_chunks, open_pty_replay, start_replay_thread
+import effortface.capture_tool.serial_link  # noqa: F401  (registers replay://)
+from effortface.core.errors import UserError
+from effortface.capture_tool.replay import PtyReplay, TimedChunk, load_timed_chunks, open_pty_replay, start_replay_thread
 
 from .capture_helpers import HXM_DAT, hxm_chunks, write_serlog
 

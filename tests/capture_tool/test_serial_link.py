@@ -9,11 +9,11 @@ import time
 import pytest
 import serial
 
-from capture_tool.errors import DeviceError, DeviceErrorReason
-from capture_tool.protocols import get_decoder
-from capture_tool.replay import PtyReplay, TimedChunk, start_replay_thread
-from capture_tool.serial_link import SerialLink, list_ports, open_port
-from capture_tool.serlog import read_serlog
+from effortface.core.errors import DeviceError, DeviceErrorReason
+from effortface.capture_tool.protocols import get_decoder
+from effortface.capture_tool.replay import PtyReplay, TimedChunk, start_replay_thread
+from effortface.capture_tool.serial_link import SerialLink, list_ports, open_port
+from effortface.capture_tool.serlog import read_serlog
 
 from .capture_helpers import content, decode, decode_parts, hxm_chunks, write_serlog
 
@@ -135,8 +135,8 @@ def test_startup_frames_are_sent_after_open(tmp_path) -> None:
 
 
 def test_real_ant_stick_needs_the_key_replays_do_not(monkeypatch, tmp_path) -> None:
-    from capture_tool.protocols.ant_stick import ENV_VAR, open_sequence
-    from capture_tool.recorder import device_startup_frames
+    from effortface.capture_tool.protocols.ant_stick import ENV_VAR, open_sequence
+    from effortface.capture_tool.recorder import device_startup_frames
 
     monkeypatch.delenv(ENV_VAR, raising=False)
     monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path))

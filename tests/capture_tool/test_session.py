@@ -7,9 +7,9 @@ import json
 
 import pytest
 
-from capture_tool.errors import SessionFormatError, UserError
-from capture_tool.protocols import HrSample
-from capture_tool.session import (
+from effortface.core.errors import SessionFormatError, UserError
+from effortface.capture_tool.protocols import HrSample
+from effortface.capture_tool.session import (
     Event,
     EventWriter,
     FrameTimeWriter,

@@ -11,8 +11,8 @@ from pathlib import Path
 import pytest
 from PySide6 import QtCore, QtGui, QtWidgets
 
-from capture_tool.errors import UserError
-from capture_tool.session import Participant, SessionInfo, create_session
+from effortface.core.errors import UserError
+from effortface.capture_tool.session import Participant, SessionInfo, create_session
 import effortface.app as app_module
 from effortface.app import STAGES, MainWindow, QtPlaceholderStage, install_exception_hooks, main
 
@@ -99,7 +99,7 @@ def test_stage_list_switches_and_placeholders_list_sessions(qtbot, sessions, set
 
     def make_stage(key, sessions_dir, settings_):
         if key == "annotate":
-            raise ImportError("No module named 'annotate.gui.annotate_stage'")
+            raise ImportError("No module named 'effortface.annotate.gui.annotate_stage'")
         return real(key, sessions_dir, settings_)
 
     monkeypatch.setattr(app_module, "make_stage", make_stage)

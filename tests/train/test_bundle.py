@@ -10,11 +10,11 @@ import pytest
 from sklearn.preprocessing import StandardScaler
 from sklearn.svm import SVR
 
-from annotate.blendshapes import DEFAULT_SET
-from capture_tool.errors import UserError
-from train.bundle import BundleFormatError, ModelBundle, read_bundle, write_bundle
-from train.face import SvrModel
-from train.physiology import NhrParams, NhrRegression
+from effortface.core.blendshapes import DEFAULT_SET
+from effortface.core.errors import UserError
+from effortface.train.bundle import BundleFormatError, ModelBundle, read_bundle, write_bundle
+from effortface.train.face import SvrModel
+from effortface.train.physiology import NhrParams, NhrRegression
 
 
 def make_bundle(seed: int = 0, n: int = 200) -> ModelBundle:

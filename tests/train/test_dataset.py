@@ -10,15 +10,15 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from annotate.blendshapes import DEFAULT_SET
-from annotate.keyframes import KeyframeTrack, RaterAnnotations
-from capture_tool.errors import UserError
-from capture_tool.protocols import HrSample
-from capture_tool.session import (FrameTimeWriter, HrWriter, Participant, SessionInfo, create_session,
+from effortface.core.blendshapes import DEFAULT_SET
+from effortface.annotate.keyframes import KeyframeTrack, RaterAnnotations
+from effortface.core.errors import UserError
+from effortface.capture_tool.protocols import HrSample
+from effortface.capture_tool.session import (FrameTimeWriter, HrWriter, Participant, SessionInfo, create_session,
                                   make_session_id)
-from train.dataset import (TABLE_COLUMNS, DatasetError, hr_series, prepare, read_table,
+from effortface.train.dataset import (TABLE_COLUMNS, DatasetError, hr_series, prepare, read_table,
                            session_table, sessions_table, synthetic_table, write_table)
-from train.physiology import hr_max_bpm, hr_rest_bpm
+from effortface.train.physiology import hr_max_bpm, hr_rest_bpm
 
 FPS = 10.0
 
@@ -190,7 +190,7 @@ def test_missing_folder_is_a_user_error(tmp_path):
 
 def test_work_from_a_motion_clip_when_there_is_no_work_log(tmp_path):
     """The sample lab's loaded-squat set ships as real CMU mocap: without work.csv, w comes from
-    the clip through train.energy and agrees with the exercise log within 25 % (SCIENCE.md 2)."""
+    the clip through effortface.train.energy and agrees with the exercise log within 25 % (SCIENCE.md 2)."""
     import shutil
 
     lab = Path(__file__).resolve().parents[2] / "sample_sessions"

@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from capture_tool.errors import UserError
-from train.energy import G_M_PER_S2, EnergyCrowd, EnergyStream, looped, segment_energies, work_and_power
-from train.motion import Motion, axis_rotations, motion_from_positions, read_motion
-from train.segments import BodyModel, Loads, build_body
+from effortface.core.errors import UserError
+from effortface.train.energy import G_M_PER_S2, EnergyCrowd, EnergyStream, looped, segment_energies, work_and_power
+from effortface.train.motion import Motion, axis_rotations, motion_from_positions, read_motion
+from effortface.train.segments import BodyModel, Loads, build_body
 
 FPS = 120.0
 

@@ -11,14 +11,14 @@ import numpy as np
 import onnx
 import pytest
 
-from annotate.blendshapes import DEFAULT_SET
-from train import export
-from train.dataset import hr_series, prepare, synthetic_table
-from train.export import (FACE_ONNX, MODEL_CARD, STANDARD_OPS, ExportError, build_bundle, export_model,
+from effortface.core.blendshapes import DEFAULT_SET
+from effortface.train import export
+from effortface.train.dataset import hr_series, prepare, synthetic_table
+from effortface.train.export import (FACE_ONNX, MODEL_CARD, STANDARD_OPS, ExportError, build_bundle, export_model,
                           parity_features, run_onnx)
-from train.face_fit import FaceFitConfig, fit_face_models
-from train.hr_fit import fit_hr_model
-from train.runtime import Character, load_model
+from effortface.train.face_fit import FaceFitConfig, fit_face_models
+from effortface.train.hr_fit import fit_hr_model
+from effortface.train.runtime import Character, load_model
 
 
 @pytest.fixture(scope="module")
@@ -125,13 +125,13 @@ def test_runtime_synthesizes_with_the_bundle(model_dir):
 
 
 def test_blendshape_mismatch(fitted):
-    from annotate.blendshapes import BlendshapeSet
+    from effortface.core.blendshapes import BlendshapeSet
     with pytest.raises(ExportError, match="blendshapes: expected the face fit's"):
         build_bundle(fitted[0], fitted[1], BlendshapeSet(DEFAULT_SET.shapes[:2]), {}, {})
 
 
 def test_model_card_warns_when_tl_model_generalises_worse():
-    from train.export import hr_warnings
+    from effortface.train.export import hr_warnings
 
     worse = hr_warnings({"tl_regression": {"rmse_pct": 23.0}, "pooled": {"rmse_pct": 9.0}})
     assert len(worse) == 1 and "23.0 % RMSE" in worse[0] and "9.0 %" in worse[0]

@@ -7,9 +7,9 @@ import pytest
 from sklearn.preprocessing import StandardScaler
 from sklearn.svm import SVR
 
-from annotate.blendshapes import DEFAULT_SET, Blendshape, BlendshapeSet
-from capture_tool.errors import UserError
-from train.face import FEATURE_NAMES, RuleFaceModel, SvrModel, apply_expressiveness
+from effortface.core.blendshapes import DEFAULT_SET, Blendshape, BlendshapeSet
+from effortface.core.errors import UserError
+from effortface.train.face import FEATURE_NAMES, RuleFaceModel, SvrModel, apply_expressiveness
 
 
 def _random_features(rng: np.random.Generator, n: int) -> np.ndarray:

@@ -12,9 +12,9 @@ from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import StandardScaler
 from sklearn.svm import SVR
 
-from annotate.blendshapes import DEFAULT_SET
-from train.dataset import prepare, sessions_table, synthetic_table
-from train.face_fit import (FEATURES, PROTOCOLS, FaceFitConfig, expressiveness, face_data,
+from effortface.core.blendshapes import DEFAULT_SET
+from effortface.train.dataset import prepare, sessions_table, synthetic_table
+from effortface.train.face_fit import (FEATURES, PROTOCOLS, FaceFitConfig, expressiveness, face_data,
                             fit_face_models, grid_search, held_out_scores, protocol_scores, subsample)
 
 SAMPLE_LAB = Path(__file__).resolve().parents[2] / "sample_sessions"

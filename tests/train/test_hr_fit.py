@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from train.hr_fit import (
+from effortface.train.hr_fit import (
     HrCoefficients,
     HrSeries,
     by_participant,
@@ -19,7 +19,7 @@ from train.hr_fit import (
     simulate_series,
     step_samples,
 )
-from train.physiology import PAPER_REGRESSION, NhrParams
+from effortface.train.physiology import PAPER_REGRESSION, NhrParams
 
 
 def _true(tl: float) -> HrCoefficients:
@@ -137,7 +137,7 @@ def test_tl_model_beats_pooled_on_held_out_sample_lab_participants():
     one by a clear margin (measured: 6.6 % vs 10.3 % RMSE) and the threshold rises with TL."""
     from pathlib import Path
 
-    from train.dataset import hr_series, prepare, sessions_table
+    from effortface.train.dataset import hr_series, prepare, sessions_table
 
     lab = Path(__file__).resolve().parents[2] / "sample_sessions"
     if not any(lab.glob("*/session.json")):

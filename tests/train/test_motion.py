@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from train.motion import (
+from effortface.train.motion import (
     Motion,
     CMU_UNIT_M,
     MotionFormatError,
@@ -17,7 +17,7 @@ from train.motion import (
     read_motion,
     read_npz_motion,
 )
-from capture_tool.errors import UserError
+from effortface.core.errors import UserError
 
 JJ = "motion/cmu_13_29_jumping_jacks_120fps.bvh"
 

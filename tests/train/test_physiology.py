@@ -8,8 +8,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from capture_tool.errors import UserError
-from train import physiology as ph
+from effortface.core.errors import UserError
+from effortface.train import physiology as ph
 
 
 @dataclasses.dataclass

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from capture_tool.errors import UserError
-from train.motion import Motion, read_motion
-from train.segments import (
+from effortface.core.errors import UserError
+from effortface.train.motion import Motion, read_motion
+from effortface.train.segments import (
     REQUIRED_SEGMENTS,
     Loads,
     SegmentMappingError,

@@ -13,8 +13,8 @@ import pytest
 
 from effortface.cli import main
 from tests.train.test_bundle import make_bundle
-from train.bundle import write_bundle
-from train.commands.synth import LIVELINK_BLENDSHAPES, livelink_timecode
+from effortface.train.bundle import write_bundle
+from effortface.train.commands.synth import LIVELINK_BLENDSHAPES, livelink_timecode
 
 ROOT = Path(__file__).resolve().parents[2]
 JJ = "motion/cmu_13_29_jumping_jacks_120fps.bvh"
@@ -165,7 +165,7 @@ def test_user_mapping_file_maps_unknown_joints(shared_data: Path, tmp_path: Path
     """The renamed skeleton that fails above works with a mapping file, giving the same curves."""
     import json
 
-    from train.segments import CONVENTIONS
+    from effortface.train.segments import CONVENTIONS
 
     renamed = {"LeftUpLeg": "Bone_leftupleg_x", "LeftLeg": "Bone_leftleg_x",
                "LeftFoot": "Bone_leftfoot_x"}

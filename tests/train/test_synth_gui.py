@@ -1,9 +1,9 @@
 """The Synthesize stage offscreen: a trained bundle drives the face while a real clip plays.
 
 Trains a small bundle on the sample lab (into tmp_path), loads it in
-:class:`train.gui.synth_stage.QtSynthStage`, plays the 120 Hz jumping-jacks clip and changes the
+:class:`effortface.train.gui.synth_stage.QtSynthStage`, plays the 120 Hz jumping-jacks clip and changes the
 character through the controls while it plays; asserts on the model
-(:class:`train.synth_session.SynthSession`) and on what the views show.
+(:class:`effortface.train.synth_session.SynthSession`) and on what the views show.
 """
 
 from __future__ import annotations
@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 from PySide6 import QtCore
 
-from train.commands.synth import LIVELINK_BLENDSHAPES
-from train.gui.synth_stage import QtSynthStage
-from train.runtime import load_model
-from train.synth_session import SynthSession
-from train.train_session import TrainSession
+from effortface.train.commands.synth import LIVELINK_BLENDSHAPES
+from effortface.train.gui.synth_stage import QtSynthStage
+from effortface.train.runtime import load_model
+from effortface.train.synth_session import SynthSession
+from effortface.train.train_session import TrainSession
 
 SAMPLE = Path(__file__).resolve().parents[2] / "sample_sessions"
 CLIP = "motion/cmu_13_29_jumping_jacks_120fps.bvh"

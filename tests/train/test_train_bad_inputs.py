@@ -12,7 +12,7 @@ import pytest
 
 from effortface.cli import main
 from tests.train.test_dataset import make_session
-from train.dataset import synthetic_table, write_table
+from effortface.train.dataset import synthetic_table, write_table
 
 
 @pytest.fixture(scope="module")
@@ -87,7 +87,7 @@ def test_force_refuses_other_files_and_folders(table, tmp_path, capsys):
 
 
 def test_force_replaces_a_model_folder_or_an_empty_one(tmp_path):
-    from train.export import check_model_target
+    from effortface.train.export import check_model_target
 
     model, empty = tmp_path / "model", tmp_path / "empty"
     model.mkdir()
@@ -180,8 +180,8 @@ def test_session_without_mass_names_the_session(table, tmp_path, capsys):
 
 
 def test_physiology_refuses_unknown_sex_and_missing_body_values():
-    from capture_tool.errors import UserError
-    from train.physiology import hr_rest_bpm, vo2max_ml_per_kg_min
+    from effortface.core.errors import UserError
+    from effortface.train.physiology import hr_rest_bpm, vo2max_ml_per_kg_min
 
     with pytest.raises(UserError, match=r"sex: expected one of female, male .*found 'x'"):
         hr_rest_bpm(30, "x", 2.0)
@@ -190,10 +190,10 @@ def test_physiology_refuses_unknown_sex_and_missing_body_values():
 
 
 def test_hr_check_and_face_check_raise_user_errors(table):
-    from capture_tool.errors import UserError
-    from train.dataset import hr_series, prepare
-    from train.face_fit import check_face_table
-    from train.hr_fit import check_hr_series
+    from effortface.core.errors import UserError
+    from effortface.train.dataset import hr_series, prepare
+    from effortface.train.face_fit import check_face_table
+    from effortface.train.hr_fit import check_hr_series
 
     prepared = prepare(table[table["participant"] != "P03"])
     with pytest.raises(UserError, match=r"^lab: expected sessions of at least 3 participants.*found 2"):
@@ -204,9 +204,9 @@ def test_hr_check_and_face_check_raise_user_errors(table):
 
 def test_train_stage_refuses_too_few_participants_before_any_progress(table):
     """The Train stage's worker runs the same checks as the command line, before its first step."""
-    from annotate.blendshapes import DEFAULT_SET
-    from capture_tool.errors import UserError
-    from train.train_session import TrainSettings, train_models
+    from effortface.core.blendshapes import DEFAULT_SET
+    from effortface.core.errors import UserError
+    from effortface.train.train_session import TrainSettings, train_models
 
     steps: list[str] = []
     with pytest.raises(UserError, match=r"^lab: expected sessions of at least 3 participants.*found 2"):

@@ -11,7 +11,7 @@ import pytest
 
 from effortface.cli import main
 from tests.train.test_dataset import make_session
-from train.dataset import synthetic_table, write_table
+from effortface.train.dataset import synthetic_table, write_table
 
 
 @pytest.fixture(scope="module")

@@ -1,7 +1,7 @@
 """The Train stage offscreen: pick part of the sample lab, train, read results, export, compare.
 
-Drives :class:`train.gui.train_stage.QtTrainStage` with real clicks and asserts on its model
-(:class:`train.train_session.TrainSession`). Reads ``sample_sessions/``, writes only to tmp_path.
+Drives :class:`effortface.train.gui.train_stage.QtTrainStage` with real clicks and asserts on its model
+(:class:`effortface.train.train_session.TrainSession`). Reads ``sample_sessions/``, writes only to tmp_path.
 """
 
 from __future__ import annotations
@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 from PySide6 import QtCore
 
-from train.bundle import read_bundle
-from train.gui.train_stage import QtTrainStage
-from train.runtime import load_model
-from train.train_session import TrainSession, filter_entries
+from effortface.train.bundle import read_bundle
+from effortface.train.gui.train_stage import QtTrainStage
+from effortface.train.runtime import load_model
+from effortface.train.train_session import TrainSession, filter_entries
 
 SAMPLE = Path(__file__).resolve().parents[2] / "sample_sessions"
 SESSIONS = sorted(p.parent.name for p in SAMPLE.glob("*/session.json"))
@@ -126,7 +126,7 @@ def test_unannotated_session_is_reported(qtbot, tmp_path: Path) -> None:
 
 
 def test_train_on_a_loaded_table(qtbot, stage: QtTrainStage, tmp_path: Path) -> None:
-    from train.dataset import sessions_table, write_table
+    from effortface.train.dataset import sessions_table, write_table
 
     table = write_table(sessions_table([SAMPLE / s for s in CARDIO]), tmp_path / "lab.csv")
     bad = tmp_path / "bad.csv"
@@ -216,7 +216,7 @@ def test_cancel_stops_a_comparison(qtbot, stage: QtTrainStage, two_bundles: tupl
     """Cancel is enabled while comparing, and the comparison stops at its next step."""
     import threading
 
-    import train.train_session as ts
+    import effortface.train.train_session as ts
 
     release, real = threading.Event(), ts.compare_bundle
 

@@ -1,6 +1,6 @@
 """``effortface evaluate MODEL_DIR (SESSION | DIR)... | --table CSV``: re-score a bundle on other data.
 
-The bundle is loaded through the runtime (:func:`train.runtime.load_model`), as a game would load it:
+The bundle is loaded through the runtime (:func:`effortface.train.runtime.load_model`), as a game would load it:
 
 - heart rate: the bundle's training-level regression at each participant's TL, simulated over each
   whole session from its first measured value (r, RMSE in % of the NHR range, HR RMSE in bpm);
@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from capture_tool.errors import UserError
-from train.dataset import hr_series, prepare, read_table, sessions_table
-from train.face_fit import expressiveness, weight_metrics
-from train.hr_fit import HrCoefficients, score_series, simulate_series
+from effortface.core.errors import UserError
+from effortface.train.dataset import hr_series, prepare, read_table, sessions_table
+from effortface.train.face_fit import expressiveness, weight_metrics
+from effortface.train.hr_fit import HrCoefficients, score_series, simulate_series
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -57,8 +57,8 @@ def evaluate_bundle(model_dir: str | Path, table: pd.DataFrame, source: str = "t
     -------
     Evaluation
     """
-    from train.bundle import read_bundle
-    from train.runtime import load_model
+    from effortface.train.bundle import read_bundle
+    from effortface.train.runtime import load_model
 
     model = load_model(model_dir)
     bundle = read_bundle(model_dir)
@@ -67,7 +67,7 @@ def evaluate_bundle(model_dir: str | Path, table: pd.DataFrame, source: str = "t
     if missing:
         raise UserError(f"{source}: expected the model's blendshape columns {', '.join(missing)}, "
                         f"found {', '.join(table.columns)}")
-    from train.physiology import EpocParams, NhrParams
+    from effortface.train.physiology import EpocParams, NhrParams
     prepared = prepare(table, bundle.physiology["hr_max_formula"], EpocParams(**bundle.physiology["epoc"]),
                        source)
     reg = bundle.nhr_regression
@@ -109,8 +109,8 @@ def check_model_dir(model: str) -> Path:
 
 def run(args: argparse.Namespace) -> int:
     """Entry point of ``effortface evaluate``."""
-    from train.bundle import read_bundle
-    from train.report import _md
+    from effortface.train.bundle import read_bundle
+    from effortface.train.report import _md
 
     if bool(args.inputs) == bool(args.table):
         raise UserError("inputs: expected session folders or --table CSV (one of the two), found "

@@ -19,11 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-from annotate.blendshapes import BlendshapeSet
-from capture_tool.errors import UserError
-from capture_tool.fileio import atomic_write_text
-from train.motion import read_motion
-from train.runtime import Character, FaceModel, load_model
+from effortface.core.blendshapes import BlendshapeSet
+from effortface.core.errors import UserError
+from effortface.core.fileio import atomic_write_text
+from effortface.train.motion import read_motion
+from effortface.train.runtime import Character, FaceModel, load_model
 
 #: Live Link Face CSV columns after Timecode and BlendShapeCount: the 52 ARKit blendshapes in the
 #: app's order, then head and eye rotations (BlendShapeCount = 61 counts all of them).

@@ -18,12 +18,12 @@ from typing import Any
 
 import pandas as pd
 
-from annotate.blendshapes import BlendshapeSet, load_blendshape_set
-from capture_tool.errors import UserError
-from train.dataset import blendshape_columns, read_table, sessions_table
-from train.face_fit import (GRIDS, MIN_ROWS_PER_PARTICIPANT, FaceFitConfig, fit_face_models,
+from effortface.core.blendshapes import BlendshapeSet, load_blendshape_set
+from effortface.core.errors import UserError
+from effortface.train.dataset import blendshape_columns, read_table, sessions_table
+from effortface.train.face_fit import (GRIDS, MIN_ROWS_PER_PARTICIPANT, FaceFitConfig, fit_face_models,
                             held_out_scores, protocol_scores)
-from train.hr_fit import evaluate_hr_models
+from effortface.train.hr_fit import evaluate_hr_models
 
 
 
@@ -47,10 +47,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def check_inputs(args: argparse.Namespace) -> None:
     """UserError for contradictory or missing inputs, and for an --out that would lose data.
 
-    See :func:`train.export.check_model_target`: an existing --out needs --force, and --force
+    See :func:`effortface.train.export.check_model_target`: an existing --out needs --force, and --force
     replaces only a model folder (or an empty one) that is not the current directory or an input.
     """
-    from train.export import check_model_target  # lazy: onnx loads slowly
+    from effortface.train.export import check_model_target  # lazy: onnx loads slowly
 
     if bool(args.inputs) == bool(args.table):
         raise UserError("inputs: expected session folders or --table CSV (one of the two), found "
@@ -105,7 +105,7 @@ def run_training(table: pd.DataFrame, blendshapes: BlendshapeSet, out: str | Pat
     """
     from tqdm import tqdm
 
-    from train.pipeline import check_training_data, export_training
+    from effortface.train.pipeline import check_training_data, export_training
 
     config = config or FaceFitConfig()
     prepared, series = check_training_data(table, blendshapes, ", ".join(sources) or "table", config)

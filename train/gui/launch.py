@@ -2,8 +2,8 @@
 
 ::
 
-    python -m train.gui.launch synth --clip CLIP.bvh [--model DIR] [--loops N] [--seconds S] [--screenshot PNG]
-    python -m train.gui.launch train [--sessions DIR] [--train] [--tab N] [--screenshot PNG]
+    python -m effortface.train.gui.launch synth --clip CLIP.bvh [--model DIR] [--loops N] [--seconds S] [--screenshot PNG]
+    python -m effortface.train.gui.launch train [--sessions DIR] [--train] [--tab N] [--screenshot PNG]
 
 ``--screenshot`` renders offscreen and exits; ``--train`` trains on every annotated session first
 (with the small grid); ``--seconds`` plays the clip that long before the picture.
@@ -16,13 +16,13 @@ import os
 import sys
 from pathlib import Path
 
-from capture_tool.errors import UserError
+from effortface.core.errors import UserError
 
 SIZE = (1400, 900)
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m train.gui.launch", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(prog="python -m effortface.train.gui.launch", description=__doc__.splitlines()[0])
     p.add_argument("stage", choices=("train", "synth"))
     p.add_argument("--sessions", default="sample_sessions", metavar="DIR")
     p.add_argument("--clip", metavar="CLIP")
@@ -49,8 +49,8 @@ def _wait(app: object, seconds: float) -> None:
 
 
 def _synth(args: argparse.Namespace) -> object:
-    from train.gui.synth_stage import QtSynthStage
-    from train.synth_session import SynthSession
+    from effortface.train.gui.synth_stage import QtSynthStage
+    from effortface.train.synth_session import SynthSession
 
     session = SynthSession(args.model, background=True)
     folder = Path(args.clip).parent if args.clip else Path(args.sessions)
@@ -69,8 +69,8 @@ def _synth(args: argparse.Namespace) -> object:
 
 
 def _train(args: argparse.Namespace, app: object) -> object:
-    from train.gui.train_stage import QtTrainStage
-    from train.train_session import TrainSession
+    from effortface.train.gui.train_stage import QtTrainStage
+    from effortface.train.train_session import TrainSession
 
     session = TrainSession(args.sessions)
     stage = QtTrainStage(session)

@@ -1,9 +1,9 @@
 """The Synthesize stage: play a motion clip through a face model, tune the character, export curves.
 
-:class:`QtSynthStage` views a :class:`~train.synth_session.SynthSession`: the controls call its
+:class:`QtSynthStage` views a :class:`~effortface.train.synth_session.SynthSession`: the controls call its
 methods, its callbacks redraw the views, and a QTimer moves its play head with the wall time
 (STYLE.md L3). Views: a stick figure of the skeleton (front or side projection), the parametric
-face (:func:`annotate.face.render_face`) driven by the weights at the play head, and plots of w and
+face (:func:`effortface.annotate.face.render_face`) driven by the weights at the play head, and plots of w and
 p, NHR and HR, EPOC and the blendshape weights with a moving time cursor.
 """
 
@@ -18,12 +18,12 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6 import QtCore, QtGui, QtWidgets
 
-from annotate.face import render_face
-from annotate.gui.qt_compat import guard_none_refcount
-from capture_tool.errors import UserError
-from capture_tool.gui.widgets import QtElidedLabel, caption
-from train.runtime import AGE_RANGE, HEIGHT_RANGE_M, SEXES, TRAINING_LEVEL_RANGE
-from train.synth_session import (
+from effortface.annotate.face import render_face
+from effortface.core.gui.qt_compat import guard_none_refcount
+from effortface.core.errors import UserError
+from effortface.core.gui.widgets import QtElidedLabel, caption
+from effortface.train.runtime import AGE_RANGE, HEIGHT_RANGE_M, SEXES, TRAINING_LEVEL_RANGE
+from effortface.train.synth_session import (
     MAX_LOOPS,
     SynthSession,
     find_clips,

@@ -1,7 +1,7 @@
 """The Train stage: pick sessions (or a table), choose settings, train in the background, read the
 results as the paper shows them, export the bundle, compare two bundles.
 
-:class:`QtTrainStage` views a :class:`~train.train_session.TrainSession`: the controls call its
+:class:`QtTrainStage` views a :class:`~effortface.train.train_session.TrainSession`: the controls call its
 methods, its callbacks update the views, and a QTimer calls :meth:`TrainSession.poll` to bring the
 worker thread's progress and results to the GUI thread (STYLE.md L3, L5).
 """
@@ -17,11 +17,11 @@ import pandas as pd
 import pyqtgraph as pg
 from PySide6 import QtCore, QtWidgets
 
-from annotate.gui.qt_compat import guard_none_refcount
-from capture_tool.errors import UserError
-from capture_tool.gui.widgets import caption
-from train.face_fit import CV_CHOICES, GRIDS, PROTOCOLS
-from train.train_session import ANY, TrainSession, filter_entries
+from effortface.core.gui.qt_compat import guard_none_refcount
+from effortface.core.errors import UserError
+from effortface.core.gui.widgets import caption
+from effortface.train.face_fit import CV_CHOICES, GRIDS, PROTOCOLS
+from effortface.train.train_session import ANY, TrainSession, filter_entries
 
 __all__ = ["QtTrainStage", "TrainSession"]
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from capture_tool.errors import UserError
+from effortface.core.errors import UserError
 
 
 def agg_figure(figsize: tuple[float, float], *, layout: str | None = None) -> Any:

@@ -12,7 +12,7 @@ import json
 import os
 from pathlib import Path
 
-from capture_tool.errors import UserError
+from effortface.core.errors import UserError
 
 
 @dataclasses.dataclass(frozen=True)

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any
 
-from capture_tool.errors import UserError
+from effortface.core.errors import UserError
 
 
 def refuse_overwrite(path: str | os.PathLike, *, overwrite: bool = False, what: str = "file",
