@@ -34,7 +34,7 @@ SAMPLE_LAB = ROOT / "sample_sessions"
 
 def bench_full(table, label: str) -> float:
     """Wall time of a whole training run (export and report included)."""
-    from effortface.train.commands.train import run_training
+    from effortface.train.pipeline import run_training
 
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()

@@ -95,6 +95,10 @@ class FaceFitConfig:
         per_share = self.max_total_rows // max(n_participants, 1)
         return max(MIN_ROWS_PER_PARTICIPANT, min(self.max_rows_per_participant, per_share))
 
+    def n_folds(self, n_participants: int) -> int:
+        """Cross-validation folds of a face fit on ``n_participants`` (the splits of :func:`cv_folds`)."""
+        return min(n_participants, self.max_folds) if self.cv == "lopo" else self.n_splits
+
     def __post_init__(self) -> None:
         if self.cv not in CV_CHOICES:
             raise ValueError(f"cv: expected one of {CV_CHOICES}, found {self.cv!r}")

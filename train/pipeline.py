@@ -1,67 +1,413 @@
-"""The end of a training run, shared by ``effortface train`` and the Train stage: metrics and
-provenance for ``model.json``, the bundle export (train/export.py) and the report (train/report.py).
+"""The one training run, shared by ``effortface train``, ``effortface demo`` and the Train stage.
+
+- :func:`training_table` reads the data (sessions or a long table);
+- :func:`train_models` checks and prepares them, then fits and scores both models (the paper's
+  heart-rate models, the four face SVRs and their held-out and Fig. 3 protocol scores), reporting
+  progress and stopping at a cancel check between steps and cross-validation folds; it writes
+  nothing and returns a :class:`TrainingOutcome`;
+- :func:`export_outcome` writes the bundle (train/export.py: ``model.json``, ``svr.npz``,
+  ``face.onnx`` with its parity checks, ``MODEL_CARD.md``) and the report (train/report.py);
+- :func:`run_training` is both, with progress bars on stderr (the command line).
+
+The command line and the GUI call these functions; neither repeats a step.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as _dt
 import math
+import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 
 from effortface.core.blendshapes import BlendshapeSet
-from effortface.train.dataset import hr_series, prepare
-from effortface.train.face_fit import FaceFitConfig, check_face_table
-from effortface.train.hr_fit import check_hr_series
+from effortface.core.errors import UserError
 from effortface.core.version import __version__
+from effortface.train.dataset import hr_series, prepare, read_table, sessions_table
+from effortface.train.face_fit import (GRIDS, MIN_ROWS_PER_PARTICIPANT, FaceFitConfig, FaceModelFit,
+                                       check_face_table, fit_face_models, held_out_scores,
+                                       protocol_scores)
+from effortface.train.hr_fit import HrEvaluation, HrSeries, check_hr_series, evaluate_hr_models
 
 REPORT_DIR = "report"
+#: the paper's heart-rate results (section 3 of SCIENCE.md), shown beside ours
+PAPER_HR = {"per_participant": {"r": 0.88, "rmse_pct": 19.0},
+            "pooled": {"r": 0.21, "rmse_pct": 79.0},
+            "tl_regression": {"r": 0.87, "rmse_pct": 24.0}}
+#: fraction of the progress reached after each step of :func:`train_models` (the CV folds fill the middle)
+_STEP_FRACTION = {"prepare": 0.05, "hr": 0.2, "folds": 0.8, "held_out": 0.85, "protocols": 1.0}
+
+#: ``progress(fraction, text)``: fraction of the run done (0-1) and what runs now
+ProgressFn = Callable[[float, str], None]
 
 
-def export_training(*, prepared: pd.DataFrame, series: Any, hr_eval: Any, face: Any,
-                    held_out: pd.DataFrame, protocols: pd.DataFrame, protocol_predictions: Any,
-                    blendshapes: BlendshapeSet, sources: Sequence[str], rater_policy: str,
-                    config: FaceFitConfig, out: str | Path, force: bool = False,
-                    on_report: Callable[[], None] | None = None) -> tuple[Path, Path, Any]:
+class Cancelled(Exception):
+    """The user cancelled a running training."""
+
+
+def _no_progress(fraction: float, text: str) -> None:
+    """A progress callback that shows nothing."""
+
+
+def _never() -> bool:
+    """A cancel check that never cancels."""
+    return False
+
+
+# --------------------------------------------------------------------------- settings and data
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainSettings:
+    """The trainer's choices (the options of ``effortface train`` and the Train stage's panel).
+
+    Parameters
+    ----------
+    rater_policy : str
+        ``"mean"`` of the raters or one rater's name.
+    grid : str
+        A key of :data:`effortface.train.face_fit.GRIDS`.
+    cv : {"lopo", "kfold"}
+        Leave-one-participant-out (the paper's honest protocol) or random-frame K-fold.
+    max_rows_per_participant : int
+        Face training rows per participant (1 Hz, evenly spaced).
+    """
+
+    rater_policy: str = "mean"
+    grid: str = "small"
+    cv: str = "lopo"
+    max_rows_per_participant: int = 300
+
+    def __post_init__(self) -> None:
+        if self.grid not in GRIDS:
+            raise UserError(f"grid: expected one of {', '.join(GRIDS)}, found {self.grid!r}")
+        if self.max_rows_per_participant < MIN_ROWS_PER_PARTICIPANT:
+            raise UserError(f"max rows per participant: expected at least {MIN_ROWS_PER_PARTICIPANT}, "
+                            f"found {self.max_rows_per_participant}")
+        if not self.rater_policy.strip():
+            raise UserError("rater policy: expected 'mean' or a rater's name, found nothing")
+
+    def config(self) -> FaceFitConfig:
+        """The face-fit configuration of these settings."""
+        return FaceFitConfig(grid=dict(GRIDS[self.grid]), cv=self.cv,
+                             max_rows_per_participant=self.max_rows_per_participant)
+
+
+def training_table(sessions: Sequence[str | Path], table: str | Path | None, blendshapes: BlendshapeSet,
+                   rater_policy: str = "mean") -> tuple[pd.DataFrame, list[str]]:
+    """The long training table of some sessions or of a table file, and its source names.
+
+    Parameters
+    ----------
+    sessions : sequence of path-like
+        Session folders, or folders of sessions (used when ``table`` is None).
+    table : path-like or None
+        A long table CSV (DESIGN.md) instead of sessions.
+    blendshapes : BlendshapeSet
+        The blendshape set (the table's columns).
+    rater_policy : str
+        ``"mean"`` of the raters or one rater's key-frames (sessions only).
+
+    Returns
+    -------
+    table : DataFrame
+        The long table.
+    sources : list of str
+        The table file, or the session folders (provenance and messages).
+    """
+    if table is not None:
+        return read_table(table, blendshapes), [str(table)]
+    return sessions_table(sessions, blendshapes, rater_policy), [str(p) for p in sessions]
+
+
+def check_training_data(table: pd.DataFrame, blendshapes: BlendshapeSet, source: str,
+                        config: FaceFitConfig) -> tuple[pd.DataFrame, list[HrSeries]]:
+    """Prepare the table and refuse data the models cannot be fitted on, before any progress shows.
+
+    Parameters
+    ----------
+    table : DataFrame
+        Long training table.
+    blendshapes : BlendshapeSet
+        The blendshape set.
+    source : str
+        The table or sessions, for messages.
+    config : FaceFitConfig
+        Face-fit settings (its subsampling).
+
+    Returns
+    -------
+    prepared : DataFrame
+        From :func:`effortface.train.dataset.prepare`.
+    series : list of HrSeries
+        From :func:`effortface.train.dataset.hr_series`.
+
+    Raises
+    ------
+    UserError
+        One line naming the source and what is missing (participants, heart rate, annotations).
+    """
+    prepared = prepare(table, source=source)
+    series = hr_series(prepared)
+    check_hr_series(series, source)
+    check_face_table(prepared, blendshapes.names, source, config)
+    return prepared, series
+
+
+# --------------------------------------------------------------------------- the training run
+
+
+@dataclasses.dataclass
+class TrainingOutcome:
+    """Everything a training run produced, for the plots, the tables and the export."""
+
+    prepared: pd.DataFrame
+    series: list[HrSeries]
+    hr_eval: HrEvaluation
+    face: FaceModelFit
+    held_out: pd.DataFrame
+    protocols: pd.DataFrame
+    protocol_predictions: dict[str, np.ndarray]
+    blendshapes: BlendshapeSet
+    sources: list[str]
+    settings: TrainSettings
+
+    @property
+    def sessions(self) -> list[str]:
+        """Session ids scored by the heart-rate evaluation, in order."""
+        return [s.session for s in self.series]
+
+    def fig2(self, session: str) -> dict[str, Any]:
+        """Fig. 2 curves of one session: ``t_min``, ``measured``, ``own`` and ``tl`` NHR, and a title."""
+        s = next(x for x in self.series if x.session == session)
+        p = self.hr_eval.predictions
+        return {"t_min": np.asarray(s.t_s) / 60.0, "measured": np.asarray(s.nhr, float),
+                "own": p[("per_participant", session)], "tl": p[("tl_regression", session)],
+                "title": f"{s.participant} (TL {s.training_level:g}): {session}"}
+
+    def fig3(self, session: str, protocol: str) -> dict[str, Any]:
+        """Fig. 3 curves: ``t_min``, ``keyed`` (n, B) and ``predicted`` (n, B) of one session."""
+        d = self.face.data
+        rows = np.flatnonzero(d.session == session)
+        rows = rows[np.argsort(d.t_s[rows])]
+        return {"t_min": d.t_s[rows] / 60.0, "keyed": d.y_norm[rows] * d.e[rows],
+                "predicted": self.protocol_predictions[protocol][rows]}
+
+    def face_sessions(self) -> list[str]:
+        """Sessions with face rows (Fig. 3 choices)."""
+        return sorted(np.unique(self.face.data.session).tolist())
+
+    def hr_table(self) -> pd.DataFrame:
+        """Heart-rate models (held out) beside the paper's figures."""
+        rows = [{"model": k, "r": v["r"], "RMSE %": v["rmse_pct"], "HR RMSE bpm": v["hr_rmse_bpm"],
+                 "paper r": PAPER_HR[k]["r"], "paper RMSE %": PAPER_HR[k]["rmse_pct"]}
+                for k, v in self.hr_eval.summary().items()]
+        return pd.DataFrame(rows)
+
+    def face_table(self) -> pd.DataFrame:
+        """Face held-out scores: SVR beside the mean and linear baselines, per blendshape and mean."""
+        wide = self.held_out.pivot_table(index="blendshape", columns="model", values="r", sort=False)
+        rmse = self.held_out.pivot_table(index="blendshape", columns="model", values="rmse_pct_range",
+                                         sort=False)
+        out = pd.DataFrame({"blendshape": wide.index})
+        for model in ("svr", "mean", "linear"):
+            out[f"{model} r"] = wide[model].to_numpy()
+            out[f"{model} RMSE %"] = rmse[model].to_numpy()
+        mean = out.drop(columns="blendshape").mean()
+        return pd.concat([out, pd.DataFrame([{"blendshape": "mean", **mean}])], ignore_index=True)
+
+
+def train_models(table: pd.DataFrame, blendshapes: BlendshapeSet, settings: TrainSettings,
+                 sources: Sequence[str], progress: ProgressFn = _no_progress,
+                 cancelled: Callable[[], bool] = _never) -> TrainingOutcome:
+    """Check the data, then fit and score both models (the one training run; writes nothing).
+
+    Parameters
+    ----------
+    table : DataFrame
+        Long training table (:func:`training_table`).
+    blendshapes : BlendshapeSet
+        The blendshape set.
+    settings : TrainSettings
+        Rater policy (provenance only here), grid, CV, subsampling.
+    sources : sequence of str
+        Where the data came from (provenance and messages).
+    progress : callable
+        ``progress(fraction, text)`` after each step and each CV fold (called from this thread),
+        never before the data checks have passed.
+    cancelled : callable
+        Polled between steps and folds; when it returns True, :class:`Cancelled` is raised.
+
+    Returns
+    -------
+    TrainingOutcome
+
+    Raises
+    ------
+    UserError
+        Data the models cannot be fitted on (:func:`check_training_data`).
+    Cancelled
+        When ``cancelled()`` turned True.
+    """
+    config = settings.config()
+
+    def step(name: str, text: str) -> None:
+        if cancelled():
+            raise Cancelled(text)
+        progress(_STEP_FRACTION[name], text)
+
+    prepared, series = check_training_data(table, blendshapes, ", ".join(sources) or "table", config)
+    step("prepare", "heart-rate models")
+    hr_eval = evaluate_hr_models(series)
+    step("hr", "face SVR grid search")
+    face = _fit_face(prepared, blendshapes, config, cancelled, progress)
+    step("folds", "held-out scores")
+    held = held_out_scores(face)
+    step("held_out", "the paper's Fig. 3 protocols")
+    protos, proto_preds = protocol_scores(face)
+    step("protocols", "done")
+    return TrainingOutcome(prepared, series, hr_eval, face, held, protos, proto_preds, blendshapes,
+                           list(sources), settings)
+
+
+def _fit_face(prepared: pd.DataFrame, blendshapes: BlendshapeSet, config: FaceFitConfig,
+              cancelled: Callable[[], bool], progress: ProgressFn) -> FaceModelFit:
+    """The face grid search with a progress report (and a cancel check) after each fold."""
+    n_folds = config.n_folds(prepared["participant"].nunique())
+    done = [0]
+    lo, hi = _STEP_FRACTION["hr"], _STEP_FRACTION["folds"]
+
+    def fold(n: int) -> None:
+        done[0] += n
+        if cancelled():
+            raise Cancelled("face CV")
+        progress(lo + (hi - lo) * done[0] / max(n_folds, 1), f"face CV fold {done[0]} of {n_folds}")
+
+    return fit_face_models(prepared, blendshapes.names, config, progress=fold)
+
+
+# --------------------------------------------------------------------------- export and report
+
+
+@dataclasses.dataclass
+class ExportedModel:
+    """What :func:`export_outcome` wrote: the model folder, its report and the metrics in model.json."""
+
+    model_dir: Path
+    report: Path
+    metrics: dict[str, Any]
+
+
+def export_outcome(outcome: TrainingOutcome, out: str | Path, *, force: bool = False,
+                   progress: ProgressFn = _no_progress) -> ExportedModel:
     """Export the bundle (with ONNX, parity checks and model card) and write the report.
 
     Parameters
     ----------
-    prepared, series, hr_eval, face, held_out, protocols, protocol_predictions
-        The outputs of the training steps (train/dataset.py, train/hr_fit.py, train/face_fit.py).
-    blendshapes : BlendshapeSet
-    sources : sequence of str
-        Sessions or table the data came from (provenance).
-    rater_policy : str
-    config : FaceFitConfig
-    out : path
+    outcome : TrainingOutcome
+        From :func:`train_models`.
+    out : path-like
         The model folder to create.
     force : bool
-        Replace an existing folder.
-    on_report : callable, optional
-        Called between the export and the report (progress).
+        Replace an existing folder (see :func:`effortface.train.export.export_model`).
+    progress : callable
+        ``progress(fraction, text)`` before the export, before the report and at the end.
 
     Returns
     -------
-    model_dir, report_path, bundle
+    ExportedModel
     """
-    from effortface.train.export import build_bundle, export_model
+    from effortface.train.export import build_bundle, export_model  # lazy: onnx loads slowly
     from effortface.train.report import write_report
 
-    metrics = training_metrics(hr_eval, face, held_out, protocols)
-    provenance = training_provenance(prepared, face, sources, rater_policy, config)
-    bundle = build_bundle(face, hr_eval.fit, blendshapes, metrics, provenance)
-    model_dir = export_model(bundle, face, out, force=force)
-    if on_report is not None:
-        on_report()
-    report = write_report(model_dir / REPORT_DIR, evaluation=hr_eval, series=series, fit=face,
-                          held_out=held_out, protocols=protocols,
-                          protocol_predictions=protocol_predictions,
+    o = outcome
+    config = o.settings.config()
+    progress(0.0, "export and parity checks")
+    metrics = training_metrics(o.hr_eval, o.face, o.held_out, o.protocols)
+    provenance = training_provenance(o.prepared, o.face, o.sources, o.settings.rater_policy, config)
+    bundle = build_bundle(o.face, o.hr_eval.fit, o.blendshapes, metrics, provenance)
+    model_dir = export_model(bundle, o.face, out, force=force)
+    progress(0.8, "report")
+    report = write_report(model_dir / REPORT_DIR, evaluation=o.hr_eval, series=o.series, fit=o.face,
+                          held_out=o.held_out, protocols=o.protocols,
+                          protocol_predictions=o.protocol_predictions,
                           header=report_header(bundle.provenance, model_dir))
-    return model_dir, report, bundle
+    progress(1.0, "done")
+    return ExportedModel(model_dir, report, bundle.metrics)
+
+
+class ProgressBar:
+    """A tqdm bar on stderr driven by a :data:`ProgressFn`; it appears at its first report.
+
+    So a run refused by its data checks prints its one error line and no bar.
+
+    Parameters
+    ----------
+    desc : str
+        The bar's label.
+    enabled : bool
+        False shows nothing.
+    """
+
+    def __init__(self, desc: str, enabled: bool = True) -> None:
+        self.desc, self.enabled = desc, enabled
+        self._bar: Any = None
+
+    def __call__(self, fraction: float, text: str) -> None:
+        """Show ``fraction`` (0-1) done and ``text``."""
+        if not self.enabled:
+            return
+        if self._bar is None:
+            from tqdm import tqdm
+
+            self._bar = tqdm(total=100, desc=self.desc, unit="%", file=sys.stderr)
+        self._bar.n = round(100 * fraction)
+        self._bar.set_postfix_str(text)
+
+    def __enter__(self) -> ProgressBar:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._bar is not None:
+            self._bar.close()
+
+
+def run_training(table: pd.DataFrame, blendshapes: BlendshapeSet, out: str | Path, *,
+                 settings: TrainSettings | None = None, force: bool = False,
+                 sources: Sequence[str] = (), progress: bool = True) -> ExportedModel:
+    """:func:`train_models` then :func:`export_outcome`, with progress bars on stderr.
+
+    Parameters
+    ----------
+    table : DataFrame
+        Long training table (:func:`training_table`).
+    blendshapes : BlendshapeSet
+        The blendshape set (the table's columns).
+    out : path-like
+        Model folder to write.
+    settings : TrainSettings, optional
+        The trainer's choices (default: :class:`TrainSettings` ()).
+    force : bool
+        Replace an existing model folder.
+    sources : sequence of str
+        Provenance for the model card.
+    progress : bool
+        Show the bars.
+
+    Returns
+    -------
+    ExportedModel
+    """
+    settings = settings or TrainSettings()
+    with ProgressBar("train", progress) as bar:
+        outcome = train_models(table, blendshapes, settings, sources, bar)
+    with ProgressBar("export", progress) as bar:
+        return export_outcome(outcome, out, force=force, progress=bar)
 
 
 def training_metrics(hr_eval: Any, face: Any, held: pd.DataFrame, protos: pd.DataFrame) -> dict[str, Any]:
@@ -115,37 +461,3 @@ def report_header(prov: dict[str, Any], model_dir: Path) -> dict[str, Any]:
     keys = ("created_utc", "sources", "participants", "n_sessions", "n_seconds", "n_face_rows",
             "rater_policy", "cv")
     return {"model": str(model_dir), **{k: prov[k] for k in keys}}
-
-
-def check_training_data(table: pd.DataFrame, blendshapes: BlendshapeSet, source: str,
-                        config: FaceFitConfig) -> tuple[pd.DataFrame, list[Any]]:
-    """Prepare the table and refuse data the models cannot be fitted on, before any progress shows.
-
-    Parameters
-    ----------
-    table : DataFrame
-        Long training table.
-    blendshapes : BlendshapeSet
-        The blendshape set.
-    source : str
-        The table or sessions, for messages.
-    config : FaceFitConfig
-        Face-fit settings (its subsampling).
-
-    Returns
-    -------
-    prepared : DataFrame
-        From :func:`effortface.train.dataset.prepare`.
-    series : list of HrSeries
-        From :func:`effortface.train.dataset.hr_series`.
-
-    Raises
-    ------
-    UserError
-        One line naming the source and what is missing (participants, heart rate, annotations).
-    """
-    prepared = prepare(table, source=source)
-    series = hr_series(prepared)
-    check_hr_series(series, source)
-    check_face_table(prepared, blendshapes.names, source, config)
-    return prepared, series

@@ -102,7 +102,7 @@ def _liveliest_session(fit: FaceModelFit) -> str:
     return max(spread, key=spread.get)
 
 
-def _md(df: pd.DataFrame) -> str:
+def markdown_table(df: pd.DataFrame) -> str:
     """A DataFrame as a Markdown table (floats to 3 significant digits)."""
     cols = list(df.columns)
     out = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
@@ -160,18 +160,18 @@ def _report_lines(evaluation: HrEvaluation, fit: FaceModelFit, held_out: pd.Data
         "Simulated over whole sessions from the first measured value. Paper: per participant r 0.88, "
         "RMSE 19 %; pooled r 0.21, RMSE 79 %; TL regression r 0.87, RMSE 24 %. Pooled and TL models "
         "are fitted without the scored participant. RMSE in % of the NHR range [0, 1].", "",
-        _md(summ), "", *hr_warnings(evaluation.summary()), "",
-        "Per-participant trees:", "", _md(coef), "",
-        "Regressions on training level (value = intercept + slope x TL):", "", _md(reg), "",
+        markdown_table(summ), "", *hr_warnings(evaluation.summary()), "",
+        "Per-participant trees:", "", markdown_table(coef), "",
+        "Regressions on training level (value = intercept + slope x TL):", "", markdown_table(reg), "",
         f"![Fig. 2]({FIG2_PNG})", "",
         "## Face (SCIENCE.md section 5)", "",
         f"Hyper-parameters by {fit.config.cv} cross-validation over C {fit.config.grid['C']}, "
-        f"gamma {fit.config.grid['gamma']}, epsilon {fit.config.grid['epsilon']}:", "", _md(best), "",
+        f"gamma {fit.config.grid['gamma']}, epsilon {fit.config.grid['epsilon']}:", "", markdown_table(best), "",
         "Held-out participants (weights = prediction x the participant's expressiveness), against the "
-        "training mean and a linear regression:", "", _md(held_out), "",
-        "Mean over blendshapes:", "", _md(mean_scores.reset_index()), "",
-        "The paper's Fig. 3 protocols:", "", _md(protocols), "",
+        "training mean and a linear regression:", "", markdown_table(held_out), "",
+        "Mean over blendshapes:", "", markdown_table(mean_scores.reset_index()), "",
+        "The paper's Fig. 3 protocols:", "", markdown_table(protocols), "",
         f"![Fig. 3]({FIG3_PNG})", "",
         "Expressiveness (maximal key-framed weight per participant):", "",
-        _md(fit.expressiveness.reset_index()), "",
+        markdown_table(fit.expressiveness.reset_index()), "",
     ]

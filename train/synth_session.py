@@ -25,13 +25,13 @@ import numpy as np
 
 from effortface.core.errors import UserError
 from effortface.core.fileio import refuse_overwrite
-from effortface.train.commands.synth import write_output, curves_csv, livelink_csv
+from effortface.train.curves_io import CURVE_FORMATS, write_curves
 from effortface.train.energy import EnergyCurves, looped, work_and_power
 from effortface.train.motion import Motion, read_motion
 from effortface.train.runtime import Character, FaceModel, load_model
 from effortface.core.events import Emitter
 
-EXPORT_FORMATS = ("csv", "livelink")
+EXPORT_FORMATS = CURVE_FORMATS
 MOTION_SUFFIXES = (".bvh", ".npz")
 MAX_LOOPS = 200
 
@@ -269,7 +269,7 @@ class SynthSession:
 
     # ---- export
     def export(self, path: str | os.PathLike, fmt: str = "csv", *, overwrite: bool = False) -> Path:
-        """Write the curves as the per-frame CSV or a Live Link Face CSV (synth's writers).
+        """Write the curves as the per-frame CSV or a Live Link Face CSV (:func:`write_curves`, as synth).
 
         Raises
         ------
@@ -283,8 +283,6 @@ class SynthSession:
         if not self.n_frames:
             raise UserError("export: expected curves, found none (load a motion clip first)")
         out = refuse_overwrite(path, overwrite=overwrite)
-        text = (livelink_csv(self.curves, self.model.blendshapes) if fmt == "livelink"
-                else curves_csv(self.curves, self.model.columns))
-        write_output(out, text, force=True)
+        write_curves(out, self.curves, self.model, fmt=fmt, force=True)
         self.status_changed.emit(f"exported {self.n_frames} frames to {out}", False)
         return out

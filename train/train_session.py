@@ -2,10 +2,9 @@
 
 The widgets of :mod:`effortface.train.gui.train_stage` call :class:`TrainSession` methods and listen to its
 plain callbacks (:class:`Emitter`); a QTimer calls :meth:`TrainSession.poll`, which drains the
-worker's queue on the GUI thread (STYLE.md L3, L5). The training itself is the headless lab's
-(:mod:`effortface.train.dataset`, :mod:`effortface.train.hr_fit`, :mod:`effortface.train.face_fit`, :mod:`effortface.train.export`,
-:mod:`effortface.train.report`), run step by step so that it reports progress and can be cancelled between
-cross-validation folds.
+worker's queue on the GUI thread (STYLE.md L3, L5). The training and the export are the command
+line's own (:func:`effortface.train.pipeline.train_models`, which reports progress and can be
+cancelled between cross-validation folds, and :func:`effortface.train.pipeline.export_outcome`).
 """
 
 from __future__ import annotations
@@ -27,24 +26,12 @@ from effortface.core.errors import UserError
 from effortface.core.fileio import refuse_overwrite
 from effortface.capture_tool.session import list_sessions, parse_session_id, read_session_info
 from effortface.train.dataset import ANNOTATIONS_DIR, prepare, read_table, sessions_table
-from effortface.train.face_fit import (GRIDS, MIN_ROWS_PER_PARTICIPANT, FaceFitConfig, FaceModelFit,
-                            held_out_scores, protocol_scores)
-from effortface.train.hr_fit import HrEvaluation, HrSeries, evaluate_hr_models
-from effortface.train.pipeline import check_training_data
+from effortface.train.pipeline import (Cancelled, TrainingOutcome, TrainSettings, export_outcome,
+                                       train_models, training_table)
 
-#: the paper's heart-rate results (section 3 of SCIENCE.md), shown beside ours
-PAPER_HR = {"per_participant": {"r": 0.88, "rmse_pct": 19.0},
-            "pooled": {"r": 0.21, "rmse_pct": 79.0},
-            "tl_regression": {"r": 0.87, "rmse_pct": 24.0}}
-#: fraction of the progress bar reached after each step (the CV folds fill the middle)
-_STEP_FRACTION = {"prepare": 0.05, "hr": 0.2, "folds": 0.8, "held_out": 0.85, "protocols": 1.0}
 ANY = "any"
 #: the background jobs that :meth:`TrainSession.cancel` can stop (an export always finishes)
 CANCELLABLE_JOBS = ("train", "compare")
-
-
-class Cancelled(Exception):
-    """The user cancelled a running training."""
 
 
 # --------------------------------------------------------------------------- the data to pick
@@ -100,194 +87,6 @@ def filter_entries(entries: Sequence[SessionEntry], participant: str = ANY, exer
     return [e for e in entries
             if participant in (ANY, e.participant) and exercise in (ANY, e.exercise)
             and (annotated is None or e.annotated == annotated)]
-
-
-@dataclasses.dataclass(frozen=True)
-class TrainSettings:
-    """The trainer's choices.
-
-    Parameters
-    ----------
-    rater_policy : str
-        ``"mean"`` of the raters or one rater's name.
-    grid : str
-        A key of :data:`effortface.train.face_fit.GRIDS`.
-    cv : {"lopo", "kfold"}
-        Leave-one-participant-out (the paper's honest protocol) or random-frame K-fold.
-    max_rows_per_participant : int
-        Face training rows per participant (1 Hz, evenly spaced).
-    """
-
-    rater_policy: str = "mean"
-    grid: str = "small"
-    cv: str = "lopo"
-    max_rows_per_participant: int = 300
-
-    def __post_init__(self) -> None:
-        if self.grid not in GRIDS:
-            raise UserError(f"grid: expected one of {', '.join(GRIDS)}, found {self.grid!r}")
-        if self.max_rows_per_participant < MIN_ROWS_PER_PARTICIPANT:
-            raise UserError(f"max rows per participant: expected at least {MIN_ROWS_PER_PARTICIPANT}, "
-                            f"found {self.max_rows_per_participant}")
-        if not self.rater_policy.strip():
-            raise UserError("rater policy: expected 'mean' or a rater's name, found nothing")
-
-    def config(self) -> FaceFitConfig:
-        """The face-fit configuration of these settings."""
-        return FaceFitConfig(grid=dict(GRIDS[self.grid]), cv=self.cv,
-                             max_rows_per_participant=self.max_rows_per_participant)
-
-
-# --------------------------------------------------------------------------- training
-
-
-@dataclasses.dataclass
-class TrainingOutcome:
-    """Everything a training run produced, for the plots, the tables and the export."""
-
-    prepared: pd.DataFrame
-    series: list[HrSeries]
-    hr_eval: HrEvaluation
-    face: FaceModelFit
-    held_out: pd.DataFrame
-    protocols: pd.DataFrame
-    protocol_predictions: dict[str, np.ndarray]
-    blendshapes: BlendshapeSet
-    sources: list[str]
-    settings: TrainSettings
-
-    @property
-    def sessions(self) -> list[str]:
-        """Session ids scored by the heart-rate evaluation, in order."""
-        return [s.session for s in self.series]
-
-    def fig2(self, session: str) -> dict[str, Any]:
-        """Fig. 2 curves of one session: ``t_min``, ``measured``, ``own`` and ``tl`` NHR, and a title."""
-        s = next(x for x in self.series if x.session == session)
-        p = self.hr_eval.predictions
-        return {"t_min": np.asarray(s.t_s) / 60.0, "measured": np.asarray(s.nhr, float),
-                "own": p[("per_participant", session)], "tl": p[("tl_regression", session)],
-                "title": f"{s.participant} (TL {s.training_level:g}): {session}"}
-
-    def fig3(self, session: str, protocol: str) -> dict[str, Any]:
-        """Fig. 3 curves: ``t_min``, ``keyed`` (n, B) and ``predicted`` (n, B) of one session."""
-        d = self.face.data
-        rows = np.flatnonzero(d.session == session)
-        rows = rows[np.argsort(d.t_s[rows])]
-        return {"t_min": d.t_s[rows] / 60.0, "keyed": d.y_norm[rows] * d.e[rows],
-                "predicted": self.protocol_predictions[protocol][rows]}
-
-    def face_sessions(self) -> list[str]:
-        """Sessions with face rows (Fig. 3 choices)."""
-        return sorted(np.unique(self.face.data.session).tolist())
-
-    def hr_table(self) -> pd.DataFrame:
-        """Heart-rate models (held out) beside the paper's figures."""
-        rows = [{"model": k, "r": v["r"], "RMSE %": v["rmse_pct"], "HR RMSE bpm": v["hr_rmse_bpm"],
-                 "paper r": PAPER_HR[k]["r"], "paper RMSE %": PAPER_HR[k]["rmse_pct"]}
-                for k, v in self.hr_eval.summary().items()]
-        return pd.DataFrame(rows)
-
-    def face_table(self) -> pd.DataFrame:
-        """Face held-out scores: SVR beside the mean and linear baselines, per blendshape and mean."""
-        wide = self.held_out.pivot_table(index="blendshape", columns="model", values="r", sort=False)
-        rmse = self.held_out.pivot_table(index="blendshape", columns="model", values="rmse_pct_range",
-                                         sort=False)
-        out = pd.DataFrame({"blendshape": wide.index})
-        for model in ("svr", "mean", "linear"):
-            out[f"{model} r"] = wide[model].to_numpy()
-            out[f"{model} RMSE %"] = rmse[model].to_numpy()
-        mean = out.drop(columns="blendshape").mean()
-        return pd.concat([out, pd.DataFrame([{"blendshape": "mean", **mean}])], ignore_index=True)
-
-
-ProgressFn = Callable[[float, str], None]
-
-
-def train_models(table: pd.DataFrame, blendshapes: BlendshapeSet, settings: TrainSettings,
-                 sources: Sequence[str], progress: ProgressFn,
-                 cancelled: Callable[[], bool] = lambda: False) -> TrainingOutcome:
-    """Fit and evaluate both models like ``effortface train`` (without writing anything).
-
-    Parameters
-    ----------
-    table : DataFrame
-        Long training table.
-    blendshapes : BlendshapeSet
-        The blendshape set.
-    settings : TrainSettings
-        Rater policy (provenance only here), grid, CV, subsampling.
-    sources : sequence of str
-        Where the data came from (provenance).
-    progress : callable
-        ``progress(fraction, text)`` after each step and each CV fold (called from this thread).
-    cancelled : callable
-        Polled between steps and folds; when it returns True, :class:`Cancelled` is raised.
-
-    Returns
-    -------
-    TrainingOutcome
-    """
-    config = settings.config()
-
-    def step(name: str, text: str) -> None:
-        if cancelled():
-            raise Cancelled(text)
-        progress(_STEP_FRACTION[name], text)
-
-    prepared, series = check_training_data(table, blendshapes, ", ".join(sources) or "table", config)
-    step("prepare", "heart-rate models")
-    hr_eval = evaluate_hr_models(series)
-    step("hr", "face SVR grid search")
-    face = _fit_face(prepared, blendshapes, config, step, cancelled, progress)
-    held = held_out_scores(face)
-    step("held_out", "the paper's Fig. 3 protocols")
-    protos, proto_preds = protocol_scores(face)
-    step("protocols", "done")
-    return TrainingOutcome(prepared, series, hr_eval, face, held, protos, proto_preds, blendshapes,
-                           list(sources), settings)
-
-
-def _fit_face(prepared: pd.DataFrame, blendshapes: BlendshapeSet, config: FaceFitConfig,
-              step: Callable[[str, str], None], cancelled: Callable[[], bool],
-              progress: ProgressFn) -> FaceModelFit:
-    """The face grid search with a progress report (and a cancel check) after each fold."""
-    from effortface.train.face_fit import fit_face_models
-
-    n_people = prepared["participant"].nunique()
-    n_folds = min(n_people, config.max_folds) if config.cv == "lopo" else config.n_splits
-    done = [0]
-    lo, hi = _STEP_FRACTION["hr"], _STEP_FRACTION["folds"]
-
-    def fold(n: int) -> None:
-        done[0] += n
-        if cancelled():
-            raise Cancelled("face CV")
-        progress(lo + (hi - lo) * done[0] / max(n_folds, 1), f"face CV fold {done[0]} of {n_folds}")
-
-    face = fit_face_models(prepared, blendshapes.names, config, progress=fold)
-    step("folds", "held-out scores")
-    return face
-
-
-def export_outcome(outcome: TrainingOutcome, out_dir: str | os.PathLike, *,
-                   overwrite: bool = False) -> Path:
-    """Export the bundle with its model card (train/export.py) and the report (train/report.py).
-
-    Raises
-    ------
-    FileExistsError
-        If ``out_dir`` exists and ``overwrite`` is False.
-    """
-    from effortface.train.pipeline import export_training
-
-    o = outcome
-    model_dir, _, _ = export_training(
-        prepared=o.prepared, series=o.series, hr_eval=o.hr_eval, face=o.face,
-        held_out=o.held_out, protocols=o.protocols, protocol_predictions=o.protocol_predictions,
-        blendshapes=o.blendshapes, sources=o.sources, rater_policy=o.settings.rater_policy,
-        config=o.settings.config(), out=Path(out_dir), force=overwrite)
-    return model_dir
 
 
 # --------------------------------------------------------------------------- comparing bundles
@@ -504,13 +303,11 @@ class TrainSession:
 
     def table(self) -> tuple[pd.DataFrame, list[str]]:
         """The training table of the current choice, and its sources (reads files: call from a worker)."""
-        if self.table_path is not None:
-            return read_table(self.table_path, self.blendshapes), [str(self.table_path)]
         paths = [e.path for e in self.entries if e.session_id in self.selected]
-        if not paths:
+        if self.table_path is None and not paths:
             raise UserError("sessions: expected at least one selected session or a loaded table, "
                             "found none")
-        return self._sessions_table(paths), [str(p) for p in paths]
+        return training_table(paths, self.table_path, self.blendshapes, self.settings.rater_policy)
 
     def _sessions_table(self, paths: Sequence[Path]) -> pd.DataFrame:
         return sessions_table(paths, self.blendshapes, self.settings.rater_policy)
@@ -614,7 +411,7 @@ class TrainSession:
             raise UserError("export: expected a trained model, found none (train first)")
         out = refuse_overwrite(out_dir, overwrite=overwrite, what="model folder")
         outcome = self.outcome
-        self._start("export", lambda: export_outcome(outcome, out, overwrite=overwrite))
+        self._start("export", lambda: export_outcome(outcome, out, force=overwrite).model_dir)
 
     def compare(self, bundle_a: str | os.PathLike, bundle_b: str | os.PathLike,
                 session: str | None = None) -> None:

@@ -33,6 +33,8 @@ from effortface.train.face_fit import MIN_ROWS_PER_PARTICIPANT
 #: replay speed and capture length: 12 s of capture at 25x = 5 minutes of the recording
 REPLAY_SPEED = 25.0
 CAPTURE_S = 12.0
+#: significant digits of the demo's synth.csv
+SYNTH_DIGITS = 5
 #: a file written into every demo output folder: only such a folder (or an empty one) is replaced by --force
 MARKER = ".effortface-demo"
 
@@ -167,6 +169,7 @@ def decode_step(captured: Path, out: Path) -> tuple[int, int]:
 def synth_step(model_dir: Path, lab: Path, out: Path) -> Path:
     """Face curves for a motion clip of the lab (or a session's work.csv) with the trained bundle."""
     from effortface.capture_tool.session import list_sessions, read_session
+    from effortface.train.curves_io import write_curves
     from effortface.train.runtime import Character, load_model
 
     model = load_model(model_dir)
@@ -180,20 +183,15 @@ def synth_step(model_dir: Path, lab: Path, out: Path) -> Path:
     else:
         work = pd.read_csv(sessions[0] / "work.csv")
         curves = model.curves_from_work(work["t_s"], work["w_per_kg"], work["p_per_kg"], 1.0, character)
-    target = out / "synth.csv"
-    pd.DataFrame(curves).to_csv(target, index=False, float_format="%.5g")
-    return target
+    return write_curves(out / "synth.csv", curves, model, digits=SYNTH_DIGITS)
 
 
 def run(args: argparse.Namespace) -> int:
     """Entry point of ``effortface demo``."""
     from effortface.capture_tool.session import list_sessions
-    from effortface.train.commands.evaluate import evaluate_bundle
-    from effortface.train.commands.train import run_training
-    from effortface.train.dataset import sessions_table
-    from effortface.train.face_fit import FaceFitConfig
     from effortface.core.blendshapes import DEFAULT_SET
-    from effortface.train.report import _md
+    from effortface.train.evaluation import evaluate_bundle, write_evaluation
+    from effortface.train.pipeline import TrainSettings, run_training, training_table
 
     _check_options(args)
     lab = Path(args.lab)
@@ -208,15 +206,13 @@ def run(args: argparse.Namespace) -> int:
     captured = capture_step(sessions[0], out, args.capture_seconds)
     decoded, recorded = decode_step(captured, out)
     _say("decode", f"{captured.name}: {recorded} samples recorded live, {decoded} decoded from the raw bytes")
-    table = sessions_table([lab], DEFAULT_SET)
+    table, sources = training_table([lab], None, DEFAULT_SET)
     _say("train", f"{table['participant'].nunique()} participants, {table['session'].nunique()} sessions, "
                   f"{len(table)} participant-seconds")
     result = run_training(table, DEFAULT_SET, out / "model",
-                          config=FaceFitConfig(max_rows_per_participant=args.max_rows),
-                          sources=[str(lab)], rater_policy="mean")
+                          settings=TrainSettings(max_rows_per_participant=args.max_rows), sources=sources)
     ev = evaluate_bundle(out / "model", table, str(lab))
-    (out / "evaluation.md").write_text(f"# Evaluation of {out / 'model'} on {lab}\n\n{_md(ev.hr)}\n\n"
-                                       f"{_md(ev.face)}\n", encoding="utf-8")
+    write_evaluation(ev, out / "evaluation.md", out / "model", str(lab))
     _say("evaluate", f"heart rate r {ev.hr['r'].mean():.2f}; face r {ev.face['r'].mean():.2f} "
                      f"({out / 'evaluation.md'})")
     _say("synth", f"face curves: {synth_step(out / 'model', lab, out)}")

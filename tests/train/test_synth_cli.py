@@ -14,7 +14,7 @@ import pytest
 from effortface.cli import main
 from tests.train.test_bundle import make_bundle
 from effortface.train.bundle import write_bundle
-from effortface.train.commands.synth import LIVELINK_BLENDSHAPES, livelink_timecode
+from effortface.train.curves_io import LIVELINK_BLENDSHAPES, livelink_timecode
 
 ROOT = Path(__file__).resolve().parents[2]
 JJ = "motion/cmu_13_29_jumping_jacks_120fps.bvh"

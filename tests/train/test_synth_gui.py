@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from PySide6 import QtCore
 
-from effortface.train.commands.synth import LIVELINK_BLENDSHAPES
+from effortface.train.curves_io import LIVELINK_BLENDSHAPES
 from effortface.train.gui.synth_stage import QtSynthStage
 from effortface.train.runtime import load_model
 from effortface.train.synth_session import SynthSession

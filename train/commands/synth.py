@@ -1,48 +1,20 @@
 """``effortface synth``: a motion clip + a character -> per-frame face curves (CSV or Live Link Face).
 
-``MODEL_DIR`` is a model bundle folder or ``default`` (the built-in rule model). The CSV has the
-columns ``t_s,w_per_kg,p_per_kg,nhr,hr_bpm,vo2,resp_rate,epoc`` and one per blendshape;
-``--format livelink`` writes the Live Link Face CSV that Unreal's importer reads (``Timecode``,
-``BlendShapeCount``, the 52 ARKit blendshapes in the app's column order, then the nine head and eye
-rotations), with our blendshapes written under their ARKit names and every other column 0.
-An existing ``--out`` is never replaced without ``--force``.
+``MODEL_DIR`` is a model bundle folder or ``default`` (the built-in rule model). The file formats
+(the per-frame CSV, ``--format livelink`` for the Live Link Face CSV) are
+:mod:`effortface.train.curves_io`'s. An existing ``--out`` is never replaced without ``--force``.
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
-import io
 import math
-from collections.abc import Mapping, Sequence
 from pathlib import Path
 
-import numpy as np
-
-from effortface.core.blendshapes import BlendshapeSet
 from effortface.core.errors import UserError
-from effortface.core.fileio import atomic_write_text
+from effortface.train.curves_io import CURVE_FORMATS, check_output, write_curves
 from effortface.train.motion import read_motion
 from effortface.train.runtime import Character, FaceModel, load_model
-
-#: Live Link Face CSV columns after Timecode and BlendShapeCount: the 52 ARKit blendshapes in the
-#: app's order, then head and eye rotations (BlendShapeCount = 61 counts all of them).
-LIVELINK_BLENDSHAPES = (
-    "EyeBlinkLeft", "EyeLookDownLeft", "EyeLookInLeft", "EyeLookOutLeft", "EyeLookUpLeft",
-    "EyeSquintLeft", "EyeWideLeft", "EyeBlinkRight", "EyeLookDownRight", "EyeLookInRight",
-    "EyeLookOutRight", "EyeLookUpRight", "EyeSquintRight", "EyeWideRight", "JawForward", "JawRight",
-    "JawLeft", "JawOpen", "MouthClose", "MouthFunnel", "MouthPucker", "MouthRight", "MouthLeft",
-    "MouthSmileLeft", "MouthSmileRight", "MouthFrownLeft", "MouthFrownRight", "MouthDimpleLeft",
-    "MouthDimpleRight", "MouthStretchLeft", "MouthStretchRight", "MouthRollLower", "MouthRollUpper",
-    "MouthShrugLower", "MouthShrugUpper", "MouthPressLeft", "MouthPressRight", "MouthLowerDownLeft",
-    "MouthLowerDownRight", "MouthUpperUpLeft", "MouthUpperUpRight", "BrowDownLeft", "BrowDownRight",
-    "BrowInnerUp", "BrowOuterUpLeft", "BrowOuterUpRight", "CheekPuff", "CheekSquintLeft",
-    "CheekSquintRight", "NoseSneerLeft", "NoseSneerRight", "TongueOut",
-)
-LIVELINK_ROTATIONS = ("HeadYaw", "HeadPitch", "HeadRoll", "LeftEyeYaw", "LeftEyePitch",
-                      "LeftEyeRoll", "RightEyeYaw", "RightEyePitch", "RightEyeRoll")
-#: Live Link Face timecode rate (frames per second of the HH:MM:SS:FF.fff stamp; the app's default).
-LIVELINK_TIMECODE_FPS = 60
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -50,7 +22,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("model_dir", metavar="MODEL_DIR", help="model bundle folder, or 'default'")
     parser.add_argument("motion", metavar="MOTION", help="motion clip (.bvh or .npz)")
     parser.add_argument("--out", required=True, metavar="CSV", help="output CSV file")
-    parser.add_argument("--format", choices=("csv", "livelink"), default="csv",
+    parser.add_argument("--format", choices=CURVE_FORMATS, default="csv",
                         help="per-frame curves (default) or a Live Link Face CSV")
     parser.add_argument("--force", action="store_true", help="replace an existing --out file")
     parser.add_argument("--age", type=float, default=30.0, help="years (default 30)")
@@ -94,92 +66,6 @@ def _character(args: argparse.Namespace, model: FaceModel) -> Character:
     return character
 
 
-def curves_csv(curves: Mapping[str, np.ndarray], columns: Sequence[str]) -> str:
-    """The per-frame CSV text (header + one row per frame)."""
-    buf = io.StringIO()
-    writer = csv.writer(buf, lineterminator="\n")
-    writer.writerow(columns)
-    table = np.column_stack([curves[c] for c in columns])
-    writer.writerows([[f"{v:.10g}" for v in row] for row in table])
-    return buf.getvalue()
-
-
-def livelink_timecode(t_s: float, fps: int = LIVELINK_TIMECODE_FPS) -> str:
-    """``HH:MM:SS:FF.fff``: FF is the frame within the second at ``fps``, .fff the sub-frame."""
-    frames = t_s * fps
-    whole = int(np.floor(frames + 1e-9))
-    sub = max(frames - whole, 0.0)
-    seconds, ff = divmod(whole, fps)
-    minutes, ss = divmod(seconds, 60)
-    hh, mm = divmod(minutes, 60)
-    return f"{hh:02d}:{mm:02d}:{ss:02d}:{ff:02d}.{int(round(sub * 1000)) % 1000:03d}"
-
-
-def livelink_csv(curves: Mapping[str, np.ndarray], blendshapes: BlendshapeSet) -> str:
-    """A Live Link Face CSV: our blendshapes under their ARKit names, every other column 0."""
-    n = len(curves["t_s"])
-    values = {name: np.zeros(n) for name in LIVELINK_BLENDSHAPES + LIVELINK_ROTATIONS}
-    for shape in blendshapes.shapes:
-        for arkit in shape.arkit:
-            column = arkit[:1].upper() + arkit[1:]
-            if column not in values:
-                raise UserError(f"blendshape {shape.name}: expected ARKit names, found {arkit!r}")
-            values[column] = curves[shape.name]
-    header = ["Timecode", "BlendShapeCount", *LIVELINK_BLENDSHAPES, *LIVELINK_ROTATIONS]
-    buf = io.StringIO()
-    writer = csv.writer(buf, lineterminator="\n")
-    writer.writerow(header)
-    count = len(LIVELINK_BLENDSHAPES) + len(LIVELINK_ROTATIONS)
-    table = np.column_stack([values[c] for c in header[2:]])
-    for t, row in zip(curves["t_s"], table):
-        writer.writerow([livelink_timecode(float(t)), count, *(f"{v:.6f}" for v in row)])
-    return buf.getvalue()
-
-
-def check_output(path: Path, force: bool) -> None:
-    """Raise a UserError naming ``--out`` unless ``path`` can be (re)written as a file.
-
-    Parameters
-    ----------
-    path : Path
-        The ``--out`` file.
-    force : bool
-        Whether an existing file may be replaced.
-    """
-    if path.is_dir():
-        raise UserError(f"--out {path}: expected a file path, found a folder")
-    if path.exists() and not force:
-        raise UserError(f"--out {path}: expected a new file, found an existing one "
-                        "(use --force to replace it)")
-    if not path.parent.is_dir():
-        raise UserError(f"--out {path}: expected an existing folder, found no {path.parent}")
-
-
-def write_output(path: Path, text: str, force: bool) -> None:
-    """Write an output file atomically; refuse an existing file unless ``force`` (UserError).
-
-    Parameters
-    ----------
-    path : Path
-        The ``--out`` file.
-    text : str
-        The file's content.
-    force : bool
-        Whether an existing file may be replaced.
-
-    Raises
-    ------
-    UserError
-        A folder, an existing file without ``force``, a missing folder or a failed write (one
-        line naming ``--out``).
-    """
-    check_output(path, force)
-    try:
-        atomic_write_text(path, text)
-    except OSError as exc:
-        raise UserError(f"--out {path}: expected a writable file, found {exc.strerror or exc}") from None
-
-
 def run(args: argparse.Namespace) -> int:
     """Synthesize and write the curves; return 0."""
     out = Path(args.out)
@@ -190,7 +76,5 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--unit-m: expected a length in metres above 0, found {args.unit_m:g}")
     motion = read_motion(args.motion, unit_m=args.unit_m)
     curves = model.synthesize(motion, character, mapping=args.mapping)
-    text = (livelink_csv(curves, model.blendshapes) if args.format == "livelink"
-            else curves_csv(curves, model.columns))
-    write_output(out, text, args.force)
+    write_curves(out, curves, model, fmt=args.format, force=args.force)
     return 0

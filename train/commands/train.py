@@ -10,21 +10,12 @@ paper's Fig. 3 protocols; export the bundle (``model.json``, ``svr.npz``, ``face
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
-from collections.abc import Sequence
-from pathlib import Path
-from typing import Any
 
-import pandas as pd
-
-from effortface.core.blendshapes import BlendshapeSet, load_blendshape_set
+from effortface.core.blendshapes import load_blendshape_set
 from effortface.core.errors import UserError
-from effortface.train.dataset import blendshape_columns, read_table, sessions_table
-from effortface.train.face_fit import (GRIDS, MIN_ROWS_PER_PARTICIPANT, FaceFitConfig, fit_face_models,
-                            held_out_scores, protocol_scores)
-from effortface.train.hr_fit import evaluate_hr_models
-
+from effortface.train.face_fit import GRIDS, MIN_ROWS_PER_PARTICIPANT, FaceFitConfig
+from effortface.train.pipeline import TrainSettings, run_training, training_table
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -60,106 +51,18 @@ def check_inputs(args: argparse.Namespace) -> None:
     check_model_target(args.out, force=args.force, inputs=args.inputs or [args.table])
 
 
-def load_table(args: argparse.Namespace, blendshapes: BlendshapeSet) -> tuple[pd.DataFrame, list[str]]:
-    """The long table from ``--table`` or from the sessions, and its source names."""
-    if args.table:
-        return read_table(args.table, blendshapes), [str(args.table)]
-    return sessions_table(args.inputs, blendshapes, args.rater_policy), [str(p) for p in args.inputs]
-
-
-@dataclasses.dataclass
-class TrainingResult:
-    """What a training run produced (paths and the headline numbers)."""
-
-    model_dir: Path
-    report: Path
-    metrics: dict[str, Any]
-
-
-def run_training(table: pd.DataFrame, blendshapes: BlendshapeSet, out: str | Path, *,
-                 config: FaceFitConfig | None = None, force: bool = False,
-                 sources: Sequence[str] = (), rater_policy: str = "mean",
-                 progress: bool = True) -> TrainingResult:
-    """Fit, evaluate, export and report (the body of ``effortface train``).
-
-    Parameters
-    ----------
-    table : DataFrame
-        Long training table (from sessions or ``read_table``).
-    blendshapes : BlendshapeSet
-        The blendshape set (the table's columns).
-    out : path-like
-        Model folder to write.
-    config : FaceFitConfig, optional
-        Face-fit settings.
-    force : bool
-        Replace an existing model folder.
-    sources, rater_policy
-        Provenance for the model card.
-    progress : bool
-        Show tqdm bars on stderr.
-
-    Returns
-    -------
-    TrainingResult
-    """
-    from tqdm import tqdm
-
-    from effortface.train.pipeline import check_training_data, export_training
-
-    config = config or FaceFitConfig()
-    prepared, series = check_training_data(table, blendshapes, ", ".join(sources) or "table", config)
-    steps = tqdm(total=5, desc="train", unit="step", file=sys.stderr, disable=not progress)
-
-    def step(label: str) -> None:
-        """Close the current step and name the next."""
-        steps.set_postfix_str(label)
-        steps.update()
-
-    steps.set_postfix_str("heart-rate models")
-    hr_eval = evaluate_hr_models(series)
-    step("face SVR grid search")
-    face = _fit_face(prepared, blendshapes, config, progress)
-    step("evaluation")
-    held = held_out_scores(face)
-    protos, proto_preds = protocol_scores(face)
-    step("export and parity checks")
-    model_dir, report, bundle = export_training(
-        prepared=prepared, series=series, hr_eval=hr_eval, face=face, held_out=held,
-        protocols=protos, protocol_predictions=proto_preds, blendshapes=blendshapes,
-        sources=sources, rater_policy=rater_policy, config=config, out=out, force=force,
-        on_report=lambda: step("report"))
-    step("done")
-    steps.close()
-    return TrainingResult(model_dir, report, bundle.metrics)
-
-
-def _fit_face(prepared: pd.DataFrame, blendshapes: BlendshapeSet, config: FaceFitConfig,
-              progress: bool) -> Any:
-    """The face fit with a progress bar over its CV folds."""
-    from tqdm import tqdm
-
-    n = prepared["participant"].nunique()
-    n_folds = min(n, config.max_folds) if config.cv == "lopo" else config.n_splits
-    with tqdm(total=n_folds, desc="face CV folds", unit="fold", file=sys.stderr, leave=False,
-              disable=not progress) as bar:
-        return fit_face_models(prepared, blendshapes.names, config, progress=bar.update)
-
-
 def run(args: argparse.Namespace) -> int:
     """Entry point of ``effortface train``."""
     check_inputs(args)
+    settings = TrainSettings(rater_policy=args.rater_policy, grid=args.grid, cv=args.cv,
+                             max_rows_per_participant=args.max_rows)
     blendshapes = load_blendshape_set(args.blendshapes)
-    table, sources = load_table(args, blendshapes)
-    missing = [c for c in blendshapes.names if c not in blendshape_columns(table, blendshapes)]
-    if missing:
-        raise UserError(f"blendshapes: expected columns {missing} in the training data, found none")
-    config = FaceFitConfig(grid=dict(GRIDS[args.grid]), cv=args.cv, max_rows_per_participant=args.max_rows)
+    table, sources = training_table(args.inputs, args.table, blendshapes, args.rater_policy)
     if args.cv == "kfold":
         print("effortface train: warning: --cv kfold puts neighbouring, autocorrelated seconds of the "
               "same participant in training and test folds: its scores are inflated", file=sys.stderr)
-    result = run_training(table, blendshapes, args.out, config=config, force=args.force,
-                          sources=sources, rater_policy=args.rater_policy)
+    result = run_training(table, blendshapes, args.out, settings=settings, force=args.force,
+                          sources=sources)
     hr = result.metrics["hr"]
     print(f"model: {result.model_dir}")
     print("heart rate (pooled and TL models on held-out participants): " + "; ".join(

@@ -1,0 +1,191 @@
+"""The synthesized curves as files: the per-frame CSV and the Live Link Face CSV.
+
+One writer for ``effortface synth``, the Synthesize stage's export and ``effortface demo``.
+The CSV has the columns ``t_s,w_per_kg,p_per_kg,nhr,hr_bpm,vo2,resp_rate,epoc`` and one per
+blendshape (:attr:`effortface.train.runtime.FaceModel.columns`); the Live Link Face CSV is the one
+Unreal's importer reads (``Timecode``, ``BlendShapeCount``, the 52 ARKit blendshapes in the app's
+column order, then the nine head and eye rotations), with our blendshapes written under their ARKit
+names and every other column 0. An existing file is never replaced without ``force``.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from effortface.core.blendshapes import BlendshapeSet
+from effortface.core.errors import UserError
+from effortface.core.fileio import atomic_write_text
+from effortface.train.runtime import FaceModel
+
+#: the file formats of :func:`write_curves`
+CURVE_FORMATS = ("csv", "livelink")
+#: significant digits of the per-frame CSV's values
+CSV_DIGITS = 10
+
+#: Live Link Face CSV columns after Timecode and BlendShapeCount: the 52 ARKit blendshapes in the
+#: app's order, then head and eye rotations (BlendShapeCount = 61 counts all of them).
+LIVELINK_BLENDSHAPES = (
+    "EyeBlinkLeft", "EyeLookDownLeft", "EyeLookInLeft", "EyeLookOutLeft", "EyeLookUpLeft",
+    "EyeSquintLeft", "EyeWideLeft", "EyeBlinkRight", "EyeLookDownRight", "EyeLookInRight",
+    "EyeLookOutRight", "EyeLookUpRight", "EyeSquintRight", "EyeWideRight", "JawForward", "JawRight",
+    "JawLeft", "JawOpen", "MouthClose", "MouthFunnel", "MouthPucker", "MouthRight", "MouthLeft",
+    "MouthSmileLeft", "MouthSmileRight", "MouthFrownLeft", "MouthFrownRight", "MouthDimpleLeft",
+    "MouthDimpleRight", "MouthStretchLeft", "MouthStretchRight", "MouthRollLower", "MouthRollUpper",
+    "MouthShrugLower", "MouthShrugUpper", "MouthPressLeft", "MouthPressRight", "MouthLowerDownLeft",
+    "MouthLowerDownRight", "MouthUpperUpLeft", "MouthUpperUpRight", "BrowDownLeft", "BrowDownRight",
+    "BrowInnerUp", "BrowOuterUpLeft", "BrowOuterUpRight", "CheekPuff", "CheekSquintLeft",
+    "CheekSquintRight", "NoseSneerLeft", "NoseSneerRight", "TongueOut",
+)
+LIVELINK_ROTATIONS = ("HeadYaw", "HeadPitch", "HeadRoll", "LeftEyeYaw", "LeftEyePitch",
+                      "LeftEyeRoll", "RightEyeYaw", "RightEyePitch", "RightEyeRoll")
+#: Live Link Face timecode rate (frames per second of the HH:MM:SS:FF.fff stamp; the app's default).
+LIVELINK_TIMECODE_FPS = 60
+
+
+def curves_csv(curves: Mapping[str, np.ndarray], columns: Sequence[str], digits: int = CSV_DIGITS) -> str:
+    """The per-frame CSV text (header + one row per frame, values to ``digits`` significant digits)."""
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(columns)
+    table = np.column_stack([curves[c] for c in columns])
+    writer.writerows([[f"{v:.{digits}g}" for v in row] for row in table])
+    return buf.getvalue()
+
+
+def livelink_timecode(t_s: float, fps: int = LIVELINK_TIMECODE_FPS) -> str:
+    """``HH:MM:SS:FF.fff``: FF is the frame within the second at ``fps``, .fff the sub-frame."""
+    frames = t_s * fps
+    whole = int(np.floor(frames + 1e-9))
+    sub = max(frames - whole, 0.0)
+    seconds, ff = divmod(whole, fps)
+    minutes, ss = divmod(seconds, 60)
+    hh, mm = divmod(minutes, 60)
+    return f"{hh:02d}:{mm:02d}:{ss:02d}:{ff:02d}.{int(round(sub * 1000)) % 1000:03d}"
+
+
+def livelink_csv(curves: Mapping[str, np.ndarray], blendshapes: BlendshapeSet) -> str:
+    """A Live Link Face CSV: our blendshapes under their ARKit names, every other column 0."""
+    n = len(curves["t_s"])
+    values = {name: np.zeros(n) for name in LIVELINK_BLENDSHAPES + LIVELINK_ROTATIONS}
+    for shape in blendshapes.shapes:
+        for arkit in shape.arkit:
+            column = arkit[:1].upper() + arkit[1:]
+            if column not in values:
+                raise UserError(f"blendshape {shape.name}: expected ARKit names, found {arkit!r}")
+            values[column] = curves[shape.name]
+    header = ["Timecode", "BlendShapeCount", *LIVELINK_BLENDSHAPES, *LIVELINK_ROTATIONS]
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(header)
+    count = len(LIVELINK_BLENDSHAPES) + len(LIVELINK_ROTATIONS)
+    table = np.column_stack([values[c] for c in header[2:]])
+    for t, row in zip(curves["t_s"], table):
+        writer.writerow([livelink_timecode(float(t)), count, *(f"{v:.6f}" for v in row)])
+    return buf.getvalue()
+
+
+def check_output(path: Path, force: bool) -> None:
+    """Raise a UserError naming ``--out`` unless ``path`` can be (re)written as a file.
+
+    Parameters
+    ----------
+    path : Path
+        The ``--out`` file.
+    force : bool
+        Whether an existing file may be replaced.
+    """
+    if path.is_dir():
+        raise UserError(f"--out {path}: expected a file path, found a folder")
+    if path.exists() and not force:
+        raise UserError(f"--out {path}: expected a new file, found an existing one "
+                        "(use --force to replace it)")
+    if not path.parent.is_dir():
+        raise UserError(f"--out {path}: expected an existing folder, found no {path.parent}")
+
+
+def write_output(path: Path, text: str, force: bool) -> None:
+    """Write an output file atomically; refuse an existing file unless ``force`` (UserError).
+
+    Parameters
+    ----------
+    path : Path
+        The ``--out`` file.
+    text : str
+        The file's content.
+    force : bool
+        Whether an existing file may be replaced.
+
+    Raises
+    ------
+    UserError
+        A folder, an existing file without ``force``, a missing folder or a failed write (one
+        line naming ``--out``).
+    """
+    check_output(path, force)
+    try:
+        atomic_write_text(path, text)
+    except OSError as exc:
+        raise UserError(f"--out {path}: expected a writable file, found {exc.strerror or exc}") from None
+
+
+def curves_text(curves: Mapping[str, np.ndarray], model: FaceModel, fmt: str = "csv",
+                digits: int = CSV_DIGITS) -> str:
+    """The curves of ``model`` as the text of a ``fmt`` file.
+
+    Parameters
+    ----------
+    curves : mapping of str to array
+        From :meth:`FaceModel.synthesize` or :meth:`FaceModel.curves_from_work`.
+    model : FaceModel
+        The model that made them (its columns and blendshapes).
+    fmt : {"csv", "livelink"}
+        The per-frame CSV or a Live Link Face CSV.
+    digits : int
+        Significant digits of the per-frame CSV.
+
+    Returns
+    -------
+    str
+
+    Raises
+    ------
+    UserError
+        An unknown format, or a blendshape whose ARKit names Live Link does not know.
+    """
+    if fmt not in CURVE_FORMATS:
+        raise UserError(f"format: expected one of {', '.join(CURVE_FORMATS)}, found {fmt!r}")
+    if fmt == "livelink":
+        return livelink_csv(curves, model.blendshapes)
+    return curves_csv(curves, model.columns, digits)
+
+
+def write_curves(path: str | Path, curves: Mapping[str, np.ndarray], model: FaceModel, *,
+                 fmt: str = "csv", force: bool = False, digits: int = CSV_DIGITS) -> Path:
+    """Write the curves of ``model`` as a ``fmt`` file (atomically; see :func:`curves_text`).
+
+    Parameters
+    ----------
+    path : path-like
+        The file to write.
+    curves, model, fmt, digits
+        As for :func:`curves_text`.
+    force : bool
+        Replace an existing file.
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    UserError
+        As :func:`curves_text` and :func:`write_output`.
+    """
+    out = Path(path)
+    write_output(out, curves_text(curves, model, fmt, digits), force)
+    return out
