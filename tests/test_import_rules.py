@@ -6,12 +6,16 @@
 - Qt (PySide6, pyqtgraph) only in ``gui/`` folders and ``effortface/app.py``; no other module imports a
   ``gui`` module.
 - ``effortface.runtime`` and everything it imports use numpy and scipy only.
+- Command modules (``*/commands/*.py``) only parse arguments, call library functions and print:
+  nothing but ``effortface/cli.py`` imports one (not the library, the GUI, another command,
+  the benchmarks or the sample-lab script), so their work is always reachable as a library function.
 """
 
 from __future__ import annotations
 
 import ast
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -26,6 +30,8 @@ FOLDERS = {"effortface/core": "effortface.core", "capture_tool": "effortface.cap
 LAYERS = ["effortface.core", "effortface.capture_tool", "effortface.annotate", "effortface.train", "effortface"]
 QT = {"PySide6", "pyqtgraph", "shiboken6", "PyQt5", "PyQt6"}
 OLD_TOP_LEVEL = {"capture_tool", "annotate", "train"}
+#: a command module: effortface.commands.X or effortface.<stage>.commands.X (or the package itself)
+COMMAND_MODULE = re.compile(r"^effortface(\.(capture_tool|annotate|train))?\.commands(\.|$)")
 
 
 def _imports(path: Path) -> set[str]:
@@ -114,3 +120,42 @@ def test_import_linter_contracts() -> None:
     """import-linter checks the layer and runtime contracts in pyproject.toml (indirect imports too)."""
     lint = subprocess.run(["lint-imports", "--no-cache"], cwd=ROOT, capture_output=True, text=True)
     assert lint.returncode == 0, lint.stdout + lint.stderr
+
+
+def _command_modules_imported(path: Path) -> list[str]:
+    """The command modules (or packages) that ``path`` imports."""
+    return sorted(n for n in _imports(path) if COMMAND_MODULE.match(n))
+
+
+def _module_name(path: Path) -> str:
+    """The dotted module name of a source file (its layer prefix and its path below it)."""
+    rel = path.relative_to(ROOT).as_posix()
+    folder = next(f for f in FOLDERS if rel.startswith(f + "/"))
+    parts = rel[len(folder) + 1:].removesuffix(".py").split("/")
+    return ".".join([FOLDERS[folder], *parts]).removesuffix(".__init__")
+
+
+@pytest.mark.parametrize("path", _sources() + sorted((ROOT / "benchmarks").glob("*.py"))
+                         + sorted((ROOT / "sample_sessions").glob("*.py")),
+                         ids=lambda p: str(p.relative_to(ROOT)))
+def test_only_the_cli_imports_command_modules(path: Path) -> None:
+    rel = path.relative_to(ROOT)
+    if rel.as_posix() == "effortface/cli.py":
+        return
+    found = _command_modules_imported(path)
+    if "commands" in rel.parts:  # a command module may name its own package, never another command
+        own = _module_name(path)
+        found = [n for n in found if not (n == own or own.startswith(n + ".") or n.startswith(own + "."))]
+    assert not found, (f"{rel} imports the command module(s) {found}: move the code it needs into a "
+                       "library module, which the command then calls")
+
+
+def test_the_command_module_rule_catches_an_import(tmp_path: Path) -> None:
+    """The rule above sees both import forms and lets a module name its own package."""
+    lib = tmp_path / "lib.py"
+    lib.write_text("from effortface.train.commands.synth import run\n"
+                   "def f():\n    import effortface.commands.demo\n")
+    assert _command_modules_imported(lib) == ["effortface.commands.demo", "effortface.train.commands.synth",
+                                              "effortface.train.commands.synth.run"]
+    assert _module_name(ROOT / "train" / "commands" / "synth.py") == "effortface.train.commands.synth"
+    assert _module_name(ROOT / "effortface" / "commands" / "__init__.py") == "effortface.commands"

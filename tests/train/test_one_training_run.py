@@ -1,0 +1,132 @@
+"""One function per job between the command line and the GUI: the training run
+(:func:`effortface.train.pipeline.train_models`), its export and report
+(:func:`~effortface.train.pipeline.export_outcome`), the evaluation
+(:func:`effortface.train.evaluation.evaluate_bundle`) and the curve writer
+(:func:`effortface.train.curves_io.write_curves`) each exist once, and both paths call them.
+
+Each function is replaced, wherever a loaded ``effortface`` module holds it, by a spy that counts
+the call and runs the real function; the CLI commands and the GUI models (``TrainSession``,
+``SynthSession``) then run for real. ``effortface demo`` is checked the same way in
+tests/effortface/test_demo.py (:func:`spy_on_jobs`).
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from effortface.cli import main
+from effortface.train.dataset import synthetic_table, write_table
+
+#: module -> the one function of a job
+JOBS = {"train_models": "effortface.train.pipeline", "export_outcome": "effortface.train.pipeline",
+        "evaluate_bundle": "effortface.train.evaluation", "write_curves": "effortface.train.curves_io"}
+#: the callers: the command modules and the GUI models (imported before the spies go in)
+CALLERS = ("effortface.train.commands.train", "effortface.train.commands.evaluate",
+           "effortface.train.commands.synth", "effortface.commands.demo",
+           "effortface.train.train_session", "effortface.train.synth_session")
+CLIP = "motion/cmu_13_29_jumping_jacks_120fps.bvh"
+
+
+def _spy(original: Callable[..., Any], name: str, calls: dict[str, int]) -> Callable[..., Any]:
+    def spy(*args: Any, **kwargs: Any) -> Any:
+        calls[name] += 1
+        return original(*args, **kwargs)
+    return spy
+
+
+def spy_on_jobs(monkeypatch: pytest.MonkeyPatch) -> dict[str, int]:
+    """Count the calls of each job's function (the real function still runs); returns the counts.
+
+    The spy replaces the function in its own module and in every loaded ``effortface`` module that
+    imported it by name, so a caller is counted whichever import form it uses.
+    """
+    for name in CALLERS:
+        importlib.import_module(name)
+    calls = dict.fromkeys(JOBS, 0)
+    for name, owner in JOBS.items():
+        original = getattr(importlib.import_module(owner), name)
+        spy = _spy(original, name, calls)
+        for module in [m for k, m in sys.modules.items() if k.startswith("effortface") and m is not None]:
+            for attr, value in list(vars(module).items()):
+                if value is original:
+                    monkeypatch.setattr(module, attr, spy)
+    return calls
+
+
+@pytest.fixture(scope="module")
+def table_csv(tmp_path_factory) -> Path:
+    table = synthetic_table(n_participants=3, seconds=200, seed=5)
+    return write_table(table, tmp_path_factory.mktemp("lab") / "lab.csv")
+
+
+def test_cli_and_train_stage_run_the_same_training_and_export(table_csv: Path, tmp_path: Path,
+                                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    from effortface.train.train_session import TrainSession
+
+    calls = spy_on_jobs(monkeypatch)
+    cli_model = tmp_path / "cli"
+    assert main(["train", "--table", str(table_csv), "--out", str(cli_model), "--max-rows", "40"]) == 0
+    assert calls == {"train_models": 1, "export_outcome": 1, "evaluate_bundle": 0, "write_curves": 0}
+
+    session = TrainSession(tmp_path / "no-sessions")
+    session.load_table(table_csv)
+    session.set_settings(max_rows_per_participant=40)
+    session.start_training()
+    session.wait(300)
+    assert session.outcome is not None
+    gui_model = tmp_path / "gui"
+    session.export(gui_model)
+    session.wait(300)
+    assert calls == {"train_models": 2, "export_outcome": 2, "evaluate_bundle": 0, "write_curves": 0}
+
+    # same data and settings -> the same model, whichever path trained it
+    assert (cli_model / "svr.npz").read_bytes() == (gui_model / "svr.npz").read_bytes()
+    cli_doc, gui_doc = (json.loads((m / "model.json").read_text()) for m in (cli_model, gui_model))
+    assert cli_doc["metrics"] == gui_doc["metrics"]
+    assert cli_doc["provenance"]["sources"] == gui_doc["provenance"]["sources"] == [str(table_csv)]
+
+    assert main(["evaluate", str(gui_model), "--table", str(table_csv)]) == 0
+    assert calls["evaluate_bundle"] == 1
+
+
+def test_synth_cli_and_synthesize_stage_write_with_the_same_writer(shared_data: Path, tmp_path: Path,
+                                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    from effortface.train.synth_session import SynthSession
+
+    calls = spy_on_jobs(monkeypatch)
+    for fmt in ("csv", "livelink"):
+        assert main(["synth", "default", str(shared_data / CLIP), "--format", fmt,
+                     "--out", str(tmp_path / f"cli-{fmt}.csv")]) == 0
+    assert calls["write_curves"] == 2
+    session = SynthSession()
+    session.load_motion(shared_data / CLIP)
+    for fmt in ("csv", "livelink"):
+        session.export(tmp_path / f"gui-{fmt}.csv", fmt)
+    assert calls["write_curves"] == 4
+    # the default character and model on the same clip: the same files
+    cli = pd.read_csv(tmp_path / "cli-csv.csv")
+    gui = pd.read_csv(tmp_path / "gui-csv.csv")
+    assert list(cli.columns) == list(gui.columns)
+    np.testing.assert_allclose(cli.to_numpy(), gui.to_numpy(), rtol=1e-9, atol=1e-12)
+    assert (tmp_path / "cli-livelink.csv").read_text() == (tmp_path / "gui-livelink.csv").read_text()
+
+
+def test_the_fold_count_rule_is_the_face_fits() -> None:
+    """FaceFitConfig.n_folds (the progress bars' count) is the number of splits cv_folds makes."""
+    from effortface.train.face_fit import FaceFitConfig, cv_folds
+
+    for n_people, cv in ((3, "lopo"), (8, "lopo"), (11, "lopo"), (4, "kfold")):
+        config = FaceFitConfig(cv=cv)
+        data = SimpleNamespace(groups=np.repeat([f"P{i}" for i in range(n_people)], 10))  # all cv_folds reads
+        folds = cv_folds(data, config.cv, config.n_splits, config.seed, config.max_folds)  # type: ignore[arg-type]
+        assert len(folds) == config.n_folds(n_people)
