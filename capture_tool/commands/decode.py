@@ -13,14 +13,14 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from collections.abc import Iterable
 from pathlib import Path
 from typing import TextIO
 
 from effortface.capture_tool.captures import check_capture_file, read_timed_capture
 from effortface.core.errors import UserError
 from effortface.capture_tool.hr_csv import HR_CSV_HEADER, format_hr_row
-from effortface.capture_tool.protocols import PROTOCOLS, Decoder, HrSample, check_protocol, get_decoder, header_protocol
+from effortface.capture_tool.protocols import (PROTOCOLS, Decoder, check_protocol, decode_chunks, get_decoder,
+                                              header_protocol)
 from effortface.capture_tool.serlog import is_serlog, read_serlog_header
 
 
@@ -32,26 +32,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--device-type", type=int, default=None, metavar="N",
                         help="ANT only: device type that yields heart rate (default 120)")
     parser.add_argument("file", metavar="FILE", help=".serlog, .pcap or raw capture")
-
-
-def decode_chunks(decoder: Decoder, chunks: Iterable[tuple[float, bytes]]) -> list[HrSample]:
-    """Feed ``(t_s, bytes)`` chunks to ``decoder`` and finish it; return every sample.
-
-    Parameters
-    ----------
-    decoder : Decoder
-        A fresh decoder.
-    chunks : iterable of (float, bytes)
-        Arrival time and bytes of each read.
-
-    Returns
-    -------
-    list of HrSample
-    """
-    out: list[HrSample] = []
-    for t_s, data in chunks:
-        out += decoder.feed(data, t_s)
-    return out + decoder.finish()
 
 
 def summary_line(decoder: Decoder) -> str:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import dataclasses
 import importlib
 import os
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from typing import ClassVar
 
 from effortface.core.errors import SessionFormatError, UserError
@@ -142,6 +142,25 @@ class Decoder:
     def _consume(self) -> list[HrSample]:  # pragma: no cover - abstract
         raise NotImplementedError
 
+
+def decode_chunks(decoder: Decoder, chunks: Iterable[tuple[float, bytes]]) -> list[HrSample]:
+    """Feed ``(t_s, bytes)`` chunks to ``decoder`` and finish it; return every sample.
+
+    Parameters
+    ----------
+    decoder : Decoder
+        A fresh decoder.
+    chunks : iterable of (float, bytes)
+        Arrival time and bytes of each read.
+
+    Returns
+    -------
+    list of HrSample
+    """
+    out: list[HrSample] = []
+    for t_s, data in chunks:
+        out += decoder.feed(data, t_s)
+    return out + decoder.finish()
 
 def check_protocol(protocol: str) -> str:
     """``protocol`` if it is one of :data:`PROTOCOLS`, else a UserError naming ``--protocol``."""

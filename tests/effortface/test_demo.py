@@ -59,19 +59,17 @@ def test_demo_needs_sessions(tmp_path, capsys):
 
 
 def test_default_out_is_a_fresh_timestamped_folder(tmp_path, monkeypatch):
-    import argparse
-
-    from effortface.commands.demo import MARKER, _out_dir, _replace_out
+    from effortface.demo import MARKER, demo_out_dir, replace_out
 
     monkeypatch.chdir(tmp_path)
-    out = _out_dir(argparse.Namespace(out=None, force=False))
+    out = demo_out_dir(None)
     assert out.name.startswith("effortface-demo-") and not out.exists()
     forced = tmp_path / "old"
     (forced / "x").mkdir(parents=True)
     (forced / MARKER).write_text("")  # a previous demo output
-    assert _out_dir(argparse.Namespace(out=str(forced), force=True)) == forced
+    assert demo_out_dir(str(forced), force=True) == forced
     assert (forced / "x").is_dir()  # nothing removed until every option is checked
-    _replace_out(forced)
+    replace_out(forced)
     assert [p.name for p in forced.iterdir()] == [MARKER]
 
 
@@ -134,7 +132,7 @@ def test_force_refuses_a_file(lab, tmp_path, capsys):
 
 def test_force_never_replaces_the_lab_or_the_current_directory(tmp_path, monkeypatch, capsys):
     from effortface.capture_tool.session import Participant, SessionInfo, create_session
-    from effortface.commands.demo import MARKER
+    from effortface.demo import MARKER
 
     fake_lab = tmp_path / "lab"
     create_session(fake_lab, SessionInfo("P01_20260101-100000_cardio", Participant("P01"), complete=True))

@@ -1,0 +1,175 @@
+"""The steps of ``effortface demo`` (the command, :mod:`effortface.commands.demo`, parses and prints).
+
+1. **capture** (:func:`capture_step`): one sample session's strap recording (``serial/*.serlog``) is
+   replayed through a pseudo-terminal by ``effortface replay`` and recorded by ``effortface capture``
+   (two real processes, real serial I/O), into ``DIR/captured/``;
+2. **decode** (:func:`decode_step`): ``effortface decode`` turns the captured raw bytes back into a
+   heart-rate CSV;
+3. **train**: :func:`effortface.train.pipeline.run_training`, the one training run;
+4. **evaluate**: :func:`effortface.train.evaluation.evaluate_bundle`, the one evaluation;
+5. **synthesize** (:func:`synth_step`): a clip's face curves with the trained bundle, written by
+   :func:`effortface.train.curves_io.write_curves`.
+
+The output folder's rules are :func:`demo_out_dir`'s and :func:`replace_out`'s.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pandas as pd
+
+from effortface import SAMPLE_LAB
+from effortface.core.errors import UserError
+
+#: replay speed and capture length: 12 s of capture at 25x = 5 minutes of the recording
+REPLAY_SPEED = 25.0
+CAPTURE_S = 12.0
+#: significant digits of the demo's synth.csv
+SYNTH_DIGITS = 5
+#: a file written into every demo output folder: only such a folder (or an empty one) is replaced by --force
+MARKER = ".effortface-demo"
+
+
+def _contains(folder: Path, other: Path) -> bool:
+    """Whether ``other`` is ``folder`` or inside it (both resolved)."""
+    folder, other = folder.resolve(), other.resolve()
+    return other == folder or folder in other.parents
+
+
+def demo_out_dir(out_arg: str | None, force: bool = False, lab: str | Path | None = None) -> Path:
+    """The output folder: a fresh timestamped one, or ``--out`` (refused if it exists without ``force``).
+
+    ``force`` replaces only a previous demo output (a folder holding :data:`MARKER`) or an empty
+    folder; never a file, another folder, the lab or the current directory. Nothing is removed here:
+    :func:`replace_out` does it, once every option has been checked.
+
+    Parameters
+    ----------
+    out_arg : str or None
+        The ``--out`` option (None: a new ``effortface-demo-<time>`` folder in the current directory).
+    force : bool
+        The ``--force`` option.
+    lab : path-like, optional
+        The ``--lab`` folder (default: the sample lab), which is never replaced.
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    UserError
+        Naming ``--out`` and why it is not replaced.
+    """
+    if out_arg is None:
+        return Path(f"effortface-demo-{_dt.datetime.now():%Y%m%d-%H%M%S}")
+    out = Path(out_arg)
+    if not out.exists() and not out.is_symlink():
+        return out
+    if not force:
+        raise UserError(f"--out {out}: expected a new folder, found an existing one (pass --force)")
+    if out.is_symlink() or not out.is_dir():
+        raise UserError(f"--out {out}: expected a folder made by effortface demo, found "
+                        f"{'a symbolic link' if out.is_symlink() else 'a file'} (not replaced)")
+    for name, protected in (("the current directory", Path.cwd()), ("the --lab folder", Path(lab or SAMPLE_LAB)),
+                            ("the sample lab", SAMPLE_LAB)):
+        if protected.exists() and _contains(out, protected):
+            raise UserError(f"--out {out}: expected a folder made by effortface demo, found {name} "
+                            "or a folder holding it (not replaced)")
+    if not (out / MARKER).is_file() and any(out.iterdir()):
+        raise UserError(f"--out {out}: expected a folder made by effortface demo (with {MARKER}) or an "
+                        "empty folder, found other files (not replaced)")
+    return out
+
+
+def replace_out(out: Path) -> None:
+    """Remove a previous demo output that :func:`demo_out_dir` accepted, then make ``out`` afresh with its marker."""
+    if out.is_dir():
+        shutil.rmtree(out)
+    out.mkdir(parents=True)
+    (out / MARKER).write_text("made by 'effortface demo'; 'effortface demo --force' may replace this folder\n",
+                              encoding="utf-8")
+
+
+def _cli(*args: str) -> list[str]:
+    return [sys.executable, "-m", "effortface", *args]
+
+
+def capture_step(session: Path, out: Path, seconds: float) -> Path:
+    """Replay the session's strap log through a pseudo-terminal into ``effortface capture``."""
+    from effortface.capture_tool.session import read_session
+
+    s = read_session(session)
+    logs = s.serlog_paths()
+    if not logs:
+        raise UserError(f"{session / 'serial'}: expected a .serlog strap recording, found none")
+    protocol = str(s.devices.get("heart_rate", {}).get("protocol", logs[0].stem))
+    with subprocess.Popen(_cli("replay", str(logs[0]), "--speed", str(REPLAY_SPEED)),
+                          stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True) as replay:
+        try:
+            port = replay.stdout.readline().strip() if replay.stdout else ""
+            if not port:
+                raise UserError(f"{logs[0]}: expected 'effortface replay' to print a port, found nothing")
+            cmd = _cli("capture", "--port", port, "--protocol", protocol, "--no-video",
+                       *_participant_options(s.participant), "--label", "demo",
+                       "--duration", str(seconds), "--out", str(out / "captured"))
+            done = subprocess.run(cmd, capture_output=True, text=True, timeout=seconds + 60)
+        finally:
+            replay.terminate()  # our own child: the replay would otherwise play to the end
+    if done.returncode != 0:
+        raise UserError(f"effortface capture on {port}: expected exit 0, found {done.returncode}: "
+                        f"{done.stderr.strip().splitlines()[-1] if done.stderr.strip() else ''}")
+    return Path(done.stdout.strip().splitlines()[0])
+
+
+def _participant_options(p: object) -> list[str]:
+    """``--participant CODE --age ...`` for the recorded fields of a participant."""
+    opts = ["--participant", p.code]  # type: ignore[attr-defined]
+    for flag, name in (("--age", "age"), ("--sex", "sex"), ("--height", "height_m"),
+                       ("--mass", "mass_kg"), ("--training-level", "training_level")):
+        if getattr(p, name) is not None:
+            opts += [flag, str(getattr(p, name))]
+    return opts
+
+
+def decode_step(captured: Path, out: Path) -> tuple[int, int]:
+    """Decode the captured raw bytes with ``effortface decode``; (decoded rows, recorded rows)."""
+    from effortface.capture_tool.session import read_session
+
+    s = read_session(captured)
+    log = s.serlog_paths()[0]
+    protocol = str(s.devices.get("heart_rate", {}).get("protocol", log.stem))
+    target = out / "decoded_heart_rate.csv"
+    with open(target, "w", encoding="utf-8") as fh:
+        done = subprocess.run(_cli("decode", "--protocol", protocol, str(log)), stdout=fh,
+                              stderr=subprocess.PIPE, text=True, timeout=120)
+    if done.returncode != 0:
+        raise UserError(f"effortface decode {log}: expected exit 0, found {done.returncode}: "
+                        f"{done.stderr.strip()}")
+    decoded = len(pd.read_csv(target))
+    return decoded, len(s.heart_rate)
+
+
+def synth_step(model_dir: Path, lab: Path, out: Path) -> Path:
+    """Face curves for a motion clip of the lab (or a session's work.csv) with the trained bundle."""
+    from effortface.capture_tool.session import list_sessions, read_session
+    from effortface.train.curves_io import write_curves
+    from effortface.train.runtime import Character, load_model
+
+    model = load_model(model_dir)
+    sessions = list_sessions(lab)
+    clips = [c for s in sessions for c in sorted((s / "motion").glob("*")) if c.suffix in (".bvh", ".npz")]
+    p = read_session(sessions[0]).participant
+    character = Character(age=p.age, sex=p.sex, height_m=p.height_m, mass_kg=p.mass_kg,
+                          training_level=p.training_level)
+    if clips:
+        curves = model.synthesize(clips[0], character)
+    else:
+        work = pd.read_csv(sessions[0] / "work.csv")
+        curves = model.curves_from_work(work["t_s"], work["w_per_kg"], work["p_per_kg"], 1.0, character)
+    return write_curves(out / "synth.csv", curves, model, digits=SYNTH_DIGITS)
