@@ -101,7 +101,27 @@ def _cli(*args: str) -> list[str]:
 
 
 def capture_step(session: Path, out: Path, seconds: float) -> Path:
-    """Replay the session's strap log through a pseudo-terminal into ``effortface capture``."""
+    """Replay the session's strap log through a pseudo-terminal into ``effortface capture``.
+
+    Parameters
+    ----------
+    session : Path
+        A session folder with a ``serial/*.serlog`` recording.
+    out : Path
+        The demo folder: the new session goes into ``out/captured``.
+    seconds : float
+        Length of the live capture (the replay runs at :data:`REPLAY_SPEED`).
+
+    Returns
+    -------
+    Path
+        The captured session folder.
+
+    Raises
+    ------
+    UserError
+        No recording, or the replay or the capture failed (with its last error line).
+    """
     from effortface.capture_tool.session import read_session
 
     s = read_session(session)
@@ -138,7 +158,20 @@ def _participant_options(p: object) -> list[str]:
 
 
 def decode_step(captured: Path, out: Path) -> tuple[int, int]:
-    """Decode the captured raw bytes with ``effortface decode``; (decoded rows, recorded rows)."""
+    """Decode the captured raw bytes with ``effortface decode`` into ``out/decoded_heart_rate.csv``.
+
+    Parameters
+    ----------
+    captured : Path
+        The session folder :func:`capture_step` made.
+    out : Path
+        The demo folder.
+
+    Returns
+    -------
+    decoded, recorded : int
+        Heart-rate rows decoded from the raw bytes, and rows the capture recorded live.
+    """
     from effortface.capture_tool.session import read_session
 
     s = read_session(captured)
@@ -156,7 +189,22 @@ def decode_step(captured: Path, out: Path) -> tuple[int, int]:
 
 
 def synth_step(model_dir: Path, lab: Path, out: Path) -> Path:
-    """Face curves for a motion clip of the lab (or a session's work.csv) with the trained bundle."""
+    """Face curves for a motion clip of the lab (or a session's work.csv) with the trained bundle.
+
+    Parameters
+    ----------
+    model_dir : Path
+        The trained bundle.
+    lab : Path
+        The lab: its first clip, else its first session's ``work.csv``; its first participant.
+    out : Path
+        The demo folder: the curves go to ``out/synth.csv`` (:data:`SYNTH_DIGITS` digits).
+
+    Returns
+    -------
+    Path
+        The CSV written.
+    """
     from effortface.capture_tool.session import list_sessions, read_session
     from effortface.train.curves_io import write_curves
     from effortface.train.runtime import Character, load_model
