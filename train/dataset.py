@@ -37,8 +37,8 @@ from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
 from effortface.annotate.keyframes import read_annotations
 from effortface.core.errors import UserError
 from effortface.core.fileio import refuse_overwrite
-from effortface.capture_tool.session import PARTICIPANT_RANGES, SEX_ALIASES  # the limits capture enforces
-from effortface.capture_tool.session import SEXES, Session, list_sessions, parse_session_id, read_session
+from effortface.core.participant import LIMITS, SEX_ALIASES, SEXES  # the one limits table
+from effortface.capture_tool.session import Session, list_sessions, parse_session_id, read_session
 from effortface.train.hr_fit import HrSeries
 from effortface.train.physiology import (EpocParams, hr_max_bpm, hr_rest_bpm, epoc_step,
                               vo2max_ml_per_kg_min, VO2_REST_ML_PER_KG_MIN)
@@ -197,8 +197,9 @@ def check_participants(table: pd.DataFrame, source: str) -> None:
     """DatasetError if a participant's sex/age/height/mass/TL is missing, implausible, or differs
     between rows.
 
-    The ranges are capture's (``effortface.capture_tool.session``): age 5-120 years, height 0.5-2.5 m, mass
-    15-300 kg, TL 0-10, measured HR_rest 25-120 and HR_max 100-240 bpm; sex female or male.
+    The ranges are :data:`effortface.core.participant.LIMITS`, the ones every stage uses: age
+    10-100 years, height 0.5-2.6 m, mass 15-300 kg, TL 0-10, measured HR_rest 25-120 and HR_max
+    100-240 bpm; sex female or male.
 
     Raises
     ------
@@ -226,16 +227,15 @@ def check_participants(table: pd.DataFrame, source: str) -> None:
 
 
 def _check_participant_value(source: str, code: str, col: str, value: object) -> None:
-    """DatasetError unless ``value`` is a valid sex or lies in capture's range for ``col``."""
+    """DatasetError unless ``value`` is a valid sex or lies within :data:`LIMITS` ``[col]``."""
     if col == "sex":
         if value not in SEXES:
             raise DatasetError(f"{source}: participant {code}: column sex: expected one of "
                                f"{', '.join(SEXES)}, found {value!r}")
         return
-    lo, hi = PARTICIPANT_RANGES[col]
-    if not lo <= float(value) <= hi:  # type: ignore[arg-type]
-        raise DatasetError(f"{source}: participant {code}: column {col}: expected a number from "
-                           f"{lo} to {hi}, found {value:g}")
+    if not LIMITS[col].accepts(value):
+        raise DatasetError(f"{source}: participant {code}: column {col}: expected "
+                           f"{LIMITS[col].expected()}, found {value:g}")
 
 
 def _session_label(session_id: str) -> str:
