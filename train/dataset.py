@@ -29,6 +29,7 @@ import math
 import os
 from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -365,6 +366,9 @@ def _work_from_motion(s: Session, t: np.ndarray) -> tuple[np.ndarray, np.ndarray
         raise DatasetError(f"{index}: expected {{\"files\": [{{path, offset_s}}]}}, found {exc!r}") from None
     w, p = np.full(len(t), np.nan), np.full(len(t), np.nan)
     part = s.participant
+    if part.mass_kg is None or part.sex is None:  # the segment model needs both (found by mypy)
+        raise DatasetError(f"{s.path / 'session.json'}: participant {part.code}: expected mass_kg and sex "
+                           f"for the motion clips' work, found mass_kg {part.mass_kg}, sex {part.sex}")
     for entry in entries:
         clip = read_motion(index.parent / str(entry["path"]))
         loads = Loads(*(float(entry.get(k, 0.0)) for k in ("load_left_kg", "load_right_kg", "load_back_kg")))
@@ -522,8 +526,8 @@ def synthetic_table(n_participants: int = 6, seconds: int = 900, seed: int = 0,
     for i in range(n_participants):
         code, tl = f"P{i + 1:02d}", float(rng.uniform(0, 7.5))
         e = rng.uniform(0.3, 1.0, len(blendshapes))
-        body = dict(sex=("female", "male")[i % 2], age=float(rng.integers(20, 50)),
-                    height_m=float(rng.uniform(1.6, 1.9)), mass_kg=float(rng.uniform(55, 90)))
+        body: dict[str, Any] = dict(sex=("female", "male")[i % 2], age=float(rng.integers(20, 50)),
+                                    height_m=float(rng.uniform(1.6, 1.9)), mass_kg=float(rng.uniform(55, 90)))
         for kind, levels in (("cardio", (0.1, 4.0, 8.0, 12.0, 20.0)), ("strength", (0.1, 2.0, 3.5, 6.0))):
             sid = f"{code}_2026010{1 + (kind == 'strength')}-1000{i:02d}_{kind}"
             w = _bouts(rng, levels, seconds)

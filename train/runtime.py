@@ -173,7 +173,7 @@ class FaceModel:
                           loads=character.loads(), mapping=mapping,
                           reference_positions_m=skeleton.positions_m[::step])
 
-    def synthesize(self, motion: str | os.PathLike | Motion, character: Character, *,
+    def synthesize(self, motion: str | os.PathLike[str] | Motion, character: Character, *,
                    mapping: Any = None, causal: bool = False) -> dict[str, np.ndarray]:
         """Per-frame curves for a whole clip.
 
@@ -336,7 +336,7 @@ class CrowdStream:
 
 # --------------------------------------------------------------------------- loading
 
-def load_model(path: str | os.PathLike | None = "default") -> FaceModel:
+def load_model(path: str | os.PathLike[str] | None = "default") -> FaceModel:
     """Load a model bundle folder, or the built-in rule model for ``"default"`` / None.
 
     Parameters

@@ -40,7 +40,8 @@ class QtParticipantForm(QtWidgets.QGroupBox):
     def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__("Participant", parent)
         self._build()
-        self._preview_timer = QtCore.QTimer(self, interval=1000, timeout=self._update_preview)
+        self._preview_timer = QtCore.QTimer(self, interval=1000)
+        self._preview_timer.timeout.connect(self._update_preview)
         self._preview_timer.start()
         self._update_preview()
 
@@ -149,7 +150,8 @@ def _spin(field: str, value: int) -> QtWidgets.QSpinBox:
     """An integer spin box over the whole-number part of :data:`LIMITS` ``[field]``."""
     limit = LIMITS[field]
     spin = QtWidgets.QSpinBox(minimum=math.ceil(limit.lo), maximum=math.floor(limit.hi), value=value,
-                              suffix=_suffix(limit), toolTip=limit.meaning)
+                              suffix=_suffix(limit))
+    spin.setToolTip(limit.meaning)
     spin.setKeyboardTracking(False)
     return spin
 
@@ -158,8 +160,8 @@ def _dspin(field: str, value: float, step: float, decimals: int) -> QtWidgets.QD
     """A spin box over :data:`LIMITS` ``[field]``."""
     limit = LIMITS[field]
     spin = QtWidgets.QDoubleSpinBox(minimum=limit.lo, maximum=limit.hi, singleStep=step,
-                                    suffix=_suffix(limit), decimals=decimals,
-                                    toolTip=limit.meaning)
+                                    suffix=_suffix(limit), decimals=decimals)
+    spin.setToolTip(limit.meaning)
     spin.setValue(value)
     return spin
 
