@@ -503,7 +503,7 @@ def _poses_for(target: Path, sessions: list[Path], n_poses: int) -> list[Pose]:
             if poses:
                 return poses
     per_session = max(1, math.ceil(n_poses / len(sessions)))
-    poses: list[Pose] = []
+    poses = []
     for s in sessions:
         poses += propose_poses(read_session(s), per_session, first_id=len(poses) + 1)
     return poses[:n_poses]

@@ -306,7 +306,7 @@ def _from_dict(doc: object) -> RaterAnnotations:
 def _read_blendshapes(items: object) -> BlendshapeSet:
     """The blendshape set of a document; UserError if malformed."""
     try:
-        shapes = BlendshapeSet.from_dict(items)  # type: ignore[arg-type]
+        shapes = BlendshapeSet.from_dict(items)  # type: ignore[arg-type]  # malformed: caught below
     except (TypeError, KeyError, AttributeError):
         raise UserError(f"blendshapes: expected a list of {{name, drives, arkit}}, found {items!r}") from None
     if not shapes.shapes or len(set(shapes.names)) != len(shapes.names):

@@ -267,7 +267,8 @@ class VideoIndex:
                     if self._closed:
                         return
                     centre, self._wanted = self._wanted, None
-                self._fill_around(decoder, centre)
+                # not None: the wait above ends only on a request or on close
+                self._fill_around(decoder, centre)  # type: ignore[arg-type]  # see above
         finally:
             decoder.close()
 

@@ -221,7 +221,8 @@ class SerialLink:
     def _read_once(self) -> None:
         ser = self._ser
         assert ser is not None
-        data = ser.read(max(1, min(ser.in_waiting, 65536)))
+        # every concrete port (posix, URL handlers, replay://) has in_waiting; SerialBase does not
+        data = ser.read(max(1, min(ser.in_waiting, 65536)))  # type: ignore[attr-defined]  # see above
         now = self.clock()
         if data:
             assert self._log is not None

@@ -26,8 +26,11 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any, TextIO
 
-from effortface.core.errors import SessionFormatError, UserError, not_text_error
+from effortface.core.errors import SessionFormatError, UserError, json_type, not_text_error
 from effortface.core.fileio import refuse_overwrite, write_json_atomic  # noqa: F401  (re-exported for callers)
+# The participant record lives in the core (one limits table for every stage); re-exported here.
+from effortface.core.participant import (CODE_PATTERN, CODE_RULE, LIMITS, SEX_ALIASES,  # noqa: F401
+                                         SEXES, Participant, check_participant_code)
 from effortface.capture_tool.hr_csv import HR_CSV_HEADER, format_hr_row, read_hr_csv
 from effortface.capture_tool.protocols import HrSample
 
@@ -41,124 +44,11 @@ SERIAL_DIR = "serial"
 EVENTS_HEADER = "t_s,kind,label,value"
 FRAMES_HEADER = "frame,t_s"
 
-#: participant codes: a capital letter, then capitals / digits / '-', 2-16 characters, with a digit
-CODE_RULE = "a capital letter then capitals, digits or '-' (2-16 characters, at least one digit), e.g. P01"
-_CODE_RE = re.compile(r"^[A-Z][A-Z0-9-]{1,15}$")
 _LABEL_RE = re.compile(r"^[A-Za-z0-9-]{1,32}$")
-_ID_RE = re.compile(r"^(?P<code>[A-Z][A-Z0-9-]{1,15})_(?P<stamp>\d{8}-\d{6})(?:_(?P<label>[A-Za-z0-9-]{1,32}))?$")
+_ID_RE = re.compile(rf"^(?P<code>{CODE_PATTERN})_(?P<stamp>\d{{8}}-\d{{6}})(?:_(?P<label>[A-Za-z0-9-]{{1,32}}))?$")
 _STAMP_FMT = "%Y%m%d-%H%M%S"
-SEXES = ("female", "male")
-SEX_ALIASES = {"f": "female", "m": "male", "female": "female", "male": "male"}
-
-
-# ----------------------------------------------------------------------------------- participant
-@dataclasses.dataclass(frozen=True)
-class Participant:
-    """Who was recorded: a code (never a name) and the body data the models need.
-
-    Attributes
-    ----------
-    code : str
-        Pseudonymous code, see :data:`CODE_RULE` (``P01``, ``LAB2-07``).
-    sex : str or None
-        ``"female"`` or ``"male"`` (``"f"``/``"m"`` accepted), None if not recorded.
-    age : float or None
-        Years, 5-120.
-    height_m, mass_kg : float or None
-        Body height (0.5-2.5 m) and mass (15-300 kg).
-    training_level : float or None
-        Training level TL, 0 (poor) to 10.
-    hr_rest_bpm, hr_max_bpm : float or None
-        Measured resting / maximal heart rate; they override the charts when given.
-    """
-
-    code: str
-    sex: str | None = None
-    age: float | None = None
-    height_m: float | None = None
-    mass_kg: float | None = None
-    training_level: float | None = None
-    hr_rest_bpm: float | None = None
-    hr_max_bpm: float | None = None
-
-    def __post_init__(self) -> None:
-        check_participant_code(self.code)
-        if self.sex is not None:
-            sex = SEX_ALIASES.get(str(self.sex).strip().lower())
-            if sex is None:
-                raise UserError(f"participant sex: expected one of {', '.join(SEXES)}, found {self.sex!r}")
-            object.__setattr__(self, "sex", sex)
-        for name, (lo, hi) in PARTICIPANT_RANGES.items():
-            _check_range(name, getattr(self, name), lo, hi)
-        if self.hr_rest_bpm is not None and self.hr_max_bpm is not None and self.hr_rest_bpm >= self.hr_max_bpm:
-            raise UserError(
-                f"participant hr_rest_bpm: expected below hr_max_bpm ({self.hr_max_bpm}), found {self.hr_rest_bpm}"
-            )
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict (optional measured HR keys only when set)."""
-        out = dataclasses.asdict(self)
-        for key in ("hr_rest_bpm", "hr_max_bpm"):
-            if out[key] is None:
-                del out[key]
-        return out
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> Participant:
-        """Build from a ``session.json`` ``participant`` object (not an object, unknown keys or no
-        ``code`` are a UserError naming the problem)."""
-        if not isinstance(data, dict):
-            raise UserError(f"participant: expected a JSON object, found {_json_type(data)}")
-        names = {f.name for f in dataclasses.fields(cls)}
-        unknown = set(data) - names
-        if unknown:
-            raise UserError(f"participant: expected keys among {sorted(names)}, found {sorted(unknown)}")
-        if "code" not in data:
-            raise UserError(f"participant: expected the key 'code', found only {sorted(data)}")
-        return cls(**data)
-
-
-def _json_type(value: Any) -> str:
-    """The JSON name of a parsed value's type (``object``, ``array``, ``string``...), for messages."""
-    names = {dict: "object", list: "array", str: "string", bool: "boolean", int: "number", float: "number"}
-    return "null" if value is None else f"{names.get(type(value), type(value).__name__)} {value!r}"[:80]
-
-
-PARTICIPANT_RANGES = {
-    "age": (5, 120),
-    "height_m": (0.5, 2.5),
-    "mass_kg": (15, 300),
-    "training_level": (0, 10),
-    "hr_rest_bpm": (25, 120),
-    "hr_max_bpm": (100, 240),
-}
-
-
-def _check_range(name: str, value: float | None, lo: float, hi: float) -> None:
-    """Raise UserError unless ``value`` is None or a number in [lo, hi]."""
-    if value is None:
-        return
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not lo <= value <= hi:
-        raise UserError(f"participant {name}: expected a number from {lo} to {hi}, found {value!r}")
-
-
-def check_participant_code(code: str) -> str:
-    """Return ``code`` if it is a valid participant code, else raise.
-
-    Parameters
-    ----------
-    code : str
-        Candidate code.
-
-    Raises
-    ------
-    UserError
-        If it does not follow :data:`CODE_RULE` (names such as ``"Jane Doe"`` or ``"jane"`` fail:
-        they have spaces, lower case letters or no digit).
-    """
-    if not isinstance(code, str) or not _CODE_RE.match(code) or not any(c.isdigit() for c in code):
-        raise UserError(f"participant code: expected {CODE_RULE} (codes, never names), found {code!r}")
-    return code
+#: ``{field: (lo, hi)}`` of :data:`effortface.core.participant.LIMITS` (kept for callers).
+PARTICIPANT_RANGES = {name: limit.bounds for name, limit in LIMITS.items()}
 
 
 # ------------------------------------------------------------------------------------ session id
@@ -254,7 +144,7 @@ class SessionInfo:
             raise SessionFormatError(f"{source}: {exc}") from None
         if not isinstance(data["complete"], bool):
             raise SessionFormatError(f"{source}: field 'complete': expected true or false, "
-                                     f"found {_json_type(data['complete'])}")
+                                     f"found {json_type(data['complete'])}")
         known = {"schema_version", "session_id", "complete", "created_utc", "participant", "devices", "software"}
         return cls(
             session_id=str(data["session_id"]),
@@ -307,7 +197,7 @@ def _object_field(data: dict[str, Any], key: str, source: str | os.PathLike) -> 
     if value is None:
         return {}
     if not isinstance(value, dict):
-        raise SessionFormatError(f"{source}: field {key!r}: expected a JSON object, found {_json_type(value)}")
+        raise SessionFormatError(f"{source}: field {key!r}: expected a JSON object, found {json_type(value)}")
     return dict(value)
 
 

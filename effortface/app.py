@@ -203,7 +203,7 @@ class MainWindow(QtWidgets.QMainWindow):
             except Exception as exc:  # noqa: BLE001 - one broken stage must not take the window down
                 log.warning("stage %s not available: %s", key, exc, exc_info=not isinstance(exc, UserError))
                 widget = QtPlaceholderStage(key, self.sessions_dir, reason=str(exc))
-            self._slots[key].layout().addWidget(widget)
+            self._slots[key].layout().addWidget(widget)  # type: ignore[union-attr]  # built with one
             self.stages[key] = widget
         return self.stages[key]
 
@@ -390,7 +390,7 @@ def main(args: argparse.Namespace) -> int:
         return _run_window(app, MainWindow(sessions_dir), args.stage, out)
 
 
-def _run_window(app: QtWidgets.QApplication, window: MainWindow, stage: str, out: Path | None) -> int:
+def _run_window(app: QtCore.QCoreApplication, window: MainWindow, stage: str, out: Path | None) -> int:
     """Render ``stage`` to ``out`` and close, or show the window until the user quits."""
     if out is not None:
         render_screenshot(window, stage, out)

@@ -20,11 +20,13 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
 from effortface import SAMPLE_LAB
 from effortface.core.errors import UserError
+from effortface.core.participant import Participant
 
 #: replay speed and capture length: 12 s of capture at 25x = 5 minutes of the recording
 REPLAY_SPEED = 25.0
@@ -147,9 +149,9 @@ def capture_step(session: Path, out: Path, seconds: float) -> Path:
     return Path(done.stdout.strip().splitlines()[0])
 
 
-def _participant_options(p: object) -> list[str]:
+def _participant_options(p: Participant) -> list[str]:
     """``--participant CODE --age ...`` for the recorded fields of a participant."""
-    opts = ["--participant", p.code]  # type: ignore[attr-defined]
+    opts = ["--participant", p.code]
     for flag, name in (("--age", "age"), ("--sex", "sex"), ("--height", "height_m"),
                        ("--mass", "mass_kg"), ("--training-level", "training_level")):
         if getattr(p, name) is not None:
@@ -213,8 +215,13 @@ def synth_step(model_dir: Path, lab: Path, out: Path) -> Path:
     sessions = list_sessions(lab)
     clips = [c for s in sessions for c in sorted((s / "motion").glob("*")) if c.suffix in (".bvh", ".npz")]
     p = read_session(sessions[0]).participant
-    character = Character(age=p.age, sex=p.sex, height_m=p.height_m, mass_kg=p.mass_kg,
-                          training_level=p.training_level)
+    body: dict[str, Any] = {"age": p.age, "sex": p.sex, "height_m": p.height_m, "mass_kg": p.mass_kg,
+                            "training_level": p.training_level}
+    missing = [name for name, value in body.items() if value is None]
+    if missing:
+        raise UserError(f"{sessions[0] / 'session.json'}: participant {p.code}: expected "
+                        f"{', '.join(missing)} for the synthesized character, found none")
+    character = Character(**body)
     if clips:
         curves = model.synthesize(clips[0], character)
     else:

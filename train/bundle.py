@@ -129,7 +129,7 @@ def _to_json(bundle: ModelBundle) -> dict[str, Any]:
     }
 
 
-def write_bundle(bundle: ModelBundle, directory: str | os.PathLike, *,
+def write_bundle(bundle: ModelBundle, directory: str | os.PathLike[str], *,
                  overwrite: bool = False) -> Path:
     """Write ``model.json`` and ``svr.npz`` into ``directory``.
 
@@ -163,7 +163,8 @@ def write_bundle(bundle: ModelBundle, directory: str | os.PathLike, *,
     for name, sv, coef in zip(bundle.blendshapes.names, bundle.support_vectors, bundle.dual_coef):
         arrays[f"support_vectors_{name}"] = np.asarray(sv, float)
         arrays[f"dual_coef_{name}"] = np.asarray(coef, float).ravel()
-    atomic_write(directory / SVR_NPZ, lambda f: np.savez(f, **arrays))  # type: ignore[arg-type]
+    # np.savez's stubs want a path or a seekable writer; atomic_write's binary file is one
+    atomic_write(directory / SVR_NPZ, lambda f: np.savez(f, **arrays))  # type: ignore[arg-type]  # see above
     return directory
 
 
@@ -311,7 +312,8 @@ def _read_svr_json(doc: dict[str, Any], where: str, names: tuple[str, ...]) -> l
             for i, d in enumerate(items)]
 
 
-def _read_npz(path: Path, names: tuple[str, ...]) -> tuple[list, list, np.ndarray]:
+def _read_npz(path: Path, names: tuple[str, ...]
+              ) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray]:
     """The SVR arrays of ``svr.npz``: support vectors (n_b, 4), dual coefs (n_b,), intercept (B,)."""
     if not path.is_file():
         raise BundleFormatError(f"{path}: expected the SVR arrays file, found none")
@@ -351,7 +353,7 @@ def _check_svr_shapes(path: Path, arrays: Mapping[str, np.ndarray], names: tuple
                                     f"support vector), found {coef.shape}")
 
 
-def read_bundle(directory: str | os.PathLike) -> ModelBundle:
+def read_bundle(directory: str | os.PathLike[str]) -> ModelBundle:
     """Read and validate a model bundle folder.
 
     Parameters

@@ -29,6 +29,7 @@ import math
 import os
 from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -37,8 +38,8 @@ from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
 from effortface.annotate.keyframes import read_annotations
 from effortface.core.errors import UserError
 from effortface.core.fileio import refuse_overwrite
-from effortface.capture_tool.session import PARTICIPANT_RANGES, SEX_ALIASES  # the limits capture enforces
-from effortface.capture_tool.session import SEXES, Session, list_sessions, parse_session_id, read_session
+from effortface.core.participant import LIMITS, SEX_ALIASES, SEXES  # the one limits table
+from effortface.capture_tool.session import Session, list_sessions, parse_session_id, read_session
 from effortface.train.hr_fit import HrSeries
 from effortface.train.physiology import (EpocParams, hr_max_bpm, hr_rest_bpm, epoc_step,
                               vo2max_ml_per_kg_min, VO2_REST_ML_PER_KG_MIN)
@@ -197,8 +198,9 @@ def check_participants(table: pd.DataFrame, source: str) -> None:
     """DatasetError if a participant's sex/age/height/mass/TL is missing, implausible, or differs
     between rows.
 
-    The ranges are capture's (``effortface.capture_tool.session``): age 5-120 years, height 0.5-2.5 m, mass
-    15-300 kg, TL 0-10, measured HR_rest 25-120 and HR_max 100-240 bpm; sex female or male.
+    The ranges are :data:`effortface.core.participant.LIMITS`, the ones every stage uses: age
+    10-100 years, height 0.5-2.6 m, mass 15-300 kg, TL 0-10, measured HR_rest 25-120 and HR_max
+    100-240 bpm; sex female or male.
 
     Raises
     ------
@@ -226,16 +228,15 @@ def check_participants(table: pd.DataFrame, source: str) -> None:
 
 
 def _check_participant_value(source: str, code: str, col: str, value: object) -> None:
-    """DatasetError unless ``value`` is a valid sex or lies in capture's range for ``col``."""
+    """DatasetError unless ``value`` is a valid sex or lies within :data:`LIMITS` ``[col]``."""
     if col == "sex":
         if value not in SEXES:
             raise DatasetError(f"{source}: participant {code}: column sex: expected one of "
                                f"{', '.join(SEXES)}, found {value!r}")
         return
-    lo, hi = PARTICIPANT_RANGES[col]
-    if not lo <= float(value) <= hi:  # type: ignore[arg-type]
-        raise DatasetError(f"{source}: participant {code}: column {col}: expected a number from "
-                           f"{lo} to {hi}, found {value:g}")
+    if not LIMITS[col].accepts(value):
+        raise DatasetError(f"{source}: participant {code}: column {col}: expected "
+                           f"{LIMITS[col].expected()}, found {value:g}")
 
 
 def _session_label(session_id: str) -> str:
@@ -365,6 +366,9 @@ def _work_from_motion(s: Session, t: np.ndarray) -> tuple[np.ndarray, np.ndarray
         raise DatasetError(f"{index}: expected {{\"files\": [{{path, offset_s}}]}}, found {exc!r}") from None
     w, p = np.full(len(t), np.nan), np.full(len(t), np.nan)
     part = s.participant
+    if part.mass_kg is None or part.sex is None:  # the segment model needs both (found by mypy)
+        raise DatasetError(f"{s.path / 'session.json'}: participant {part.code}: expected mass_kg and sex "
+                           f"for the motion clips' work, found mass_kg {part.mass_kg}, sex {part.sex}")
     for entry in entries:
         clip = read_motion(index.parent / str(entry["path"]))
         loads = Loads(*(float(entry.get(k, 0.0)) for k in ("load_left_kg", "load_right_kg", "load_back_kg")))
@@ -522,8 +526,8 @@ def synthetic_table(n_participants: int = 6, seconds: int = 900, seed: int = 0,
     for i in range(n_participants):
         code, tl = f"P{i + 1:02d}", float(rng.uniform(0, 7.5))
         e = rng.uniform(0.3, 1.0, len(blendshapes))
-        body = dict(sex=("female", "male")[i % 2], age=float(rng.integers(20, 50)),
-                    height_m=float(rng.uniform(1.6, 1.9)), mass_kg=float(rng.uniform(55, 90)))
+        body: dict[str, Any] = dict(sex=("female", "male")[i % 2], age=float(rng.integers(20, 50)),
+                                    height_m=float(rng.uniform(1.6, 1.9)), mass_kg=float(rng.uniform(55, 90)))
         for kind, levels in (("cardio", (0.1, 4.0, 8.0, 12.0, 20.0)), ("strength", (0.1, 2.0, 3.5, 6.0))):
             sid = f"{code}_2026010{1 + (kind == 'strength')}-1000{i:02d}_{kind}"
             w = _bouts(rng, levels, seconds)

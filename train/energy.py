@@ -593,7 +593,7 @@ class EnergyCrowd(EnergyStream):
         super().__init__(stack_bodies(bodies), fps, window_s=window_s, power_window_s=power_window_s,
                          cutoff_hz=cutoff_hz)
 
-    def step(self, joint_positions_m: np.ndarray, dt_s: float,  # type: ignore[override]
+    def step(self, joint_positions_m: np.ndarray, dt_s: float,  # type: ignore[override]  # (N, J, 3)
              rotations: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Advance every character one frame.
 

@@ -209,7 +209,7 @@ class SearchResult:
 
 
 def grid_search(data: FaceData, config: FaceFitConfig,
-                progress: Callable[[int], None] | None = None) -> dict[str, SearchResult]:
+                progress: Callable[[int], object] | None = None) -> dict[str, SearchResult]:
     """Grid search of every blendshape's SVR with cached per-fold Gram matrices.
 
     Parameters
@@ -347,7 +347,7 @@ def check_face_table(table: pd.DataFrame, blendshapes: Sequence[str], source: st
 
 def fit_face_models(table: pd.DataFrame, blendshapes: Sequence[str],
                     config: FaceFitConfig | None = None,
-                    progress: Callable[[int], None] | None = None) -> FaceModelFit:
+                    progress: Callable[[int], object] | None = None) -> FaceModelFit:
     """Search hyper-parameters by grouped CV, then fit one RBF SVR per blendshape on all rows.
 
     Parameters

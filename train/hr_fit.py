@@ -176,7 +176,7 @@ def _pool_samples(series: Sequence[HrSeries], smooth_s: int
     """Concatenated step samples of several sessions."""
     parts = [step_samples(s, smooth_s) for s in series]
     return tuple(np.concatenate([p[i] for p in parts]) if parts else np.empty(0)
-                 for i in range(3))  # type: ignore[return-value]
+                 for i in range(3))  # type: ignore[return-value]  # three arrays
 
 
 # --------------------------------------------------------------------------- the tree

@@ -15,6 +15,7 @@ import math
 import zipfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 
@@ -491,7 +492,7 @@ def _parse_frames(path: Path, lines: list[str], motion_at: int, n_channels: int)
         values = None
     if values is None or values.size != len(rows) * n_channels:
         _raise_bad_frame(path, rows, first, n_channels)
-    frames = values.reshape(len(rows), n_channels)  # type: ignore[union-attr]
+    frames = values.reshape(len(rows), n_channels)
     _check_finite_frames(path, frames, first)
     return frames, frame_time_s
 
@@ -506,7 +507,7 @@ def _check_finite_frames(path: Path, frames: np.ndarray, first: int) -> None:
             f"{path}: line {first + k + 1}: expected finite numbers in frame {k}, found {value}")
 
 
-def _raise_bad_frame(path: Path, rows: list[str], first: int, n_channels: int) -> None:
+def _raise_bad_frame(path: Path, rows: list[str], first: int, n_channels: int) -> NoReturn:
     """Find the first frame line that is not ``n_channels`` numbers and raise naming it."""
     for k, row in enumerate(rows):
         fields = row.split()

@@ -99,7 +99,7 @@ def _liveliest_session(fit: FaceModelFit) -> str:
     d = fit.data
     spread = {s: float(np.nanstd(d.y_norm[d.session == s] * d.e[d.session == s]))
               for s in np.unique(d.session)}
-    return max(spread, key=spread.get)
+    return max(spread, key=spread.__getitem__)
 
 
 def markdown_table(df: pd.DataFrame) -> str:

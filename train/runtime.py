@@ -33,31 +33,27 @@ import numpy as np
 
 from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
 from effortface.core.errors import UserError
+from effortface.core.participant import LIMITS, check_limit, check_sex
 from effortface.train.bundle import default_physiology, read_bundle
 from effortface.train.energy import EnergyCrowd, EnergyStream, work_and_power
 from effortface.train.face import RuleFaceModel, SvrModel, apply_expressiveness
 from effortface.train.motion import Motion, read_motion
 from effortface.train.physiology import (PAPER_REGRESSION, EpocParams, NhrRegression, PhysiologyParams,
                               PhysiologyState, simulate)
-from effortface.train.segments import BodyModel, Loads, build_body, check_mass
+from effortface.train.segments import BodyModel, Loads, build_body
 
-#: Training levels accepted (choice): the paper's participants span 0-7.5 (the resting-HR chart's
-#: range, clamped above 7.5) and its Fig. 5 animates TL 10; at TL 10 the paper's c_inc is still
-#: positive (0.0013), beyond about 13 it would turn negative.
-TRAINING_LEVEL_RANGE = (0.0, 10.0)
-AGE_RANGE = (10.0, 100.0)
-HEIGHT_RANGE_M = (0.5, 2.6)
-SEXES = ("male", "female")
+#: A character's limits are a participant's (:data:`effortface.core.participant.LIMITS`, the one
+#: table every stage reads). Training levels: the paper's participants span 0-7.5 (the resting-HR
+#: chart's range, clamped above 7.5) and its Fig. 5 animates TL 10; at TL 10 the paper's c_inc is
+#: still positive (0.0013), beyond about 13 it would turn negative.
+TRAINING_LEVEL_RANGE = LIMITS["training_level"].bounds
+AGE_RANGE = LIMITS["age"].bounds
+HEIGHT_RANGE_M = LIMITS["height_m"].bounds
+MASS_RANGE_KG = LIMITS["mass_kg"].bounds
 #: Frames used for bone lengths (a median over frames; more adds time, not accuracy).
 REFERENCE_FRAMES = 600
 #: Per-frame columns of :meth:`FaceModel.synthesize`, before one column per blendshape.
 CURVE_COLUMNS = ("t_s", "w_per_kg", "p_per_kg", "nhr", "hr_bpm", "vo2", "resp_rate", "epoc")
-
-
-def _in_range(name: str, value: Any, lo: float, hi: float, unit: str = "") -> float:
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not lo <= float(value) <= hi:
-        raise UserError(f"{name}: expected a number from {lo:g} to {hi:g}{unit}, found {value!r}")
-    return float(value)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -69,11 +65,11 @@ class Character:
     age : float
         Years (10-100).
     sex : {"male", "female"}
-        Selects the de Leva table, the resting-HR chart row and the VO2max model.
+        Selects the de Leva table, the resting-HR chart row and the VO2max model ("m"/"f" accepted).
     height_m : float
         Height in metres (0.5-2.6).
     mass_kg : float
-        Body mass in kg (> 0): the divisor of w and p.
+        Body mass in kg (15-300): the divisor of w and p.
     training_level : float
         0 (sedentary) to 10, see :data:`TRAINING_LEVEL_RANGE`.
     expressiveness : sequence of float
@@ -81,7 +77,7 @@ class Character:
     load_left_kg, load_right_kg, load_back_kg : float
         Carried loads (>= 0).
     hr_rest_bpm, hr_max_bpm : float, optional
-        Measured values; they override the charts.
+        Measured values (25-120 and 100-240 bpm); they override the charts.
 
     Raises
     ------
@@ -102,12 +98,9 @@ class Character:
     hr_max_bpm: float | None = None
 
     def __post_init__(self) -> None:
-        _in_range("age", self.age, *AGE_RANGE, " years")
-        if self.sex not in SEXES:
-            raise UserError(f"sex: expected 'male' or 'female', found {self.sex!r}")
-        _in_range("height_m", self.height_m, *HEIGHT_RANGE_M, " m")
-        check_mass(self.mass_kg)
-        _in_range("training_level", self.training_level, *TRAINING_LEVEL_RANGE)
+        object.__setattr__(self, "sex", check_sex(self.sex))
+        for name in ("age", "height_m", "mass_kg", "training_level"):
+            check_limit(name, getattr(self, name))
         object.__setattr__(self, "expressiveness", _expressiveness(self.expressiveness))
         for name in ("load_left_kg", "load_right_kg", "load_back_kg"):
             value = getattr(self, name)
@@ -116,7 +109,7 @@ class Character:
                 raise UserError(f"{name}: expected a load of 0 kg or more, found {value!r}")
         for name in ("hr_rest_bpm", "hr_max_bpm"):
             if getattr(self, name) is not None:
-                _in_range(name, getattr(self, name), 25.0, 250.0, " bpm")
+                check_limit(name, getattr(self, name))
 
     def loads(self) -> Loads:
         """The carried loads as :class:`effortface.train.segments.Loads`."""
@@ -180,7 +173,7 @@ class FaceModel:
                           loads=character.loads(), mapping=mapping,
                           reference_positions_m=skeleton.positions_m[::step])
 
-    def synthesize(self, motion: str | os.PathLike | Motion, character: Character, *,
+    def synthesize(self, motion: str | os.PathLike[str] | Motion, character: Character, *,
                    mapping: Any = None, causal: bool = False) -> dict[str, np.ndarray]:
         """Per-frame curves for a whole clip.
 
@@ -343,7 +336,7 @@ class CrowdStream:
 
 # --------------------------------------------------------------------------- loading
 
-def load_model(path: str | os.PathLike | None = "default") -> FaceModel:
+def load_model(path: str | os.PathLike[str] | None = "default") -> FaceModel:
     """Load a model bundle folder, or the built-in rule model for ``"default"`` / None.
 
     Parameters
@@ -368,4 +361,4 @@ def load_model(path: str | os.PathLike | None = "default") -> FaceModel:
 
 
 __all__ = ["Character", "CharacterStream", "CrowdStream", "FaceModel", "load_model",
-           "CURVE_COLUMNS", "TRAINING_LEVEL_RANGE"]
+           "CURVE_COLUMNS", "AGE_RANGE", "HEIGHT_RANGE_M", "MASS_RANGE_KG", "TRAINING_LEVEL_RANGE"]

@@ -267,7 +267,7 @@ def _resolve_end(end: EndPoint, index: Mapping[str, int]) -> tuple[int, ...] | N
     found = [_resolve_end(e, index) for e in end]
     if any(f is None for f in found) or not found:
         return None
-    return tuple(i for f in found for i in f)  # type: ignore[union-attr]
+    return tuple(i for f in found for i in f)  # type: ignore[union-attr]  # no None: checked above
 
 
 def resolve_mapping(
@@ -549,11 +549,11 @@ def stack_bodies(bodies: Sequence[BodyModel]) -> BodyModel:
             raise UserError(f"bodies: expected single bodies on one skeleton and mapping, body {i} differs")
     return dataclasses.replace(
         first,
-        mass_kg=np.array([b.mass_kg for b in bodies]),  # type: ignore[arg-type]
+        mass_kg=np.array([b.mass_kg for b in bodies]),  # type: ignore[arg-type]  # (N,): one per body
         segment_mass_kg=np.stack([b.segment_mass_kg for b in bodies]),
         length_m=np.stack([b.length_m for b in bodies]),
         com_frac=np.stack([b.com_frac for b in bodies]),
         radii=np.stack([b.radii for b in bodies]),
         load_kg=np.stack([b.load_kg for b in bodies]),
-        back_load_kg=np.array([b.back_load_kg for b in bodies]),  # type: ignore[arg-type]
+        back_load_kg=np.array([b.back_load_kg for b in bodies]),  # type: ignore[arg-type]  # (N,)
     )

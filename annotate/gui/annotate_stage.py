@@ -16,6 +16,7 @@ playback pauses whenever the editor is out of sight.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import time
@@ -122,7 +123,10 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         for i, (text, tip, slot) in enumerate(steps):
             if i == 3:
                 row.addWidget(self.play_button)
-            button = QtWidgets.QToolButton(text=text, toolTip=tip, autoRepeat=True)
+            button = QtWidgets.QToolButton()
+            button.setText(text)
+            button.setToolTip(tip)
+            button.setAutoRepeat(True)
             button.setFocusPolicy(QtCore.Qt.FocusPolicy.NoFocus)
             button.clicked.connect(slot)
             row.addWidget(button)
@@ -139,12 +143,13 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         self.speed.setCurrentIndex(SPEEDS.index(1.0))
         self.speed.setFocusPolicy(QtCore.Qt.FocusPolicy.NoFocus)
         self.speed.currentIndexChanged.connect(lambda *_: self._restart_clock())
-        self.frame_box = QtWidgets.QSpinBox(minimum=0, maximum=self.model.n_frames - 1, keyboardTracking=False)
+        self.frame_box = QtWidgets.QSpinBox(minimum=0, maximum=self.model.n_frames - 1)
         self.frame_box.editingFinished.connect(lambda: self._go(lambda: self.model.set_frame(self.frame_box.value())))
         self.time_box = QtWidgets.QDoubleSpinBox(minimum=0.0, maximum=self.model.times.duration_s, decimals=3,
-                                                 suffix=" s", keyboardTracking=False)
+                                                 suffix=" s")
         self.time_box.editingFinished.connect(lambda: self._go(lambda: self.model.go_to_time(self.time_box.value())))
         for box in (self.frame_box, self.time_box):
+            box.setKeyboardTracking(False)
             box.setToolTip("Type a frame or time and press Enter; Esc cancels")
             box.installEventFilter(self)
         self.position = QtWidgets.QLabel(f"/ {self.model.n_frames - 1}")  # the last frame, after the frame box
@@ -174,15 +179,20 @@ class QtKeyframeEditor(QtWidgets.QWidget):
             (Key.Key_N, m.start_next_pass),
             (QtGui.QKeySequence.StandardKey.Undo, m.undo), ("Ctrl+Shift+Z", m.redo), ("Ctrl+Y", m.redo),
             (QtGui.QKeySequence.StandardKey.Copy, self.copy_key), (QtGui.QKeySequence.StandardKey.Paste, self.paste),
-            ("Ctrl+G", lambda: (self.frame_box.setFocus(), self.frame_box.selectAll())),
+            ("Ctrl+G", self._select_frame_box),
         ]
-        bindings += [(getattr(Key, f"Key_{d}"), (lambda w=d / 10: m.set_key(w))) for d in range(10)]
+        bindings += [(getattr(Key, f"Key_{d}"), functools.partial(m.set_key, d / 10)) for d in range(10)]
         for seq, slot in bindings:
             action = QtGui.QAction(self)
             action.setShortcut(QtGui.QKeySequence(seq))
             action.setShortcutContext(QtCore.Qt.ShortcutContext.WidgetWithChildrenShortcut)
             action.triggered.connect(lambda *_, s=slot: self._guarded(s))
             self.addAction(action)
+
+    def _select_frame_box(self) -> None:
+        """Ctrl+G: type the frame to go to."""
+        self.frame_box.setFocus()
+        self.frame_box.selectAll()
 
     # ------------------------------------------------------------------------------- actions
     def _guarded(self, slot: Callable[[], Any]) -> None:
@@ -198,7 +208,8 @@ class QtKeyframeEditor(QtWidgets.QWidget):
 
     def eventFilter(self, watched: QtCore.QObject, event: QtCore.QEvent) -> bool:  # noqa: N802 - Qt override
         """Esc in the frame or time box cancels the go-to and hands the keys back to the video."""
-        if (event.type() == QtCore.QEvent.Type.KeyPress and event.key() == QtCore.Qt.Key.Key_Escape
+        if (isinstance(event, QtGui.QKeyEvent) and event.type() == QtCore.QEvent.Type.KeyPress
+                and event.key() == QtCore.Qt.Key.Key_Escape
                 and watched in (self.frame_box, self.time_box)):
             self.cancel_go_to()
             return True
@@ -208,7 +219,7 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         """Put the current frame and time back in their boxes and focus the video view."""
         for box, value in ((self.frame_box, self.model.frame), (self.time_box, self.model.t_s)):
             box.blockSignals(True)
-            box.setValue(value)
+            box.setValue(value)  # type: ignore[arg-type]  # int frame to frame_box, float t_s to time_box
             box.blockSignals(False)
         self.video_view.setFocus()
 
@@ -276,7 +287,7 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         for box, value in ((self.frame_box, frame), (self.time_box, self.model.t_s)):
             if not box.hasFocus():
                 box.blockSignals(True)
-                box.setValue(value)
+                box.setValue(value)  # type: ignore[arg-type]  # int frame to frame_box, float t_s to time_box
                 box.blockSignals(False)
         self._show_face()
 
@@ -339,7 +350,8 @@ class QtAnnotateStage(QtWidgets.QWidget):
         self.rater.returnPressed.connect(lambda: self.open_selected() if self.tabs.currentIndex() == 0 else None)
         self.open_button = QtWidgets.QPushButton("Open session")
         self.open_button.clicked.connect(self.open_selected)
-        self.rescan_button = QtWidgets.QPushButton("Rescan (F5)", toolTip="List the sessions recorded since")
+        self.rescan_button = QtWidgets.QPushButton("Rescan (F5)")
+        self.rescan_button.setToolTip("List the sessions recorded since")
         self.rescan_button.clicked.connect(self.refresh_sessions)
         self.status = QtWidgets.QLabel(wordWrap=True)
         self.status.setMinimumHeight(36)
@@ -351,7 +363,7 @@ class QtAnnotateStage(QtWidgets.QWidget):
         self.reliability_note = _centred_note()
         self.reliability_host.addWidget(self.reliability_note)
         self._show_notes()
-        self.tabs = QtWidgets.QTabWidget()
+        self.tabs: QtWidgets.QTabWidget = QtWidgets.QTabWidget()  # typed here: a lambda above reads it
         self.tabs.addTab(self.editor_host, "Key-frames")
         self.tabs.addTab(self.reliability_host, "Reliability round")
         self.tabs.currentChanged.connect(self._on_tab)
@@ -396,7 +408,8 @@ class QtAnnotateStage(QtWidgets.QWidget):
         export = QtWidgets.QMenu("Export", self)
         self.export_weights_action = export.addAction("Per-frame weights CSV\u2026", lambda: self.export_weights())
         self.export_keys_action = export.addAction("Key-frames JSON\u2026", lambda: self.export_keyframes())
-        button = QtWidgets.QToolButton(text="Export \u25be", popupMode=QtWidgets.QToolButton.ToolButtonPopupMode.InstantPopup)
+        button = QtWidgets.QToolButton(popupMode=QtWidgets.QToolButton.ToolButtonPopupMode.InstantPopup)
+        button.setText("Export \u25be")
         button.setMenu(export)
         bar.addWidget(button)
         self.export_menu = export
@@ -422,7 +435,7 @@ class QtAnnotateStage(QtWidgets.QWidget):
         """
         rater = text.strip()
         hidden = False
-        if self.shown_editor() is not None and self.editor.model.rater != rater:
+        if (editor := self.shown_editor()) is not None and editor.model.rater != rater:
             self.editor_host.setCurrentWidget(self.placeholder)
             hidden = True
         if self.reliability is not None and self.reliability.rater != rater:
@@ -490,10 +503,12 @@ class QtAnnotateStage(QtWidgets.QWidget):
 
     def focus_main(self) -> None:
         """Give the keyboard to the stage's main widget (the video of the open session, else the list)."""
-        if self.tabs.currentIndex() == 1 and self.reliability_host.currentWidget() is self.reliability:
-            self.reliability.poses.setFocus()
-        elif self.shown_editor() is not None:
-            self.editor.video_view.setFocus()
+        reliability, editor = self.reliability, self.shown_editor()
+        if self.tabs.currentIndex() == 1 and reliability is not None \
+                and self.reliability_host.currentWidget() is reliability:
+            reliability.poses.setFocus()
+        elif editor is not None:
+            editor.video_view.setFocus()
         else:
             self.sessions.setFocus()
 

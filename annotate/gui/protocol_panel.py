@@ -32,7 +32,8 @@ class WheelGuard(QtCore.QObject):
 
     def eventFilter(self, watched: QtCore.QObject, event: QtCore.QEvent) -> bool:  # noqa: N802 - Qt override
         """Stop a wheel event for an unfocused watched widget; let everything else through."""
-        if event.type() == QtCore.QEvent.Type.Wheel and not watched.hasFocus():
+        if event.type() == QtCore.QEvent.Type.Wheel and isinstance(watched, QtWidgets.QWidget) \
+                and not watched.hasFocus():
             event.ignore()
             return True
         return False
@@ -69,7 +70,8 @@ class QtProtocolPanel(QtWidgets.QWidget):
         self.next_button = QtWidgets.QPushButton("Next blendshape (N)")
         self.next_button.setFocusPolicy(QtCore.Qt.FocusPolicy.NoFocus)
         self.next_button.clicked.connect(self.model.start_next_pass)
-        self.slider = QtWidgets.QSlider(QtCore.Qt.Orientation.Horizontal, minimum=0, maximum=100)
+        self.slider = QtWidgets.QSlider(QtCore.Qt.Orientation.Horizontal)
+        self.slider.setRange(0, 100)
         self.slider.setFocusPolicy(QtCore.Qt.FocusPolicy.NoFocus)
         self.slider.sliderReleased.connect(lambda: self._set_weight(self.slider.value() / 100))
         self.slider.valueChanged.connect(self._on_slider_value)

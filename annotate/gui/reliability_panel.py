@@ -11,6 +11,7 @@ extremes (written to ``reliability/poses.csv``, never over an existing one).
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +20,7 @@ from PySide6 import QtCore, QtGui, QtWidgets
 
 from effortface.annotate.agreement import FLAG_PCT, N_POSES, AgreementReport, agreement_report, gather_ratings, propose_poses
 from effortface.annotate.gui.image_view import QtImageView
-from effortface.annotate.reliability import write_poses
+from effortface.annotate.reliability import Pose, write_poses
 from effortface.annotate.session_model import BlindRound
 from effortface.capture_tool.camera import read_frame
 from effortface.core.errors import UserError
@@ -40,7 +41,7 @@ def _table(headers: list[str]) -> QtWidgets.QTableWidget:
     return table
 
 
-def _fill(table: QtWidgets.QTableWidget, rows: list[list[str]], flagged: set[int] = frozenset()) -> None:
+def _fill(table: QtWidgets.QTableWidget, rows: list[list[str]], flagged: Collection[int] = frozenset()) -> None:
     table.setRowCount(len(rows))
     for r, row in enumerate(rows):
         for c, text in enumerate(row):
@@ -233,7 +234,7 @@ class QtReliabilityPanel(QtWidgets.QWidget):
             if not sessions:
                 raise UserError(f"{self.lab_dir}: expected sessions with video, found none")
             per = -(-N_POSES // len(sessions))
-            poses = []
+            poses: list[Pose] = []
             for s in sessions:
                 poses += propose_poses(s, per, first_id=len(poses) + 1)
             write_poses(self.lab_dir / "reliability" / "poses.csv", poses[:N_POSES])

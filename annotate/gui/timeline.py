@@ -242,8 +242,11 @@ class QtTimeline(pg.GraphicsLayoutWidget):
         self.select_key(frame)
 
     def key_point_scene_pos(self, frame: int) -> QtCore.QPointF:
-        """Scene position of the key on ``frame`` (for tests and tooltips)."""
-        return self._curve_box.mapViewToScene(QtCore.QPointF(self.t_s[frame], self.model.track.get(frame).weight))
+        """Scene position of the key on ``frame`` (for tests and tooltips); KeyError if it has none."""
+        key = self.model.track.get(frame)
+        if key is None:
+            raise KeyError(f"no key on frame {frame}")
+        return self._curve_box.mapViewToScene(QtCore.QPointF(self.t_s[frame], key.weight))
 
     def time_scene_pos(self, t_s: float, weight: float) -> QtCore.QPointF:
         """Scene position of a point of the curve editor."""

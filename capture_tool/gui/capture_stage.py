@@ -8,10 +8,12 @@ and recovering block (devices open, threads join, files are re-indexed), so they
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
-from PySide6 import QtCore, QtWidgets
+from PySide6 import QtCore, QtGui, QtWidgets
 
 from effortface.core.errors import UserError
 from effortface.capture_tool.gui.controller import CaptureController, HrRow, LiveUpdate
@@ -72,7 +74,8 @@ class QtCaptureStage(QtWidgets.QWidget):
         self._contact_ok = True
         self._build(settings)
         self._connect()
-        self._timer = QtCore.QTimer(self, interval=POLL_MS, timeout=self._tick)
+        self._timer = QtCore.QTimer(self, interval=POLL_MS)
+        self._timer.timeout.connect(self._tick)
         self._timer.start()
         self._update_zones()
         self._set_state("idle")
@@ -130,11 +133,11 @@ class QtCaptureStage(QtWidgets.QWidget):
         self.recovery_bar.recover.connect(self._recover)
         self.preflight.camera_frame.connect(self._show_camera_check)
 
-    def _show_camera_check(self, frame: object) -> None:
+    def _show_camera_check(self, frame: np.ndarray | None) -> None:
         """Before recording, show the chosen camera's first frame (to check the framing)."""
         if not self.controller.recording:
             caption = "camera check: first frame (live video starts with Record)" if frame is not None else ""
-            self.live.set_frame(frame, caption)  # type: ignore[arg-type]
+            self.live.set_frame(frame, caption)
 
     # ------------------------------------------------------------------------- record / stop
     def toggle_recording(self) -> None:
@@ -221,12 +224,12 @@ class QtCaptureStage(QtWidgets.QWidget):
     def _on_phase(self, phase: str, value: str) -> None:
         t_s = self._guarded(self.controller.start_phase, phase, value)
         if t_s is not None:
-            self.phases.set_current(phase, format_elapsed(float(t_s)))  # type: ignore[arg-type]
+            self.phases.set_current(phase, format_elapsed(float(t_s)))
 
-    def _guarded(self, fn: object, *args: object) -> object:
+    def _guarded(self, fn: Callable[..., Any], *args: Any) -> Any:
         """Call a controller method; show an expected error in the banner instead of raising."""
         try:
-            return fn(*args)  # type: ignore[operator]
+            return fn(*args)
         except UserError as exc:
             self.show_banner(str(exc), "error")
             return None
@@ -396,9 +399,9 @@ class QtCaptureStage(QtWidgets.QWidget):
         if hr_max > rest:
             self.live.set_zones(rest, hr_max)
 
-    def resizeEvent(self, event: object) -> None:  # noqa: N802 - Qt override
+    def resizeEvent(self, event: QtGui.QResizeEvent) -> None:  # noqa: N802 - Qt override
         """Keep the flash overlay covering the stage."""
-        super().resizeEvent(event)  # type: ignore[arg-type]
+        super().resizeEvent(event)
         self.flash.setGeometry(self.rect())
 
 

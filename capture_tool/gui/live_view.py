@@ -227,7 +227,8 @@ class _Counters(QtWidgets.QWidget):
             self.labels[key] = QtWidgets.QLabel("-")
             grid.addRow(text, self.labels[key])
 
-    def update(self, counters: dict[str, Any]) -> None:  # type: ignore[override]
+    # shadows QWidget.update() (a repaint request, which nothing here calls) with the counters' update
+    def update(self, counters: dict[str, Any]) -> None:  # type: ignore[override]  # see above
         """Set the text of the rows named in ``counters``."""
         for key, value in counters.items():
             if key in self.labels:

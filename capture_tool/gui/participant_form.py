@@ -7,11 +7,13 @@ validated ``Participant`` and shows any problem inside the form (STYLE.md E4).
 from __future__ import annotations
 
 import datetime as dt
+import math
 from typing import Any
 
 from PySide6 import QtCore, QtWidgets
 
 from effortface.core.errors import UserError
+from effortface.core.participant import LIMITS, Limit
 from effortface.capture_tool.session import CODE_RULE, SEXES, Participant, make_session_id
 
 
@@ -38,7 +40,8 @@ class QtParticipantForm(QtWidgets.QGroupBox):
     def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__("Participant", parent)
         self._build()
-        self._preview_timer = QtCore.QTimer(self, interval=1000, timeout=self._update_preview)
+        self._preview_timer = QtCore.QTimer(self, interval=1000)
+        self._preview_timer.timeout.connect(self._update_preview)
         self._preview_timer.start()
         self._update_preview()
 
@@ -48,20 +51,20 @@ class QtParticipantForm(QtWidgets.QGroupBox):
         self.code.setToolTip(f"Participant code: {CODE_RULE}")
         self.sex = QtWidgets.QComboBox()
         self.sex.addItems(SEXES)
-        self.age = _spin(12, 99, 30, " years")
-        self.height = _dspin(1.00, 2.30, 1.75, 0.01, " m", 2)
-        self.mass = _dspin(30.0, 200.0, 70.0, 0.5, " kg", 1)
-        self.training_level = _dspin(0.0, 7.5, 3.0, 0.5, "", 1)
-        self.training_level.setToolTip("0 = sedentary ... 7.5 = athlete (SCIENCE.md section 3)")
-        self.hr_rest = _optional_hr()
-        self.hr_max = _optional_hr()
+        self.age = _spin("age", 30)
+        # not ``self.height``: that would hide QWidget.height() (mypy found it)
+        self.height_m = _dspin("height_m", 1.75, 0.01, 2)
+        self.mass = _dspin("mass_kg", 70.0, 0.5, 1)
+        self.training_level = _dspin("training_level", 3.0, 0.5, 1)
+        self.hr_rest = _optional_hr("hr_rest_bpm")
+        self.hr_max = _optional_hr("hr_max_bpm")
         self.label = QtWidgets.QLineEdit(placeholderText="optional, e.g. treadmill", maxLength=32)
         self.session_preview = QtWidgets.QLabel(textFormat=QtCore.Qt.TextFormat.PlainText)
         self.session_preview.setTextInteractionFlags(QtCore.Qt.TextInteractionFlag.TextSelectableByMouse)
         self.message = QtWidgets.QLabel(wordWrap=True)
         self.message.setStyleSheet("color: #b00020;")
         for text, widget in (("Code", self.code), ("Sex", self.sex), ("Age", self.age),
-                             ("Height", self.height), ("Mass", self.mass),
+                             ("Height", self.height_m), ("Mass", self.mass),
                              ("Training level", self.training_level),
                              ("Resting HR", self.hr_rest), ("Max HR", self.hr_max),
                              ("Session label", self.label), ("Session", self.session_preview)):
@@ -69,7 +72,7 @@ class QtParticipantForm(QtWidgets.QGroupBox):
         form.addRow(self.message)
         for edit in (self.code, self.label):
             edit.textChanged.connect(self._on_changed)
-        for spin in (self.age, self.height, self.mass, self.training_level, self.hr_rest, self.hr_max):
+        for spin in (self.age, self.height_m, self.mass, self.training_level, self.hr_rest, self.hr_max):
             spin.valueChanged.connect(self._on_changed)
         self.sex.currentIndexChanged.connect(self._on_changed)
 
@@ -95,18 +98,18 @@ class QtParticipantForm(QtWidgets.QGroupBox):
             "code": self.code.text().strip(),
             "sex": self.sex.currentText(),
             "age": self.age.value(),
-            "height_m": round(self.height.value(), 2),
+            "height_m": round(self.height_m.value(), 2),
             "mass_kg": round(self.mass.value(), 1),
             "training_level": self.training_level.value(),
-            "hr_rest_bpm": self.hr_rest.value() or None,
-            "hr_max_bpm": self.hr_max.value() or None,
+            "hr_rest_bpm": _optional_value(self.hr_rest),
+            "hr_max_bpm": _optional_value(self.hr_max),
         }
 
     def set_values(self, values: dict[str, Any]) -> None:
         """Fill the form (e.g. from the last session's participant)."""
         self.code.setText(str(values.get("code", "")))
         self.sex.setCurrentText(str(values.get("sex", SEXES[0])))
-        for key, spin in (("age", self.age), ("height_m", self.height), ("mass_kg", self.mass),
+        for key, spin in (("age", self.age), ("height_m", self.height_m), ("mass_kg", self.mass),
                           ("training_level", self.training_level), ("hr_rest_bpm", self.hr_rest),
                           ("hr_max_bpm", self.hr_max)):
             if values.get(key) is not None:
@@ -143,25 +146,43 @@ class QtParticipantForm(QtWidgets.QGroupBox):
         return Participant(**self.values())
 
 
-def _spin(lo: int, hi: int, value: int, suffix: str) -> QtWidgets.QSpinBox:
-    spin = QtWidgets.QSpinBox(minimum=lo, maximum=hi, value=value, suffix=suffix)
+def _spin(field: str, value: int) -> QtWidgets.QSpinBox:
+    """An integer spin box over the whole-number part of :data:`LIMITS` ``[field]``."""
+    limit = LIMITS[field]
+    spin = QtWidgets.QSpinBox(minimum=math.ceil(limit.lo), maximum=math.floor(limit.hi), value=value,
+                              suffix=_suffix(limit))
+    spin.setToolTip(limit.meaning)
     spin.setKeyboardTracking(False)
     return spin
 
 
-def _dspin(lo: float, hi: float, value: float, step: float, suffix: str, decimals: int
-           ) -> QtWidgets.QDoubleSpinBox:
-    spin = QtWidgets.QDoubleSpinBox(minimum=lo, maximum=hi, singleStep=step, suffix=suffix,
-                                    decimals=decimals)
+def _dspin(field: str, value: float, step: float, decimals: int) -> QtWidgets.QDoubleSpinBox:
+    """A spin box over :data:`LIMITS` ``[field]``."""
+    limit = LIMITS[field]
+    spin = QtWidgets.QDoubleSpinBox(minimum=limit.lo, maximum=limit.hi, singleStep=step,
+                                    suffix=_suffix(limit), decimals=decimals)
+    spin.setToolTip(limit.meaning)
     spin.setValue(value)
     return spin
 
 
-def _optional_hr() -> QtWidgets.QSpinBox:
-    """A bpm spin box whose lowest value reads 'not measured' (stored as None)."""
-    spin = QtWidgets.QSpinBox(minimum=0, maximum=240, suffix=" bpm", value=0)
+def _suffix(limit: Limit) -> str:
+    return f" {limit.unit}" if limit.unit else ""
+
+
+def _optional_hr(field: str) -> QtWidgets.QSpinBox:
+    """A bpm spin box over :data:`LIMITS` ``[field]`` whose extra lowest value (one below the limit)
+    reads 'not measured' (stored as None, see :func:`_optional_value`)."""
+    spin = _spin(field, 0)
+    spin.setMinimum(spin.minimum() - 1)
     spin.setSpecialValueText("not measured")
+    spin.setValue(spin.minimum())
     return spin
+
+
+def _optional_value(spin: QtWidgets.QSpinBox) -> int | None:
+    """The value of an :func:`_optional_hr` spin box, None when it reads 'not measured'."""
+    return None if spin.value() == spin.minimum() else spin.value()
 
 
 def _mark(widget: QtWidgets.QWidget, bad: bool) -> None:

@@ -44,7 +44,8 @@ class QtPhasePanel(QtWidgets.QGroupBox):
     def _build(self) -> None:
         grid = QtWidgets.QGridLayout(self)
         for col, (phase, text, key) in enumerate(PHASES):
-            button = QtWidgets.QPushButton(f"{text}  [{key}]", checkable=True)
+            button = QtWidgets.QPushButton(f"{text}  [{key}]")
+            button.setCheckable(True)
             button.setMinimumHeight(36)
             button.setStyleSheet("QPushButton:checked { background: #1b7f3b; color: white; font-weight: bold; }")
             button.clicked.connect(lambda _=False, p=phase: self.request_phase(p))

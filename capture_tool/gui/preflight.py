@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import os
 from pathlib import Path
+from collections.abc import Callable
 from typing import Any
 
 from PySide6 import QtCore, QtWidgets
@@ -106,14 +107,16 @@ class QtPreflight(QtWidgets.QGroupBox):
         self.state = {"strap": MISSING, "camera": MISSING}
         self.detect_seconds = 2.5  # how long Detect listens to the port
         self._build()
-        self._timer = QtCore.QTimer(self, interval=100, timeout=self._drain)
+        self._timer = QtCore.QTimer(self, interval=100)
+        self._timer.timeout.connect(self._drain)
         self._timer.start()
         self._restore()
         self.refresh()
 
     def _build(self) -> None:
         self.port = QtWidgets.QComboBox(editable=True)
-        self.port.lineEdit().setPlaceholderText("/dev/ttyUSB0 or replay://file.serlog")
+        self.port.lineEdit().setPlaceholderText(  # type: ignore[union-attr]  # editable: it has one
+            "/dev/ttyUSB0 or replay://file.serlog")
         self.port.setMinimumContentsLength(22)
         self.protocol = QtWidgets.QComboBox()
         self.protocol.addItems(sorted(PROTOCOLS))
@@ -139,7 +142,8 @@ class QtPreflight(QtWidgets.QGroupBox):
         self.refresh_button.clicked.connect(self.refresh)
         self.detect_button.clicked.connect(self.detect)
         self.browse.clicked.connect(self._browse)
-        self._debounce = QtCore.QTimer(self, singleShot=True, interval=400, timeout=self.check)
+        self._debounce = QtCore.QTimer(self, singleShot=True, interval=400)
+        self._debounce.timeout.connect(self.check)
         self.port.currentTextChanged.connect(lambda _: self._debounce.start())
         self.camera.currentIndexChanged.connect(lambda _: self._on_camera_changed())
         self.video_path.editingFinished.connect(self.check)
@@ -198,7 +202,7 @@ class QtPreflight(QtWidgets.QGroupBox):
         self._check_one("strap", choice.port, check_strap, "no port chosen")
         self._check_one("camera", choice.camera, check_camera, "no video will be recorded")
 
-    def _check_one(self, name: str, target: object, fn: object, none_text: str) -> None:
+    def _check_one(self, name: str, target: object, fn: Callable[[Any], Any], none_text: str) -> None:
         if target in (None, ""):
             self._show(name, MISSING, none_text)
             if name == "camera":

@@ -281,11 +281,11 @@ class AntDecoder(Decoder):
         if d_count == 1:
             return (d_time * 1000.0 / 1024.0,)
         self.stats.count("missed_beats", d_count - 1)
-        p4 = page.page4_rr_ms
-        if p4 is None:
+        p4, prev = page.page4_rr_ms, page.prev_beat_time_1024
+        if p4 is None or prev is None:  # not page 4 (both are None then)
             return ()
         if d_count == 2:  # last event -> previous beat -> this beat: both intervals are known
-            earlier = ((page.prev_beat_time_1024 - last.beat_time_1024) & 0xFFFF) * 1000.0 / 1024.0
+            earlier = ((prev - last.beat_time_1024) & 0xFFFF) * 1000.0 / 1024.0
             return (earlier, p4)
         return (p4,)
 

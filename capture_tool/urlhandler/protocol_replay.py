@@ -11,16 +11,20 @@ from __future__ import annotations
 
 import time
 import urllib.parse as urlparse
+from typing import TYPE_CHECKING, Any
 
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException
 
 from effortface.core.errors import UserError
 
+if TYPE_CHECKING:
+    from typing_extensions import Buffer  # typing only (collections.abc.Buffer from Python 3.12)
+
 
 class Serial(SerialBase):
     """Serial port that replays a recording (see the module docstring for the URL form)."""
 
-    def __init__(self, *args: object, **kwargs: object) -> None:
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
         self._data = b""
         self._due_s: list[tuple[float, int]] = []  # (time, end offset in _data)
         self._pos = 0
@@ -34,7 +38,7 @@ class Serial(SerialBase):
         """Load the recording named in the URL and start its clock."""
         if self.is_open:
             raise SerialException("Port is already open.")
-        if self._port is None:
+        if self.port is None:
             raise SerialException("Port must be configured before it can be used.")
         path = self.from_url(self.port)
         from effortface.capture_tool.replay import load_timed_chunks
@@ -107,7 +111,7 @@ class Serial(SerialBase):
         """Return up to ``size`` due bytes, waiting up to ``timeout`` for the first."""
         if not self.is_open:
             raise PortNotOpenError()
-        deadline = None if self._timeout is None else time.monotonic() + self._timeout
+        deadline = None if self.timeout is None else time.monotonic() + self.timeout
         while True:
             self._check_plugged()
             end = min(self._available_end(), self._pos + size)
@@ -118,12 +122,13 @@ class Serial(SerialBase):
                 return b""
             time.sleep(0.002)
 
-    def write(self, data: bytes) -> int:
+    def write(self, data: Buffer) -> int:
         """Accept and count bytes sent to the device."""
         if not self.is_open:
             raise PortNotOpenError()
-        self.bytes_sent += len(data)
-        return len(data)
+        n_bytes = memoryview(data).nbytes
+        self.bytes_sent += n_bytes
+        return n_bytes
 
     def reset_input_buffer(self) -> None:
         """Skip nothing: the recording is the input."""

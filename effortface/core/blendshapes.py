@@ -11,6 +11,7 @@ import dataclasses
 import json
 import os
 from pathlib import Path
+from typing import Any
 
 from effortface.core.errors import UserError
 
@@ -47,12 +48,12 @@ class BlendshapeSet:
                 f"blendshape: expected one of {', '.join(self.names)}, found {name!r}"
             ) from None
 
-    def to_dict(self) -> list[dict]:
+    def to_dict(self) -> list[dict[str, Any]]:
         """JSON-ready list (for model.json and annotation files)."""
         return [{"name": b.name, "drives": b.drives, "arkit": list(b.arkit)} for b in self.shapes]
 
     @classmethod
-    def from_dict(cls, items: list[dict]) -> BlendshapeSet:
+    def from_dict(cls, items: list[dict[str, Any]]) -> BlendshapeSet:
         """Inverse of :meth:`to_dict`."""
         return cls(tuple(Blendshape(d["name"], d.get("drives", ""), tuple(d.get("arkit", ())))
                          for d in items))
@@ -66,7 +67,7 @@ DEFAULT_SET = BlendshapeSet((
 ))
 
 
-def load_blendshape_set(path: str | os.PathLike | None = None) -> BlendshapeSet:
+def load_blendshape_set(path: str | os.PathLike[str] | None = None) -> BlendshapeSet:
     """Read a blendshape set from a JSON file (a list of {name, drives, arkit}); default if None.
 
     Raises

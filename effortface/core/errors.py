@@ -38,6 +38,13 @@ def not_text_error(path: object, exc: UnicodeDecodeError | csv.Error) -> Session
     return SessionFormatError(f"{path}: expected CSV text, found unreadable CSV ({exc})")
 
 
+def json_type(value: object) -> str:
+    """The JSON name of a parsed value's type and the value (``object {...}``, ``string 'x'``), for
+    messages; at most 80 characters."""
+    names = {dict: "object", list: "array", str: "string", bool: "boolean", int: "number", float: "number"}
+    return "null" if value is None else f"{names.get(type(value), type(value).__name__)} {value!r}"[:80]
+
+
 class DeviceErrorReason(enum.Enum):
     """Machine-readable reason for a device failure, so a GUI can suggest a fix."""
 

@@ -8,12 +8,13 @@ stays cheap.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Literal
 
 from effortface.core.errors import UserError
 
 
-def agg_figure(figsize: tuple[float, float], *, layout: str | None = None) -> Any:
+def agg_figure(figsize: tuple[float, float], *,
+               layout: Literal["constrained", "compressed", "tight"] | None = None) -> Any:
     """A new figure on its own Agg canvas (no pyplot, no display, nothing to close).
 
     Parameters

@@ -16,7 +16,7 @@ from typing import IO, Any
 from effortface.core.errors import UserError
 
 
-def refuse_overwrite(path: str | os.PathLike, *, overwrite: bool = False, what: str = "file",
+def refuse_overwrite(path: str | os.PathLike[str], *, overwrite: bool = False, what: str = "file",
                      hint: str = "") -> Path:
     """Return ``path`` as a Path, or refuse if it exists and ``overwrite`` is False.
 
@@ -42,7 +42,7 @@ def refuse_overwrite(path: str | os.PathLike, *, overwrite: bool = False, what: 
     return path
 
 
-def not_a_file(path: str | os.PathLike) -> str | None:
+def not_a_file(path: str | os.PathLike[str]) -> str | None:
     """None if ``path`` is an existing regular file, else what is there, for a refusal message.
 
     Returns
@@ -59,7 +59,7 @@ def not_a_file(path: str | os.PathLike) -> str | None:
     return "a folder" if path.is_dir() else "a special file (FIFO, device or socket)"
 
 
-def check_new_png(option: str, value: str | os.PathLike) -> Path:
+def check_new_png(option: str, value: str | os.PathLike[str]) -> Path:
     """A new ``.png`` path in an existing writable folder, for an option such as ``--plot``.
 
     Checked before any work is done, so a bad path costs nothing.
@@ -97,7 +97,7 @@ def check_new_png(option: str, value: str | os.PathLike) -> Path:
     return path
 
 
-def atomic_write(path: str | os.PathLike, write: Callable[[IO[bytes]], Any]) -> Path:
+def atomic_write(path: str | os.PathLike[str], write: Callable[[IO[bytes]], Any]) -> Path:
     """Call ``write(fh)`` on a temp file beside ``path``, fsync it, then rename it over ``path``.
 
     Parameters
@@ -126,12 +126,12 @@ def atomic_write(path: str | os.PathLike, write: Callable[[IO[bytes]], Any]) -> 
     return path
 
 
-def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
+def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
     """Write UTF-8 ``text`` atomically (see :func:`atomic_write`)."""
     data = text.encode("utf-8")
     return atomic_write(path, lambda fh: fh.write(data))
 
 
-def write_json_atomic(path: str | os.PathLike, data: Any) -> Path:
+def write_json_atomic(path: str | os.PathLike[str], data: Any) -> Path:
     """Write ``data`` as indented JSON atomically (see :func:`atomic_write`)."""
     return atomic_write_text(path, json.dumps(data, indent=2, sort_keys=False) + "\n")

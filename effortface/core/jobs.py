@@ -32,7 +32,7 @@ class Jobs:
 
     def __init__(self, workers: int = 2) -> None:
         self._pool = cf.ThreadPoolExecutor(max_workers=workers, thread_name_prefix="gui-job")
-        self._pending: list[tuple[str, cf.Future]] = []
+        self._pending: list[tuple[str, cf.Future[Any]]] = []
 
     def submit(self, key: str, fn: Callable[..., Any], *args: Any) -> None:
         """Run ``fn(*args)`` in a worker; its result comes back from :meth:`drain` under ``key``."""

@@ -75,7 +75,7 @@ def _fill_form(stage, code: str = "P07") -> None:
     form.code.setText(code)
     form.sex.setCurrentText("male")
     form.age.setValue(34)
-    form.height.setValue(1.81)
+    form.height_m.setValue(1.81)
     form.mass.setValue(77.5)
     form.training_level.setValue(5.0)
     form.hr_rest.setValue(55)

@@ -47,8 +47,8 @@ def test_participant_code_accepted(code: str) -> None:
         ("codes, never names", {"code": "JANE"}),  # no digit: looks like a name
         ("codes, never names", {"code": "p01"}),
         ("sex: expected one of female, male", {"code": "P01", "sex": "x"}),
-        ("age: expected a number from 5 to 120", {"code": "P01", "age": 400}),
-        ("height_m: expected a number from 0.5 to 2.5", {"code": "P01", "height_m": 178}),
+        ("age: expected a number from 10 to 100 years", {"code": "P01", "age": 400}),
+        ("height_m: expected a number from 0.5 to 2.6 m", {"code": "P01", "height_m": 178}),
         ("mass_kg", {"code": "P01", "mass_kg": -1}),
         ("training_level", {"code": "P01", "training_level": 11}),
         ("hr_rest_bpm: expected below hr_max_bpm", {"code": "P01", "hr_rest_bpm": 110, "hr_max_bpm": 105}),

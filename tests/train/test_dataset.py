@@ -206,6 +206,25 @@ def test_work_from_a_motion_clip_when_there_is_no_work_log(tmp_path):
     assert np.isnan(session_table(folder)["w_per_kg"].iloc[0])  # before the clip: unknown, not 0
 
 
+def test_work_from_a_motion_clip_needs_mass_and_sex(tmp_path):
+    """Without work.csv, a participant recorded without a mass is named with the session (it used
+    to reach the segment model as None: 'mass_kg: expected a body mass above 0 kg, got None')."""
+    import shutil
+
+    lab = Path(__file__).resolve().parents[2] / "sample_sessions"
+    src = next((p.parent.parent for p in lab.glob("*/motion/motion.json")), None)
+    if src is None:
+        pytest.skip("sample_sessions/ has no session with motion/ yet")
+    folder = Path(shutil.copytree(src, tmp_path / src.name))
+    (folder / "work.csv").unlink()
+    info = json.loads((folder / "session.json").read_text())
+    del info["participant"]["mass_kg"]
+    (folder / "session.json").write_text(json.dumps(info))
+    with pytest.raises(DatasetError, match=rf"{src.name}/session.json: participant P\d+: expected "
+                                           r"mass_kg and sex for the motion clips' work, found mass_kg None"):
+        session_table(folder)
+
+
 def test_no_work_at_all(lab):
     folder = sorted(lab.glob("P01_*"))[0]
     (folder / "work.csv").unlink()

@@ -24,16 +24,16 @@ def jumping_jacks(shared_data: Path):
 
 
 BAD_CHARACTERS = {
-    r"mass_kg: expected a body mass above 0 kg, got -75": dict(mass_kg=-75),
+    r"mass_kg: expected a number from 15 to 300 kg, found -75": dict(mass_kg=-75),
     r"training_level: expected a number from 0 to 10, found 11": dict(training_level=11),
     r"training_level: expected a number from 0 to 10, found -1": dict(training_level=-1),
-    r"sex: expected 'male' or 'female', found 'robot'": dict(sex="robot"),
+    r"sex: expected one of female, male, found 'robot'": dict(sex="robot"),
     r"age: expected a number from 10 to 100 years, found 300": dict(age=300),
     r"height_m: expected a number from 0.5 to 2.6 m, found 178": dict(height_m=178),
     r"expressiveness: expected numbers >= 0, found \(1, -1, 1, 1\)": dict(expressiveness=(1, -1, 1, 1)),
     r"expressiveness: expected a sequence of numbers, found 'big'": dict(expressiveness="big"),
     r"load_left_kg: expected a load of 0 kg or more, found -3": dict(load_left_kg=-3),
-    r"hr_max_bpm: expected a number from 25 to 250 bpm, found 900": dict(hr_max_bpm=900),
+    r"hr_max_bpm: expected a number from 100 to 240 bpm, found 900": dict(hr_max_bpm=900),
 }
 
 

@@ -128,13 +128,13 @@ def _unknown_joints_bvh(shared_data: Path, tmp_path: Path) -> Path:
 BAD_CLI = {
     r"bad\.bvh.*line 191": lambda d, t: [str(_malformed_bvh(d, t))],
     r"skeleton joints: .*unmapped segments: .*left_thigh": lambda d, t: [str(_unknown_joints_bvh(d, t))],
-    r"character options: mass_kg: expected a body mass above 0 kg": lambda d, t: [str(d / JJ), "--mass", "-75"],
+    r"character options: mass_kg: expected a number from 15 to 300 kg": lambda d, t: [str(d / JJ), "--mass", "-75"],
     r"character options: training_level: expected a number from 0 to 10, found 12":
         lambda d, t: [str(d / JJ), "--training-level", "12"],
     r"character options: expressiveness: expected 4 values": lambda d, t: [str(d / JJ), "--expressiveness", "1,1,1"],
     r"--expressiveness: expected 4 comma-separated numbers, found 'a,b'":
         lambda d, t: [str(d / JJ), "--expressiveness", "a,b"],
-    r"character options: sex: expected 'male' or 'female'": lambda d, t: [str(d / JJ), "--sex", "x"],
+    r"character options: sex: expected one of female, male": lambda d, t: [str(d / JJ), "--sex", "x"],
     r"character options: load_back_kg: expected a load of 0 kg or more":
         lambda d, t: [str(d / JJ), "--load-back", "-1"],
     r"clip\.txt: expected a motion file ending in \.bvh or \.npz":

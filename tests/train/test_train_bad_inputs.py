@@ -143,10 +143,10 @@ BAD_TABLES = {
     "sex x": (_spoil("sex", "x", "P01"), r"participant P01: column sex: expected one of female, male, found 'x'"),
     # item 4: silently accepted values
     "negative mass": (_spoil("mass_kg", -70.0, "P01"), r"participant P01: column mass_kg: expected a number "
-                                                       r"from 15 to 300, found -70"),
+                                                       r"from 15 to 300 kg, found -70"),
     "training level 99": (_spoil("training_level", 99.0, "P02"), r"P02: column training_level: .* 0 to 10, found 99"),
-    "age 0": (_spoil("age", 0.0, "P01"), r"P01: column age: expected a number from 5 to 120, found 0"),
-    "height in cm": (_spoil("height_m", 178.0, "P01"), r"column height_m: expected a number from 0.5 to 2.5, found 178"),
+    "age 0": (_spoil("age", 0.0, "P01"), r"P01: column age: expected a number from 10 to 100 years, found 0"),
+    "height in cm": (_spoil("height_m", 178.0, "P01"), r"column height_m: expected a number from 0.5 to 2.6 m, found 178"),
     "negative heart rate": (_spoil("hr_bpm", -5.0), r"column hr_bpm: expected values from 25 to 250 \(or empty\), "
                                                     r"found -5 on line 2"),
     "weight 5": (_spoil("mouth_open", 5.0), r"column mouth_open: expected values from 0 to 1 \(or empty\), found 5"),

@@ -15,8 +15,12 @@ import argparse
 import os
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from effortface.core.errors import UserError
+
+if TYPE_CHECKING:
+    from PySide6 import QtCore
 
 SIZE = (1400, 900)
 
@@ -40,12 +44,12 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-def _wait(app: object, seconds: float) -> None:
+def _wait(app: QtCore.QCoreApplication, seconds: float) -> None:
     from PySide6 import QtCore
 
     deadline = QtCore.QDeadlineTimer(int(seconds * 1000))
     while not deadline.hasExpired():
-        app.processEvents(QtCore.QEventLoop.ProcessEventsFlag.AllEvents, 20)  # type: ignore[attr-defined]
+        app.processEvents(QtCore.QEventLoop.ProcessEventsFlag.AllEvents, 20)
 
 
 def _synth(args: argparse.Namespace) -> object:
@@ -94,21 +98,22 @@ def main(argv: list[str] | None = None) -> int:
 
     app = QtWidgets.QApplication.instance() or QtWidgets.QApplication(sys.argv[:1])
     try:
+        # a QtSynthStage or QtTrainStage, typed object so that the stage modules load lazily
         stage = _synth(args) if args.stage == "synth" else _train(args, app)
     except UserError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    stage.resize(*SIZE)  # type: ignore[attr-defined]
-    stage.show()  # type: ignore[attr-defined]
+    stage.resize(*SIZE)  # type: ignore[attr-defined]  # a stage, typed object
+    stage.show()  # type: ignore[attr-defined]  # a stage, typed object
     if args.stage == "synth" and args.seconds > 0:
-        stage.session.play()  # type: ignore[attr-defined]
+        stage.session.play()  # type: ignore[attr-defined]  # a stage, typed object
     _wait(app, max(args.seconds, 0.5))
     if not args.screenshot:
-        return int(app.exec())  # type: ignore[attr-defined]
-    stage.shutdown()  # type: ignore[attr-defined]
+        return int(app.exec())
+    stage.shutdown()  # type: ignore[attr-defined]  # a stage, typed object
     _wait(app, 0.3)
     out = Path(args.screenshot)
-    if not stage.grab().save(str(out), "PNG"):  # type: ignore[attr-defined]
+    if not stage.grab().save(str(out), "PNG"):  # type: ignore[attr-defined]  # a stage, typed object
         print(f"error: --screenshot {out}: could not write", file=sys.stderr)
         return 2
     print(out)

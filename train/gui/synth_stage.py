@@ -22,7 +22,8 @@ from effortface.annotate.face import render_face
 from effortface.core.gui.qt_compat import guard_none_refcount
 from effortface.core.errors import UserError
 from effortface.core.gui.widgets import QtElidedLabel, caption
-from effortface.train.runtime import AGE_RANGE, HEIGHT_RANGE_M, SEXES, TRAINING_LEVEL_RANGE
+from effortface.core.participant import SEXES
+from effortface.train.runtime import AGE_RANGE, HEIGHT_RANGE_M, MASS_RANGE_KG, TRAINING_LEVEL_RANGE
 from effortface.train.synth_session import (
     MAX_LOOPS,
     SynthSession,
@@ -103,7 +104,7 @@ class QtCharacterPanel(QtWidgets.QGroupBox):
         sex.addItems(SEXES)
         self._add("Sex", "sex", sex)
         self._add("Height", "height_m", self._spin(*HEIGHT_RANGE_M, 0.01, 2, " m"))
-        self._add("Mass", "mass_kg", self._spin(20, 250, 1, 1, " kg"))
+        self._add("Mass", "mass_kg", self._spin(*MASS_RANGE_KG, 1, 1, " kg"))
         tl = self._spin(*TRAINING_LEVEL_RANGE, 0.5, 1, "")
         slider = QtWidgets.QSlider(QtCore.Qt.Orientation.Horizontal)
         slider.setRange(0, int(TRAINING_LEVEL_RANGE[1] * 10))

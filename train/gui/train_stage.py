@@ -199,7 +199,8 @@ class QtSettingsPanel(QtWidgets.QGroupBox):
         session.sessions_changed.connect(self._fill_raters)
         self._fill_raters()
         self.show_settings()
-        self.rater.lineEdit().editingFinished.connect(self.commit_rater)   # not on every keystroke
+        # not on every keystroke (an editable combo box always has its line edit)
+        self.rater.lineEdit().editingFinished.connect(self.commit_rater)  # type: ignore[union-attr]  # see above
         self.rater.activated.connect(self.commit_rater)                    # a pick from the list
         self.grid.currentTextChanged.connect(lambda v: self._write(grid=v))
         self.cv.currentIndexChanged.connect(lambda i: self._write(cv=self.cv.itemData(i)))
