@@ -188,6 +188,8 @@ class CaptureSession:
         return self.state in BUSY_STATES
 
     def _set_state(self, state: str) -> None:
+        if state not in STATES:
+            raise ValueError(f"state: expected one of {', '.join(STATES)}, found {state!r}")
         self.state = state
         self.state_changed.emit(state)
 

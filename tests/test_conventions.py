@@ -104,13 +104,7 @@ def test_stage_models_notify_through_emitters_named_thing_changed(stage: str) ->
 
 
 def _thread_imports(path: Path) -> set[str]:
-    names = set()
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-        if isinstance(node, ast.Import):
-            names |= {a.name for a in node.names}
-        elif isinstance(node, ast.ImportFrom) and node.module:
-            names.add(node.module)
-    return names & THREAD_MODULES
+    return _imported(path) & THREAD_MODULES
 
 
 @pytest.mark.parametrize("path", [p for p in _sources() if "gui" in p.relative_to(ROOT).parts
@@ -118,3 +112,25 @@ def _thread_imports(path: Path) -> set[str]:
 def test_stage_models_and_views_run_background_work_through_core_jobs(path: Path) -> None:
     assert _rel(path) in THREADS_ALLOWED or not _thread_imports(path), \
         f"{_rel(path)}: run background work through effortface.core.jobs.Jobs"
+
+
+def test_psutil_is_for_the_benchmarks_only() -> None:
+    """psutil installs with the ``bench`` extra: the package and the tests never import it."""
+    tomllib = pytest.importorskip("tomllib", reason="tomllib is Python 3.11+")
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]
+    extras = project["optional-dependencies"]
+    assert not [d for d in project["dependencies"] + extras["test"] if d.startswith("psutil")]
+    assert [d for d in extras["bench"] if d.startswith("psutil")]
+    importers = [_rel(p) for p in [*_sources(), *sorted((ROOT / "tests").rglob("*.py"))]
+                 if "psutil" in {n.split(".")[0] for n in _imported(p)}]
+    assert importers == []
+
+
+def _imported(path: Path) -> set[str]:
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            names |= {a.name for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            names.add(node.module)
+    return names
