@@ -77,6 +77,9 @@ def test_each_stage_model_sits_at_its_package_root_under_one_name(stage: str) ->
     assert path.name == f"{stage}_session.py" and cls == f"{stage.capitalize()}Session"
     tree = ast.parse(path.read_text(encoding="utf-8"))
     assert cls in {n.name for n in tree.body if isinstance(n, ast.ClassDef)}
+    view = path.parent / "gui" / f"{stage}_stage.py"  # its view: Qt<Stage>Stage in the stage's gui/
+    assert f"Qt{stage.capitalize()}Stage" in {n.name for n in ast.parse(view.read_text(encoding="utf-8")).body
+                                              if isinstance(n, ast.ClassDef)}
 
 
 def _emitters(tree: ast.AST) -> list[str]:

@@ -59,7 +59,7 @@ class Job:
         self.key = key
         self.done = done
         self.progress = progress
-        self.future: cf.Future = cf.Future()
+        self.future: cf.Future[Any] = cf.Future()
         self._cancel = threading.Event()
         self._reports: queue.SimpleQueue[tuple[float, str]] = queue.SimpleQueue()
 
@@ -111,11 +111,9 @@ class Jobs:
     def __init__(self, workers: int = 2, name: str = "job") -> None:
         self._tasks: queue.SimpleQueue[tuple[Job, Callable[[], Any]] | None] = queue.SimpleQueue()
         self._pending: list[Job] = []
-        self._threads = [threading.Thread(target=self._work, name=f"{name}-{i}", daemon=True)
-                         for i in range(workers)]
+        self._workers, self._name = max(1, int(workers)), name
+        self._threads: list[threading.Thread] = []  # started on demand, up to ``workers``
         self._closed = False
-        for thread in self._threads:
-            thread.start()
 
     def submit(self, key: str, fn: Callable[..., Any], *args: Any, done: DoneFn | None = None,
                progress: ProgressFn | None = None, takes_job: bool = False) -> Job:
@@ -149,6 +147,10 @@ class Jobs:
         call = (lambda: fn(job, *args)) if takes_job else (lambda: fn(*args))
         self._pending.append(job)
         self._tasks.put((job, call))
+        if len(self._threads) < min(self._workers, len(self.running())):
+            thread = threading.Thread(target=self._work, name=f"{self._name}-{len(self._threads)}", daemon=True)
+            self._threads.append(thread)
+            thread.start()
         return job
 
     def _work(self) -> None:

@@ -178,3 +178,19 @@ def test_shutdown_cancels_and_refuses_new_jobs() -> None:
     assert result.cancelled
     with pytest.raises(RuntimeError, match="shut down"):
         pool.submit("late", print)
+
+
+def test_threads_start_on_demand_up_to_the_pool_size() -> None:
+    def ours() -> list[str]:
+        return [t.name for t in threading.enumerate() if t.name.startswith("probe-pool-")]
+
+    pool = Jobs(workers=2, name="probe-pool")
+    assert ours() == []  # a stage that never runs a job starts no thread
+    release = threading.Event()
+    for _ in range(5):
+        pool.submit("wait", release.wait, TIMEOUT_S)
+    assert sorted(ours()) == ["probe-pool-0", "probe-pool-1"]
+    assert all(t.daemon for t in threading.enumerate() if t.name.startswith("probe-pool-"))
+    release.set()
+    assert pool.wait(TIMEOUT_S) and [r.value for r in pool.drain()] == [True] * 5
+    pool.shutdown()
