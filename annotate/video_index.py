@@ -100,14 +100,12 @@ class _FrameCache:
         self.capacity = max(1, int(capacity))
         self._frames: collections.OrderedDict[int, np.ndarray] = collections.OrderedDict()
         self._lock = threading.Lock()
-        self.hits = 0
-        self.misses = 0
+        self.hits = 0  # read by the cache test: a cached frame is never decoded again
 
     def get(self, frame: int) -> np.ndarray | None:
         with self._lock:
             image = self._frames.get(frame)
             if image is None:
-                self.misses += 1
                 return None
             self._frames.move_to_end(frame)
             self.hits += 1
@@ -142,13 +140,11 @@ class _Decoder:
             raise UserError(f"{path}: expected a video OpenCV can decode, found an unreadable file")
         self.n_frames = int(self._cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
         self._next = 0  # frame the next read() returns
-        self.seeks = 0
 
     def read(self, frame: int) -> np.ndarray | None:
         """Decode ``frame``; None if the file ends before it."""
         if frame != self._next:
             self._cap.set(_cv2().CAP_PROP_POS_FRAMES, frame)
-            self.seeks += 1
         ok, image = self._cap.read()
         self._next = frame + 1 if ok else -1
         return image if ok else None

@@ -115,7 +115,7 @@ def bench_stepping(folder: Path, n_steps: int, cache_frames: int, rate_hz: float
     stage.activateWindow()
     QTest.qWaitForWindowActive(stage)
     editor = stage.open_session(folder, "BENCH")
-    view, model = editor.video_view, editor.model
+    view, session = editor.video_view, editor.session
     if cache_frames <= 1:
         editor.video.prefetch_ahead = editor.video.prefetch_behind = 0
     view.setFocus()
@@ -131,7 +131,7 @@ def bench_stepping(folder: Path, n_steps: int, cache_frames: int, rate_hz: float
         QTest.keyClick(view, QtCore.Qt.Key.Key_Right)
         lat.append(time.perf_counter() - t0)
     elapsed = time.perf_counter() - start
-    assert model.frame == n_steps, f"stepped to frame {model.frame}, expected {n_steps}"
+    assert session.frame == n_steps, f"stepped to frame {session.frame}, expected {n_steps}"
     stage.shutdown()
     stage.deleteLater()
     app.processEvents()

@@ -127,9 +127,10 @@ def make_stage(key: str, sessions_dir: Path, settings: QtCore.QSettings) -> QtWi
         a :class:`QtPlaceholderStage`).
     """
     if key == "capture":
-        from effortface.capture_tool.gui.capture_stage import CaptureController, QtCaptureStage
+        from effortface.capture_tool.capture_session import CaptureSession
+        from effortface.capture_tool.gui.capture_stage import QtCaptureStage
 
-        return QtCaptureStage(CaptureController(sessions_dir), settings)
+        return QtCaptureStage(CaptureSession(sessions_dir), settings)
     if key == "annotate":
         from effortface.annotate.gui.annotate_stage import QtAnnotateStage
 

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from effortface.core.jobs import Cancelled  # noqa: F401  (re-exported: the one cancel exception)
 from effortface.core.blendshapes import BlendshapeSet
 from effortface.core.errors import UserError
 from effortface.core.version import __version__
@@ -44,10 +45,6 @@ _STEP_FRACTION = {"prepare": 0.05, "hr": 0.2, "folds": 0.8, "held_out": 0.85, "p
 
 #: ``progress(fraction, text)``: fraction of the run done (0-1) and what runs now
 ProgressFn = Callable[[float, str], None]
-
-
-class Cancelled(Exception):
-    """The user cancelled a running training."""
 
 
 def _no_progress(fraction: float, text: str) -> None:

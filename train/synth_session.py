@@ -1,11 +1,13 @@
 """The Synthesize stage's model (Qt-free): a clip, a model, a character, the curves and a play head.
 
-The widgets of :mod:`effortface.train.gui.synth_stage` call :class:`SynthSession` methods and listen to its
-plain callbacks; a QTimer calls :meth:`SynthSession.advance` with the wall time elapsed, so the play
-head moves in real time whatever the frame rate of the display (STYLE.md L3).
+:class:`SynthSession` follows the stage-model convention of :mod:`effortface.core`: the widgets of
+:mod:`effortface.train.gui.synth_stage` call its methods and connect to its ``<thing>_changed``
+emitters; a QTimer calls :meth:`SynthSession.advance` with the wall time elapsed, so the play head
+moves in real time whatever the frame rate of the display (STYLE.md L3).
 
 Curves are recomputed for the whole clip whenever the character or the model changes, at once or,
-for the GUI, on a worker thread whose newest result :meth:`SynthSession.poll` applies (a looped
+for the GUI, in the core :class:`~effortface.core.jobs.Jobs`, whose newest result
+:meth:`SynthSession.poll` applies on the stage's QTimer (a looped
 2-minute clip through an SVR bundle takes about 0.1 s); the work and power of the clip depend only on the body
 (mass, sex, loads), so they are cached and reused when only the training level, age, height or
 expressiveness change. ``loops`` repeats the clip end to end (:func:`effortface.train.energy.looped`: the work
@@ -15,7 +17,6 @@ fatigue building up over minutes.
 
 from __future__ import annotations
 
-import concurrent.futures as cf
 import dataclasses
 import os
 from pathlib import Path
@@ -25,6 +26,7 @@ import numpy as np
 
 from effortface.core.errors import UserError
 from effortface.core.fileio import refuse_overwrite
+from effortface.core.jobs import JobResult, Jobs
 from effortface.train.curves_io import CURVE_FORMATS, write_curves
 from effortface.train.energy import EnergyCurves, looped, work_and_power
 from effortface.train.motion import Motion, read_motion
@@ -80,12 +82,12 @@ class SynthSession:
     character : Character, optional
         Who moves (default: :class:`effortface.train.runtime.Character` defaults).
     background : bool
-        Recompute curves on a worker thread (the GUI: a 2-minute clip through an SVR bundle takes
+        Recompute curves in background jobs (the GUI: a 2-minute clip through an SVR bundle takes
         about 0.1 s); :meth:`poll` then applies the newest result. False computes at once.
 
     Notes
     -----
-    Callbacks (each an :class:`~effortface.core.events.Emitter`): ``model_changed()``,
+    Emitters (:class:`~effortface.core.events.Emitter`): ``model_changed()``,
     ``motion_changed()``, ``curves_changed()``, ``character_changed()``, ``position_changed(frame)``,
     ``playing_changed(playing)``, ``status_changed(text, is_error)``.
     """
@@ -101,8 +103,7 @@ class SynthSession:
         self.position_s = 0.0
         self.playing = False
         self._work_cache: tuple[Motion, tuple, EnergyCurves] | None = None
-        self._pool = cf.ThreadPoolExecutor(1, thread_name_prefix="synth-curves") if background else None
-        self._pending: list[tuple[int, cf.Future]] = []
+        self.jobs = Jobs(workers=1, name="synth-curves") if background else None
         self._generation = 0
         self.model_changed, self.motion_changed = Emitter(), Emitter()
         self.curves_changed, self.character_changed = Emitter(), Emitter()
@@ -178,10 +179,19 @@ class SynthSession:
             return
         self._generation += 1
         args = (self.model, self.motion, self.character, self.loops)
-        if self._pool is None:
+        if self.jobs is None:
             self._apply(self._curves(*args))
         else:
-            self._pending.append((self._generation, self._pool.submit(self._curves, *args)))
+            generation = self._generation
+            self.jobs.submit("curves", self._curves, *args,
+                             done=lambda result: self._curves_done(generation, result))
+
+    def _curves_done(self, generation: int, result: JobResult) -> None:
+        """Apply a background recompute if it is the newest (older ones are dropped); report an error."""
+        if result.error is not None:
+            self.status_changed.emit(f"curves not updated: {result.error}", True)
+        elif generation == self._generation:
+            self._apply(result.value)
 
     def _apply(self, curves: dict[str, np.ndarray]) -> None:
         self.curves = curves
@@ -192,31 +202,27 @@ class SynthSession:
     @property
     def busy(self) -> bool:
         """True while curves are being recomputed in the background."""
-        return any(not f.done() for _, f in self._pending)
+        return self.jobs is not None and self.jobs.busy()
 
     def poll(self) -> None:
         """Apply the newest finished recompute (call on the GUI thread); older ones are dropped.
 
         An error raised by a background recompute is reported through ``status_changed``.
         """
-        done = [(g, f) for g, f in self._pending if f.done()]
-        self._pending = [(g, f) for g, f in self._pending if not f.done()]
-        for gen, future in done:
-            if future.exception() is not None:
-                self.status_changed.emit(f"curves not updated: {future.exception()}", True)
-            elif gen == self._generation:
-                self._apply(future.result())
+        if self.jobs is not None:
+            self.jobs.drain()
 
     def wait(self, timeout_s: float | None = None, *, apply: bool = True) -> None:
         """Block until background recomputes finish, then :meth:`poll` unless ``apply`` is False."""
-        cf.wait([f for _, f in self._pending], timeout=timeout_s)
+        if self.jobs is not None:
+            self.jobs.wait(timeout_s)
         if apply:
             self.poll()
 
     def shutdown(self) -> None:
-        """Stop the background worker (pending recomputes are dropped)."""
-        if self._pool is not None:
-            self._pool.shutdown(wait=False, cancel_futures=True)
+        """Stop the background jobs (pending recomputes are dropped)."""
+        if self.jobs is not None:
+            self.jobs.shutdown()
 
     # ---- play head
     @property

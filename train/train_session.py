@@ -1,18 +1,18 @@
 """The Train stage's model (Qt-free): pick data, train in a worker thread, show, export, compare.
 
-The widgets of :mod:`effortface.train.gui.train_stage` call :class:`TrainSession` methods and listen to its
-plain callbacks (:class:`Emitter`); a QTimer calls :meth:`TrainSession.poll`, which drains the
-worker's queue on the GUI thread (STYLE.md L3, L5). The training and the export are the command
-line's own (:func:`effortface.train.pipeline.train_models`, which reports progress and can be
-cancelled between cross-validation folds, and :func:`effortface.train.pipeline.export_outcome`).
+:class:`TrainSession` follows the stage-model convention of :mod:`effortface.core`: the widgets of
+:mod:`effortface.train.gui.train_stage` call its methods and connect to its ``<thing>_changed``
+emitters; its background work (training, export, comparison) runs in the core
+:class:`~effortface.core.jobs.Jobs`, which a QTimer drains through :meth:`TrainSession.poll` on the
+GUI thread (STYLE.md L3, L5). The training and the export are the command line's own
+(:func:`effortface.train.pipeline.train_models`, which reports progress and can be cancelled between
+cross-validation folds, and :func:`effortface.train.pipeline.export_outcome`).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import os
-import queue
-import threading
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -24,14 +24,17 @@ from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
 from effortface.core.events import Emitter
 from effortface.core.errors import UserError
 from effortface.core.fileio import refuse_overwrite
+from effortface.core.jobs import Cancelled, Job, JobResult, Jobs
 from effortface.capture_tool.session import list_sessions, parse_session_id, read_session_info
 from effortface.train.dataset import ANNOTATIONS_DIR, prepare, read_table, sessions_table
-from effortface.train.pipeline import (Cancelled, TrainingOutcome, TrainSettings, export_outcome,
+from effortface.train.pipeline import (TrainingOutcome, TrainSettings, export_outcome,
                                        train_models, training_table)
 
 ANY = "any"
 #: the background jobs that :meth:`TrainSession.cancel` can stop (an export always finishes)
 CANCELLABLE_JOBS = ("train", "compare")
+#: errors a job reports in the status line only; any other also goes to sys.excepthook
+_EXPECTED_ERRORS = (UserError, ValueError, OSError, Cancelled)
 
 
 # --------------------------------------------------------------------------- the data to pick
@@ -136,68 +139,6 @@ def measured_curves(prepared_rows: pd.DataFrame, names: Sequence[str]) -> dict[s
     return out
 
 
-# --------------------------------------------------------------------------- the worker
-
-
-@dataclasses.dataclass(frozen=True)
-class _Message:
-    kind: str          # "progress", "done", "error"
-    job: str
-    value: Any = None
-
-
-class _Worker:
-    """One background job at a time; it reports into a queue that :meth:`drain` empties."""
-
-    def __init__(self) -> None:
-        self.queue: queue.Queue[_Message] = queue.Queue()
-        self.cancel_event = threading.Event()
-        self._thread: threading.Thread | None = None
-        self.job = ""
-
-    @property
-    def busy(self) -> bool:
-        """True while a job runs."""
-        return self._thread is not None and self._thread.is_alive()
-
-    def start(self, job: str, fn: Callable[[], Any]) -> None:
-        """Run ``fn()`` in a thread named after ``job``."""
-        if self.busy:
-            raise UserError(f"{job}: expected no other job running, found {self.job!r} still running")
-        self.cancel_event.clear()
-        self.job = job
-
-        def run() -> None:
-            try:
-                self.queue.put(_Message("done", job, fn()))
-            except (UserError, ValueError, OSError, Cancelled) as exc:  # expected: shown in-window
-                self.queue.put(_Message("error", job, exc))
-            except BaseException as exc:  # unexpected: shown too, then to threading.excepthook
-                self.queue.put(_Message("error", job, exc))
-                raise
-
-        self._thread = threading.Thread(target=run, name=f"train-gui-{job}", daemon=True)
-        self._thread.start()
-
-    def report(self, fraction: float, text: str) -> None:
-        """Queue a progress message (called from the worker)."""
-        self.queue.put(_Message("progress", self.job, (fraction, text)))
-
-    def drain(self) -> list[_Message]:
-        """Messages queued since the last call (never blocks)."""
-        out = []
-        while True:
-            try:
-                out.append(self.queue.get_nowait())
-            except queue.Empty:
-                return out
-
-    def join(self, timeout_s: float | None = None) -> None:
-        """Wait for the running job (tests, shutdown)."""
-        if self._thread is not None:
-            self._thread.join(timeout_s)
-
-
 # --------------------------------------------------------------------------- the session model
 
 
@@ -213,9 +154,9 @@ class TrainSession:
 
     Notes
     -----
-    Callbacks (each an :class:`Emitter`): ``sessions_changed()``, ``selection_changed()``,
-    ``progress_changed(fraction, text)``, ``results_changed()``, ``status_changed(text, is_error)``,
-    ``busy_changed(busy)``, ``exported(path)``, ``comparison_changed()``.
+    Emitters: ``sessions_changed()``, ``selection_changed()``, ``progress_changed(fraction, text)``,
+    ``results_changed()``, ``status_changed(text, is_error)``, ``busy_changed(busy)``,
+    ``export_changed(path)`` (a bundle was exported), ``comparison_changed()``.
     """
 
     def __init__(self, sessions_dir: str | os.PathLike, blendshapes: BlendshapeSet = DEFAULT_SET) -> None:
@@ -227,11 +168,11 @@ class TrainSession:
         self.settings = TrainSettings()
         self.outcome: TrainingOutcome | None = None
         self.comparison: dict[str, Any] | None = None
-        self._worker = _Worker()
+        self.jobs = Jobs(workers=1, name="train")
         self.sessions_changed, self.selection_changed = Emitter(), Emitter()
         self.progress_changed, self.results_changed = Emitter(), Emitter()
         self.status_changed, self.busy_changed = Emitter(), Emitter()
-        self.exported, self.comparison_changed = Emitter(), Emitter()
+        self.export_changed, self.comparison_changed = Emitter(), Emitter()
         self.refresh()
 
     # ---- data choice
@@ -366,36 +307,41 @@ class TrainSession:
     @property
     def busy(self) -> bool:
         """True while training, exporting or comparing runs in the background."""
-        return self._worker.busy
+        return self.jobs.busy()
+
+    @property
+    def running_job(self) -> str:
+        """The job running now (``train``, ``export``, ``compare``), '' when none."""
+        running = self.jobs.running()
+        return running[0] if running else ""
 
     def start_training(self) -> None:
         """Train on the current choice in the background; results arrive through :meth:`poll`."""
         settings, blendshapes = self.settings, self.blendshapes
-        worker = self._worker
 
-        def job() -> TrainingOutcome:
+        def train(job: Job) -> TrainingOutcome:
             table, sources = self.table()
-            worker.report(0.02, "data read")
-            return train_models(table, blendshapes, settings, sources, worker.report,
-                                worker.cancel_event.is_set)
+            job.report(0.02, "data read")
+            return train_models(table, blendshapes, settings, sources, job.report,
+                                lambda: job.cancel_requested)
 
-        self._start("train", job)
+        self._start("train", train, self._trained)
 
     @property
     def cancellable(self) -> bool:
         """True while a job that :meth:`cancel` can stop runs (training or comparison, not export)."""
-        return self.busy and self._worker.job in CANCELLABLE_JOBS
+        return self.running_job in CANCELLABLE_JOBS
 
     def cancel(self) -> None:
         """Ask the running training or comparison to stop at its next step; an export finishes."""
-        if not self.busy:
+        job = self.running_job
+        if not job:
             return
         if not self.cancellable:
-            self.status_changed.emit(f"{self._worker.job} cannot be cancelled: it finishes on its own",
-                                     False)
+            self.status_changed.emit(f"{job} cannot be cancelled: it finishes on its own", False)
             return
-        self._worker.cancel_event.set()
-        self.status_changed.emit(f"{self._worker.job}: cancelling at the next step...", False)
+        self.jobs.cancel(job)
+        self.status_changed.emit(f"{job}: cancelling at the next step...", False)
 
     def export(self, out_dir: str | os.PathLike, *, overwrite: bool = False) -> None:
         """Export the last training's bundle, model card and report in the background.
@@ -411,7 +357,7 @@ class TrainSession:
             raise UserError("export: expected a trained model, found none (train first)")
         out = refuse_overwrite(out_dir, overwrite=overwrite, what="model folder")
         outcome = self.outcome
-        self._start("export", lambda: export_outcome(outcome, out, force=overwrite).model_dir)
+        self._start("export", lambda _job: export_outcome(outcome, out, force=overwrite).model_dir, self._exported)
 
     def compare(self, bundle_a: str | os.PathLike, bundle_b: str | os.PathLike,
                 session: str | None = None) -> None:
@@ -428,22 +374,20 @@ class TrainSession:
         entries, what = self.comparison_data(bundle_a, bundle_b)
         table_path = self.table_path
 
-        def job() -> dict[str, Any]:
+        def compare(job: Job) -> dict[str, Any]:
             table = (read_table(table_path, self.blendshapes) if table_path is not None
                      else self._sessions_table([e.path for e in entries]))
-            return {"data": what, **self._compare_on(table, bundle_a, bundle_b, session)}
+            return {"data": what, **self._compare_on(job, table, bundle_a, bundle_b, session)}
 
-        self._start("compare", job)
+        self._start("compare", compare, self._compared)
 
-    def _compare_on(self, table: pd.DataFrame, bundle_a: str | os.PathLike, bundle_b: str | os.PathLike,
-                    session: str | None) -> dict[str, Any]:
-        """The comparison's results on a training table (runs on the worker; stops when cancelled)."""
-        worker = self._worker
+    def _compare_on(self, job: Job, table: pd.DataFrame, bundle_a: str | os.PathLike,
+                    bundle_b: str | os.PathLike, session: str | None) -> dict[str, Any]:
+        """The comparison's results on a training table (runs in the job; stops when cancelled)."""
 
         def step(fraction: float, text: str) -> None:
-            if worker.cancel_event.is_set():
-                raise Cancelled(text)
-            worker.report(fraction, text)
+            job.check(text)
+            job.report(fraction, text)
 
         step(0.4, "compare: data read")
         prepared = prepare(table)
@@ -459,51 +403,57 @@ class TrainSession:
         return {"session": sid, "sessions": sorted(prepared["session"].unique().tolist()),
                 "measured": measured_curves(rows, self.blendshapes.names), "a": a, "b": b}
 
-    def _start(self, job: str, fn: Callable[[], Any]) -> None:
-        self._worker.start(job, fn)
+    def _start(self, key: str, fn: Callable[[Job], Any], done: Callable[[JobResult], None]) -> None:
+        """Run ``fn(job)`` in the background, one job at a time; ``done`` gets its result."""
+        if self.busy:
+            raise UserError(f"{key}: expected no other job running, found {self.running_job!r} still running")
+        self.jobs.submit(key, fn, takes_job=True, progress=self.progress_changed.emit, done=done)
         self.busy_changed.emit(True)
-        self.progress_changed.emit(0.0, f"{job}: started")
+        self.progress_changed.emit(0.0, f"{key}: started")
 
     def poll(self) -> None:
-        """Deliver the worker's messages as callbacks (call on the GUI thread, e.g. from a QTimer)."""
-        for msg in self._worker.drain():
-            if msg.kind == "progress":
-                self.progress_changed.emit(*msg.value)
-            elif msg.kind == "error":
-                self._finish_error(msg)
-            else:
-                self._finish(msg)
+        """Deliver the jobs' progress and results to the emitters (GUI thread, e.g. a QTimer)."""
+        self.jobs.drain()
 
-    def _finish_error(self, msg: _Message) -> None:
+    def _ended(self, result: JobResult) -> bool:
+        """Report the end of a job; True if it succeeded (an unexpected error is re-raised after)."""
         self.busy_changed.emit(False)
-        if isinstance(msg.value, Cancelled):
+        if result.error is None:
+            self.progress_changed.emit(1.0, f"{result.key}: done")
+            return True
+        if result.cancelled:
             self.progress_changed.emit(0.0, "cancelled")
-            self.status_changed.emit(f"{msg.job} cancelled; previous results kept", False)
-        else:
-            self.progress_changed.emit(0.0, f"{msg.job} failed")
-            self.status_changed.emit(f"{msg.job} failed: {msg.value}", True)
+            self.status_changed.emit(f"{result.key} cancelled; previous results kept", False)
+            return False
+        self.progress_changed.emit(0.0, f"{result.key} failed")
+        self.status_changed.emit(f"{result.key} failed: {result.error}", True)
+        if not isinstance(result.error, _EXPECTED_ERRORS):
+            raise result.error
+        return False
 
-    def _finish(self, msg: _Message) -> None:
-        self.busy_changed.emit(False)
-        self.progress_changed.emit(1.0, f"{msg.job}: done")
-        if msg.job == "train":
-            self.outcome = msg.value
+    def _trained(self, result: JobResult) -> None:
+        if self._ended(result):
+            self.outcome = result.value
             self.results_changed.emit()
-            self.status_changed.emit(f"trained on {len(self.outcome.series)} sessions", False)
-        elif msg.job == "export":
-            self.exported.emit(msg.value)
-            self.status_changed.emit(f"exported model to {msg.value}", False)
-        elif msg.job == "compare":
-            self.comparison = msg.value
+            self.status_changed.emit(f"trained on {len(result.value.series)} sessions", False)
+
+    def _exported(self, result: JobResult) -> None:
+        if self._ended(result):
+            self.export_changed.emit(result.value)
+            self.status_changed.emit(f"exported model to {result.value}", False)
+
+    def _compared(self, result: JobResult) -> None:
+        if self._ended(result):
+            self.comparison = result.value
             self.comparison_changed.emit()
-            self.status_changed.emit(f"compared on {msg.value['session']} of {msg.value['data']}",
+            self.status_changed.emit(f"compared on {result.value['session']} of {result.value['data']}",
                                      False)
 
     def wait(self, timeout_s: float | None = None) -> None:
         """Block until the running job ends, then :meth:`poll` (tests and scripts, not the GUI)."""
-        self._worker.join(timeout_s)
+        self.jobs.wait(timeout_s)
         self.poll()
 
     def shutdown(self) -> None:
-        """Cancel a running training (the thread is a daemon; export finishes or is discarded)."""
-        self._worker.cancel_event.set()
+        """Cancel a running training (the threads are daemons; an export finishes or is discarded)."""
+        self.jobs.shutdown()

@@ -39,7 +39,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.session:
         editor = stage.open_session(Path(args.dir) / args.session, args.rater)
         if editor is not None:
-            editor.model.set_frame(args.frame)
+            editor.session.set_frame(args.frame)
     if args.tab == "reliability":
         stage.tabs.setCurrentIndex(1)
     stage.show()

@@ -3,7 +3,7 @@
 :class:`QtAnnotateStage` (hosted by the main window, or run alone with ``python -m effortface.annotate.gui``)
 holds the session browser, the rater code, the key-frame editor of the open session and the
 reliability round. :class:`QtKeyframeEditor` views one
-:class:`~effortface.annotate.session_model.AnnotationSession` (Qt-free: frame, blendshape, the rater's tracks,
+:class:`~effortface.annotate.annotate_session.AnnotateSession` (Qt-free: frame, blendshape, the rater's tracks,
 undo history, autosave) and a :class:`~effortface.annotate.video_index.VideoIndex` (frame-exact decode cache
 with prefetch): video and face preview side by side, the protocol panel, transport controls, heart
 rate and the curve editor on the session's time axis. Keyboard first: see
@@ -33,7 +33,7 @@ from effortface.annotate.gui.protocol_panel import HELP_TEXT, QtProtocolPanel
 from effortface.core.gui.qt_compat import guard_none_refcount
 from effortface.annotate.gui.reliability_panel import QtReliabilityPanel
 from effortface.annotate.gui.timeline import QtTimeline
-from effortface.annotate.session_model import AnnotationSession, check_rater
+from effortface.annotate.annotate_session import AnnotateSession, check_rater
 from effortface.annotate.video_index import VideoIndex
 from effortface.core.errors import UserError
 from effortface.core.gui.widgets import QtElidedLabel
@@ -53,7 +53,7 @@ class QtKeyframeEditor(QtWidgets.QWidget):
 
     Parameters
     ----------
-    model : AnnotationSession
+    session : AnnotateSession
         The rater's session (the editor writes back only through its methods).
     video : VideoIndex
         The session video (owned by the editor from now on: closed by :meth:`shutdown`).
@@ -61,11 +61,11 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         ``report(message, is_error)`` shows a one-line message (the stage's status line).
     """
 
-    def __init__(self, model: AnnotationSession, video: VideoIndex,
+    def __init__(self, session: AnnotateSession, video: VideoIndex,
                  report: Callable[[str, bool], None] | None = None,
                  parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
-        self.model, self.video = model, video
+        self.session, self.video = session, video
         self.report = report or (lambda message, is_error: None)
         self._face_weights: tuple[float, ...] | None = None
         self._play_timer = QtCore.QTimer(self, interval=PLAY_TICK_MS, timerType=QtCore.Qt.TimerType.PreciseTimer)
@@ -73,13 +73,13 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         self._play_from: tuple[float, float] = (0.0, 0.0)
         self._build()
         self._add_shortcuts()
-        model.connect("frame_changed", self._show_frame)
-        model.connect("keys_changed", lambda *_: self._show_face())
-        model.connect("saved", self._show_saved)
-        model.connect("pass_done", lambda name: self.report(
-            f"pass on {name} done: press N for {model.next_blendshape}" if model.next_blendshape
+        session.frame_changed.connect(self._show_frame)
+        session.keys_changed.connect(lambda *_: self._show_face())
+        session.file_changed.connect(self._show_saved)
+        session.passes_changed.connect(lambda name: self.report(
+            f"pass on {name} done: press N for {session.next_blendshape}" if session.next_blendshape
             else f"pass on {name} done: every blendshape keyed", False))
-        self._show_frame(model.frame)
+        self._show_frame(session.frame)
 
     # ---------------------------------------------------------------------------------- layout
     def _build(self) -> None:
@@ -87,8 +87,8 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         self.video_view.setFocusPolicy(QtCore.Qt.FocusPolicy.StrongFocus)
         self.face_view = QtImageView("face preview", (240, 180))
         self.face_view.setToolTip("The parametric face drawn from the four current weights: match it to the participant")
-        self.protocol = QtProtocolPanel(self.model)
-        self.timeline = QtTimeline(self.model)
+        self.protocol = QtProtocolPanel(self.session)
+        self.timeline = QtTimeline(self.session)
         pictures = QtWidgets.QHBoxLayout()
         pictures.addLayout(self._captioned(self.video_view, "Video"), 4)
         pictures.addLayout(self._captioned(self.face_view, "Face from the current weights"), 3)
@@ -111,12 +111,12 @@ class QtKeyframeEditor(QtWidgets.QWidget):
 
     def _build_transport(self) -> QtWidgets.QHBoxLayout:
         row = QtWidgets.QHBoxLayout()
-        steps = (("|\u25c0", "first frame (Home)", lambda: self.model.set_frame(0)),
-                 ("\u25c0\u25c0", "10 frames back (Shift+\u2190)", lambda: self.model.step(-10)),
-                 ("\u25c0", "one frame back (\u2190)", lambda: self.model.step(-1)),
-                 ("\u25b6", "one frame on (\u2192)", lambda: self.model.step(1)),
-                 ("\u25b6\u25b6", "10 frames on (Shift+\u2192)", lambda: self.model.step(10)),
-                 ("\u25b6|", "last frame (End)", lambda: self.model.set_frame(self.model.n_frames - 1)))
+        steps = (("|\u25c0", "first frame (Home)", lambda: self.session.set_frame(0)),
+                 ("\u25c0\u25c0", "10 frames back (Shift+\u2190)", lambda: self.session.step(-10)),
+                 ("\u25c0", "one frame back (\u2190)", lambda: self.session.step(-1)),
+                 ("\u25b6", "one frame on (\u2192)", lambda: self.session.step(1)),
+                 ("\u25b6\u25b6", "10 frames on (Shift+\u2192)", lambda: self.session.step(10)),
+                 ("\u25b6|", "last frame (End)", lambda: self.session.set_frame(self.session.n_frames - 1)))
         self.play_button = QtWidgets.QPushButton("Play (Space)")
         self.play_button.setCheckable(True)
         self.play_button.toggled.connect(self.set_playing)
@@ -143,16 +143,16 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         self.speed.setCurrentIndex(SPEEDS.index(1.0))
         self.speed.setFocusPolicy(QtCore.Qt.FocusPolicy.NoFocus)
         self.speed.currentIndexChanged.connect(lambda *_: self._restart_clock())
-        self.frame_box = QtWidgets.QSpinBox(minimum=0, maximum=self.model.n_frames - 1)
-        self.frame_box.editingFinished.connect(lambda: self._go(lambda: self.model.set_frame(self.frame_box.value())))
-        self.time_box = QtWidgets.QDoubleSpinBox(minimum=0.0, maximum=self.model.times.duration_s, decimals=3,
+        self.frame_box = QtWidgets.QSpinBox(minimum=0, maximum=self.session.n_frames - 1)
+        self.frame_box.editingFinished.connect(lambda: self._go(lambda: self.session.set_frame(self.frame_box.value())))
+        self.time_box = QtWidgets.QDoubleSpinBox(minimum=0.0, maximum=self.session.times.duration_s, decimals=3,
                                                  suffix=" s")
-        self.time_box.editingFinished.connect(lambda: self._go(lambda: self.model.go_to_time(self.time_box.value())))
+        self.time_box.editingFinished.connect(lambda: self._go(lambda: self.session.go_to_time(self.time_box.value())))
         for box in (self.frame_box, self.time_box):
             box.setKeyboardTracking(False)
             box.setToolTip("Type a frame or time and press Enter; Esc cancels")
             box.installEventFilter(self)
-        self.position = QtWidgets.QLabel(f"/ {self.model.n_frames - 1}")  # the last frame, after the frame box
+        self.position = QtWidgets.QLabel(f"/ {self.session.n_frames - 1}")  # the last frame, after the frame box
         for label, widget in (("speed", self.speed), ("frame", self.frame_box), ("time", self.time_box)):
             row.addSpacing(8)
             row.addWidget(QtWidgets.QLabel(label))
@@ -165,7 +165,7 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         row.addWidget(self.saved_label, 1)
 
     def _add_shortcuts(self) -> None:
-        m = self.model
+        m = self.session
         Key = QtCore.Qt.Key
         bindings: list[tuple[Any, Callable[[], Any]]] = [
             (Key.Key_Right, lambda: m.step(1)), (Key.Key_Left, lambda: m.step(-1)),
@@ -217,7 +217,7 @@ class QtKeyframeEditor(QtWidgets.QWidget):
 
     def cancel_go_to(self) -> None:
         """Put the current frame and time back in their boxes and focus the video view."""
-        for box, value in ((self.frame_box, self.model.frame), (self.time_box, self.model.t_s)):
+        for box, value in ((self.frame_box, self.session.frame), (self.time_box, self.session.t_s)):
             box.blockSignals(True)
             box.setValue(value)  # type: ignore[arg-type]  # int frame to frame_box, float t_s to time_box
             box.blockSignals(False)
@@ -225,24 +225,24 @@ class QtKeyframeEditor(QtWidgets.QWidget):
 
     def nudge(self, delta: float) -> None:
         """Key the current frame at its weight + ``delta`` (clipped to [0, 1])."""
-        w = self.model.weight()
-        self.model.set_key(min(max((0.0 if math.isnan(w) else w) + delta, 0.0), 1.0))
+        w = self.session.weight()
+        self.session.set_key(min(max((0.0 if math.isnan(w) else w) + delta, 0.0), 1.0))
 
     def delete_key(self) -> None:
         """Delete the current blendshape's key on the current frame (where a selected key always is)."""
-        frame = self.model.frame
-        if self.model.delete_key(frame) is None:
-            self.report(f"no {self.model.blendshape} key on frame {frame} to delete", True)
+        frame = self.session.frame
+        if self.session.delete_key(frame) is None:
+            self.report(f"no {self.session.blendshape} key on frame {frame} to delete", True)
 
     def copy_key(self) -> None:
         """Copy the current blendshape's key on the current frame (where a selected key always is)."""
-        n = self.model.copy(self.model.frame)
-        self.report(f"copied {n} key{'s' * (n != 1)} of {self.model.blendshape}", n == 0)
+        n = self.session.copy(self.session.frame)
+        self.report(f"copied {n} key{'s' * (n != 1)} of {self.session.blendshape}", n == 0)
 
     def paste(self) -> None:
         """Paste the copied keys at the current frame."""
-        n = self.model.paste()
-        self.report(f"pasted {n} key{'s' * (n != 1)} at frame {self.model.frame}", n == 0)
+        n = self.session.paste()
+        self.report(f"pasted {n} key{'s' * (n != 1)} at frame {self.session.frame}", n == 0)
 
     # ------------------------------------------------------------------------------- playback
     @property
@@ -252,8 +252,8 @@ class QtKeyframeEditor(QtWidgets.QWidget):
 
     def set_playing(self, on: bool) -> None:
         """Start or stop playback at the chosen speed (real session time, frames from the timestamps)."""
-        if on and self.model.frame >= self.model.n_frames - 1:
-            self.model.set_frame(0)
+        if on and self.session.frame >= self.session.n_frames - 1:
+            self.session.set_frame(0)
         if on:
             self._restart_clock()
             self._play_timer.start()
@@ -269,13 +269,13 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         super().hideEvent(event)
 
     def _restart_clock(self) -> None:
-        self._play_from = (self.model.t_s, time.perf_counter())
+        self._play_from = (self.session.t_s, time.perf_counter())
 
     def _play_tick(self) -> None:
         t0_s, wall0 = self._play_from
         speed = SPEEDS[self.speed.currentIndex()]
-        self.model.go_to_time(t0_s + speed * (time.perf_counter() - wall0))
-        if self.model.frame >= self.model.n_frames - 1:
+        self.session.go_to_time(t0_s + speed * (time.perf_counter() - wall0))
+        if self.session.frame >= self.session.n_frames - 1:
             self.set_playing(False)
 
     # ------------------------------------------------------------------------------- display
@@ -284,7 +284,7 @@ class QtKeyframeEditor(QtWidgets.QWidget):
             self.video_view.set_image(self.video.get(frame))
         except UserError as exc:
             self.video_view.setText(str(exc))
-        for box, value in ((self.frame_box, frame), (self.time_box, self.model.t_s)):
+        for box, value in ((self.frame_box, frame), (self.time_box, self.session.t_s)):
             if not box.hasFocus():
                 box.blockSignals(True)
                 box.setValue(value)  # type: ignore[arg-type]  # int frame to frame_box, float t_s to time_box
@@ -296,7 +296,7 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         self.saved_label.setToolTip(f"every key is saved to {path} as soon as it is set")
 
     def _show_face(self) -> None:
-        weights = tuple(0.0 if math.isnan(w) else w for w in self.model.weights().values())
+        weights = tuple(0.0 if math.isnan(w) else w for w in self.session.weights().values())
         if weights == self._face_weights:
             return
         self._face_weights = weights
@@ -305,7 +305,7 @@ class QtKeyframeEditor(QtWidgets.QWidget):
     def shutdown(self) -> None:
         """Stop playback, forget the model's listeners and close the video."""
         self._play_timer.stop()
-        self.model.disconnect_all()
+        self.session.disconnect_all()
         self.video.close()
 
 
@@ -403,8 +403,8 @@ class QtAnnotateStage(QtWidgets.QWidget):
     def _build_toolbar(self) -> QtWidgets.QWidget:
         bar = QtWidgets.QToolBar()
         bar.setToolButtonStyle(QtCore.Qt.ToolButtonStyle.ToolButtonTextOnly)
-        self.undo_action = bar.addAction("Undo", lambda: self._on_editor(lambda e: e.model.undo()))
-        self.redo_action = bar.addAction("Redo", lambda: self._on_editor(lambda e: e.model.redo()))
+        self.undo_action = bar.addAction("Undo", lambda: self._on_editor(lambda e: e.session.undo()))
+        self.redo_action = bar.addAction("Redo", lambda: self._on_editor(lambda e: e.session.redo()))
         export = QtWidgets.QMenu("Export", self)
         self.export_weights_action = export.addAction("Per-frame weights CSV\u2026", lambda: self.export_weights())
         self.export_keys_action = export.addAction("Key-frames JSON\u2026", lambda: self.export_keyframes())
@@ -435,7 +435,7 @@ class QtAnnotateStage(QtWidgets.QWidget):
         """
         rater = text.strip()
         hidden = False
-        if (editor := self.shown_editor()) is not None and editor.model.rater != rater:
+        if (editor := self.shown_editor()) is not None and editor.session.rater != rater:
             self.editor_host.setCurrentWidget(self.placeholder)
             hidden = True
         if self.reliability is not None and self.reliability.rater != rater:
@@ -448,7 +448,7 @@ class QtAnnotateStage(QtWidgets.QWidget):
     def _on_rater_confirmed(self) -> None:
         """The typed code is confirmed: show that rater's open session or reliability round."""
         rater = self.rater.text().strip()
-        if self.editor is not None and self.editor.model.rater == rater:
+        if self.editor is not None and self.editor.session.rater == rater:
             self.editor_host.setCurrentWidget(self.editor)
         if self.tabs.currentIndex() == 1:
             self.open_reliability()
@@ -534,7 +534,7 @@ class QtAnnotateStage(QtWidgets.QWidget):
         """Open ``folder`` for ``rater`` (their file only); an expected error is shown, not raised."""
         try:
             check_rater(rater)
-            model = AnnotationSession(folder, rater)
+            session = AnnotateSession(folder, rater)
             video = VideoIndex.from_session(folder, cache_frames=self.cache_frames)
         except UserError as exc:
             self.show_message(str(exc), True)
@@ -543,16 +543,16 @@ class QtAnnotateStage(QtWidgets.QWidget):
         if self.rater.text().strip() != rater:
             self.rater.setText(rater)  # the field names whose keys are shown
         self._select_listed(Path(folder))
-        self.editor = QtKeyframeEditor(model, video, self.show_message)
+        self.editor = QtKeyframeEditor(session, video, self.show_message)
         self.editor_host.addWidget(self.editor)
         self.editor_host.setCurrentWidget(self.editor)
         self.tabs.setCurrentIndex(0)
         self.editor.video_view.setFocus()
         if self.settings is not None:
             self.settings.setValue("annotate/rater", rater)
-        keys = sum(len(t) for t in model.annotations.tracks.values())
-        self.show_message(f"{model.session.info.session_id}: rater {rater}, {keys} keys "
-                          f"({'file ' + model.path.name if model.path.exists() else 'new file on first key'})")
+        keys = sum(len(t) for t in session.annotations.tracks.values())
+        self.show_message(f"{session.session.info.session_id}: rater {rater}, {keys} keys "
+                          f"({'file ' + session.path.name if session.path.exists() else 'new file on first key'})")
         return self.editor
 
     def _select_listed(self, folder: Path) -> None:
@@ -591,12 +591,12 @@ class QtAnnotateStage(QtWidgets.QWidget):
     def export_weights(self, path: str | os.PathLike | None = None, *, overwrite: bool = False) -> Path | None:
         """Write the open session's per-frame weights CSV (asks for a file name when ``path`` is None)."""
         return self._export("weights.csv", "CSV (*.csv)", path, overwrite,
-                            lambda e, p, o: write_weights_csv(e.model.annotations, e.model.times, p, overwrite=o))
+                            lambda e, p, o: write_weights_csv(e.session.annotations, e.session.times, p, overwrite=o))
 
     def export_keyframes(self, path: str | os.PathLike | None = None, *, overwrite: bool = False) -> Path | None:
         """Write the open session's key-frame JSON (asks for a file name when ``path`` is None)."""
         return self._export("keyframes.json", "JSON (*.json)", path, overwrite,
-                            lambda e, p, o: write_keyframes_json(e.model.annotations, p, overwrite=o))
+                            lambda e, p, o: write_keyframes_json(e.session.annotations, p, overwrite=o))
 
     def _export(self, suffix: str, filter_: str, path: str | os.PathLike | None, overwrite: bool,
                 write: Callable[[QtKeyframeEditor, Path, bool], Path]) -> Path | None:
@@ -605,7 +605,7 @@ class QtAnnotateStage(QtWidgets.QWidget):
             self.show_message("open a session first", True)
             return None
         if path is None:  # the dialog asks before replacing a file: that is the explicit choice
-            default = editor.model.session.path / f"{editor.model.rater}_{suffix}"
+            default = editor.session.session.path / f"{editor.session.rater}_{suffix}"
             chosen, _ = QtWidgets.QFileDialog.getSaveFileName(self, "Export", str(default), filter_)
             if not chosen:
                 return None

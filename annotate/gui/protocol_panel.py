@@ -1,6 +1,6 @@
 """The paper's protocol panel: one blendshape at a time in the fixed order, and its weight.
 
-:class:`QtProtocolPanel` views an :class:`~effortface.annotate.session_model.AnnotationSession`: the blendshape
+:class:`QtProtocolPanel` views an :class:`~effortface.annotate.annotate_session.AnnotateSession`: the blendshape
 list in annotation order (the current one highlighted, finished passes ticked), the next blendshape
 offered after a pass, a slider and a number box for the weight at the current frame (setting either
 sets a key), the interpolation of the key, Set / Delete key buttons and the four current weights.
@@ -13,7 +13,7 @@ import math
 from PySide6 import QtCore, QtWidgets
 
 from effortface.annotate.keyframes import INTERPOLATIONS
-from effortface.annotate.session_model import AnnotationSession
+from effortface.annotate.annotate_session import AnnotateSession
 
 HELP_TEXT = ("\u2190/\u2192 one frame (Shift: ten) \u00b7 Home/End \u00b7 0-9 key at weight 0.0-0.9, "
              "M at 1.0 \u00b7 \u2191/\u2193 weight \u00b10.05 \u00b7 K key at the box's weight \u00b7 "
@@ -44,32 +44,32 @@ class QtProtocolPanel(QtWidgets.QWidget):
 
     Parameters
     ----------
-    model : AnnotationSession
+    session : AnnotateSession
         The rater's session.
     """
 
-    def __init__(self, model: AnnotationSession, parent: QtWidgets.QWidget | None = None) -> None:
+    def __init__(self, session: AnnotateSession, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
-        self.model = model
+        self.session = session
         self._updating = False
         self._build()
-        model.connect("frame_changed", lambda *_: self.refresh())
-        model.connect("keys_changed", lambda *_: self.refresh())
-        model.connect("blendshape_changed", lambda *_: self.refresh())
-        model.connect("pass_done", lambda *_: self.refresh())
+        session.frame_changed.connect(lambda *_: self.refresh())
+        session.keys_changed.connect(lambda *_: self.refresh())
+        session.blendshape_changed.connect(lambda *_: self.refresh())
+        session.passes_changed.connect(lambda *_: self.refresh())
         self.refresh()
 
     def _build(self) -> None:
         self.shapes = QtWidgets.QListWidget()
         self.shapes.setFocusPolicy(QtCore.Qt.FocusPolicy.NoFocus)
-        for i, name in enumerate(self.model.blendshape_names, start=1):
+        for i, name in enumerate(self.session.blendshape_names, start=1):
             self.shapes.addItem(f"{i}. {name}")
-        self.shapes.setMaximumHeight(22 * len(self.model.blendshape_names) + 8)
+        self.shapes.setMaximumHeight(22 * len(self.session.blendshape_names) + 8)
         self.shapes.currentRowChanged.connect(self._on_row)
         self.drives = QtWidgets.QLabel(wordWrap=True)
         self.next_button = QtWidgets.QPushButton("Next blendshape (N)")
         self.next_button.setFocusPolicy(QtCore.Qt.FocusPolicy.NoFocus)
-        self.next_button.clicked.connect(self.model.start_next_pass)
+        self.next_button.clicked.connect(self.session.start_next_pass)
         self.slider = QtWidgets.QSlider(QtCore.Qt.Orientation.Horizontal)
         self.slider.setRange(0, 100)
         self.slider.setFocusPolicy(QtCore.Qt.FocusPolicy.NoFocus)
@@ -87,7 +87,7 @@ class QtProtocolPanel(QtWidgets.QWidget):
         for b in (self.set_button, self.delete_button):
             b.setFocusPolicy(QtCore.Qt.FocusPolicy.NoFocus)
         self.set_button.clicked.connect(lambda: self._set_weight(self.number.value()))
-        self.delete_button.clicked.connect(lambda: self.model.delete_key())
+        self.delete_button.clicked.connect(lambda: self.session.delete_key())
         self.key_state = QtWidgets.QLabel()
         self.readout = QtWidgets.QLabel()
         self.readout.setTextFormat(QtCore.Qt.TextFormat.RichText)
@@ -127,7 +127,7 @@ class QtProtocolPanel(QtWidgets.QWidget):
     def refresh(self) -> None:
         """Show the model's current blendshape, weight, key and passes."""
         self._updating = True
-        m = self.model
+        m = self.session
         row = m.blendshape_names.index(m.blendshape)
         for i, name in enumerate(m.blendshape_names):
             item = self.shapes.item(i)
@@ -152,8 +152,8 @@ class QtProtocolPanel(QtWidgets.QWidget):
         self._updating = False
 
     def _refresh_next(self) -> None:
-        nxt = self.model.next_blendshape
-        done = self.model.blendshape in self.model.passes_done
+        nxt = self.session.next_blendshape
+        done = self.session.blendshape in self.session.passes_done
         self.next_button.setEnabled(nxt is not None)
         self.next_button.setText(f"Next: {nxt} (N)" if nxt else "Last blendshape")
         self.next_button.setStyleSheet(_NEXT_READY if done and nxt else "")
@@ -162,15 +162,15 @@ class QtProtocolPanel(QtWidgets.QWidget):
 
     def _readout(self) -> str:
         rows = []
-        for name, w in self.model.weights().items():
+        for name, w in self.session.weights().items():
             text = "-" if math.isnan(w) else f"{w:.2f}"
-            style = " style='color:#1f5fbf'" if name == self.model.blendshape else ""
+            style = " style='color:#1f5fbf'" if name == self.session.blendshape else ""
             rows.append(f"<tr{style}><td>{name}</td><td align='right'>&nbsp;{text}</td></tr>")
         return "<b>Weights at this frame</b><table>" + "".join(rows) + "</table>"
 
     # ----------------------------------------------------------------------------- to the model
     def _set_weight(self, weight: float) -> None:
-        self.model.set_key(round(float(weight), 2))
+        self.session.set_key(round(float(weight), 2))
 
     def _on_slider_value(self, value: int) -> None:
         if self._updating:
@@ -188,11 +188,11 @@ class QtProtocolPanel(QtWidgets.QWidget):
 
     def _on_interp(self, interp: str) -> None:
         if not self._updating:
-            self.model.set_interp(interp)
+            self.session.set_interp(interp)
 
     def _on_row(self, row: int) -> None:
         if not self._updating and row >= 0:
-            self.model.set_blendshape(self.model.blendshape_names[row])
+            self.session.set_blendshape(self.session.blendshape_names[row])
 
     def sizeHint(self) -> QtCore.QSize:  # noqa: N802 - Qt override
         return QtCore.QSize(280, super().sizeHint().height())

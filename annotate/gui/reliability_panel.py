@@ -1,6 +1,6 @@
 """The reliability round: rate the pose set blind, then see the agreement report.
 
-:class:`QtReliabilityPanel` views a :class:`~effortface.annotate.session_model.BlindRound` (one rater's blind
+:class:`QtReliabilityPanel` views a :class:`~effortface.annotate.annotate_session.BlindRound` (one rater's blind
 ratings of ``reliability/poses.csv``) and the lab's :class:`~effortface.annotate.agreement.AgreementReport`:
 per-pose and per-blendshape tables (mean absolute difference in % of the weight range, ICC(A,1),
 ICC(C,1), Krippendorff's alpha), flagged poses in red and the Bland-Altman plot of every rater
@@ -21,7 +21,7 @@ from PySide6 import QtCore, QtGui, QtWidgets
 from effortface.annotate.agreement import FLAG_PCT, N_POSES, AgreementReport, agreement_report, gather_ratings, propose_poses
 from effortface.annotate.gui.image_view import QtImageView
 from effortface.annotate.reliability import Pose, write_poses
-from effortface.annotate.session_model import BlindRound
+from effortface.annotate.annotate_session import BlindRound
 from effortface.capture_tool.camera import read_frame
 from effortface.core.errors import UserError
 from effortface.capture_tool.session import list_sessions, read_session

@@ -1,6 +1,6 @@
 """Heart rate, phases and the curve editor under the video, on one session-time axis (pyqtgraph).
 
-:class:`QtTimeline` views an :class:`~effortface.annotate.session_model.AnnotationSession`:
+:class:`QtTimeline` views an :class:`~effortface.annotate.annotate_session.AnnotateSession`:
 
 - top plot: heart rate (valid samples; gaps where the strap lost contact) with the exercise
   phases shaded and named;
@@ -23,7 +23,7 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6 import QtCore, QtWidgets
 
-from effortface.annotate.session_model import AnnotationSession
+from effortface.annotate.annotate_session import AnnotateSession
 
 _CURRENT_PEN = pg.mkPen("#1f5fbf", width=2)
 _OTHER_PEN = pg.mkPen((120, 120, 120, 110), width=1)
@@ -107,16 +107,16 @@ class QtTimeline(pg.GraphicsLayoutWidget):
 
     Parameters
     ----------
-    model : AnnotationSession
+    session : AnnotateSession
         The rater's session.
     """
 
-    def __init__(self, model: AnnotationSession, parent: QtWidgets.QWidget | None = None) -> None:
+    def __init__(self, session: AnnotateSession, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
         self.setBackground("w")
-        self.model = model
+        self.session = session
         self.selected: int | None = None
-        self.t_s = model.times.t_s
+        self.t_s = session.times.t_s
         self.hr_plot = self.addPlot(row=0, col=0)
         self._curve_box = _ClickViewBox()
         self.curve_plot = self.addPlot(row=1, col=0, viewBox=self._curve_box)
@@ -125,13 +125,13 @@ class QtTimeline(pg.GraphicsLayoutWidget):
         self._build_hr()
         self._build_curves()
         self.cursors = [self._cursor(self.hr_plot, movable=True), self._cursor(self.curve_plot, movable=False)]
-        self.cursors[0].sigDragged.connect(lambda line: model.go_to_time(line.value()))
+        self.cursors[0].sigDragged.connect(lambda line: session.go_to_time(line.value()))
         self.setMinimumHeight(260)
-        model.connect("frame_changed", self._on_frame)
-        model.connect("keys_changed", lambda *_: self.refresh_curves())
-        model.connect("blendshape_changed", self._on_blendshape)
+        session.frame_changed.connect(self._on_frame)
+        session.keys_changed.connect(lambda *_: self.refresh_curves())
+        session.blendshape_changed.connect(self._on_blendshape)
         self.refresh_curves()
-        self._on_frame(model.frame)
+        self._on_frame(session.frame)
 
     # -------------------------------------------------------------------------------- building
     def _build_hr(self) -> None:
@@ -139,7 +139,7 @@ class QtTimeline(pg.GraphicsLayoutWidget):
         plot.setLabel("left", "heart rate", units="bpm")
         plot.showGrid(x=True, y=True, alpha=0.2)
         plot.setMouseEnabled(x=True, y=False)
-        hr = self.model.session.heart_rate
+        hr = self.session.session.heart_rate
         t = np.array([h.t_s for h in hr], dtype=float)
         bpm = np.array([h.hr_bpm if (h.valid and h.hr_bpm) else np.nan for h in hr], dtype=float)
         plot.plot(t, bpm, pen=pg.mkPen("#c0002a", width=1.5), connect="finite")
@@ -151,7 +151,7 @@ class QtTimeline(pg.GraphicsLayoutWidget):
     def _add_phases(self, plot: pg.PlotItem) -> None:
         """Shade each phase between its start and end events and name it."""
         starts: dict[str, float] = {}
-        for i, e in enumerate(ev for ev in self.model.session.events if ev.kind in ("phase_start", "phase_end")):
+        for i, e in enumerate(ev for ev in self.session.session.events if ev.kind in ("phase_start", "phase_end")):
             if e.kind == "phase_start":
                 starts[e.label] = e.t_s
             elif e.label in starts:
@@ -171,13 +171,13 @@ class QtTimeline(pg.GraphicsLayoutWidget):
         plot.setYRange(-0.05, 1.05, padding=0)
         plot.setXLink(self.hr_plot)
         self.hr_plot.getAxis("bottom").setStyle(showValues=False)
-        self.others = {n: plot.plot(pen=_OTHER_PEN) for n in self.model.blendshape_names}
+        self.others = {n: plot.plot(pen=_OTHER_PEN) for n in self.session.blendshape_names}
         self.current_curve = plot.plot(pen=_CURRENT_PEN)
         self.keys = _KeyPoints()
         plot.addItem(self.keys)
         self.keys.on_select = self.select_key
         self.keys.on_drop = self._on_drop
-        self._curve_box.on_click = lambda x, y: self.model.go_to_time(x)
+        self._curve_box.on_click = lambda x, y: self.session.go_to_time(x)
         self._curve_box.on_double_click = self._on_double_click
         self.title = pg.TextItem(color="#1f5fbf", anchor=(0, 0))
         plot.addItem(self.title, ignoreBounds=True)
@@ -191,18 +191,18 @@ class QtTimeline(pg.GraphicsLayoutWidget):
     # ------------------------------------------------------------------------------- updates
     def refresh_curves(self) -> None:
         """Redraw the rater's curves and the current blendshape's keys from the model."""
-        frames = np.arange(self.model.n_frames)
+        frames = np.arange(self.session.n_frames)
         for name, item in self.others.items():
-            values = self.model.annotations.tracks[name].evaluate(frames)
+            values = self.session.annotations.tracks[name].evaluate(frames)
             item.setData(self.t_s, values, connect="finite")
-            item.setVisible(name != self.model.blendshape)
-        self.current_curve.setData(self.t_s, self.model.track.evaluate(frames), connect="finite")
-        kf, kw, _ = self.model.track.arrays()
+            item.setVisible(name != self.session.blendshape)
+        self.current_curve.setData(self.t_s, self.session.track.evaluate(frames), connect="finite")
+        kf, kw, _ = self.session.track.arrays()
         if self.selected is not None and self.selected not in set(kf.tolist()):
             self.selected = None
         brushes = [_SELECTED_BRUSH if f == self.selected else _KEY_BRUSH for f in kf]
         self.keys.setData(x=self.t_s[kf], y=kw, data=kf, brush=brushes)
-        self.title.setText(f"{self.model.blendshape} ({self.model.rater}): {len(kf)} keys")
+        self.title.setText(f"{self.session.blendshape} ({self.session.rater}): {len(kf)} keys")
         self.title.setPos(self.t_s[0], 1.05)
 
     def _on_frame(self, frame: int) -> None:
@@ -223,27 +223,27 @@ class QtTimeline(pg.GraphicsLayoutWidget):
         """Select the current track's key on ``frame`` (None: clear) and go to its frame."""
         self.selected = frame
         if frame is not None:
-            self.model.set_frame(frame)
+            self.session.set_frame(frame)
         self.refresh_curves()
 
     def _on_drop(self, frame: int, x: float, y: float) -> None:
-        new_frame = self.model.times.frame_at(x)
+        new_frame = self.session.times.frame_at(x)
         try:
-            key = self.model.move_key(frame, new_frame, y)
+            key = self.session.move_key(frame, new_frame, y)
         except ValueError:  # another key sits there: keep the old position
             self.refresh_curves()
             return
         self.select_key(key.frame)
 
     def _on_double_click(self, x: float, y: float) -> None:
-        frame = self.model.times.frame_at(x)
-        self.model.set_frame(frame)
-        self.model.set_key(min(max(y, 0.0), 1.0), frame)
+        frame = self.session.times.frame_at(x)
+        self.session.set_frame(frame)
+        self.session.set_key(min(max(y, 0.0), 1.0), frame)
         self.select_key(frame)
 
     def key_point_scene_pos(self, frame: int) -> QtCore.QPointF:
         """Scene position of the key on ``frame`` (for tests and tooltips); KeyError if it has none."""
-        key = self.model.track.get(frame)
+        key = self.session.track.get(frame)
         if key is None:
             raise KeyError(f"no key on frame {frame}")
         return self._curve_box.mapViewToScene(QtCore.QPointF(self.t_s[frame], key.weight))

@@ -1,9 +1,10 @@
 """The Capture stage: pre-flight, participant, live view, phases and markers, Record/Stop, sync test.
 
-:class:`QtCaptureStage` views a :class:`~effortface.capture_tool.gui.controller.CaptureController`: it calls
-its methods and draws what :meth:`~CaptureController.poll` returns on a QTimer. Starting, stopping
-and recovering block (devices open, threads join, files are re-indexed), so they run in
-:class:`~effortface.core.jobs.Jobs` and the GUI thread never waits (STYLE.md L3, L5).
+:class:`QtCaptureStage` views a :class:`~effortface.capture_tool.capture_session.CaptureSession`
+(the stage-model convention of :mod:`effortface.core`): it calls the session's methods, connects to
+its ``<thing>_changed`` emitters in ``__init__``, and its QTimer calls
+:meth:`~effortface.capture_tool.capture_session.CaptureSession.poll`, which delivers the background
+start, stop and recovery jobs and the live rows; the GUI thread never waits (STYLE.md L3, L5).
 """
 
 from __future__ import annotations
@@ -16,15 +17,15 @@ import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from effortface.core.errors import UserError
-from effortface.capture_tool.gui.controller import CaptureController, HrRow, LiveUpdate
-from effortface.core.jobs import JobResult, Jobs
-from effortface.capture_tool.gui.live_view import QtLiveView, format_bytes, format_elapsed
+from effortface.capture_tool.capture_session import (BUSY_STATES, CaptureSession, DeviceChoice, HrRow,
+                                                      LiveUpdate, format_elapsed)
+from effortface.capture_tool.gui.live_view import QtLiveView, format_bytes
 from effortface.capture_tool.gui.participant_form import QtParticipantForm
 from effortface.capture_tool.gui.phases import PHASE_TITLES, QtPhasePanel
-from effortface.capture_tool.gui.preflight import DeviceChoice, QtPreflight
+from effortface.capture_tool.gui.preflight import QtPreflight
 from effortface.capture_tool.session import Event
 
-__all__ = ["CaptureController", "QtCaptureStage"]
+__all__ = ["CaptureSession", "QtCaptureStage"]
 
 POLL_MS = 100
 FLASH_MS = 250
@@ -52,7 +53,7 @@ class QtCaptureStage(QtWidgets.QWidget):
 
     Parameters
     ----------
-    controller : CaptureController
+    session : CaptureSession
         The model: starts, marks, polls and stops recordings.
     settings : QSettings
         UI preferences (last port, protocol, video file).
@@ -62,23 +63,20 @@ class QtCaptureStage(QtWidgets.QWidget):
 
     recording_changed = QtCore.Signal(bool)
 
-    def __init__(self, controller: CaptureController, settings: QtCore.QSettings,
+    def __init__(self, session: CaptureSession, settings: QtCore.QSettings,
                  parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
-        self.controller = controller
-        self.jobs = Jobs(workers=1)  # start, stop and recover run one at a time, in order
-        self._busy = False
-        self._recovering: Path | None = None
+        self.session = session
         self._banner_reason = ""
         self._contact_lost = 0
         self._contact_ok = True
         self._build(settings)
         self._connect()
         self._timer = QtCore.QTimer(self, interval=POLL_MS)
-        self._timer.timeout.connect(self._tick)
+        self._timer.timeout.connect(session.poll)
         self._timer.start()
         self._update_zones()
-        self._set_state("idle")
+        self._show_state(session.state)
         self.check_incomplete()
 
     # ------------------------------------------------------------------------------- layout
@@ -126,25 +124,36 @@ class QtCaptureStage(QtWidgets.QWidget):
     def _connect(self) -> None:
         self.record_button.clicked.connect(self.toggle_recording)
         self.phases.phase_requested.connect(self._on_phase)
-        self.phases.load_changed.connect(lambda value: self._guarded(self.controller.change_load, value))
-        self.phases.marker_requested.connect(lambda text: self._guarded(self.controller.mark, "marker", text))
+        self.phases.load_changed.connect(lambda value: self._guarded(self.session.change_load, value))
+        self.phases.marker_requested.connect(lambda text: self._guarded(self.session.mark, "marker", text))
         self.phases.sync_requested.connect(self.sync_test)
         self.form.changed.connect(self._update_zones)
-        self.recovery_bar.recover.connect(self._recover)
+        self.recovery_bar.recover.connect(self.session.recover_in_background)
         self.preflight.camera_frame.connect(self._show_camera_check)
+        s = self.session
+        s.state_changed.connect(self._show_state)
+        s.recording_changed.connect(self._show_recording)
+        s.live_changed.connect(self._show_update)
+        s.status_changed.connect(lambda text, is_error: self.show_banner(text, "error" if is_error else "info"))
+        s.incomplete_changed.connect(lambda sessions: self.recovery_bar.offer(sessions, s.recovery_failed))
 
     def _show_camera_check(self, frame: np.ndarray | None) -> None:
         """Before recording, show the chosen camera's first frame (to check the framing)."""
-        if not self.controller.recording:
+        if not self.session.recording:
             caption = "camera check: first frame (live video starts with Record)" if frame is not None else ""
             self.live.set_frame(frame, caption)
 
     # ------------------------------------------------------------------------- record / stop
+    @property
+    def _busy(self) -> bool:
+        """True while a start, stop or recovery runs."""
+        return self.session.busy
+
     def toggle_recording(self) -> None:
         """Record if idle, stop if recording (the Record/Stop button)."""
         if self._busy:
             return
-        if self.controller.recording:
+        if self.session.recording:
             self.stop_recording()
         else:
             self.start_recording()
@@ -165,8 +174,7 @@ class QtCaptureStage(QtWidgets.QWidget):
             return False
         participant, label = self.form.participant(), self.form.session_label()
         self.preflight.remember()
-        self._set_state("starting")
-        self.jobs.submit("start", self.controller.start, participant, choice, label)
+        self.session.start_in_background(participant, choice, label)
         return True
 
     def _confirm_devices(self, choice: DeviceChoice) -> DeviceChoice | None:
@@ -185,24 +193,18 @@ class QtCaptureStage(QtWidgets.QWidget):
 
     def stop_recording(self) -> None:
         """Stop in the background: the session is closed and marked complete."""
-        self._set_state("stopping")
-        self.jobs.submit("stop", self._stop_and_summarise)
-
-    def _stop_and_summarise(self) -> tuple[Path, str]:
-        """Runs in the job thread: stop, then read the session back for the summary line."""
-        path = self.controller.stop()
-        return path, session_summary(path)
+        self.session.stop_in_background()
 
     def stop_now(self) -> Path:
         """Stop and wait (used when the application closes)."""
-        return self.controller.stop()
+        return self.session.stop()
 
     def may_close(self) -> bool:
         """Ask before closing while recording; on yes, stop the recording cleanly first."""
         if self._busy:
             self.show_banner("Wait a moment: a recording is starting, stopping or being recovered.", "warn")
             return False
-        if not self.controller.recording:
+        if not self.session.recording:
             return True
         text = "A recording is running. Stop it, save the session and close?"
         if not _ask(self, "Recording in progress", text):
@@ -212,17 +214,18 @@ class QtCaptureStage(QtWidgets.QWidget):
 
     def settled(self) -> bool:
         """True when no device check, start, stop or recovery is pending (screenshots, tests)."""
-        return self.jobs.idle() and self.preflight.jobs.idle() and not self.preflight._debounce.isActive()
+        return (self.session.jobs.idle() and self.preflight.jobs.idle()
+                and not self.preflight._debounce.isActive())
 
     def shutdown(self) -> None:
         """Stop timers and background pools (the window is closing)."""
         self._timer.stop()
         self.preflight.shutdown()
-        self.jobs.shutdown()
+        self.session.shutdown()
 
     # ----------------------------------------------------------------------- phases, markers
     def _on_phase(self, phase: str, value: str) -> None:
-        t_s = self._guarded(self.controller.start_phase, phase, value)
+        t_s = self._guarded(self.session.start_phase, phase, value)
         if t_s is not None:
             self.phases.set_current(phase, format_elapsed(float(t_s)))
 
@@ -240,19 +243,12 @@ class QtCaptureStage(QtWidgets.QWidget):
         self.flash.raise_()
         self.flash.show()
         self.flash.repaint()
-        if self._guarded(self.controller.sync_flash) is None:
+        if self._guarded(self.session.sync_flash) is None:
             self.flash.hide()
             return
         QtCore.QTimer.singleShot(FLASH_MS, self.flash.hide)
 
-    # ------------------------------------------------------------------------------ polling
-    def _tick(self) -> None:
-        for result in self.jobs.drain():
-            getattr(self, f"_on_{result.key}_done")(result)
-        update = self.controller.poll()
-        if update is not None:
-            self._show_update(update)
-
+    # ------------------------------------------------------------------------ model changes
     def _show_update(self, update: LiveUpdate) -> None:
         self._plot_rows(update.hr_rows)
         self._plot_events(update.events)
@@ -308,69 +304,29 @@ class QtCaptureStage(QtWidgets.QWidget):
         self.banner.setText(text)
         self.banner.show()
 
-    # ----------------------------------------------------------------------- job results
-    def _on_start_done(self, result: JobResult) -> None:
-        if result.error is not None:
-            self._set_state("idle")
-            self.show_banner(f"Could not start: {result.error}", "error")
-            if not isinstance(result.error, (UserError, OSError)):
-                raise result.error
+    def _show_recording(self, path: Path | None) -> None:
+        """A recording started into ``path`` (clear the live view), or stopped (None)."""
+        if path is not None:
+            self._contact_lost = 0
+            self._contact_ok = True
+            self.live.clear()
+            self.banner.hide()
+            self.form.show_session_name(path.name)
+            self.session_label.setText(f"Recording into<br><b>{path}</b>")
             return
-        self._contact_lost = 0
-        self._contact_ok = True
-        self.live.clear()
-        self.banner.hide()
-        self._set_state("recording")
-        self.form.show_session_name(Path(result.value).name)
-        self.session_label.setText(f"Recording into<br><b>{result.value}</b>")
-
-    def _on_stop_done(self, result: JobResult) -> None:
-        self._set_state("idle")
-        if result.error is not None:
-            self.show_banner(f"Stop failed: {result.error}", "error")
-            raise result.error
         self._banner_reason = ""
-        path, summary = result.value
         self.live.set_current(None, None)
         self.live.set_counters({"link": "stopped"})
         self.live.preview_caption.setText("last frame recorded (stopped)")
-        self.session_label.setText(f"Saved, complete:<br><b>{path}</b>")
-        self.show_banner(summary, "info")
-
-    def _on_recover_done(self, result: JobResult) -> None:
-        """Show what the recovery did or why it failed; offer the next incomplete session.
-
-        A session whose recovery failed is not offered again in this run, so a broken one never
-        hides the others.
-        """
-        folder, self._recovering = self._recovering, None
-        name = folder.name if folder is not None else "the session"
-        self._set_state("idle")
-        if result.error is not None:
-            if folder is not None:
-                self.recovery_bar.mark_failed(folder)
-            self.show_banner(f"Recovery of {name} failed: {_error_line(result.error)}", "error")
-        else:
-            self.show_banner(f"Recovered {name}: " + "; ".join(result.value.get("done", [])), "info")
-        self.check_incomplete()
+        self.session_label.setText(f"Saved, complete:<br><b>{self.session.last_session}</b>")
 
     # ----------------------------------------------------------------------------- recovery
     def check_incomplete(self) -> list[Path]:
         """Offer recovery of sessions a crash left incomplete; return them."""
-        sessions = self.controller.incomplete_sessions()
-        self.recovery_bar.offer(sessions)
-        return sessions
-
-    def _recover(self, folder: str) -> None:
-        """Recover ``folder`` in the background; Record and Recover are disabled until it is done."""
-        if self._busy or self.controller.recording or not folder:
-            return
-        self._recovering = Path(folder)
-        self._set_state("recovering")
-        self.jobs.submit("recover", self.controller.recover, folder)
+        return self.session.check_incomplete()
 
     # -------------------------------------------------------------------------------- state
-    def _set_state(self, state: str) -> None:
+    def _show_state(self, state: str) -> None:
         """What can be pressed and what the Record button says.
 
         Parameters
@@ -378,12 +334,11 @@ class QtCaptureStage(QtWidgets.QWidget):
         state : str
             ``idle``, ``starting``, ``recording``, ``stopping`` or ``recovering``.
         """
-        self._busy = state in ("starting", "stopping", "recovering")
         recording = state == "recording"
         self.record_button.setText(_STATE_TEXT[state])
         colour = _STATE_COLOUR.get(state, "#b00020")
         self.record_button.setStyleSheet(f"color: white; background: {colour}; border-radius: 6px;")
-        self.record_button.setEnabled(not self._busy)
+        self.record_button.setEnabled(state not in BUSY_STATES)
         self.preflight.setEnabled(state == "idle")
         self.form.setEnabled(state == "idle")
         self.phases.setEnabled(recording)
@@ -409,7 +364,7 @@ class _RecoveryBar(QtWidgets.QFrame):
     """'A recording was left incomplete by a crash' with Recover, Next and Later.
 
     Next moves on to the next incomplete session (round the list), so every one can be reached. A
-    session whose recovery failed (:meth:`mark_failed`) is not offered again in this run.
+    session whose recovery failed (the model's ``recovery_failed``) is not offered again in this run.
     """
 
     recover = QtCore.Signal(str)
@@ -431,7 +386,6 @@ class _RecoveryBar(QtWidgets.QFrame):
         self.later.clicked.connect(self.hide)
         self._sessions: list[Path] = []
         self._index = 0
-        self._failed: set[Path] = set()
         self._n_failed = 0  # failed sessions still incomplete
         self._enabled = True
         self.hide()
@@ -440,13 +394,14 @@ class _RecoveryBar(QtWidgets.QFrame):
         """The session on offer ('' when none)."""
         return str(self._sessions[self._index]) if self._sessions else ""
 
-    def offer(self, sessions: list[Path]) -> None:
+    def offer(self, sessions: list[Path], failed: set[Path] | None = None) -> None:
         """Offer ``sessions`` except those that failed; stay on the current one, else the next.
 
         Hides when none is left.
         """
         previous = self.current()
-        self._sessions = [Path(s) for s in sessions if Path(s) not in self._failed]
+        failed = failed or set()
+        self._sessions = [Path(s) for s in sessions if Path(s) not in failed]
         self._n_failed = len(sessions) - len(self._sessions)
         later = [i for i, s in enumerate(self._sessions) if str(s) >= previous]
         self._index = later[0] if later and previous else 0
@@ -457,10 +412,6 @@ class _RecoveryBar(QtWidgets.QFrame):
         if self._sessions:
             self._index = (self._index + 1) % len(self._sessions)
         self._show_current()
-
-    def mark_failed(self, folder: str | Path) -> None:
-        """Do not offer ``folder`` again in this run (its recovery failed)."""
-        self._failed.add(Path(folder))
 
     def set_actions_enabled(self, enabled: bool) -> None:
         """Enable Recover and Next (disabled while recording, starting, stopping or recovering)."""
@@ -480,24 +431,6 @@ class _RecoveryBar(QtWidgets.QFrame):
         self.text.setText(f"A recording was left incomplete by a crash: <b>{self._sessions[self._index].name}</b>"
                           f"{more}. Recover it to finish its files and mark it complete.{failed}")
         self.show()
-
-
-def session_summary(folder: Path) -> str:
-    """One line about a stopped session: id, duration, samples, frames, events (from its files)."""
-    from effortface.capture_tool.session import read_session
-
-    session = read_session(folder)
-    stats = session.info.extra.get("stats", {})
-    phases = sum(e.kind == "phase_start" for e in session.events)
-    return (f"Saved, complete: {session.info.session_id}  -  {format_elapsed(stats.get('duration_s', 0.0))}, "
-            f"{len(session.heart_rate)} HR rows, {len(session.frame_times_s)} video frames "
-            f"({stats.get('dropped_frames', 0)} dropped), {phases} phases, {len(session.events)} events")
-
-
-def _error_line(error: BaseException) -> str:
-    """One line for an error: its message (a UserError's says what and where), else type and message."""
-    text = str(error).strip().splitlines()[0] if str(error).strip() else ""
-    return text if isinstance(error, UserError) else f"{type(error).__name__}: {text}"
 
 
 def _ask(parent: QtWidgets.QWidget, title: str, text: str) -> bool:

@@ -47,12 +47,6 @@ def format_bytes(n_bytes: int) -> str:
     return f"{size:.1f} GB"  # pragma: no cover
 
 
-def format_elapsed(t_s: float) -> str:
-    """``h:mm:ss`` of a duration in seconds."""
-    total = int(max(t_s, 0.0))
-    return f"{total // 3600}:{total % 3600 // 60:02d}:{total % 60:02d}"
-
-
 class QtLiveView(QtWidgets.QWidget):
     """Camera preview, HR plot, large HR/RR and recording counters.
 

@@ -105,16 +105,6 @@ class QtParticipantForm(QtWidgets.QGroupBox):
             "hr_max_bpm": _optional_value(self.hr_max),
         }
 
-    def set_values(self, values: dict[str, Any]) -> None:
-        """Fill the form (e.g. from the last session's participant)."""
-        self.code.setText(str(values.get("code", "")))
-        self.sex.setCurrentText(str(values.get("sex", SEXES[0])))
-        for key, spin in (("age", self.age), ("height_m", self.height_m), ("mass_kg", self.mass),
-                          ("training_level", self.training_level), ("hr_rest_bpm", self.hr_rest),
-                          ("hr_max_bpm", self.hr_max)):
-            if values.get(key) is not None:
-                spin.setValue(values[key])
-
     def session_label(self) -> str:
         """The optional label appended to the session name."""
         return self.label.text().strip()

@@ -1,12 +1,11 @@
 """Pre-flight: which strap port, protocol and camera; each device shown ready or missing.
 
 Opening ports and cameras can block for a second or more, so every check runs in
-:class:`~effortface.core.jobs.Jobs` and the results are drained on a QTimer.
+:class:`~effortface.core.jobs.Jobs` with its own ``done`` callback, delivered on a QTimer.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import os
 from pathlib import Path
 from collections.abc import Callable
@@ -14,25 +13,16 @@ from typing import Any
 
 from PySide6 import QtCore, QtWidgets
 
+from effortface.capture_tool.capture_session import DeviceChoice
 from effortface.capture_tool.gui.detect import detect_protocol, read_first_bytes
 from effortface.core.jobs import JobResult, Jobs
 from effortface.capture_tool.protocols import PROTOCOLS
 
+__all__ = ["DeviceChoice", "QtPreflight"]
+
 NO_VIDEO = "No video"
 VIDEO_FILE = "Video file..."
 READY, MISSING, CHECKING = "ready", "missing", "checking..."
-
-
-@dataclasses.dataclass(frozen=True)
-class DeviceChoice:
-    """What to record from: strap ``port`` (path or URL, '' for none), ``protocol``, ``camera``.
-
-    ``camera`` is a camera index, a video file path, or None for no video.
-    """
-
-    port: str
-    protocol: str
-    camera: int | str | None
 
 
 def check_strap(port: str) -> str:
@@ -103,12 +93,12 @@ class QtPreflight(QtWidgets.QGroupBox):
     def __init__(self, settings: QtCore.QSettings, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__("Devices", parent)
         self.settings = settings
-        self.jobs = Jobs()
+        self.jobs = Jobs(name="preflight")
         self.state = {"strap": MISSING, "camera": MISSING}
         self.detect_seconds = 2.5  # how long Detect listens to the port
         self._build()
         self._timer = QtCore.QTimer(self, interval=100)
-        self._timer.timeout.connect(self._drain)
+        self._timer.timeout.connect(self.jobs.drain)
         self._timer.start()
         self._restore()
         self.refresh()
@@ -158,8 +148,8 @@ class QtPreflight(QtWidgets.QGroupBox):
 
     def refresh(self) -> None:
         """List the ports and cameras found (in the background), then check the chosen ones."""
-        self.jobs.submit("ports", found_ports)
-        self.jobs.submit("cameras", found_cameras)
+        self.jobs.submit("ports", found_ports, done=self._ports_found)
+        self.jobs.submit("cameras", found_cameras, done=self._cameras_found)
 
     def choice(self) -> DeviceChoice:
         """The devices chosen now."""
@@ -199,17 +189,20 @@ class QtPreflight(QtWidgets.QGroupBox):
     def check(self) -> None:
         """Check the chosen strap and camera in the background."""
         choice = self.choice()
-        self._check_one("strap", choice.port, check_strap, "no port chosen")
-        self._check_one("camera", choice.camera, check_camera, "no video will be recorded")
+        if self._check_one("strap", choice.port, "no port chosen"):
+            self.jobs.submit("strap", check_strap, choice.port, done=self._strap_checked)
+        if self._check_one("camera", choice.camera, "no video will be recorded"):
+            self.jobs.submit("camera", check_camera, choice.camera, done=self._camera_checked)
 
-    def _check_one(self, name: str, target: object, fn: Callable[[Any], Any], none_text: str) -> None:
+    def _check_one(self, name: str, target: object, none_text: str) -> bool:
+        """Show ``name`` as checking and return True, or as missing (nothing chosen) and return False."""
         if target in (None, ""):
             self._show(name, MISSING, none_text)
             if name == "camera":
                 self.camera_frame.emit(None)
-            return
+            return False
         self._show(name, CHECKING, str(target))
-        self.jobs.submit(name, fn, target)
+        return True
 
     def detect(self) -> None:
         """Listen to the chosen port and pick the protocol its bytes fit (background)."""
@@ -220,13 +213,10 @@ class QtPreflight(QtWidgets.QGroupBox):
         self.detect_button.setEnabled(False)
         self.detect_button.setText("Listening...")
         seconds = self.detect_seconds
-        self.jobs.submit("detect", lambda: detect_protocol(read_first_bytes(port, seconds)))
+        self.jobs.submit("detect", lambda: detect_protocol(read_first_bytes(port, seconds)),
+                         done=self._protocol_detected)
 
-    def _drain(self) -> None:
-        for result in self.jobs.drain():
-            getattr(self, f"_on_{result.key}")(result)
-
-    def _on_ports(self, result: JobResult) -> None:
+    def _ports_found(self, result: JobResult) -> None:
         current = self.port.currentText() or str(self.settings.value("capture/port", ""))
         ports = list(result.value or [])
         if current and current not in ports:
@@ -238,7 +228,7 @@ class QtPreflight(QtWidgets.QGroupBox):
         self.port.blockSignals(False)
         self.check()
 
-    def _on_cameras(self, result: JobResult) -> None:
+    def _cameras_found(self, result: JobResult) -> None:
         current = self.camera.currentText()
         self.camera.blockSignals(True)
         self.camera.clear()
@@ -254,10 +244,10 @@ class QtPreflight(QtWidgets.QGroupBox):
         self.browse.setVisible(is_file)
         self.check()
 
-    def _on_strap(self, result: JobResult) -> None:
+    def _strap_checked(self, result: JobResult) -> None:
         self._show_result("strap", result)
 
-    def _on_camera(self, result: JobResult) -> None:
+    def _camera_checked(self, result: JobResult) -> None:
         if result.error is not None:
             self._show_result("camera", result)
             self.camera_frame.emit(None)
@@ -266,7 +256,7 @@ class QtPreflight(QtWidgets.QGroupBox):
         self._show("camera", READY, note)
         self.camera_frame.emit(frame)
 
-    def _on_detect(self, result: JobResult) -> None:
+    def _protocol_detected(self, result: JobResult) -> None:
         self.detect_button.setEnabled(True)
         self.detect_button.setText("Detect")
         if result.error is not None:

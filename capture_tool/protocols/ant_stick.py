@@ -84,11 +84,6 @@ def open_sequence(
     ]
 
 
-def reopen_sequence(channel: int = 0) -> list[bytes]:
-    """The message that re-opens a channel the stick closed (after a search timeout)."""
-    return [encode_ant_frame(MSG_OPEN_CHANNEL, bytes([channel]))]
-
-
 def parse_network_key(text: str, source: str) -> bytes:
     """Parse 16 hex digits (spaces, commas, colons, ``0x`` allowed) into 8 bytes.
 

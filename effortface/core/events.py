@@ -1,8 +1,9 @@
 """Change notification for the stage models: one Qt-free signal type (napari's model/view split).
 
-A stage model (``CaptureController``, ``AnnotationSession``, ``TrainSession``, ``SynthSession``) owns
-one :class:`Emitter` per thing that changes, named ``<thing>_changed``; its Qt view connects to them
-in ``__init__`` and writes back only through model methods (STYLE.md L3).
+A stage model (``CaptureSession``, ``AnnotateSession``, ``TrainSession``, ``SynthSession``; the
+convention is in :mod:`effortface.core`) owns one :class:`Emitter` per thing that changes, named
+``<thing>_changed``; its Qt view connects to them in ``__init__`` and writes back only through model
+methods (STYLE.md L3).
 """
 
 from __future__ import annotations
@@ -25,6 +26,10 @@ class Emitter:
         """Stop calling ``fn`` (no error if it was not connected)."""
         if fn in self._slots:
             self._slots.remove(fn)
+
+    def disconnect_all(self) -> None:
+        """Stop calling every connected function (a view that goes away)."""
+        self._slots.clear()
 
     def emit(self, *args: Any) -> None:
         """Call the connected functions in order."""

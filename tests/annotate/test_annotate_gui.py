@@ -96,13 +96,13 @@ def _drag(timeline, start: QtCore.QPointF, end: QtCore.QPointF) -> None:
 
 
 def _on_disk(editor) -> dict:
-    return read_annotations(editor.model.path).to_dict()
+    return read_annotations(editor.session.path).to_dict()
 
 
 def test_key_a_session_end_to_end(qtbot, stage: QtAnnotateStage, lab: Path) -> None:
     r1_before = (lab / SESSION / "annotations" / "R1.json").read_bytes()
     editor = _open_by_mouse(qtbot, stage, "R9")
-    m, view = editor.model, editor.video_view
+    m, view = editor.session, editor.video_view
     # blind: the other raters' files are there, but nothing of theirs is loaded or drawn
     assert all(len(t) == 0 for t in m.annotations.tracks.values())
     assert len(editor.timeline.keys.data) == 0
@@ -171,14 +171,14 @@ def test_key_a_session_end_to_end(qtbot, stage: QtAnnotateStage, lab: Path) -> N
     again = QtAnnotateStage(lab)
     qtbot.addWidget(again)
     editor2 = again.open_session(lab / SESSION, "R9")
-    assert editor2.model.annotations.to_dict() == saved
+    assert editor2.session.annotations.to_dict() == saved
     again.shutdown()
     assert (lab / SESSION / "annotations" / "R1.json").read_bytes() == r1_before
 
 
 def test_the_video_shows_the_exact_frame_and_playback_advances(qtbot, stage: QtAnnotateStage) -> None:
     editor = _open_by_mouse(qtbot, stage, "R1")
-    m = editor.model
+    m = editor.session
     editor.video_view.setFocus()
     _press(editor.video_view, Key.Key_Right, times=12)
     expected = editor.video.get(12, prefetch=False)
@@ -219,12 +219,12 @@ def test_export_writes_weights_and_keyframes_and_never_overwrites(qtbot, stage: 
     csv = stage.export_weights(tmp_path / "w.csv")
     lines = csv.read_text().splitlines()
     assert lines[0] == "frame,t_s,mouth_stretch,mouth_open,eye_squint,brow_lower"
-    assert len(lines) == 1 + editor.model.n_frames
+    assert len(lines) == 1 + editor.session.n_frames
     row = lines[700].split(",")
-    expected = editor.model.weights(699)
+    expected = editor.session.weights(699)
     assert [float(v) for v in row[2:]] == pytest.approx(list(expected.values()), abs=1e-4)
     keys = stage.export_keyframes(tmp_path / "k.json")
-    assert read_annotations(keys).to_dict() == editor.model.annotations.to_dict()
+    assert read_annotations(keys).to_dict() == editor.session.annotations.to_dict()
     assert stage.export_weights(tmp_path / "w.csv") is None
     assert "refusing to overwrite" in stage.status.text()
 
@@ -291,7 +291,7 @@ ANNOTATOR = textwrap.dedent("""
     stage.activateWindow()
     QTest.qWaitForWindowActive(stage)
     editor = stage.open_session(lab / session, "R7")
-    view, m = editor.video_view, editor.model
+    view, m = editor.video_view, editor.session
     view.setFocus()
     n = 0
     while True:  # key every third frame until killed
@@ -367,7 +367,7 @@ def test_typing_another_rater_code_hides_the_previous_raters_report(qtbot, stage
 
 def test_typing_another_rater_code_hides_the_open_session(qtbot, stage: QtAnnotateStage, tmp_path: Path) -> None:
     editor = _open_by_mouse(qtbot, stage, "R1")
-    assert editor.isVisible() and len(editor.model.track) > 0
+    assert editor.isVisible() and len(editor.session.track) > 0
     stage.rater.clear()
     qtbot.keyClicks(stage.rater, "R2")
     assert not editor.isVisible() and not editor.timeline.isVisible()  # R1's keys and title are gone
@@ -375,12 +375,12 @@ def test_typing_another_rater_code_hides_the_open_session(qtbot, stage: QtAnnota
     assert stage.export_keyframes(tmp_path / "k.json") is None  # nor exported for R2
     assert not (tmp_path / "k.json").exists()
     qtbot.mouseClick(stage.open_button, Left)  # R2 opens the session: only R2's keys
-    assert stage.editor is not editor and stage.editor.isVisible() and stage.editor.model.rater == "R2"
+    assert stage.editor is not editor and stage.editor.isVisible() and stage.editor.session.rater == "R2"
     stage.rater.clear()
     qtbot.keyClicks(stage.rater, "R2")
     assert not stage.editor.isVisible()
     _press(stage.rater, Key.Key_Return)  # the same code confirmed: back to R2's session
-    assert stage.editor.isVisible() and stage.editor.model.rater == "R2"
+    assert stage.editor.isVisible() and stage.editor.session.rater == "R2"
 
 
 def test_a_rater_who_finished_the_round_cannot_change_a_rating(qtbot, stage: QtAnnotateStage, lab: Path) -> None:
@@ -404,7 +404,7 @@ def test_a_rater_who_finished_the_round_cannot_change_a_rating(qtbot, stage: QtA
 
 def test_the_mouse_wheel_over_the_protocol_panel_never_edits(qtbot, stage: QtAnnotateStage) -> None:
     editor = _open_by_mouse(qtbot, stage, "R9")
-    m, p = editor.model, editor.protocol
+    m, p = editor.session, editor.protocol
     editor.video_view.setFocus()
     _press(editor.video_view, Key.Key_Right, times=7)
     for widget, dy in ((p.number, 120), (p.slider, 120), (p.interp, -120), (p.interp, 120)):
@@ -419,7 +419,7 @@ def test_the_mouse_wheel_over_the_protocol_panel_never_edits(qtbot, stage: QtAnn
 
 def test_delete_and_copy_act_on_the_current_frame_not_on_an_old_selection(qtbot, stage: QtAnnotateStage) -> None:
     editor = _open_by_mouse(qtbot, stage, "R9")
-    m, view, tl = editor.model, editor.video_view, editor.timeline
+    m, view, tl = editor.session, editor.video_view, editor.timeline
     view.setFocus()
     _press(view, Key.Key_Right, times=2)
     _press(view, Key.Key_7)
@@ -442,7 +442,7 @@ def test_escape_in_the_frame_box_cancels_and_gives_the_keys_back(qtbot, stage: Q
     from PySide6 import QtWidgets
 
     editor = _open_by_mouse(qtbot, stage, "R9")
-    m, view = editor.model, editor.video_view
+    m, view = editor.session, editor.video_view
     view.setFocus()
     _press(view, Key.Key_Right, times=4)
     _press(view, Key.Key_G, QtCore.Qt.KeyboardModifier.ControlModifier)

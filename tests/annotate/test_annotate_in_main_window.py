@@ -68,7 +68,7 @@ def test_the_keyboard_reaches_the_editor_after_switching_stages(qtbot, window: M
     assert QtWidgets.QApplication.focusWidget() is editor.video_view
     _key_to_focus(Key.Key_Right)
     _key_to_focus(Key.Key_Down)  # a weight nudge in the editor, not the next stage
-    assert editor.model.frame == 1 and window.stage_list.currentRow() == list(STAGES).index("annotate")
+    assert editor.session.frame == 1 and window.stage_list.currentRow() == list(STAGES).index("annotate")
 
 
 def test_a_session_recorded_meanwhile_is_listed_when_annotate_is_shown_again(qtbot, window: MainWindow) -> None:

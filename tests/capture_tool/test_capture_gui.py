@@ -16,10 +16,10 @@ import pytest
 from PySide6 import QtCore, QtWidgets
 
 from effortface.capture_tool.camera import index_video, read_frame
-from effortface.capture_tool.gui.controller import CaptureController, CsvTail, measure_sync, store_sync_result
+from effortface.capture_tool.capture_session import CaptureSession, CsvTail, measure_sync, store_sync_result
 from effortface.capture_tool.gui.detect import detect_protocol
 from effortface.capture_tool.gui.live_view import hr_zones
-from effortface.capture_tool.gui.sync import flash_offset_s
+from effortface.capture_tool.sync import flash_offset_s
 from effortface.capture_tool.hr_csv import read_hr_csv
 from effortface.capture_tool.replay import PtyReplay, TimedChunk, start_replay_thread
 from effortface.capture_tool.session import (
@@ -58,7 +58,7 @@ def window(qtbot, tmp_path: Path, settings: QtCore.QSettings) -> MainWindow:
     qtbot.waitUntil(stage.settled, timeout=10_000)
     yield win
     # closed here, not by qtbot: a test that failed mid-recording must not leave a question open
-    if stage.controller.recording:
+    if stage.session.recording:
         stage.stop_now()
     win.close()
     win.deleteLater()
@@ -84,14 +84,14 @@ def _fill_form(stage, code: str = "P07") -> None:
 
 def _record(qtbot, stage) -> Path:
     qtbot.mouseClick(stage.record_button, QtCore.Qt.MouseButton.LeftButton)
-    qtbot.waitUntil(lambda: stage.controller.recording and stage.settled(), timeout=10_000)
-    return stage.controller.recorder.path
+    qtbot.waitUntil(lambda: stage.session.recording and stage.settled(), timeout=10_000)
+    return stage.session.recorder.path
 
 
 def _stop(qtbot, stage) -> Path:
     qtbot.mouseClick(stage.record_button, QtCore.Qt.MouseButton.LeftButton)
-    qtbot.waitUntil(lambda: not stage.controller.recording and stage.settled(), timeout=20_000)
-    return stage.controller.last_session
+    qtbot.waitUntil(lambda: not stage.session.recording and stage.settled(), timeout=20_000)
+    return stage.session.last_session
 
 
 def _key(qtbot, window: MainWindow, key: QtCore.Qt.Key) -> None:
@@ -142,14 +142,14 @@ def test_record_unplug_replug_phases_stop(qtbot, window, tmp_path, shared_data, 
     _key(qtbot, window, QtCore.Qt.Key.Key_F1)                     # rest
     qtbot.waitUntil(lambda: stage.live.n_samples() >= 5, timeout=10_000)
     _key(qtbot, window, QtCore.Qt.Key.Key_F2)                     # warm-up
-    qtbot.waitUntil(lambda: stage.controller.recorder.link.state == "reconnecting", timeout=15_000)
+    qtbot.waitUntil(lambda: stage.session.recorder.link.state == "reconnecting", timeout=15_000)
     qtbot.waitUntil(lambda: stage.banner.isVisible() and "Strap lost" in stage.banner.text(), timeout=5_000)
     assert stage.live.hr_label.value.text() == "--"  # no stale heart rate while the strap is gone
 
     replay2 = PtyReplay(second, speed=SPEED)
     _repoint(link, replay2.path)                                  # replug: same path, new pty
     thread2 = start_replay_thread(replay2)
-    qtbot.waitUntil(lambda: stage.controller.recorder.link.state == "connected", timeout=10_000)
+    qtbot.waitUntil(lambda: stage.session.recorder.link.state == "connected", timeout=10_000)
     stage.phases.load_kg.setValue(10)
     stage.phases.speed_kmh.setValue(9.5)
     _key(qtbot, window, QtCore.Qt.Key.Key_F3)                     # exercise with load and speed
@@ -216,10 +216,10 @@ def test_closing_while_recording_asks(qtbot, window, monkeypatch) -> None:
     assert asked == ["No camera"]
     window.close()
     assert asked[-1] == "Recording in progress"
-    assert window.isVisible() and stage.controller.recording
+    assert window.isVisible() and stage.session.recording
     assert read_session_info(path).complete is False
     window.close()
-    assert not window.isVisible() and not stage.controller.recording
+    assert not window.isVisible() and not stage.session.recording
     assert read_session_info(path).complete is True
     assert window.settings.value("main_window/geometry") is not None
 
@@ -243,7 +243,7 @@ def test_full_rate_stream_keeps_gui_responsive(qtbot, window, tmp_path) -> None:
     path = _record(qtbot, stage)
     ticker.start()
     thread = start_replay_thread(replay)
-    qtbot.waitUntil(lambda: stage.controller.recorder.status().samples >= n_lines, timeout=30_000)
+    qtbot.waitUntil(lambda: stage.session.recorder.status().samples >= n_lines, timeout=30_000)
     thread.join(5)
     qtbot.waitUntil(lambda: stage.live.n_samples() >= n_lines - n_lines // 97, timeout=10_000)
     ticker.stop()
@@ -287,7 +287,7 @@ def test_lost_camera_shows_banner_and_recording_goes_on(qtbot, window, tmp_path)
     qtbot.waitUntil(lambda: stage.settled() and not stage.preflight.missing(), timeout=10_000)
     path = _record(qtbot, stage)
     qtbot.waitUntil(lambda: "camera stopped" in stage.banner.text() and stage.banner.isVisible(), timeout=10_000)
-    assert stage.controller.recording
+    assert stage.session.recording
     _key(qtbot, window, QtCore.Qt.Key.Key_F1)
     _stop(qtbot, stage)
     assert ("phase_start", "rest") in [(e.kind, e.label) for e in read_events(path / "events.csv")]
@@ -324,7 +324,7 @@ def test_form_validation_shows_message_and_blocks_record(qtbot, window) -> None:
     stage = window.stages["capture"]
     stage.form.code.setText("Jane Doe")
     qtbot.mouseClick(stage.record_button, QtCore.Qt.MouseButton.LeftButton)
-    assert not stage.controller.recording
+    assert not stage.session.recording
     assert "participant code" in stage.form.message.text() and "never names" in stage.form.message.text()
     assert stage.banner.isVisible()
     stage.form.code.setText("P01")
@@ -353,7 +353,7 @@ def test_missing_strap_is_shown_and_start_error_stays_in_window(qtbot, window, t
     qtbot.mouseClick(stage.record_button, QtCore.Qt.MouseButton.LeftButton)
     qtbot.waitUntil(stage.settled, timeout=10_000)
     assert asked == ["Strap not ready", "No camera"]  # recording without a device asks first
-    assert not stage.controller.recording
+    assert not stage.session.recording
     assert "Could not start" in stage.banner.text() and "ttyNONE" in stage.banner.text()
     assert stage.record_button.isEnabled() and not (tmp_path / "sessions").exists()
 
@@ -433,13 +433,13 @@ def test_flash_offset_found_in_a_real_video(tmp_path) -> None:
     assert read_events(folder / "events.csv")[0].label == "flash"
 
 
-def test_controller_refuses_marks_without_recording(tmp_path) -> None:
+def test_capture_session_refuses_marks_without_recording(tmp_path) -> None:
     from effortface.core.errors import UserError
 
-    controller = CaptureController(tmp_path)
+    session = CaptureSession(tmp_path)
     with pytest.raises(UserError, match="expected a recording running"):
-        controller.mark("marker", "x")
+        session.mark("marker", "x")
     with pytest.raises(UserError, match="Stop: expected a recording running"):
-        controller.stop()
-    assert controller.incomplete_sessions() == []
+        session.stop()
+    assert session.incomplete_sessions() == []
     assert not any(tmp_path.iterdir())

@@ -108,14 +108,14 @@ def test_next_reaches_every_incomplete_session(qtbot, stage, lab) -> None:
 
 def test_record_and_recover_are_disabled_while_recovering(qtbot, stage, lab, monkeypatch) -> None:
     release, started = threading.Event(), threading.Event()
-    real = stage.controller.recover
+    real = stage.session.recover
 
     def slow_recover(folder: str) -> dict:
         started.set()
         release.wait(60)
         return real(folder)
 
-    monkeypatch.setattr(stage.controller, "recover", slow_recover)
+    monkeypatch.setattr(stage.session, "recover", slow_recover)
     bar = stage.recovery_bar
     assert stage.record_button.isEnabled() and bar.button.isEnabled() and bar.next.isEnabled()
     qtbot.mouseClick(bar.next, QtCore.Qt.MouseButton.LeftButton)
@@ -124,7 +124,7 @@ def test_record_and_recover_are_disabled_while_recovering(qtbot, stage, lab, mon
     assert not stage.record_button.isEnabled() and stage.record_button.text() == "Recovering..."
     assert not bar.button.isEnabled() and not bar.next.isEnabled()
     stage.toggle_recording()  # a hotkey or a stray call does nothing either
-    assert not stage.controller.recording and not stage.may_close()
+    assert not stage.session.recording and not stage.may_close()
     release.set()
     qtbot.waitUntil(lambda: stage.settled() and not stage._busy, timeout=20_000)
     assert read_session_info(lab / GOOD[0]).complete

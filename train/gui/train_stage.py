@@ -578,7 +578,7 @@ class QtTrainStage(QtWidgets.QWidget):
         s.status_changed.connect(self.show_status)
         s.busy_changed.connect(self._on_busy)
         s.results_changed.connect(lambda: self.export_button.setEnabled(True))
-        s.exported.connect(self._on_exported)
+        s.export_changed.connect(self._on_exported)
 
     def show_status(self, text: str, is_error: bool = False) -> None:
         """Show a message under the buttons (errors in red)."""

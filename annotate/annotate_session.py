@@ -1,4 +1,4 @@
-"""The annotation session model: one rater keying one session (Qt-free, plain callbacks).
+"""The Annotate stage's model: one rater keying one session (Qt-free).
 
 It holds what the Annotate stage's widgets show and edit: the current frame, the current blendshape
 (the paper's protocol: one blendshape at a time, always in the set's order, the next one offered
@@ -7,9 +7,11 @@ blind), the clipboard and an undo/redo history of whole-annotation snapshots. Ev
 once with an atomic write (:meth:`RaterAnnotations.save`: temp file + rename), so a crash or a
 ``kill -9`` loses no key that was set.
 
-Widgets subscribe with :meth:`AnnotationSession.connect` to events ``frame_changed``,
-``blendshape_changed``, ``keys_changed``, ``saved`` and ``pass_done``, and write back only through the
-methods (STYLE.md L3).
+:class:`AnnotateSession` follows the stage-model convention of :mod:`effortface.core`: one
+:class:`~effortface.core.events.Emitter` per thing that changes (``frame_changed``,
+``blendshape_changed``, ``keys_changed``, ``file_changed`` when the file is saved, ``passes_changed``
+when a pass over the video is done); widgets connect to them in ``__init__`` and write back only
+through the methods (STYLE.md L3).
 """
 
 from __future__ import annotations
@@ -20,15 +22,13 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
 from effortface.annotate.keyframes import INTERPOLATIONS, Keyframe, KeyframeTrack, RaterAnnotations, read_annotations
 from effortface.annotate.video_index import FrameTimes
 from effortface.core.errors import UserError
+from effortface.core.events import Emitter
 from effortface.capture_tool.session import Session, read_session
 
-EVENTS = ("frame_changed", "blendshape_changed", "keys_changed", "saved", "pass_done")
 ANNOTATIONS_DIR = "annotations"
 _RATER_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,31}$")
 #: snapshots kept for undo
@@ -47,8 +47,8 @@ def annotation_path(session_folder: str | os.PathLike, rater: str) -> Path:
     return Path(session_folder) / ANNOTATIONS_DIR / f"{check_rater(rater)}.json"
 
 
-class AnnotationSession:
-    """One rater's key-framing of one session.
+class AnnotateSession:
+    """One rater's key-framing of one session (the Annotate stage's model).
 
     Parameters
     ----------
@@ -65,6 +65,11 @@ class AnnotationSession:
     ------
     UserError
         If the session has no video frames, the rater code is invalid, or the file is malformed.
+
+    Notes
+    -----
+    Emitters: ``frame_changed(frame)``, ``blendshape_changed(name)``, ``keys_changed(name)``,
+    ``file_changed(path)`` (saved), ``passes_changed(name)`` (a pass over the video is done).
     """
 
     def __init__(self, session_folder: str | os.PathLike, rater: str, *,
@@ -85,23 +90,14 @@ class AnnotationSession:
         self._undo: list[RaterAnnotations] = []
         self._redo: list[RaterAnnotations] = []
         self._clipboard: list[tuple[int, float, str]] = []
-        self._listeners: dict[str, list[Callable[..., Any]]] = {e: [] for e in EVENTS}
-
-    # ------------------------------------------------------------------------------- events
-    def connect(self, event: str, callback: Callable[..., Any]) -> None:
-        """Call ``callback`` on ``event`` (one of :data:`EVENTS`)."""
-        if event not in self._listeners:
-            raise ValueError(f"event: expected one of {', '.join(EVENTS)}, found {event!r}")
-        self._listeners[event].append(callback)
+        self.frame_changed, self.blendshape_changed = Emitter(), Emitter()
+        self.keys_changed, self.file_changed, self.passes_changed = Emitter(), Emitter(), Emitter()
 
     def disconnect_all(self) -> None:
-        """Forget every listener (a view that goes away)."""
-        for callbacks in self._listeners.values():
-            callbacks.clear()
-
-    def _emit(self, event: str, *args: Any) -> None:
-        for callback in list(self._listeners[event]):
-            callback(*args)
+        """Forget every connected function (a view that goes away)."""
+        for emitter in (self.frame_changed, self.blendshape_changed, self.keys_changed,
+                        self.file_changed, self.passes_changed):
+            emitter.disconnect_all()
 
     # ------------------------------------------------------------------------------ navigation
     @property
@@ -125,10 +121,10 @@ class AnnotationSession:
         if frame == self.frame:
             return
         self.frame = frame
-        self._emit("frame_changed", frame)
+        self.frame_changed.emit(frame)
         if frame == self.n_frames - 1 and len(self.track) and self.blendshape not in self.passes_done:
             self.passes_done.add(self.blendshape)
-            self._emit("pass_done", self.blendshape)
+            self.passes_changed.emit(self.blendshape)
 
     def step(self, n_frames: int) -> None:
         """Move by ``n_frames`` (negative: back)."""
@@ -154,7 +150,7 @@ class AnnotationSession:
         self.annotations.blendshapes.index(name)
         if name != self.blendshape:
             self.blendshape = name
-            self._emit("blendshape_changed", name)
+            self.blendshape_changed.emit(name)
 
     @property
     def next_blendshape(self) -> str | None:
@@ -201,7 +197,7 @@ class AnnotationSession:
         self._undo.append(before)
         del self._undo[:-UNDO_LIMIT]
         self._redo.clear()
-        self._emit("keys_changed", self.blendshape)
+        self.keys_changed.emit(self.blendshape)
         return result
 
     def _swap(self, source: list[RaterAnnotations], target: list[RaterAnnotations]) -> bool:
@@ -217,7 +213,7 @@ class AnnotationSession:
             raise
         source.pop()
         target.append(current)
-        self._emit("keys_changed", self.blendshape)
+        self.keys_changed.emit(self.blendshape)
         return True
 
     def set_key(self, weight: float, frame: int | None = None, interp: str | None = None) -> Keyframe:
@@ -305,12 +301,8 @@ class AnnotationSession:
         """
         path = self.annotations.save(self.path, overwrite=self._file_is_ours)
         self._file_is_ours = True
-        self._emit("saved", path)
+        self.file_changed.emit(path)
         return path
-
-    def keyed_frames(self, name: str | None = None) -> np.ndarray:
-        """Frames of the keys of ``name`` (default current), sorted."""
-        return self.annotations.tracks[name or self.blendshape].arrays()[0]
 
 
 class BlindRound:

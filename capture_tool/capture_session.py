@@ -1,9 +1,12 @@
 """The Capture stage's model (Qt-free): drives a :class:`~effortface.capture_tool.recorder.Recorder`.
 
-The widgets call :class:`CaptureController` methods and draw what :meth:`CaptureController.poll`
-returns on a QTimer; nothing here blocks for long or touches a widget (STYLE.md L3, L5). What
-the live view plots is read back from the session files as they grow (:class:`CsvTail`), so the
-screen shows exactly what is on disk.
+:class:`CaptureSession` follows the stage-model convention of :mod:`effortface.core`: the view
+(:class:`~effortface.capture_tool.gui.capture_stage.QtCaptureStage`) calls its methods, listens to
+its ``<thing>_changed`` emitters, and its QTimer calls :meth:`CaptureSession.poll`, which delivers
+the background jobs (start, stop, recovery: they open devices, join threads and re-index files) and
+the new rows of the live recording. Nothing here blocks the GUI thread or touches a widget (STYLE.md
+L3, L5). What the live view plots is read back from the session files as they grow
+(:class:`CsvTail`), so the screen shows exactly what is on disk.
 """
 
 from __future__ import annotations
@@ -16,8 +19,9 @@ from pathlib import Path
 from typing import Any
 
 from effortface.core.errors import UserError
-from effortface.capture_tool.gui.preflight import DeviceChoice
-from effortface.capture_tool.gui.sync import flash_offset_s, video_brightness
+from effortface.core.events import Emitter
+from effortface.core.jobs import JobResult, Jobs
+from effortface.capture_tool.sync import flash_offset_s, video_brightness
 from effortface.capture_tool.recorder import Recorder, RecorderStatus, recover_session
 from effortface.capture_tool.session import (
     EVENTS_CSV,
@@ -28,9 +32,28 @@ from effortface.capture_tool.session import (
     Participant,
     list_sessions,
     read_events,
+    read_session,
     read_session_info,
     read_video_frames,
 )
+
+#: what a capture session is doing: idle, starting, recording, stopping or recovering
+STATES = ("idle", "starting", "recording", "stopping", "recovering")
+#: the background jobs are busy in these states (Record and Recover wait)
+BUSY_STATES = ("starting", "stopping", "recovering")
+
+
+@dataclasses.dataclass(frozen=True)
+class DeviceChoice:
+    """What to record from: strap ``port`` (path or URL, '' for none), ``protocol``, ``camera``.
+
+    ``camera`` is a camera index, a video file path, or None for no video.
+    """
+
+    port: str
+    protocol: str
+    camera: int | str | None
+
 
 SYNC_KIND, FLASH_LABEL = "sync", "flash"
 
@@ -47,7 +70,7 @@ class HrRow:
 
 @dataclasses.dataclass
 class LiveUpdate:
-    """What changed since the last :meth:`CaptureController.poll`."""
+    """What changed since the last :meth:`CaptureSession.poll`."""
 
     status: RecorderStatus
     hr_rows: list[HrRow]
@@ -108,7 +131,7 @@ def _event(fields: list[str]) -> Event | None:
         return None
 
 
-class CaptureController:
+class CaptureSession:
     """Start, mark, poll and stop one recording at a time; find and recover crashed sessions.
 
     Parameters
@@ -120,27 +143,59 @@ class CaptureController:
     ----------
     recorder : Recorder or None
         The running recording.
+    state : str
+        One of :data:`STATES`.
     phase : str or None
         The phase running now (``rest``, ``warmup``, ``exercise``, ``recovery``).
     last_session : Path or None
         The folder of the last recording stopped.
+    recovery_failed : set of Path
+        Sessions whose recovery failed in this run (not offered again).
+    jobs : Jobs
+        Start, stop and recovery, one at a time, in order.
+
+    Notes
+    -----
+    Emitters: ``state_changed(state)``, ``recording_changed(path or None)`` (a recording started
+    into ``path``, or stopped), ``live_changed(LiveUpdate)`` (from :meth:`poll`),
+    ``status_changed(text, is_error)`` (what a start, stop or recovery did),
+    ``incomplete_changed(sessions)`` (from :meth:`check_incomplete`).
     """
 
     def __init__(self, out_dir: str | os.PathLike) -> None:
         self.out_dir = Path(out_dir)
         self.recorder: Recorder | None = None
+        self.state = "idle"
         self.phase: str | None = None
         self.last_session: Path | None = None
+        self.recovery_failed: set[Path] = set()
+        self.jobs = Jobs(workers=1, name="capture")
+        self._recovering: Path | None = None
         self._tails: tuple[CsvTail, CsvTail] | None = None
         self._latest_frame: Any = None
+        self.state_changed, self.recording_changed = Emitter(), Emitter()
+        self.live_changed, self.status_changed = Emitter(), Emitter()
+        self.incomplete_changed = Emitter()
 
     @property
     def recording(self) -> bool:
         """True between :meth:`start` and :meth:`stop`."""
         return self.recorder is not None
 
+    @property
+    def busy(self) -> bool:
+        """True while a start, stop or recovery runs in the background."""
+        return self.state in BUSY_STATES
+
+    def _set_state(self, state: str) -> None:
+        if state not in STATES:
+            raise ValueError(f"state: expected one of {', '.join(STATES)}, found {state!r}")
+        self.state = state
+        self.state_changed.emit(state)
+
+    # ---------------------------------------------------------------- blocking primitives
     def start(self, participant: Participant, choice: DeviceChoice, label: str = "") -> Path:
-        """Open the devices and start a new session; return its folder.
+        """Open the devices and start a new session; return its folder (blocking).
 
         Raises
         ------
@@ -159,6 +214,93 @@ class CaptureController:
         self._tails = (CsvTail(path / HEART_RATE_CSV), CsvTail(path / EVENTS_CSV))
         return path
 
+    def stop(self) -> Path:
+        """End the running phase, stop the recording (session complete) and measure the sync test.
+
+        Blocking (the application calls it when it closes); :meth:`stop_in_background` for the GUI.
+
+        Returns
+        -------
+        Path
+            The session folder.
+        """
+        recorder = self.recorder
+        if recorder is None:
+            raise UserError("Stop: expected a recording running, found none")
+        if self.phase is not None:
+            recorder.mark("phase_end", self.phase)
+        path = recorder.stop()
+        self.recorder, self.phase, self._tails, self.last_session = None, None, None, path
+        store_sync_result(path)
+        return path
+
+    def recover(self, folder: str | os.PathLike) -> dict[str, Any]:
+        """Finish an incomplete session (blocking: :meth:`recover_in_background` for the GUI)."""
+        return recover_session(folder)
+
+    # ------------------------------------------------------------------- background jobs
+    def start_in_background(self, participant: Participant, choice: DeviceChoice, label: str = "") -> None:
+        """Start a recording in a job: ``state_changed('starting')``, then ``recording_changed(path)``
+        or ``status_changed(error, True)`` from :meth:`poll`."""
+        self._set_state("starting")
+        self.jobs.submit("start", self.start, participant, choice, label, done=self._start_done)
+
+    def stop_in_background(self) -> None:
+        """Stop in a job; the session is closed, marked complete and summarised."""
+        self._set_state("stopping")
+        self.jobs.submit("stop", self._stop_and_summarise, done=self._stop_done)
+
+    def _stop_and_summarise(self) -> tuple[Path, str]:
+        """Runs in the job thread: stop, then read the session back for the summary line."""
+        path = self.stop()
+        return path, session_summary(path)
+
+    def recover_in_background(self, folder: str | os.PathLike) -> bool:
+        """Recover ``folder`` in a job (nothing happens while busy or recording); True if started."""
+        if self.busy or self.recording or not str(folder):
+            return False
+        self._recovering = Path(folder)
+        self._set_state("recovering")
+        self.jobs.submit("recover", self.recover, folder, done=self._recover_done)
+        return True
+
+    def _start_done(self, result: JobResult) -> None:
+        if result.error is not None:
+            self._set_state("idle")
+            self.status_changed.emit(f"Could not start: {result.error}", True)
+            if not isinstance(result.error, (UserError, OSError)):
+                raise result.error
+            return
+        self._set_state("recording")
+        self.recording_changed.emit(Path(result.value))
+
+    def _stop_done(self, result: JobResult) -> None:
+        self._set_state("idle")
+        if result.error is not None:
+            self.status_changed.emit(f"Stop failed: {result.error}", True)
+            raise result.error
+        _path, summary = result.value
+        self.recording_changed.emit(None)
+        self.status_changed.emit(summary, False)
+
+    def _recover_done(self, result: JobResult) -> None:
+        """Say what the recovery did or why it failed; offer the incomplete sessions again.
+
+        A session whose recovery failed is not offered again in this run, so a broken one never
+        hides the others.
+        """
+        folder, self._recovering = self._recovering, None
+        name = folder.name if folder is not None else "the session"
+        self._set_state("idle")
+        if result.error is not None:
+            if folder is not None:
+                self.recovery_failed.add(folder)
+            self.status_changed.emit(f"Recovery of {name} failed: {_error_line(result.error)}", True)
+        else:
+            self.status_changed.emit(f"Recovered {name}: " + "; ".join(result.value.get("done", [])), False)
+        self.check_incomplete()
+
+    # ---------------------------------------------------------------------- marks, phases
     def mark(self, kind: str, label: str = "", value: str = "") -> float:
         """Write an event on the session clock; return its time in seconds.
 
@@ -187,7 +329,19 @@ class CaptureController:
         """Record the on-screen flash of the sync self-test; return its time."""
         return self.mark(SYNC_KIND, FLASH_LABEL)
 
+    # ---------------------------------------------------------------------------- polling
     def poll(self) -> LiveUpdate | None:
+        """Deliver finished jobs, then what the recording wrote since the last call (never blocks).
+
+        The new rows go to ``live_changed`` and are returned (None when not recording).
+        """
+        self.jobs.drain()
+        update = self.live_update()
+        if update is not None:
+            self.live_changed.emit(update)
+        return update
+
+    def live_update(self) -> LiveUpdate | None:
         """What changed since the last call (None when not recording); never blocks."""
         recorder = self.recorder
         if recorder is None or self._tails is None:
@@ -205,24 +359,7 @@ class CaptureController:
                           frames_bad=recorder.link.decoder.stats.frames_bad,
                           camera_ended=bool(camera is not None and camera.ended))
 
-    def stop(self) -> Path:
-        """End the running phase, stop the recording (session complete) and measure the sync test.
-
-        Returns
-        -------
-        Path
-            The session folder.
-        """
-        recorder = self.recorder
-        if recorder is None:
-            raise UserError("Stop: expected a recording running, found none")
-        if self.phase is not None:
-            recorder.mark("phase_end", self.phase)
-        path = recorder.stop()
-        self.recorder, self.phase, self._tails, self.last_session = None, None, None, path
-        store_sync_result(path)
-        return path
-
+    # --------------------------------------------------------------------------- recovery
     def incomplete_sessions(self) -> list[Path]:
         """Session folders in :attr:`out_dir` that a crash left with ``complete: false``."""
         if not self.out_dir.is_dir():
@@ -236,9 +373,37 @@ class CaptureController:
                 continue
         return out
 
-    def recover(self, folder: str | os.PathLike) -> dict[str, Any]:
-        """Finish an incomplete session (blocking: run it off the GUI thread)."""
-        return recover_session(folder)
+    def check_incomplete(self) -> list[Path]:
+        """Scan for incomplete sessions, emit ``incomplete_changed(sessions)`` and return them."""
+        sessions = self.incomplete_sessions()
+        self.incomplete_changed.emit(sessions)
+        return sessions
+
+    def shutdown(self) -> None:
+        """Stop the background jobs (the window is closing)."""
+        self.jobs.shutdown()
+
+
+def format_elapsed(t_s: float) -> str:
+    """``h:mm:ss`` of a duration in seconds."""
+    total = int(max(t_s, 0.0))
+    return f"{total // 3600}:{total % 3600 // 60:02d}:{total % 60:02d}"
+
+
+def session_summary(folder: Path) -> str:
+    """One line about a stopped session: id, duration, samples, frames, events (from its files)."""
+    session = read_session(folder)
+    stats = session.info.extra.get("stats", {})
+    phases = sum(e.kind == "phase_start" for e in session.events)
+    return (f"Saved, complete: {session.info.session_id}  -  {format_elapsed(stats.get('duration_s', 0.0))}, "
+            f"{len(session.heart_rate)} HR rows, {len(session.frame_times_s)} video frames "
+            f"({stats.get('dropped_frames', 0)} dropped), {phases} phases, {len(session.events)} events")
+
+
+def _error_line(error: BaseException) -> str:
+    """One line for an error: its message (a UserError's says what and where), else type and message."""
+    text = str(error).strip().splitlines()[0] if str(error).strip() else ""
+    return text if isinstance(error, UserError) else f"{type(error).__name__}: {text}"
 
 
 def measure_sync(folder: str | os.PathLike) -> dict[str, Any]:

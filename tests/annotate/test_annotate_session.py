@@ -12,7 +12,7 @@ import pytest
 from effortface.annotate.export import write_keyframes_json, write_weights_csv
 from effortface.annotate.keyframes import read_annotations
 from effortface.annotate.reliability import read_ratings
-from effortface.annotate.session_model import AnnotationSession, BlindRound, annotation_path
+from effortface.annotate.annotate_session import AnnotateSession, BlindRound, annotation_path
 from effortface.core.errors import UserError
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -31,17 +31,17 @@ def session(tmp_path: Path) -> Path:
 
 
 def test_protocol_order_and_passes(session: Path) -> None:
-    m = AnnotationSession(session, "R9")
+    m = AnnotateSession(session, "R9")
     seen: list[tuple[str, object]] = []
-    for event in ("blendshape_changed", "pass_done"):
-        m.connect(event, lambda x, e=event: seen.append((e, x)))
+    m.blendshape_changed.connect(lambda name: seen.append(("blendshape_changed", name)))
+    m.passes_changed.connect(lambda name: seen.append(("passes_changed", name)))
     assert m.blendshape == "mouth_stretch" and m.next_blendshape == "mouth_open"
     m.set_frame(m.n_frames - 1)
     assert not m.passes_done  # reaching the end without a key is no pass
     m.set_key(0.2, frame=0)
     m.set_frame(10)
     m.set_frame(m.n_frames - 1)
-    assert m.passes_done == {"mouth_stretch"} and ("pass_done", "mouth_stretch") in seen
+    assert m.passes_done == {"mouth_stretch"} and ("passes_changed", "mouth_stretch") in seen
     assert m.start_next_pass() == "mouth_open" and m.frame == 0
     m.set_blendshape("brow_lower")
     assert m.next_blendshape is None and m.start_next_pass() is None
@@ -50,7 +50,7 @@ def test_protocol_order_and_passes(session: Path) -> None:
 
 
 def test_edits_autosave_undo_and_redo(session: Path) -> None:
-    m = AnnotationSession(session, "R9")
+    m = AnnotateSession(session, "R9")
     path = annotation_path(session, "R9")
     assert not path.exists()
     m.set_key(0.3, frame=5)
@@ -75,7 +75,7 @@ def test_edits_autosave_undo_and_redo(session: Path) -> None:
 
 
 def test_copy_paste_is_one_undo_step(session: Path) -> None:
-    m = AnnotationSession(session, "R9", autosave=False)
+    m = AnnotateSession(session, "R9", autosave=False)
     for f, w in ((10, 0.1), (12, 0.5), (15, 0.2)):
         m.set_key(w, frame=f)
     assert m.copy(10, 15) == 3
@@ -86,7 +86,7 @@ def test_copy_paste_is_one_undo_step(session: Path) -> None:
 
 
 def test_weights_follow_the_interpolation(session: Path) -> None:
-    m = AnnotationSession(session, "R9", autosave=False)
+    m = AnnotateSession(session, "R9", autosave=False)
     assert np.isnan(m.weight())
     m.set_key(0.0, frame=0, interp="linear")
     m.set_key(1.0, frame=10)
@@ -97,9 +97,9 @@ def test_weights_follow_the_interpolation(session: Path) -> None:
 
 
 def test_a_rater_sees_only_their_own_file_and_another_file_is_never_overwritten(session: Path) -> None:
-    r1 = AnnotationSession(session, "R1")
+    r1 = AnnotateSession(session, "R1")
     assert r1.annotations == read_annotations(session / "annotations" / "R1.json")
-    new = AnnotationSession(session, "R9")
+    new = AnnotateSession(session, "R9")
     shutil.copy(session / "annotations" / "R1.json", session / "annotations" / "R9.json")  # appears meanwhile
     with pytest.raises(FileExistsError, match="refusing to overwrite"):
         new.set_key(0.5)
@@ -109,7 +109,7 @@ def test_a_rater_sees_only_their_own_file_and_another_file_is_never_overwritten(
 @pytest.mark.parametrize("rater", ["", "a b", "../R1", "x" * 40])
 def test_bad_rater_codes(session: Path, rater: str) -> None:
     with pytest.raises(UserError, match="rater: expected a code"):
-        AnnotationSession(session, rater)
+        AnnotateSession(session, rater)
 
 
 def test_blind_round_saves_only_this_raters_ratings(tmp_path: Path) -> None:
@@ -131,7 +131,7 @@ def test_blind_round_saves_only_this_raters_ratings(tmp_path: Path) -> None:
 
 
 def test_exports_refuse_to_overwrite(session: Path, tmp_path: Path) -> None:
-    m = AnnotationSession(session, "R2")
+    m = AnnotateSession(session, "R2")
     out = write_weights_csv(m.annotations, m.times, tmp_path / "w.csv")
     lines = out.read_text().splitlines()
     assert len(lines) == m.n_frames + 1 and lines[1].startswith("0,")
