@@ -27,7 +27,7 @@ from pathlib import Path
 import pandas as pd
 
 from effortface.core.errors import UserError
-from effortface import SAMPLE_LAB
+from effortface.samplelab import repo_lab, sample_lab
 from effortface.train.face_fit import MIN_ROWS_PER_PARTICIPANT
 
 #: replay speed and capture length: 12 s of capture at 25x = 5 minutes of the recording
@@ -41,7 +41,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``effortface demo``."""
     parser.add_argument("--out", metavar="DIR", help="output folder (default: effortface-demo-<time>)")
     parser.add_argument("--force", action="store_true", help="replace an existing --out made by a previous demo (or empty)")
-    parser.add_argument("--lab", default=str(SAMPLE_LAB), metavar="DIR", help="the sessions to use")
+    parser.add_argument("--lab", default=None, metavar="DIR",
+                        help="the sessions to use (default: the sample lab; built into the user cache on "
+                             "first use when effortface is not run from its repository)")
     parser.add_argument("--capture-seconds", type=float, default=CAPTURE_S, metavar="S",
                         help=f"length of the live capture step (default {CAPTURE_S:g})")
     parser.add_argument("--max-rows", type=int, default=200, metavar="N",
@@ -80,10 +82,11 @@ def _out_dir(args: argparse.Namespace) -> Path:
     if out.is_symlink() or not out.is_dir():
         raise UserError(f"--out {out}: expected a folder made by effortface demo, found "
                         f"{'a symbolic link' if out.is_symlink() else 'a file'} (not replaced)")
-    lab = Path(getattr(args, "lab", None) or SAMPLE_LAB)
-    for name, protected in (("the current directory", Path.cwd()), ("the --lab folder", lab),
-                            ("the sample lab", SAMPLE_LAB)):
-        if protected.exists() and _contains(out, protected):
+    protected_dirs = [("the current directory", Path.cwd()), ("the repository's sample lab", repo_lab())]
+    if getattr(args, "lab", None):
+        protected_dirs.append(("the --lab folder", Path(args.lab)))
+    for name, protected in protected_dirs:
+        if protected is not None and protected.exists() and _contains(out, protected):
             raise UserError(f"--out {out}: expected a folder made by effortface demo, found {name} "
                             "or a folder holding it (not replaced)")
     if not (out / MARKER).is_file() and any(out.iterdir()):
@@ -196,12 +199,12 @@ def run(args: argparse.Namespace) -> int:
     from effortface.train.report import _md
 
     _check_options(args)
-    lab = Path(args.lab)
+    out = _out_dir(args)  # checked before the lab is built: a bad --out costs nothing
+    lab = Path(args.lab) if args.lab is not None else sample_lab()
     sessions = list_sessions(lab)
     if not sessions:
         raise UserError(f"--lab {lab}: expected session folders, found none "
                         "(run python sample_sessions/generate.py)")
-    out = _out_dir(args)
     _replace_out(out)
     t0 = time.monotonic()
     _say("capture", f"replaying {sessions[0].name}'s strap at {REPLAY_SPEED:g}x into effortface capture")
