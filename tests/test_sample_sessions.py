@@ -285,7 +285,8 @@ def test_the_user_cache_copy_is_the_repositorys_lab(tmp_path) -> None:
     env = {**os.environ, "EFFORTFACE_CACHE_DIR": str(tmp_path / "cache")}
     code = "from effortface.samplelab import ensure_cached_lab; print(ensure_cached_lab())"
     t0 = time.monotonic()
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=600)
+    done = subprocess.run(["sh", "-c", 'umask 022 && exec "$@"', "umask-022", sys.executable, "-c", code],
+                          capture_output=True, text=True, env=env, timeout=600)
     print(f"sample lab built into the cache in {time.monotonic() - t0:.1f} s")
     assert done.returncode == 0, done.stderr
     from effortface import __version__
@@ -304,6 +305,9 @@ def test_the_user_cache_copy_is_the_repositorys_lab(tmp_path) -> None:
         _assert_videos_close(LAB / rel, cached / rel)
     again = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=60)
     assert again.stdout == done.stdout and again.stderr == ""  # built once per version
+    modes = {p.stat().st_mode & 0o777 for p in (tmp_path / "cache").rglob("*") if p.is_file()}
+    assert modes == {0o644}  # built under umask 022: readable by colleagues (tests/test_umask.py)
+    assert {p.stat().st_mode & 0o777 for p in (tmp_path / "cache").rglob("*") if p.is_dir()} == {0o755}
 
 
 def _assert_videos_close(a: Path, b: Path) -> None:
