@@ -79,8 +79,12 @@ class RuntimeOnlyBuild(build_py):
 
 
 def _version() -> str:
-    text = (ROOT / "effortface" / "core" / "version.py").read_text(encoding="utf-8")
-    return re.search(r'^__version__ = "([^"]+)"', text, re.M).group(1)
+    """The one version string, read from ``effortface/core/version.py`` (not imported: nothing is installed yet)."""
+    path = ROOT / "effortface" / "core" / "version.py"
+    found = re.search(r'^__version__ = "([^"]+)"', path.read_text(encoding="utf-8"), re.M)
+    if found is None:
+        raise RuntimeError(f"{path}: expected a line __version__ = \"...\", found none")
+    return found.group(1)
 
 
 setup(

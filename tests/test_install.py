@@ -132,6 +132,14 @@ def test_pip_install_dot_in_a_fresh_venv_works_from_any_folder(sources, tmp_path
     user cache on first use."""
     bin_ = _venv(tmp_path / "venv", system_site_packages=True)
     _run([bin_ / "python", "-m", "pip", "install", "-q", "--no-deps", sources], tmp_path)
+    files = _run([bin_ / "python", "-c", "import importlib.metadata as m; "
+                  "print('\\n'.join(str(f) for f in m.files('effortface')))"], tmp_path).stdout.split()
+    from effortface import __version__
+
+    # one installed namespace: nothing at top level but effortface (and the `effortface` script)
+    assert {f.split("/")[0] for f in files if not f.startswith("..")} == {"effortface",
+                                                                          f"effortface-{__version__}.dist-info"}
+    assert "effortface/samplelab/data/cmu_13_29_squats_120fps.bvh" in files  # the lab builds anywhere
     work = _user_folder(tmp_path)
     got = _runtime_check(bin_ / "python", work)
     assert got["heavy"] == [] and Path(got["file"]).is_relative_to(tmp_path / "venv")
