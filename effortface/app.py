@@ -99,6 +99,16 @@ class QtPlaceholderStage(QtWidgets.QWidget):
             self.sessions.addItem(line)
 
 
+def folder_note(sessions_dir: Path) -> str:
+    """The status-bar line naming where recordings and key-frames are written."""
+    from effortface.samplelab import data_root
+
+    note = f"Recordings and key-frames are saved in {sessions_dir.resolve()}"
+    if data_root() in sessions_dir.resolve().parents:
+        note += " (your copy of the sample lab, in the user data folder)"
+    return note
+
+
 def describe_sessions(sessions_dir: Path) -> list[str]:
     """One line per session in ``sessions_dir`` (id, participant, complete or not)."""
     from effortface.capture_tool.session import list_sessions, read_session_info
@@ -168,6 +178,8 @@ class MainWindow(QtWidgets.QMainWindow):
         self.sessions_dir = Path(sessions_dir)
         self.settings = settings if settings is not None else make_settings()
         self.setWindowTitle(f"effortface - {self.sessions_dir}")
+        self.folder_label = QtWidgets.QLabel(folder_note(self.sessions_dir))
+        self.folder_label.setTextInteractionFlags(QtCore.Qt.TextInteractionFlag.TextSelectableByMouse)
         self.stages: dict[str, QtWidgets.QWidget] = {}
         self.stage_list = QtWidgets.QListWidget()
         self.stack = QtWidgets.QStackedWidget()
@@ -194,6 +206,7 @@ class MainWindow(QtWidgets.QMainWindow):
         layout.addWidget(self.stage_list)
         layout.addWidget(self.stack, 1)
         self.setCentralWidget(central)
+        self.statusBar().addPermanentWidget(self.folder_label, 1)
         self.stage_list.setCurrentRow(0)
 
     def _ensure_stage(self, key: str) -> QtWidgets.QWidget:

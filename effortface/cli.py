@@ -20,7 +20,7 @@ from effortface.core.errors import UserError
 
 #: sub-command -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
-    "app": ("effortface.commands.app", "the Qt application, opened on DIR (default: sample_sessions)"),
+    "app": ("effortface.commands.app", "the Qt application, opened on DIR (default: the sample lab)"),
     "ports": ("effortface.capture_tool.commands.ports", "serial ports and cameras found"),
     "capture": ("effortface.capture_tool.commands.capture", "record a strap (and video) into a session folder"),
     "replay": ("effortface.capture_tool.commands.replay", "open a simulated port, print its path, replay LOG"),
@@ -30,7 +30,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "train": ("effortface.train.commands.train", "fit the heart-rate and face models, export a bundle"),
     "evaluate": ("effortface.train.commands.evaluate", "re-score a model bundle on sessions or a table"),
     "synth": ("effortface.train.commands.synth", "synthesize face curves from a motion clip"),
-    "demo": ("effortface.commands.demo", "the whole pipeline on sample_sessions"),
+    "demo": ("effortface.commands.demo", "the whole pipeline on the sample lab"),
 }
 
 

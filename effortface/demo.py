@@ -24,7 +24,7 @@ from typing import Any
 
 import pandas as pd
 
-from effortface import SAMPLE_LAB
+from effortface.samplelab import repo_lab
 from effortface.core.errors import UserError
 from effortface.core.participant import Participant
 
@@ -57,7 +57,8 @@ def demo_out_dir(out_arg: str | None, force: bool = False, lab: str | Path | Non
     force : bool
         The ``--force`` option.
     lab : path-like, optional
-        The ``--lab`` folder (default: the sample lab), which is never replaced.
+        The ``--lab`` folder (None: the sample lab), which is never replaced; nor is the repository's
+        sample lab.
 
     Returns
     -------
@@ -78,9 +79,11 @@ def demo_out_dir(out_arg: str | None, force: bool = False, lab: str | Path | Non
     if out.is_symlink() or not out.is_dir():
         raise UserError(f"--out {out}: expected a folder made by effortface demo, found "
                         f"{'a symbolic link' if out.is_symlink() else 'a file'} (not replaced)")
-    for name, protected in (("the current directory", Path.cwd()), ("the --lab folder", Path(lab or SAMPLE_LAB)),
-                            ("the sample lab", SAMPLE_LAB)):
-        if protected.exists() and _contains(out, protected):
+    protected_dirs = [("the current directory", Path.cwd()), ("the repository's sample lab", repo_lab())]
+    if lab is not None:
+        protected_dirs.append(("the --lab folder", Path(lab)))
+    for name, protected in protected_dirs:
+        if protected is not None and protected.exists() and _contains(out, protected):
             raise UserError(f"--out {out}: expected a folder made by effortface demo, found {name} "
                             "or a folder holding it (not replaced)")
     if not (out / MARKER).is_file() and any(out.iterdir()):

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import filecmp
 import json
+import os
+import re
 import signal
 import subprocess
 import sys
@@ -268,6 +270,44 @@ def test_regenerating_a_session_is_byte_identical(tmp_path) -> None:
             if not filecmp.cmp(ours / rel, theirs / rel, shallow=False):
                 assert rel.suffix == ".avi", f"{rel} differs"
                 _assert_videos_close(ours / rel, theirs / rel)
+
+
+def _sha256(path: Path) -> str:
+    import hashlib
+
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+@pytest.mark.slow
+def test_the_user_cache_copy_is_the_repositorys_lab(tmp_path) -> None:
+    """An installed effortface builds the lab into the user cache on first use (one stderr line: where,
+    how long); the generator is deterministic, so every file hashes as the committed one."""
+    env = {**os.environ, "EFFORTFACE_CACHE_DIR": str(tmp_path / "cache")}
+    code = "from effortface.samplelab import ensure_cached_lab; print(ensure_cached_lab())"
+    t0 = time.monotonic()
+    done = subprocess.run(["sh", "-c", 'umask 022 && exec "$@"', "umask-022", sys.executable, "-c", code],
+                          capture_output=True, text=True, env=env, timeout=600)
+    print(f"sample lab built into the cache in {time.monotonic() - t0:.1f} s")
+    assert done.returncode == 0, done.stderr
+    from effortface import __version__
+
+    cached = tmp_path / "cache" / __version__ / "sample_sessions"
+    assert done.stdout.strip() == str(cached)
+    assert re.fullmatch(rf"effortface: first use: building the sample lab into {re.escape(str(cached))} "
+                        r"\(about \d+ s, once\)\.\.\. done in \d+ s\n", done.stderr)
+    ours = sorted(p.relative_to(LAB) for p in LAB.rglob("*") if p.is_file() and p.name not in
+                  ("README.md", "generate.py") and "__pycache__" not in p.parts)
+    assert ours == sorted(p.relative_to(cached) for p in cached.rglob("*") if p.is_file())
+    differing = [rel for rel in ours if _sha256(LAB / rel) != _sha256(cached / rel)]
+    print(f"{len(ours)} files, {len(differing)} with another hash: {differing}")
+    for rel in differing:  # only a video, and only with another libjpeg (see the test above)
+        assert rel.suffix == ".avi", f"{rel} differs"
+        _assert_videos_close(LAB / rel, cached / rel)
+    again = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=60)
+    assert again.stdout == done.stdout and again.stderr == ""  # built once per version
+    modes = {p.stat().st_mode & 0o777 for p in (tmp_path / "cache").rglob("*") if p.is_file()}
+    assert modes == {0o644}  # built under umask 022: readable by colleagues (tests/test_umask.py)
+    assert {p.stat().st_mode & 0o777 for p in (tmp_path / "cache").rglob("*") if p.is_dir()} == {0o755}
 
 
 def _assert_videos_close(a: Path, b: Path) -> None:

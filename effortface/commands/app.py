@@ -6,25 +6,31 @@ import argparse
 from pathlib import Path
 
 from effortface.core.errors import UserError
-from effortface import SAMPLE_LAB
 
-#: the folder opened when no DIR is given (relative to the current directory; see :func:`default_dir`)
+#: the folder opened when no DIR is given, if the current directory has one (see :func:`default_dir`)
 DEFAULT_DIR = "sample_sessions"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Declare the options of ``effortface app``."""
     parser.add_argument("dir", nargs="?", default=None,
-                        help=f"sessions folder (default: {DEFAULT_DIR})")
+                        help=f"sessions folder (default: ./{DEFAULT_DIR} if there is one, else your copy "
+                             "of the sample lab in the user data folder)")
     parser.add_argument("--screenshot", metavar="PATH", help="render offscreen to a PNG and exit")
     parser.add_argument("--stage", default="capture", help="stage to show (with --screenshot)")
 
 
 def default_dir() -> str:
-    """``sample_sessions`` in the current directory, else the shipped lab, else the relative name."""
-    if Path(DEFAULT_DIR).is_dir() or not SAMPLE_LAB.is_dir():
+    """``sample_sessions`` in the current directory, else the user's copy of the sample lab.
+
+    Never the repository's or site-packages' folder when run elsewhere: the app writes key-frames
+    and recordings into the folder it opens (see :func:`effortface.samplelab.app_default_dir`).
+    """
+    if Path(DEFAULT_DIR).is_dir():
         return DEFAULT_DIR
-    return str(SAMPLE_LAB)
+    from effortface.samplelab import app_default_dir
+
+    return str(app_default_dir())
 
 
 def run(args: argparse.Namespace) -> int:

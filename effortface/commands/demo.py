@@ -21,10 +21,10 @@ import math
 import time
 from pathlib import Path
 
-from effortface import SAMPLE_LAB
 from effortface.core.errors import UserError
 from effortface.demo import (CAPTURE_S, REPLAY_SPEED, capture_step, decode_step, demo_out_dir,
                              replace_out, synth_step)
+from effortface.samplelab import sample_lab
 from effortface.train.face_fit import MIN_ROWS_PER_PARTICIPANT
 
 
@@ -32,7 +32,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``effortface demo``."""
     parser.add_argument("--out", metavar="DIR", help="output folder (default: effortface-demo-<time>)")
     parser.add_argument("--force", action="store_true", help="replace an existing --out made by a previous demo (or empty)")
-    parser.add_argument("--lab", default=str(SAMPLE_LAB), metavar="DIR", help="the sessions to use")
+    parser.add_argument("--lab", default=None, metavar="DIR",
+                        help="the sessions to use (default: the sample lab; built into the user cache on "
+                             "first use when effortface is not run from its repository)")
     parser.add_argument("--capture-seconds", type=float, default=CAPTURE_S, metavar="S",
                         help=f"length of the live capture step (default {CAPTURE_S:g})")
     parser.add_argument("--max-rows", type=int, default=200, metavar="N",
@@ -60,12 +62,12 @@ def run(args: argparse.Namespace) -> int:
     from effortface.train.pipeline import TrainSettings, run_training, training_table
 
     _check_options(args)
-    lab = Path(args.lab)
+    out = demo_out_dir(args.out, args.force, args.lab)  # checked before the lab is built: a bad --out costs nothing
+    lab = Path(args.lab) if args.lab is not None else sample_lab()
     sessions = list_sessions(lab)
     if not sessions:
         raise UserError(f"--lab {lab}: expected session folders, found none "
                         "(run python sample_sessions/generate.py)")
-    out = demo_out_dir(args.out, args.force, lab)
     replace_out(out)
     t0 = time.monotonic()
     _say("capture", f"replaying {sessions[0].name}'s strap at {REPLAY_SPEED:g}x into effortface capture")

@@ -6,9 +6,11 @@ target with ``os.replace``: a reader (or a crash) sees the old file or the new o
 
 from __future__ import annotations
 
+import errno
 import json
 import os
-import tempfile
+import secrets
+import stat
 from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any
@@ -100,6 +102,10 @@ def check_new_png(option: str, value: str | os.PathLike[str]) -> Path:
 def atomic_write(path: str | os.PathLike[str], write: Callable[[IO[bytes]], Any]) -> Path:
     """Call ``write(fh)`` on a temp file beside ``path``, fsync it, then rename it over ``path``.
 
+    The new file's mode is what ``open(path, "w")`` would give: an existing file keeps its mode, a new
+    one gets 0666 minus the umask (0644 under the usual umask 022), so that colleagues on a shared lab
+    drive can read it (see :func:`_create_temp_beside`).
+
     Parameters
     ----------
     path : path-like
@@ -113,17 +119,52 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[IO[bytes]], Any]
         The written path.
     """
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = _create_temp_beside(path)
     try:
+        _keep_mode(fd, tmp, path)
         with os.fdopen(fd, "wb") as fh:
             write(fh)
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        tmp.unlink(missing_ok=True)
         raise
     return path
+
+
+#: fresh random names tried for a temporary file before giving up (a clash is already unlikely)
+_TEMP_NAME_ATTEMPTS = 100
+
+
+def _create_temp_beside(path: Path) -> tuple[int, Path]:
+    """Create a new, empty temporary file beside ``path``; return its descriptor and path.
+
+    Created with ``O_CREAT | O_EXCL`` and mode 0666, so the kernel applies the umask as for any
+    new file. (``tempfile.mkstemp`` always gives 0600, and reading the umask to fix that afterwards
+    is not thread-safe: ``os.umask`` can only be read by setting it.)
+    """
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0) | getattr(os, "O_NOFOLLOW", 0)
+    for _ in range(_TEMP_NAME_ATTEMPTS):
+        tmp = path.with_name(f".{path.name}.{secrets.token_hex(6)}.tmp")
+        try:
+            return os.open(tmp, flags, 0o666), tmp
+        except FileExistsError:
+            continue
+    raise FileExistsError(errno.EEXIST, f"no free temporary name after {_TEMP_NAME_ATTEMPTS} tries",
+                          str(path.parent))
+
+
+def _keep_mode(fd: int, tmp: Path, path: Path) -> None:
+    """Give the temporary file the permission bits of the file it replaces, if there is one."""
+    try:
+        mode = stat.S_IMODE(path.stat().st_mode)
+    except (FileNotFoundError, NotADirectoryError):
+        return
+    if hasattr(os, "fchmod"):
+        os.fchmod(fd, mode)
+    else:  # pragma: no cover - Windows has no fchmod
+        os.chmod(tmp, mode)
 
 
 def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import subprocess
 import sys
 import threading
@@ -184,3 +185,33 @@ def test_window_is_safe_from_the_pyside_reference_leak(qtbot, tmp_path, settings
 
 class _Emitter(QtCore.QObject):
     ping = QtCore.Signal()
+
+
+def test_without_dir_outside_the_repo_the_app_writes_only_into_the_users_copy(qtbot, tmp_path, settings,
+                                                                              monkeypatch) -> None:
+    """``effortface app`` with no DIR, from a folder without ``sample_sessions``: the window opens on
+    the user's copy of the sample lab in the user data folder, names it, and key-frames saved there
+    leave the checkout (or site-packages) untouched."""
+    from effortface.annotate.session_model import AnnotationSession
+    from effortface.samplelab import repo_lab
+
+    work, data = tmp_path / "work", tmp_path / "data"
+    work.mkdir()
+    monkeypatch.setenv("EFFORTFACE_DATA_DIR", str(data))
+    env = {**os.environ, "EFFORTFACE_SETTINGS": str(tmp_path / "s.ini"), "QT_QPA_PLATFORM": "offscreen"}
+    shot = tmp_path / "annotate.png"
+    done = subprocess.run([sys.executable, "-m", "effortface", "app", "--screenshot", str(shot), "--stage",
+                           "annotate"], capture_output=True, text=True, cwd=work, env=env, timeout=120)
+    assert done.returncode == 0, done.stderr
+    copy = data / "sample_sessions"
+    assert f"copying the sample lab from {repo_lab()} into {copy}" in done.stderr
+    assert shot.is_file() and list(work.iterdir()) == []  # nothing written where it was run
+    window = MainWindow(copy, settings)
+    qtbot.addWidget(window)
+    assert window.folder_label.text() == (f"Recordings and key-frames are saved in {copy.resolve()} "
+                                          "(your copy of the sample lab, in the user data folder)")
+    assert MainWindow(tmp_path, settings).folder_label.text() == f"Recordings and key-frames are saved in {tmp_path}"
+    session = sorted(p for p in copy.iterdir() if (p / "session.json").is_file())[0]
+    AnnotationSession(session, "R7").set_key(0.5, frame=3)
+    assert (session / "annotations" / "R7.json").is_file()
+    assert not (repo_lab() / session.name / "annotations" / "R7.json").exists()

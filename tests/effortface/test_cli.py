@@ -58,16 +58,26 @@ def test_an_existing_folder_or_an_option_still_opens_the_app(tmp_path, capsys, o
                                                  ("sample_sessions", "capture")]
 
 
-def test_app_without_dir_outside_the_repo_opens_the_shipped_lab(tmp_path, monkeypatch, opened) -> None:
-    """No DIR: ./sample_sessions when the current directory has one, else the lab shipped with effortface."""
-    from effortface import SAMPLE_LAB
+def test_app_without_dir_outside_the_repo_opens_the_users_copy(tmp_path, monkeypatch, capsys, opened) -> None:
+    """No DIR: ./sample_sessions when the current directory has one, else the user's own copy of the
+    sample lab in the user data folder (made once, said on stderr), never the checkout's folder."""
+    from effortface.samplelab import repo_lab
 
-    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("EFFORTFACE_DATA_DIR", str(tmp_path / "data"))
+    work = tmp_path / "work"
+    work.mkdir()
+    monkeypatch.chdir(work)
     assert main([]) == 0
-    (tmp_path / "sample_sessions").mkdir()
+    copy = tmp_path / "data" / "sample_sessions"
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith(f"effortface: first use: copying the sample lab from {repo_lab()} "
+                                               f"into {copy} (yours to edit)... done in ")
+    assert main([]) == 0 and capsys.readouterr().err == ""  # made once
+    (work / "sample_sessions").mkdir()
     assert main(["app"]) == 0
-    assert [a.dir for a in opened] == [str(SAMPLE_LAB), "sample_sessions"]
-    assert SAMPLE_LAB.is_dir() and any(SAMPLE_LAB.glob("*/session.json"))
+    assert [a.dir for a in opened] == [str(copy), str(copy), "sample_sessions"]
+    assert sorted(p.name for p in copy.iterdir()) == sorted(
+        p.name for p in repo_lab().iterdir() if p.is_dir() and p.name not in ("_ground_truth", "__pycache__"))
 
 
 def test_app_on_a_missing_folder_is_refused(tmp_path, capsys, opened) -> None:
@@ -80,8 +90,10 @@ def test_app_on_a_missing_folder_is_refused(tmp_path, capsys, opened) -> None:
 
 def test_an_unwritable_out_is_one_line(tmp_path, capsys) -> None:
     """An OSError a command did not check (here demo's mkdir under a file) names the path."""
-    if not any(demo_module.SAMPLE_LAB.glob("*/session.json")):
-        pytest.skip("sample_sessions/ has no sessions yet")
+    from effortface.samplelab import repo_lab
+
+    if repo_lab() is None:
+        pytest.skip("not a checkout: the sample lab would be built first")
     afile = tmp_path / "afile"
     afile.write_bytes(b"keep")
     out = afile / "demo"

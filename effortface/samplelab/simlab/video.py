@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from effortface.annotate.face import render_face
-from sample_sessions.simlab.avi import write_mjpg_avi
+from effortface.samplelab.simlab.avi import write_mjpg_avi
 
 WIDTH, HEIGHT, FPS = 160, 120, 5.0
 #: with optimised Huffman tables: about 1.6 kB a frame, so the whole lab fits in 25 MB

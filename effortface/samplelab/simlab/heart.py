@@ -28,7 +28,7 @@ import dataclasses
 
 import numpy as np
 
-from sample_sessions.simlab.lab import Person, SessionPlan, work_at
+from effortface.samplelab.simlab.lab import Person, SessionPlan, work_at
 from effortface.train.physiology import hr_max_bpm, hr_rest_bpm
 
 DT_S = 0.1  # integration step

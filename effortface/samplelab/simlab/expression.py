@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sample_sessions.simlab.heart import DT_S, breathing_rate_per_min, first_order_lag
+from effortface.samplelab.simlab.heart import DT_S, breathing_rate_per_min, first_order_lag
 
 EXERTION_SCALE_W_PER_KG = 9.0
 NAMES = ("mouth_stretch", "mouth_open", "eye_squint", "brow_lower")
