@@ -27,7 +27,7 @@ CLIP = ROOT / "tests" / "data" / "motion" / "cmu_13_29_squats_120fps.bvh"
 SETUP = """
 import json, shutil, sys
 from pathlib import Path
-from effortface.annotate.session_model import AnnotationSession
+from effortface.annotate.annotate_session import AnnotateSession
 src, out = Path(sys.argv[1]), Path(sys.argv[2])
 crashed = shutil.copytree(src, out / "crashed" / src.name, copy_function=shutil.copyfile)
 info = json.loads((crashed / "session.json").read_text())
@@ -35,7 +35,7 @@ info["complete"] = False
 (crashed / "session.json").write_text(json.dumps(info))
 (crashed / "heart_rate.csv").write_text((crashed / "heart_rate.csv").read_text()[:2000])
 keyed = shutil.copytree(src, out / "keyed" / src.name, copy_function=shutil.copyfile)
-model = AnnotationSession(keyed, "R9")
+model = AnnotateSession(keyed, "R9")
 model.set_key(0.4, frame=2)
 model.set_key(0.7, frame=9)
 """

@@ -192,7 +192,7 @@ def test_without_dir_outside_the_repo_the_app_writes_only_into_the_users_copy(qt
     """``effortface app`` with no DIR, from a folder without ``sample_sessions``: the window opens on
     the user's copy of the sample lab in the user data folder, names it, and key-frames saved there
     leave the checkout (or site-packages) untouched."""
-    from effortface.annotate.session_model import AnnotationSession
+    from effortface.annotate.annotate_session import AnnotateSession
     from effortface.samplelab import repo_lab
 
     work, data = tmp_path / "work", tmp_path / "data"
@@ -212,6 +212,6 @@ def test_without_dir_outside_the_repo_the_app_writes_only_into_the_users_copy(qt
                                           "(your copy of the sample lab, in the user data folder)")
     assert MainWindow(tmp_path, settings).folder_label.text() == f"Recordings and key-frames are saved in {tmp_path}"
     session = sorted(p for p in copy.iterdir() if (p / "session.json").is_file())[0]
-    AnnotationSession(session, "R7").set_key(0.5, frame=3)
+    AnnotateSession(session, "R7").set_key(0.5, frame=3)
     assert (session / "annotations" / "R7.json").is_file()
     assert not (repo_lab() / session.name / "annotations" / "R7.json").exists()
