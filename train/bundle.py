@@ -128,10 +128,11 @@ def _to_json(bundle: ModelBundle) -> dict[str, Any]:
                                                              bundle.feature_units)],
         "scaler": {"mean": np.asarray(bundle.scaler_mean, float).tolist(),
                    "scale": np.asarray(bundle.scaler_scale, float).tolist()},
-        "nhr": {"coefficients": {k: float(v) for k, v in
-                                 dataclasses.asdict(bundle.nhr_coefficients).items()},
-                "tl_regression": {k: {"intercept": float(a), "slope": float(b)}
-                                  for k, (a, b) in dataclasses.asdict(reg).items()}},
+        "nhr": {"coefficients": {k: float(getattr(bundle.nhr_coefficients, k))
+                                 for k in ("t_root", "c_inc", "c_dec")},
+                "tl_regression": {k: {"intercept": float(getattr(reg, k)[0]),
+                                      "slope": float(getattr(reg, k)[1])}
+                                  for k in ("t_root", "c_inc", "c_dec")}},
         "physiology": bundle.physiology,
         "svr": [dict(h, blendshape=n, n_support=int(len(a)))
                 for n, h, a in zip(bundle.blendshapes.names, bundle.svr_hyperparameters,
@@ -273,8 +274,9 @@ def _read_nhr(doc: dict[str, Any], where: str) -> tuple[NhrParams, NhrRegression
     coef = _get(nhr, "coefficients", f"{where}.nhr", dict)
     reg = _get(nhr, "tl_regression", f"{where}.nhr", dict)
     keys = ("t_root", "c_inc", "c_dec")
-    params = NhrParams(*(_nhr_value(_number(coef, k, f"{where}.nhr.coefficients"),
-                                    f"{where}.nhr.coefficients.{k}") for k in keys))
+    t_root, c_inc, c_dec = (_nhr_value(_number(coef, k, f"{where}.nhr.coefficients"),
+                                       f"{where}.nhr.coefficients.{k}") for k in keys)
+    params = NhrParams(t_root, c_inc, c_dec)
     lines = [_get(reg, k, f"{where}.nhr.tl_regression", dict) for k in keys]
     pairs = [(_number(d, "intercept", f"{where}.nhr.tl_regression.{k}"),
               _number(d, "slope", f"{where}.nhr.tl_regression.{k}")) for k, d in zip(keys, lines)]
@@ -282,7 +284,7 @@ def _read_nhr(doc: dict[str, Any], where: str) -> tuple[NhrParams, NhrRegression
         for tl in TL_CHECK_RANGE:
             _nhr_value(a + b * tl, f"{where}.nhr.tl_regression.{k}", f" at training level {tl:g}",
                        signed=True)
-    return params, NhrRegression(*pairs)
+    return params, NhrRegression(pairs[0], pairs[1], pairs[2])
 
 
 def _nhr_value(value: float, where: str, at: str = "", *, signed: bool = False) -> float:

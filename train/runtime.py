@@ -38,7 +38,8 @@ from effortface.train.energy import EnergyCrowd, EnergyStream, work_and_power
 from effortface.train.face import (DEFAULT_FILTER_TAU_S, RuleFaceModel, SvrModel, WeightFilter,
                                    apply_expressiveness, check_filter_tau, filter_weights)
 from effortface.train.motion import Motion, read_motion
-from effortface.train.physiology import (PAPER_REGRESSION, EpocParams, NhrRegression, PhysiologyParams,
+from effortface.train.physiology import (CALIBRATED_REGRESSION, PAPER_REGRESSION, EpocParams, NhrRegression,
+                                         PhysiologyParams,
                               PhysiologyState, simulate)
 from effortface.train.segments import BodyModel, Loads, build_body, check_mass
 
@@ -373,13 +374,24 @@ class CrowdStream:
 
 # --------------------------------------------------------------------------- loading
 
+#: Built-in models by name: the rule face model with the Compendium-calibrated NHR model
+#: (``default``) or with the paper's exact coefficients (``paper-2015``); docs/SCIENCE_NOTES.md.
+BUILT_IN_MODELS: dict[str, tuple[NhrRegression, str]] = {
+    "default": (CALIBRATED_REGRESSION, "default (rule model, Compendium-calibrated heart rate)"),
+    "paper-2015": (PAPER_REGRESSION, "paper-2015 (rule model, the paper's heart-rate coefficients)"),
+}
+
+
 def load_model(path: str | os.PathLike | None = "default") -> FaceModel:
-    """Load a model bundle folder, or the built-in rule model for ``"default"`` / None.
+    """Load a model bundle folder, or a built-in rule model by name.
 
     Parameters
     ----------
-    path : path, "default" or None
-        A folder with ``model.json`` and ``svr.npz`` (see :mod:`effortface.train.bundle`).
+    path : path, "default", "paper-2015" or None
+        A folder with ``model.json`` and ``svr.npz`` (see :mod:`effortface.train.bundle`), or a
+        name of :data:`BUILT_IN_MODELS`: ``"default"`` (also None) calibrates heart rate against
+        the 2024 Adult Compendium of Physical Activities; ``"paper-2015"`` keeps the paper's
+        coefficients (t_root = 7.13 + 0.42 TL, above walking and jumping jacks in W/kg).
 
     Returns
     -------
@@ -390,12 +402,14 @@ def load_model(path: str | os.PathLike | None = "default") -> FaceModel:
     UserError
         A missing or malformed bundle (the message names the file and field).
     """
-    if path is None or str(path) == "default":
-        return FaceModel(RuleFaceModel(DEFAULT_SET), DEFAULT_SET, name="default (rule model)")
-    bundle = read_bundle(Path(path))
+    name = "default" if path is None else str(path)
+    if name in BUILT_IN_MODELS:
+        regression, label = BUILT_IN_MODELS[name]
+        return FaceModel(RuleFaceModel(DEFAULT_SET), DEFAULT_SET, regression, name=label)
+    bundle = read_bundle(Path(path))  # type: ignore[arg-type]
     return FaceModel(bundle.face_model(), bundle.blendshapes, bundle.nhr_regression,
                      bundle.physiology, name=str(path), filter_tau_s=bundle.filter_tau_s)
 
 
-__all__ = ["Character", "CharacterStream", "CrowdStream", "FaceModel", "load_model",
+__all__ = ["BUILT_IN_MODELS", "Character", "CharacterStream", "CrowdStream", "FaceModel", "load_model",
            "CURVE_COLUMNS", "TRAINING_LEVEL_RANGE"]
