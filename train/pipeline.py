@@ -14,7 +14,7 @@ import pandas as pd
 
 from effortface.core.blendshapes import BlendshapeSet
 from effortface.train.dataset import hr_series, prepare
-from effortface.train.face_fit import FaceFitConfig, check_face_table
+from effortface.train.face_fit import FaceFitConfig, check_face_table, training_scores
 from effortface.train.hr_fit import check_hr_series
 from effortface.core.version import __version__
 
@@ -71,6 +71,7 @@ def training_metrics(hr_eval: Any, face: Any, held: pd.DataFrame, protos: pd.Dat
         "hr_per_participant": {p: c.as_dict() for p, c in hr_eval.fit.per_participant.items()},
         "hr_tl_regression": hr_eval.fit.tl_regression.as_dict(),
         "face_held_out": held.to_dict("records"),
+        "face_in_sample": training_scores(face).to_dict("records"),
         "face_protocols": protos.to_dict("records"),
         "face_cv": {b: {"best": s.best, "cv_mse": s.cv_mse, "cv_r": s.cv_r} for b, s in face.search.items()},
         "expressiveness": {p: {b: float(v) for b, v in row.items()}

@@ -185,6 +185,20 @@ def synth_step(model_dir: Path, lab: Path, out: Path) -> Path:
     return target
 
 
+def held_out_summary(metrics: dict) -> str:
+    """One line of the training run's held-out scores (model.json metrics): heart rate of the
+    training-level model on held-out participants and of the own model on held-out sessions; face
+    SVR on held-out participants with expressiveness estimated without their key-frames."""
+    hr = metrics.get("hr", {})
+    face = [r for r in metrics.get("face_held_out", []) if r.get("model") == "svr" and r.get("r") is not None]
+    parts = [f"{label} r {hr[k]['r']:.2f}" for k, label in (("tl_regression", "heart rate TL model"),
+                                                          ("per_participant", "own model on other sessions"))
+             if k in hr and hr[k].get("r") is not None]
+    if face:
+        parts.append(f"face r {sum(r['r'] for r in face) / len(face):.2f}")
+    return "held out (not fitted on the scored participant or session): " + "; ".join(parts)
+
+
 def run(args: argparse.Namespace) -> int:
     """Entry point of ``effortface demo``."""
     from effortface.capture_tool.session import list_sessions
@@ -217,8 +231,9 @@ def run(args: argparse.Namespace) -> int:
     ev = evaluate_bundle(out / "model", table, str(lab))
     (out / "evaluation.md").write_text(f"# Evaluation of {out / 'model'} on {lab}\n\n{_md(ev.hr)}\n\n"
                                        f"{_md(ev.face)}\n", encoding="utf-8")
-    _say("evaluate", f"heart rate r {ev.hr['r'].mean():.2f}; face r {ev.face['r'].mean():.2f} "
-                     f"({out / 'evaluation.md'})")
+    _say("evaluate", f"in-sample (the model re-scored on the lab it was trained on): heart rate r "
+                     f"{ev.hr['r'].mean():.2f}; face r {ev.face['r'].mean():.2f} ({out / 'evaluation.md'})")
+    _say("evaluate", held_out_summary(result.metrics))
     _say("synth", f"face curves: {synth_step(out / 'model', lab, out)}")
     _say("done", f"in {time.monotonic() - t0:.0f} s")
     print(f"report: {result.report}")

@@ -136,3 +136,4 @@ def test_model_card_warns_when_tl_model_generalises_worse():
     worse = hr_warnings({"tl_regression": {"rmse_pct": 23.0}, "pooled": {"rmse_pct": 9.0}})
     assert len(worse) == 1 and "23.0 % RMSE" in worse[0] and "9.0 %" in worse[0]
     assert hr_warnings({"tl_regression": {"rmse_pct": 8.0}, "pooled": {"rmse_pct": 9.0}}) == []
+    assert hr_warnings({"tl_regression": {"rmse_pct": 23.0}, "pooled_threshold": {"rmse_pct": 9.0}})
