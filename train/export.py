@@ -378,7 +378,10 @@ def model_card(bundle: ModelBundle) -> str:
         f"- face: one RBF epsilon-SVR per blendshape on standardised [{', '.join(bundle.feature_names)}]; "
         f"hyper-parameters by {prov.get('cv', 'lopo')} cross-validation: "
         + "; ".join(f"{n}: C={h['C']:g}, gamma={h['gamma']:g}, epsilon={h['epsilon']:g}"
-                    for n, h in zip(bundle.blendshapes.names, bundle.svr_hyperparameters)), "",
+                    for n, h in zip(bundle.blendshapes.names, bundle.svr_hyperparameters)),
+        "- output filter: critically damped low-pass 1 / (1 + tau s)^2 on the weights, tau = "
+        + ", ".join(f"{n} {t:g} s" for n, t in zip(bundle.blendshapes.names, bundle.filter_tau_s or ()))
+        + " (model.json output_filter; the runtime applies it, face.onnx gives the raw weights)", "",
         "## Metrics (held-out participants unless stated)", "",
         "Heart rate (simulated over whole sessions from the first measured value; held out: "
         "per_participant on the participant's other sessions, pooled_threshold and tl_regression on "

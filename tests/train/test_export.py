@@ -90,6 +90,8 @@ def test_model_json_has_gamma_numbers_and_parity(model_dir):
     card = (model_dir / MODEL_CARD).read_text()
     for section in ("## Intended use", "## Data", "## Metrics", "## Limitations"):
         assert section in card
+    assert "output filter: critically damped" in card and "mouth_open 0.15 s" in card
+    assert "svr_known_expressiveness" in card and "17-26 %" in card and "## Built-in models" in card
 
 
 def test_existing_folder_needs_force(fitted, model_dir):
