@@ -225,3 +225,19 @@ def test_character_stream_work_does_not_depend_on_the_game_frame_rate(jumping_ja
     jittered = np.unique(np.cumsum(rng.integers(1, 4, n)))  # frame gaps of 1-3 skeleton frames
     for idx in (np.arange(0, n, 4), jittered[jittered < n]):
         assert mean_w(idx) == pytest.approx(every, rel=0.05)
+
+
+def test_synthesize_stage_curves_use_the_output_filter(jumping_jacks) -> None:
+    """The Synthesize stage's session (what its plots, preview and Live Link export show) gets the
+    model's filtered weights: the same as synthesize(), with less jitter than the raw weights."""
+    from effortface.train.synth_session import SynthSession
+
+    session = SynthSession("default")
+    session.load_motion(jumping_jacks)
+    model = session.model
+    names = model.blendshapes.names
+    shown = np.column_stack([session.curves[n] for n in names])
+    raw = model.synthesize(jumping_jacks, session.character, filter_tau_s=0)
+    filtered = model.synthesize(jumping_jacks, session.character)
+    np.testing.assert_allclose(shown, np.column_stack([filtered[n] for n in names]), atol=1e-9)
+    assert jitter(shown) < jitter(np.column_stack([raw[n] for n in names])) / 2
