@@ -5,7 +5,10 @@ Statistics, each per blendshape (poses x raters) and overall (pose-blendshape it
 - **mean absolute disagreement** in % of the weight range [0, 1] (the paper's 11 % figure), per pose,
   per blendshape and overall: :func:`effortface.annotate.reliability.mean_abs_disagreement_pct`;
 - **ICC(A,1)** (absolute agreement) and **ICC(C,1)** (consistency), single rater, two-way model,
-  McGraw & Wong 1996 (Shrout & Fleiss 1979 ICC(2,1) and ICC(3,1)), from the ANOVA mean squares;
+  McGraw & Wong 1996 (Shrout & Fleiss 1979 ICC(2,1) and ICC(3,1)), from the ANOVA mean squares,
+  each with its 95 % confidence interval from the F distribution (McGraw & Wong 1996, Table 7;
+  for ICC(A,1) the Satterthwaite degrees of freedom v of Shrout & Fleiss 1979): with the paper's
+  18 poses the intervals are wide;
 - **Krippendorff's alpha**, interval metric, from the ``krippendorff`` package (missing ratings allowed);
 - **Bland-Altman** per rater pair over all items: bias (mean of a - b) and 95 % limits of agreement
   (bias +- 1.96 sd of the differences).
@@ -110,6 +113,68 @@ def icc_c1(x: np.ndarray) -> float:
     return float((a.ms_rows - a.ms_error) / den) if den > 0 else math.nan
 
 
+#: Confidence level of the ICC intervals.
+ICC_CONFIDENCE = 0.95
+
+
+def icc_c1_ci(x: np.ndarray, confidence: float = ICC_CONFIDENCE) -> tuple[float, float]:
+    """Confidence interval of ICC(C,1) (McGraw & Wong 1996, Table 7, case 3; Shrout & Fleiss ICC(3,1)).
+
+    With ``F = MSR / MSE``, ``F_L = F / F_{1-a/2}(n-1, (n-1)(k-1))`` and
+    ``F_U = F * F_{1-a/2}((n-1)(k-1), n-1)``, the bounds are ``(F_L - 1) / (F_L + k - 1)`` and
+    ``(F_U - 1) / (F_U + k - 1)``.
+
+    Returns
+    -------
+    (lower, upper) : tuple of float
+        NaN when the interval is undefined (no residual variance).
+    """
+    from scipy import stats
+
+    a = anova_two_way(x)
+    q = 1 - (1 - confidence) / 2
+    df_rows, df_error = a.n - 1, (a.n - 1) * (a.k - 1)
+    if not a.ms_error > 0:
+        return math.nan, math.nan
+    f = a.ms_rows / a.ms_error
+    f_low = f / stats.f.ppf(q, df_rows, df_error)
+    f_up = f * stats.f.ppf(q, df_error, df_rows)
+    return float((f_low - 1) / (f_low + a.k - 1)), float((f_up - 1) / (f_up + a.k - 1))
+
+
+def icc_a1_ci(x: np.ndarray, confidence: float = ICC_CONFIDENCE) -> tuple[float, float]:
+    """Confidence interval of ICC(A,1) (McGraw & Wong 1996, Table 7, case 2A; Shrout & Fleiss ICC(2,1)).
+
+    With ``r`` = ICC(A,1), ``a = k r / (n (1 - r))``, ``b = 1 + k r (n - 1) / (n (1 - r))`` and the
+    Satterthwaite degrees of freedom ``v = (a MSC + b MSE)^2 / ((a MSC)^2 / (k - 1) + (b MSE)^2 /
+    ((n - 1)(k - 1)))``: lower ``n (MSR - F* MSE) / (F* (k MSC + (k n - k - n) MSE) + n MSR)`` with
+    ``F* = F_{1-a/2}(n - 1, v)``, upper ``n (F* MSR - MSE) / (k MSC + (k n - k - n) MSE + n F* MSR)``
+    with ``F* = F_{1-a/2}(v, n - 1)``.
+
+    Returns
+    -------
+    (lower, upper) : tuple of float
+        NaN when the interval is undefined (ICC undefined or 1, no residual variance).
+    """
+    from scipy import stats
+
+    a = anova_two_way(x)
+    r = icc_a1(x)
+    if not (math.isfinite(r) and r < 1 and a.ms_error > 0):
+        return math.nan, math.nan
+    n, k = a.n, a.k
+    ca = k * r / (n * (1 - r))
+    cb = 1 + k * r * (n - 1) / (n * (1 - r))
+    v = (ca * a.ms_cols + cb * a.ms_error) ** 2 / (
+        (ca * a.ms_cols) ** 2 / (k - 1) + (cb * a.ms_error) ** 2 / ((n - 1) * (k - 1)))
+    q = 1 - (1 - confidence) / 2
+    spread = k * a.ms_cols + (k * n - k - n) * a.ms_error
+    f_low, f_up = stats.f.ppf(q, n - 1, v), stats.f.ppf(q, v, n - 1)
+    low = n * (a.ms_rows - f_low * a.ms_error) / (f_low * spread + n * a.ms_rows)
+    up = n * (f_up * a.ms_rows - a.ms_error) / (spread + n * f_up * a.ms_rows)
+    return float(low), float(up)
+
+
 def krippendorff_alpha_interval(x: np.ndarray) -> float:
     """Krippendorff's alpha (interval) of a ``(units, raters)`` table, NaN for missing ratings."""
     import krippendorff
@@ -170,7 +235,8 @@ def bland_altman(a: np.ndarray, b: np.ndarray, rater_a: str = "a", rater_b: str 
 # ---------------------------------------------------------------------------------------- report
 @dataclasses.dataclass(frozen=True)
 class ItemStats:
-    """Agreement over one group of items (a blendshape, or everything)."""
+    """Agreement over one group of items (a blendshape, or everything); ``*_ci`` are the ICCs'
+    95 % confidence intervals (lower, upper)."""
 
     name: str
     n_items: int
@@ -178,6 +244,8 @@ class ItemStats:
     icc_a1: float
     icc_c1: float
     alpha: float
+    icc_a1_ci: tuple[float, float] = (math.nan, math.nan)
+    icc_c1_ci: tuple[float, float] = (math.nan, math.nan)
 
 
 @dataclasses.dataclass
@@ -239,10 +307,12 @@ def _item_stats(name: str, table: np.ndarray, ratings: Iterable[Rating]) -> Item
     if not np.any(np.isfinite(table).sum(axis=1) >= 2):  # no item rated by two raters: nothing to compare
         return ItemStats(name, int(table.shape[0]), math.nan, math.nan, math.nan, math.nan)
     complete = table[np.all(np.isfinite(table), axis=1)]
-    icc_a = icc_a1(complete) if complete.shape[0] >= 2 else math.nan
-    icc_c = icc_c1(complete) if complete.shape[0] >= 2 else math.nan
-    return ItemStats(name, int(table.shape[0]), mean_abs_disagreement_pct(ratings), icc_a, icc_c,
-                     krippendorff_alpha_interval(table))
+    enough = complete.shape[0] >= 2
+    nan2 = (math.nan, math.nan)
+    return ItemStats(name, int(table.shape[0]), mean_abs_disagreement_pct(ratings),
+                     icc_a1(complete) if enough else math.nan, icc_c1(complete) if enough else math.nan,
+                     krippendorff_alpha_interval(table), icc_a1_ci(complete) if enough else nan2,
+                     icc_c1_ci(complete) if enough else nan2)
 
 
 def agreement_report(ratings: Sequence[Rating], *, flag_pct: float = FLAG_PCT,
@@ -319,10 +389,12 @@ def format_report(report: AgreementReport) -> str:
     for pose, pct in report.per_pose_pct.items():
         flag = "  FLAGGED for review" if pose in report.flagged else ""
         lines.append(f"  {pose:<12} {pct:6.1f} %{flag}")
-    lines += ["", f"  {'blendshape':<14} {'items':>5} {'diff %':>7} {'ICC(A,1)':>9} {'ICC(C,1)':>9} {'alpha':>7}"]
+    lines += ["", f"  {'blendshape':<14} {'items':>5} {'diff %':>7} {'ICC(A,1)':>9} {'95 % CI':>14} "
+                  f"{'ICC(C,1)':>9} {'95 % CI':>14} {'alpha':>7}"]
     for s in [*report.per_blendshape, report.overall]:
         lines.append(f"  {s.name:<14} {s.n_items:>5} {s.disagreement_pct:7.1f} {s.icc_a1:9.3f} "
-                     f"{s.icc_c1:9.3f} {s.alpha:7.3f}")
+                     f"{format_ci(s.icc_a1_ci):>14} {s.icc_c1:9.3f} {format_ci(s.icc_c1_ci):>14} {s.alpha:7.3f}")
+    lines.append("  (95 % CI: F-based intervals of McGraw & Wong 1996; few poses give wide intervals)")
     lines += ["", "Bland-Altman per rater pair (weight units, a - b):"]
     for p in report.pairs:
         lines.append(f"  {p.rater_a}-{p.rater_b}  n={p.n:<4} bias {p.bias:+.3f}   "
@@ -331,6 +403,11 @@ def format_report(report: AgreementReport) -> str:
     if report.incomplete:
         lines.append(f"Poses missing a rating (left out of the ICCs): {', '.join(report.incomplete)}")
     return "\n".join(lines) + "\n"
+
+
+def format_ci(ci: tuple[float, float]) -> str:
+    """An interval as ``[0.61, 0.92]`` (``[nan, nan]`` when undefined)."""
+    return f"[{ci[0]:.2f}, {ci[1]:.2f}]"
 
 
 def save_bland_altman_png(report: AgreementReport, path: str | os.PathLike, *, overwrite: bool = False) -> Path:

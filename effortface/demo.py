@@ -231,3 +231,17 @@ def synth_step(model_dir: Path, lab: Path, out: Path) -> Path:
         work = pd.read_csv(sessions[0] / "work.csv")
         curves = model.curves_from_work(work["t_s"], work["w_per_kg"], work["p_per_kg"], 1.0, character)
     return write_curves(out / "synth.csv", curves, model, digits=SYNTH_DIGITS)
+
+
+def held_out_summary(metrics: dict) -> str:
+    """One line of the training run's held-out scores (model.json metrics): heart rate of the
+    training-level model on held-out participants and of the own model on held-out sessions; face
+    SVR on held-out participants with expressiveness estimated without their key-frames."""
+    hr = metrics.get("hr", {})
+    face = [r for r in metrics.get("face_held_out", []) if r.get("model") == "svr" and r.get("r") is not None]
+    parts = [f"{label} r {hr[k]['r']:.2f}" for k, label in (("tl_regression", "heart rate TL model"),
+                                                          ("per_participant", "own model on other sessions"))
+             if k in hr and hr[k].get("r") is not None]
+    if face:
+        parts.append(f"face r {sum(r['r'] for r in face) / len(face):.2f}")
+    return "held out (not fitted on the scored participant or session): " + "; ".join(parts)

@@ -3,7 +3,7 @@
 ``model.json`` holds everything small and readable: schema version, the blendshape set with its
 ARKit mapping, feature names and units, the scaler, the NHR coefficients and their training-level
 regressions, the physiology choices, per-blendshape SVR hyper-parameters (gamma as a number),
-metrics and provenance. ``svr.npz`` holds the arrays: ``support_vectors_<b>``, ``dual_coef_<b>``
+the output filter's time constants (optional: older bundles get the default), metrics and provenance. ``svr.npz`` holds the arrays: ``support_vectors_<b>``, ``dual_coef_<b>``
 for each blendshape name ``b``, and ``intercept`` (B,). It is read with ``allow_pickle=False``.
 
 The training stage adds ``face.onnx`` and ``MODEL_CARD.md`` beside them with its own code;
@@ -25,7 +25,7 @@ import numpy as np
 from effortface.core.blendshapes import BlendshapeSet
 from effortface.core.errors import UserError
 from effortface.core.fileio import atomic_write, atomic_write_text
-from effortface.train.face import FEATURE_NAMES, FEATURE_UNITS, SvrModel
+from effortface.train.face import DEFAULT_FILTER_TAU_S, FEATURE_NAMES, FEATURE_UNITS, SvrModel, check_filter_tau
 from effortface.train.physiology import HR_MAX_FORMULAS, EpocParams, NhrParams, NhrRegression
 
 SCHEMA_VERSION = 1
@@ -39,6 +39,10 @@ TL_CHECK_RANGE = (0.0, 10.0)
 #: fit (the paper: t_root 7-12 W/kg, rates below 0.01 per W/kg per s; odd small data sets give
 #: hundreds) and far enough from float overflow for the recursion (1e308 overflowed it).
 NHR_MAX_ABS = 1e6
+
+
+#: The output filter on the blendshape weights (effortface.train.face.WeightFilter).
+OUTPUT_FILTER_KIND = "critically_damped"
 
 
 class BundleFormatError(UserError):
@@ -70,6 +74,9 @@ class ModelBundle:
         scale_ml_per_kg}.
     metrics, provenance : dict
         Free-form JSON (scores like the paper's; data, software and date of the fit).
+    filter_tau_s : tuple of float
+        Output-filter time constant per blendshape, seconds (``model.json`` ``output_filter``;
+        a bundle without it gets :data:`~effortface.train.face.DEFAULT_FILTER_TAU_S`).
     """
 
     blendshapes: BlendshapeSet
@@ -87,6 +94,11 @@ class ModelBundle:
     schema_version: int = SCHEMA_VERSION
     feature_names: tuple[str, ...] = FEATURE_NAMES
     feature_units: tuple[str, ...] = FEATURE_UNITS
+    filter_tau_s: tuple[float, ...] | None = None
+
+    def __post_init__(self) -> None:
+        if self.filter_tau_s is None:
+            self.filter_tau_s = (DEFAULT_FILTER_TAU_S,) * len(self.blendshapes)
 
     def face_model(self) -> SvrModel:
         """The numpy SVR face model of this bundle."""
@@ -116,14 +128,17 @@ def _to_json(bundle: ModelBundle) -> dict[str, Any]:
                                                              bundle.feature_units)],
         "scaler": {"mean": np.asarray(bundle.scaler_mean, float).tolist(),
                    "scale": np.asarray(bundle.scaler_scale, float).tolist()},
-        "nhr": {"coefficients": {k: float(v) for k, v in
-                                 dataclasses.asdict(bundle.nhr_coefficients).items()},
-                "tl_regression": {k: {"intercept": float(a), "slope": float(b)}
-                                  for k, (a, b) in dataclasses.asdict(reg).items()}},
+        "nhr": {"coefficients": {k: float(getattr(bundle.nhr_coefficients, k))
+                                 for k in ("t_root", "c_inc", "c_dec")},
+                "tl_regression": {k: {"intercept": float(getattr(reg, k)[0]),
+                                      "slope": float(getattr(reg, k)[1])}
+                                  for k in ("t_root", "c_inc", "c_dec")}},
         "physiology": bundle.physiology,
         "svr": [dict(h, blendshape=n, n_support=int(len(a)))
                 for n, h, a in zip(bundle.blendshapes.names, bundle.svr_hyperparameters,
                                    bundle.dual_coef)],
+        "output_filter": {"kind": OUTPUT_FILTER_KIND,
+                          "time_constant_s": [float(v) for v in bundle.filter_tau_s or ()]},
         "metrics": bundle.metrics,
         "provenance": bundle.provenance,
     }
@@ -260,8 +275,9 @@ def _read_nhr(doc: dict[str, Any], where: str) -> tuple[NhrParams, NhrRegression
     coef = _get(nhr, "coefficients", f"{where}.nhr", dict)
     reg = _get(nhr, "tl_regression", f"{where}.nhr", dict)
     keys = ("t_root", "c_inc", "c_dec")
-    params = NhrParams(*(_nhr_value(_number(coef, k, f"{where}.nhr.coefficients"),
-                                    f"{where}.nhr.coefficients.{k}") for k in keys))
+    t_root, c_inc, c_dec = (_nhr_value(_number(coef, k, f"{where}.nhr.coefficients"),
+                                       f"{where}.nhr.coefficients.{k}") for k in keys)
+    params = NhrParams(t_root, c_inc, c_dec)
     lines = [_get(reg, k, f"{where}.nhr.tl_regression", dict) for k in keys]
     pairs = [(_number(d, "intercept", f"{where}.nhr.tl_regression.{k}"),
               _number(d, "slope", f"{where}.nhr.tl_regression.{k}")) for k, d in zip(keys, lines)]
@@ -269,7 +285,7 @@ def _read_nhr(doc: dict[str, Any], where: str) -> tuple[NhrParams, NhrRegression
         for tl in TL_CHECK_RANGE:
             _nhr_value(a + b * tl, f"{where}.nhr.tl_regression.{k}", f" at training level {tl:g}",
                        signed=True)
-    return params, NhrRegression(*pairs)
+    return params, NhrRegression(pairs[0], pairs[1], pairs[2])
 
 
 def _nhr_value(value: float, where: str, at: str = "", *, signed: bool = False) -> float:
@@ -301,6 +317,24 @@ def _read_physiology(doc: dict[str, Any], where: str) -> dict[str, Any]:
         raise BundleFormatError(f"{where}.physiology.epoc.threshold: expected a fraction of VO2max from 0 "
                                 f"to below 1, found {epoc_vals['threshold']:g}")
     return {"hr_max_formula": formula, "update_period_s": period, "epoc": epoc_vals}
+
+
+def _read_output_filter(doc: dict[str, Any], where: str, n: int) -> tuple[float, ...]:
+    """The output filter's time constants; a bundle written before the filter existed gets the default."""
+    if "output_filter" not in doc:
+        return (DEFAULT_FILTER_TAU_S,) * n
+    spec = _get(doc, "output_filter", where, dict)
+    kind = _get(spec, "kind", f"{where}.output_filter", str)
+    if kind != OUTPUT_FILTER_KIND:
+        raise BundleFormatError(f"{where}.output_filter.kind: expected {OUTPUT_FILTER_KIND!r}, found {kind!r}")
+    taus = _get(spec, "time_constant_s", f"{where}.output_filter", list)
+    if len(taus) != n or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in taus):
+        raise BundleFormatError(f"{where}.output_filter.time_constant_s: expected {n} numbers (one per "
+                                f"blendshape), found {taus!r}")
+    try:
+        return tuple(float(v) for v in check_filter_tau(taus, n, f"{where}.output_filter.time_constant_s"))
+    except UserError as exc:
+        raise BundleFormatError(str(exc)) from None
 
 
 def _read_svr_json(doc: dict[str, Any], where: str, names: tuple[str, ...]) -> list[dict[str, float]]:
@@ -389,7 +423,8 @@ def read_bundle(directory: str | os.PathLike[str]) -> ModelBundle:
         svr_hyperparameters=_read_svr_json(doc, where, shapes.names),
         support_vectors=[], dual_coef=[], intercept=np.empty(0),
         physiology=_read_physiology(doc, where),
-        metrics=_get(doc, "metrics", where, dict), provenance=_get(doc, "provenance", where, dict))
+        metrics=_get(doc, "metrics", where, dict), provenance=_get(doc, "provenance", where, dict),
+        filter_tau_s=_read_output_filter(doc, where, len(shapes)))
     bundle.support_vectors, bundle.dual_coef, bundle.intercept = _read_npz(directory / SVR_NPZ,
                                                                            shapes.names)
     try:

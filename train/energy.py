@@ -5,8 +5,8 @@ For every segment s and frame k::
     E_s(k) = m_s g z_s + 1/2 m_s |v_s|^2 + 1/2 omega_s^T I_s omega_s,
     I_s = m_s L_s^2 diag(r_sag^2, r_trans^2, r_long^2) in the segment frame.
 
-* w(k): sum over segments of |E_s(j) - E_s(j-1)| over the frames j of the last ``window_s``
-  (1 s), divided by the body mass M and the window length: no energy transfer between segments.
+* w(k): sum over segments of |E_s(j) - E_s(j-1)| over the last ``window_s`` (1 s) of time,
+  divided by the body mass M and the window length: no energy transfer between segments.
 * p(k): the same sum over the last ``power_window_s`` (0.25 s), an instantaneous rate smoothed
   over a short window.
 
@@ -14,10 +14,20 @@ Choices (named parameters):
 
 * Joint positions (and the rotation matrices of the segments' frames) are low-pass filtered with
   a 2nd-order Butterworth at ``cutoff_hz`` = 6 Hz: zero-phase (forward-backward) for files,
-  causal for streams. Both start from the steady state of the first frame.
-* Velocities are backward differences (causal). Angular velocity comes from consecutive segment
-  rotations, ``log(R(k) R(k-1)^T) / dt``; without rotations (plain positions) it comes from the turn
-  of the segment's long axis, so spin about the long axis is not seen.
+  causal for streams. Both start from the steady state of the first frame. The stream integrates
+  the filter's continuous-time equation over each frame's own ``dt_s`` (trapezoidal rule,
+  pre-warped at the cut-off), so a game whose frame time varies gets the same 6 Hz filter; at a
+  constant ``dt_s`` it is exactly the causal file filter.
+* Consistent differences: the energy of frame k is taken at the half frame t(k-1/2), with the
+  positions averaged over frames k-1 and k and the velocities (x(k) - x(k-1)) / dt, the central
+  difference about that instant. Kinetic and potential energy therefore refer to the same
+  instant (a freely falling body does no work; a backward velocity with the frame's own height
+  would make it do g^2 dt / 2 W/kg). Angular velocity comes from consecutive segment rotations,
+  ``log(R(k) R(k-1)^T) / dt``; without rotations (plain positions) it comes from the turn of the
+  segment's long axis, so spin about the long axis is not seen.
+* Windows are measured in seconds of time, not in frames: a frame's |dE| is spread over its own
+  interval dt_s and the window keeps the part of it that falls in the last ``window_s``. A stream
+  fed at 30, 60 or 120 fps, or with jittering frame times, measures the same work.
 * Segment frame: long axis from the proximal to the distal end; sagittal (antero-posterior) axis is
   the body's forward direction (from the hip joints and the vertical) made orthogonal to the long
   axis (the vertical when the segment points forward, as a foot does); transverse completes it.
@@ -32,8 +42,10 @@ numpy and scipy only (the runtime imports this module).
 
 from __future__ import annotations
 
+import collections
 import dataclasses
-from collections.abc import Sequence
+import math
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from scipy import signal
@@ -199,10 +211,64 @@ def _segment_axes(u: np.ndarray, fwd: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return a, np.cross(u, a)
 
 
+def _half_frames(x: np.ndarray) -> np.ndarray:
+    """Values at the half frames t(k-1/2): means of frames k-1 and k along axis 0 (frame 0 kept)."""
+    mid = x.copy()
+    mid[1:] = 0.5 * (x[1:] + x[:-1])
+    return mid
+
+
+def _central_diff(x: np.ndarray, dt_s: float) -> np.ndarray:
+    """(x[k+1] - x[k-1]) / (2 dt) along axis 0; one-sided at the two ends, zero for one frame."""
+    if x.shape[0] < 2:
+        return np.zeros_like(x)
+    return np.gradient(x, dt_s, axis=0)
+
+
+def _central_turn(turn: Callable[[np.ndarray, np.ndarray], np.ndarray], a: np.ndarray,
+                  dt_s: float) -> np.ndarray:
+    """Angular velocity at every frame from a frame-pair turn function, central where possible."""
+    if a.shape[0] < 2:
+        return turn(a, a)  # no turn: zeros of the right shape
+    return np.concatenate([turn(a[:1], a[1:2]), 0.5 * turn(a[:-2], a[2:]),
+                           turn(a[-2:-1], a[-1:])]) / dt_s
+
+
+def _kinematic_state(pos_m: np.ndarray, frame_rot: np.ndarray | None, dt_s: float, body: BodyModel,
+                     centred: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Positions, CM positions, CM velocities and angular velocities at the scheme's instants."""
+    com = body.com_weights @ pos_m
+    limb = body.distal_weights - body.proximal_weights
+    if centred:
+        v = _central_diff(com, dt_s)
+        if frame_rot is not None:
+            omega = _central_turn(_rotation_vector, frame_rot, dt_s)
+        else:
+            omega = _central_turn(_axis_turn, _unit(limb @ pos_m)[0], dt_s)
+        return pos_m, com, v, omega
+    v = _backward_diff(com, dt_s)
+    omega = np.zeros(com.shape)
+    if frame_rot is not None:
+        omega[1:] = _rotation_vector(frame_rot[:-1], frame_rot[1:]) / dt_s
+    else:
+        u_frame, _ = _unit(limb @ pos_m)
+        omega[1:] = _axis_turn(u_frame[:-1], u_frame[1:]) / dt_s
+    return _half_frames(pos_m), _half_frames(com), v, omega
+
+
 def kinematic_energies(
-    pos_m: np.ndarray, frame_rot: np.ndarray | None, dt_s: float, body: BodyModel
+    pos_m: np.ndarray, frame_rot: np.ndarray | None, dt_s: float, body: BodyModel, *,
+    centred: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Potential, translational and rotational energy (J), each (T, S), of filtered kinematics.
+
+    Kinetic and potential energy always refer to the same instant (free fall does no work):
+
+    * ``centred=False`` (causal: streams and the causal file path): frame k's energies are taken
+      at the half frame t(k-1/2), positions being the means of frames k-1 and k and velocities
+      their central difference (x(k) - x(k-1)) / dt about that instant.
+    * ``centred=True`` (zero-phase file path): at frame k itself, with the central difference
+      (x(k+1) - x(k-1)) / (2 dt) (one-sided at the clip's two ends).
 
     Parameters
     ----------
@@ -214,39 +280,35 @@ def kinematic_energies(
         Frame interval in seconds.
     body : BodyModel
         One body, or N bodies stacked by :func:`~effortface.train.segments.stack_bodies`.
+    centred : bool
+        The scheme, see above.
 
     Returns
     -------
     potential_j, translational_j, rotational_j : ndarray, shape (T, [N,] S)
-        Frame 0 has zero velocities. Loads are included in their segment's energy.
+        Loads are included in their segment's energy.
     """
     m, ml = body.segment_mass_kg, body.load_kg
-    com = body.com_weights @ pos_m
-    v = _backward_diff(com, dt_s)
-    pot = (m + ml) * G_M_PER_S2 * com[..., 2]
+    at, com_at, v, omega = _kinematic_state(pos_m, frame_rot, dt_s, body, centred)
+    pot = (m + ml) * G_M_PER_S2 * com_at[..., 2]
     trans = 0.5 * (m + ml) * np.sum(v * v, axis=-1)
-    u, _ = _unit((body.distal_weights - body.proximal_weights) @ pos_m)
-    omega = np.zeros_like(u)
-    if frame_rot is not None:
-        omega[1:] = _rotation_vector(frame_rot[:-1], frame_rot[1:]) / dt_s
-    else:
-        omega[1:] = _axis_turn(u[:-1], u[1:]) / dt_s
-    sag, tra = _segment_axes(u, _forward_axes(pos_m, body))
+    u, _ = _unit((body.distal_weights - body.proximal_weights) @ at)
+    sag, tra = _segment_axes(u, _forward_axes(at, body))
     w_seg = np.stack([np.sum(omega * e, axis=-1) for e in (sag, tra, u)], axis=-1)
     inertia = m[..., None] * (body.length_m[..., None] * body.radii) ** 2
     rot = 0.5 * np.sum(inertia * w_seg**2, axis=-1)
     if np.any(body.back_load_kg > 0) and body.trunk_index >= 0:
-        _add_back_load(pot, trans, com, pos_m, dt_s, body)
+        _add_back_load(pot, trans, body.com_weights @ pos_m, pos_m, dt_s, body, centred)
     return pot, trans, rot
 
 
 def _add_back_load(pot: np.ndarray, trans: np.ndarray, com: np.ndarray, pos_m: np.ndarray,
-                   dt_s: float, body: BodyModel) -> None:
+                   dt_s: float, body: BodyModel, centred: bool) -> None:
     """Add the back load (a point BACK_LOAD_OFFSET_M behind the trunk CM) to the trunk's energy."""
     k = body.trunk_index
     point = com[..., k, :] - BACK_LOAD_OFFSET_M * _forward_axes(pos_m, body)
-    v = _backward_diff(point, dt_s)
-    pot[..., k] += body.back_load_kg * G_M_PER_S2 * point[..., 2]
+    v = _central_diff(point, dt_s) if centred else _backward_diff(point, dt_s)
+    pot[..., k] += body.back_load_kg * G_M_PER_S2 * (point if centred else _half_frames(point))[..., 2]
     trans[..., k] += 0.5 * body.back_load_kg * np.sum(v * v, axis=-1)
 
 
@@ -298,7 +360,7 @@ def segment_energies(
     """
     _check_body(motion, body)
     pos, rot = _filtered_kinematics(motion, body, cutoff_hz, zero_phase, use_rotations)
-    pot, trans, rot_e = kinematic_energies(pos, rot, 1.0 / motion.fps, body)
+    pot, trans, rot_e = kinematic_energies(pos, rot, 1.0 / motion.fps, body, centred=zero_phase)
     return SegmentEnergies(motion.t_s, pot, trans, rot_e, body.segment_names)
 
 
@@ -317,19 +379,36 @@ def _check_body(motion: Motion, body: BodyModel) -> None:
 # work and power
 
 
-def window_frames(window_s: float, fps: float, name: str) -> int:
-    """Number of frames in a window (at least 1); raise UserError naming ``name`` if not > 0."""
+def check_window(window_s: float, name: str) -> float:
+    """``window_s`` as a float; raise UserError naming ``name`` if it is not above 0 s."""
     if not window_s > 0:
         raise UserError(f"{name}: expected a window above 0 s, got {window_s!r}")
-    return max(1, int(round(window_s * fps)))
+    return float(window_s)
 
 
 def _trailing_sum(x: np.ndarray, n: int) -> np.ndarray:
     """Sum of the last n values (fewer at the start) at every index of a 1-D array."""
     c = np.cumsum(x)
     out = c.copy()
+    if n < 1:
+        return np.zeros_like(x)
     out[n:] = c[n:] - c[:-n]
     return out
+
+
+def _window_rate(rate: np.ndarray, fps: float, window_s: float) -> np.ndarray:
+    """Sum of per-frame rates over the last ``window_s`` seconds of time, divided by ``window_s``.
+
+    Frame j's rate covers its interval (t_j - 1/fps, t_j]; the window keeps the whole frames that
+    fit and the fraction of the next older one that falls inside it (as :class:`_TimeWindow`).
+    """
+    frames = window_s * fps
+    n_full = int(np.floor(frames + 1e-9))
+    frac = max(frames - n_full, 0.0)
+    out = _trailing_sum(rate, n_full)
+    if frac > 1e-9 and n_full < len(rate):
+        out[n_full:] += frac * rate[:len(rate) - n_full]
+    return out / window_s
 
 
 def work_and_power(
@@ -377,10 +456,10 @@ def work_and_power(
 
 def _windowed(t_s: np.ndarray, rate: np.ndarray, fps: float, window_s: float,
               power_window_s: float) -> EnergyCurves:
-    """w and p from per-frame rates: trailing sums over the work and power windows."""
-    n_w = window_frames(window_s, fps, "window_s")
-    n_p = window_frames(power_window_s, fps, "power_window_s")
-    return EnergyCurves(t_s, _trailing_sum(rate, n_w) * fps / n_w, _trailing_sum(rate, n_p) * fps / n_p, rate)
+    """w and p from per-frame rates: sums over the last work and power windows (seconds)."""
+    window_s = check_window(window_s, "window_s")
+    power_window_s = check_window(power_window_s, "power_window_s")
+    return EnergyCurves(t_s, _window_rate(rate, fps, window_s), _window_rate(rate, fps, power_window_s), rate)
 
 
 def looped(curves: EnergyCurves, loops: int, fps: float, *, window_s: float = 1.0,
@@ -427,19 +506,89 @@ def frame_rates(total_j: np.ndarray, mass_kg: float) -> np.ndarray:
 # --------------------------------------------------------------------------------------------
 # streaming
 
+#: Largest pre-warp angle pi * cutoff * dt (rad) of the stream filter: a frame slower than about
+#: 0.38 / cutoff (64 ms at 6 Hz, a game hitch) is integrated without further pre-warping.
+_MAX_WARP_RAD = 1.2
+
+
+class _CausalButterworth:
+    """2nd-order Butterworth low-pass integrated over each frame's own time step (any dt).
+
+    The continuous filter y'' + sqrt(2) wc y' + wc^2 y = wc^2 x is integrated with the trapezoidal
+    rule over dt, with wc pre-warped, (2 / dt) tan(pi f_c dt): at a constant dt this is exactly
+    the bilinear-transform filter of :func:`butterworth_sos` (what the causal file path runs), and
+    its state (y, y') stays meaningful when dt changes. Starts at the first frame's steady state.
+    """
+
+    def __init__(self, cutoff_hz: float) -> None:
+        self.cutoff_hz = float(cutoff_hz)
+        self._y: np.ndarray | None = None
+        self._v = np.zeros(0)
+        self._x = np.zeros(0)
+
+    def step(self, x: np.ndarray, dt_s: float) -> np.ndarray:
+        """Filter one frame ``x`` (any shape) that comes ``dt_s`` seconds after the previous one."""
+        if self._y is None:
+            self._y, self._v, self._x = x.copy(), np.zeros_like(x), x.copy()
+            return x.copy()
+        h = float(dt_s)
+        wc = 2.0 / h * math.tan(min(math.pi * self.cutoff_hz * h, _MAX_WARP_RAD))
+        hz, hw2 = h * wc / math.sqrt(2.0), (h * wc) ** 2 / 4.0
+        det = 1.0 + hz + hw2
+        x_sum = self._x + x
+        y = ((1.0 + hz - hw2) * self._y + h * self._v + hw2 * x_sum) / det
+        self._v = (-h * wc * wc * self._y + (1.0 - hz - hw2) * self._v + h * wc * wc / 2.0 * x_sum) / det
+        self._y, self._x = y, x
+        return y
+
+
+class _TimeWindow:
+    """Sum of per-frame values over the last ``window_s`` seconds of time, divided by it (O(1)).
+
+    A frame's value covers its own interval dt_s; the oldest frame still overlapping the window
+    counts for the fraction inside it. At a constant dt this is the file path's window.
+    """
+
+    def __init__(self, window_s: float, batch: tuple[int, ...]) -> None:
+        self.window_s = window_s
+        self._frames: collections.deque[tuple[np.ndarray, float]] = collections.deque()
+        self._sum = np.zeros(batch)
+        self._span_s = 0.0
+        self._pushed = 0
+
+    def push(self, value: np.ndarray, dt_s: float) -> np.ndarray:
+        """Add one frame's value lasting ``dt_s``; return the window's sum / window_s."""
+        self._frames.append((value, dt_s))
+        self._sum = self._sum + value
+        self._span_s += dt_s
+        while len(self._frames) > 1 and self._span_s - self._frames[0][1] >= self.window_s:
+            old, old_dt = self._frames.popleft()
+            self._sum = self._sum - old
+            self._span_s -= old_dt
+        self._pushed += 1
+        if self._pushed % 4096 == 0:  # re-sum now and then so rounding cannot drift
+            self._sum = np.sum([v for v, _ in self._frames], axis=0)
+            self._span_s = math.fsum(d for _, d in self._frames)
+        total = self._sum
+        if self._span_s > self.window_s:
+            old, old_dt = self._frames[0]
+            total = total - old * ((self._span_s - self.window_s) / old_dt)
+        return total / self.window_s
+
 
 class EnergyStream:
     """Causal, frame-by-frame work and power for a live skeleton (O(1) per frame).
 
-    Gives the same numbers as ``work_and_power(..., zero_phase=False)`` on the same frames:
-    the same filter recursion (started at the first frame's steady state), the same energy
-    formulas on the previous and current frame, and a ring buffer over the last window.
+    Each frame brings its own ``dt_s`` (games have variable frame times): the low-pass filter is
+    integrated over that step and the windows are measured in seconds of time, so the work does
+    not depend on the frame rate. At a constant ``dt_s = 1 / fps`` it gives the same numbers as
+    ``work_and_power(..., zero_phase=False)`` on the same frames.
 
     Parameters
     ----------
     body : BodyModel
     fps : float
-        Nominal frame rate: sets the filter and the window lengths in frames.
+        Nominal frame rate: the cut-off is checked against its Nyquist frequency.
     window_s, power_window_s, cutoff_hz : float
         As in :func:`work_and_power`.
 
@@ -460,15 +609,12 @@ class EnergyStream:
             raise UserError(f"fps: expected a positive frame rate, got {fps!r}")
         self.body = body
         self.fps = float(fps)
-        self._sos = butterworth_sos(cutoff_hz, self.fps)
-        self._n_w = window_frames(window_s, self.fps, "window_s")
-        self._n_p = window_frames(power_window_s, self.fps, "power_window_s")
+        butterworth_sos(cutoff_hz, self.fps)  # checks the cut-off against the nominal rate
+        self._filter = _CausalButterworth(cutoff_hz)
         self._batch = np.shape(body.mass_kg)  # () for one character, (N,) for a crowd
-        self._ring = np.zeros((max(self._n_w, self._n_p), *self._batch))
+        self._work = _TimeWindow(check_window(window_s, "window_s"), self._batch)
+        self._power = _TimeWindow(check_window(power_window_s, "power_window_s"), self._batch)
         self._frame = 0
-        self._sum_w = np.zeros(self._batch)
-        self._sum_p = np.zeros(self._batch)
-        self._zi: np.ndarray | None = None
         self._with_rotations: bool | None = None
         self._prev: tuple[np.ndarray, np.ndarray | None] | None = None
         self._prev_e: np.ndarray | None = None
@@ -482,7 +628,8 @@ class EnergyStream:
         joint_positions_m : ndarray, shape (J, 3)
             World joint positions, metres, Z up.
         dt_s : float
-            Time since the previous frame, seconds (> 0; used for velocities).
+            Time since the previous frame, seconds (> 0; used for the filter, velocities and
+            the windows; it may vary from frame to frame).
         rotations : ndarray, shape (J, 3, 3), optional
             World joint rotations; without them spin about a segment's long axis is not seen.
             Give them on every frame or on none.
@@ -506,7 +653,7 @@ class EnergyStream:
         parts = [pos.reshape(*self._batch, -1)]
         if rot is not None:
             parts.append(rot[..., self.body.frame_joint, :, :].reshape(*self._batch, -1))
-        flat = self._filter(np.concatenate(parts, axis=-1))
+        flat = self._filter.step(np.concatenate(parts, axis=-1), dt_s)
         n_pos = parts[0].shape[-1]
         cur = (flat[..., :n_pos].reshape(pos.shape),
                None if rot is None else flat[..., n_pos:].reshape(*self._batch, -1, 3, 3))
@@ -515,7 +662,8 @@ class EnergyStream:
         if self._frame >= 2:
             rate = np.sum(np.abs(energy - self._prev_e), axis=-1) / self.body.mass_kg
         self._prev, self._prev_e = cur, energy
-        return self._push(rate)
+        self._frame += 1
+        return self._work.push(rate, float(dt_s)), self._power.push(rate, float(dt_s))
 
     def _check_frame(self, joint_positions_m: np.ndarray, dt_s: float,
                      rotations: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
@@ -538,19 +686,6 @@ class EnergyStream:
             raise UserError(f"rotations: expected shape {(*self._batch, n_joints, 3, 3)}, got {rot.shape}")
         return pos, rot
 
-    def _filter(self, x: np.ndarray) -> np.ndarray:
-        """One causal filter step for all channels (direct form II transposed, as sosfilt)."""
-        if self._zi is None:
-            self._zi = signal.sosfilt_zi(self._sos).reshape(len(self._sos), 2, *([1] * x.ndim)) * x
-        y = x
-        for s, (b0, b1, b2, _, a1, a2) in enumerate(self._sos):
-            z = self._zi[s]
-            out = b0 * y + z[0]
-            z[0] = b1 * y - a1 * out + z[1]
-            z[1] = b2 * y - a2 * out
-            y = out
-        return y
-
     def _energy(self, cur: tuple[np.ndarray, np.ndarray | None], dt_s: float) -> np.ndarray:
         """Total energy per segment ([N,] S) at this frame, from the previous and current states."""
         prev = self._prev if self._prev is not None else cur
@@ -559,18 +694,6 @@ class EnergyStream:
         pot, trans, rot_e = kinematic_energies(pos, rot, dt_s, self.body)
         k = 0 if self._prev is None else 1
         return pot[k] + trans[k] + rot_e[k]
-
-    def _push(self, rate: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Put one frame's rate in the ring buffer and update both window sums."""
-        k, size = self._frame, self._ring.shape[0]
-        self._sum_w = self._sum_w + rate - (self._ring[(k - self._n_w) % size] if k >= self._n_w else 0.0)
-        self._sum_p = self._sum_p + rate - (self._ring[(k - self._n_p) % size] if k >= self._n_p else 0.0)
-        self._ring[k % size] = rate
-        self._frame += 1
-        if self._frame % size == 0:  # re-sum once per buffer length so rounding cannot drift
-            self._sum_w = np.sum(self._ring[size - self._n_w:], axis=0)
-            self._sum_p = np.sum(self._ring[size - self._n_p:], axis=0)
-        return self._sum_w * self.fps / self._n_w, self._sum_p * self.fps / self._n_p
 
 
 class EnergyCrowd(EnergyStream):

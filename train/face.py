@@ -9,7 +9,7 @@ normalised weights in the blendshape set's order:
 - :class:`RuleFaceModel`: the paper's empirical rules (section 4.1.1), deterministic, no training;
   the default model until a trained one exists and a baseline after.
 
-numpy only (the runtime imports this module).
+numpy and scipy only (the runtime imports this module).
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+from scipy import signal
 
 from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
 from effortface.core.errors import UserError
@@ -53,6 +54,115 @@ def apply_expressiveness(normalised: Any, expressiveness: Any) -> np.ndarray:
     """
     return np.clip(np.asarray(normalised, dtype=float) * np.asarray(expressiveness, dtype=float),
                    0.0, 1.0)
+
+
+# --------------------------------------------------------------------------- output filter
+
+#: Default time constant (s) of the output filter on every blendshape weight (choice, see
+#: :class:`WeightFilter`): 0.15 s passes the build-up of effort (seconds) and damps the 1-3 Hz
+#: rhythm of jumps and strides (2 Hz to 0.2 of its amplitude) with a mean delay of 0.3 s.
+DEFAULT_FILTER_TAU_S = 0.15
+
+
+def check_filter_tau(tau_s: Any, n: int, name: str = "filter_tau_s") -> np.ndarray:
+    """Time constants (s) as an (n,) array: one number for every blendshape or one per blendshape.
+
+    Raises
+    ------
+    UserError
+        Naming ``name`` unless the values are finite numbers >= 0 (0 turns the filter off).
+    """
+    try:
+        values = np.broadcast_to(np.asarray(tau_s, dtype=float), (n,)).copy()
+    except (TypeError, ValueError):
+        raise UserError(f"{name}: expected a time constant in seconds (>= 0) or {n} of them, "
+                        f"found {tau_s!r}") from None
+    if not np.all(np.isfinite(values) & (values >= 0)):
+        raise UserError(f"{name}: expected time constants of 0 s or more, found {tau_s!r}")
+    return values
+
+
+class WeightFilter:
+    """Critically damped low-pass on blendshape weights, frame by frame (any frame time).
+
+    Two identical first-order stages in series, ``H(s) = 1 / (1 + tau s)^2``: a double real pole,
+    i.e. a critically damped second-order system. A step settles without overshoot (95 % after
+    4.7 tau) and the mean delay is 2 tau. Each stage is exact for an input held over the frame,
+    ``y <- y + (1 - exp(-dt / tau)) (x - y)``, so it works at any (varying) frame time, and a
+    convex combination of weights in [0, 1] stays in [0, 1]. It starts at the first frame's value.
+    ``tau = 0`` passes that blendshape through.
+
+    Parameters
+    ----------
+    tau_s : array_like, shape (B,)
+        Time constant per blendshape, seconds (see :func:`check_filter_tau`).
+
+    Examples
+    --------
+    >>> f = WeightFilter([0.15] * 4)                      # doctest: +SKIP
+    >>> smooth = f.step(weights, dt_s)                    # (B,) or (N, B)
+    """
+
+    def __init__(self, tau_s: Any) -> None:
+        self.tau_s = np.asarray(tau_s, dtype=float)
+        self._stages: list[np.ndarray] | None = None
+
+    def step(self, weights: Any, dt_s: float) -> np.ndarray:
+        """Filter one frame's weights (..., B) coming ``dt_s`` seconds after the previous frame."""
+        x = np.asarray(weights, dtype=float)
+        if self._stages is None:
+            self._stages = [x.copy(), x.copy()]
+            return x.copy()
+        with np.errstate(divide="ignore"):
+            gain = -np.expm1(-float(dt_s) / self.tau_s)  # 1 where tau = 0
+        for k in range(2):
+            self._stages[k] = self._stages[k] + gain * (x - self._stages[k])
+            x = self._stages[k]
+        return x.copy()
+
+
+def filter_weights(weights: Any, dt_s: float, tau_s: Any) -> np.ndarray:
+    """:class:`WeightFilter` over a whole clip at a constant frame time (identical numbers).
+
+    Parameters
+    ----------
+    weights : array_like, shape (T, B)
+    dt_s : float
+        Frame interval, seconds.
+    tau_s : float or array_like, shape (B,)
+
+    Returns
+    -------
+    ndarray, shape (T, B)
+    """
+    y = np.array(weights, dtype=float)
+    if y.shape[0] == 0:
+        return y
+    for b, tau in enumerate(np.broadcast_to(np.asarray(tau_s, dtype=float), y.shape[1:])):
+        if tau <= 0:
+            continue
+        gain = -np.expm1(-dt_s / tau)
+        for _ in range(2):  # y[k] = (1 - gain) y[k-1] + gain x[k], from the first value
+            y[:, b], _ = signal.lfilter([gain], [1.0, gain - 1.0], y[:, b], zi=[(1 - gain) * y[0, b]])
+    return y
+
+
+def jitter(weights: Any) -> float:
+    """Median over frames of the largest frame-to-frame step of any blendshape weight.
+
+    Parameters
+    ----------
+    weights : array_like, shape (T, B)
+
+    Returns
+    -------
+    float
+        0 for fewer than two frames.
+    """
+    w = np.asarray(weights, dtype=float)
+    if w.shape[0] < 2:
+        return 0.0
+    return float(np.median(np.max(np.abs(np.diff(w, axis=0)), axis=1)))
 
 
 def _features(features: Any) -> np.ndarray:

@@ -19,11 +19,13 @@ negative coefficients (a rise below threshold, a fall above it) are rejected.
 **Derivative (choice).** dNHR is a centred difference over ``smooth_s`` seconds of the measured NHR
 (default 3 s), because strap HR at 1 Hz carries about +-2 bpm of beat-to-beat noise.
 
-Then t, c_inc and c_dec are regressed linearly on training level (the global model), and the paper's
-three models are scored by *simulating* the recursion over whole sessions from the first measured
-value (the prediction feeds the next step): the per-participant model, one model pooled over everyone
-without training level, and the training-level regression, the last two on held-out participants
-(leave one participant out).
+Then t, c_inc and c_dec are regressed linearly on training level (the global model), and the models
+are scored by *simulating* the recursion over whole sessions from the first measured value (the
+prediction feeds the next step), always on data they were not fitted on, except the labelled
+in-sample score (see :data:`MODELS`): the per-participant tree on held-out time (another session),
+one threshold tree pooled over everyone else without training level (ours: not the paper's pooled
+model, which was an unpruned regression tree), and the training-level regression on held-out
+participants (leave one participant out).
 """
 
 from __future__ import annotations
@@ -124,7 +126,8 @@ class TlRegression:
 
     def to_nhr_regression(self) -> NhrRegression:
         """The runtime's :class:`~effortface.train.physiology.NhrRegression` ``(intercept, slope)`` pairs."""
-        return NhrRegression(*((f.intercept, f.slope) for f in (self.t_root, self.c_inc, self.c_dec)))
+        t, c_inc, c_dec = ((f.intercept, f.slope) for f in (self.t_root, self.c_inc, self.c_dec))
+        return NhrRegression(t, c_inc, c_dec)
 
     def as_dict(self) -> dict[str, dict[str, float]]:
         """JSON-ready dictionary ``{name: {intercept, slope, r}}``."""
@@ -466,8 +469,20 @@ class HrEvaluation:
         return out
 
 
-#: the paper's three models, in its order
-MODELS = ("per_participant", "pooled", "tl_regression")
+#: The scored models. ``per_participant``: the participant's own tree fitted on their other
+#: sessions (or the other half of a single session) and scored on held-out time;
+#: ``per_participant_in_sample``: the same tree fitted on all their sessions and scored on them (the
+#: paper's Fig. 2a protocol); ``pooled_threshold``: one two-leaf threshold tree fitted on everyone
+#: else pooled, without training level (NOT the paper's pooled model, an unpruned regression tree);
+#: ``tl_regression``: the training-level regression fitted without the scored participant.
+MODELS = ("per_participant", "per_participant_in_sample", "pooled_threshold", "tl_regression")
+#: Which models are scored on data they were not fitted on.
+HELD_OUT_MODELS = ("per_participant", "pooled_threshold", "tl_regression")
+#: The paper's figures (Boukhalfi et al. 2015), beside ours in the report and the Train stage. Its
+#: per-participant figure is in-sample; its pooled figure is for its own (unpruned-tree) pooled model.
+PAPER_HR = {"per_participant_in_sample": {"r": 0.88, "rmse_pct": 19.0},
+            "pooled_threshold": {"r": 0.21, "rmse_pct": 79.0},
+            "tl_regression": {"r": 0.87, "rmse_pct": 24.0}}
 
 
 def score_series(series: HrSeries, pred: np.ndarray, model: str) -> HrScore:
@@ -480,12 +495,38 @@ def score_series(series: HrSeries, pred: np.ndarray, model: str) -> HrScore:
     return HrScore(series.participant, series.session, model, r, 100 * rmse, rmse * span, int(ok.sum()))
 
 
-def evaluate_hr_models(series: Sequence[HrSeries], smooth_s: int = DEFAULT_SMOOTH_S) -> HrEvaluation:
-    """Score the paper's three models by simulating whole sessions.
+def held_out_time_blocks(own: Sequence[HrSeries]) -> list[tuple[list[HrSeries], list[HrSeries]]]:
+    """(fit on, score on) pairs of one participant's sessions: leave one session out, or, with a
+    single session, its two halves in time (each scored with a tree fitted on the other)."""
+    if len(own) >= 2:
+        return [([o for o in own if o is not s], [s]) for s in own]
+    s = own[0]
+    half = len(s.t_s) // 2
+    parts = [dataclasses.replace(s, t_s=s.t_s[sl], w_per_kg=s.w_per_kg[sl], nhr=s.nhr[sl])
+             for sl in (slice(None, half), slice(half, None))]
+    return [([parts[1]], [parts[0]]), ([parts[0]], [parts[1]])]
 
-    The per-participant model is fitted and scored on the participant's own sessions (paper Fig. 2a);
-    the pooled and the training-level models are fitted without the scored participant (leave one
-    participant out) and scored on all of that participant's sessions.
+
+def _held_out_time(own: Sequence[HrSeries], smooth_s: int
+                   ) -> list[tuple[HrSeries, HrCoefficients | None]]:
+    """Each held-out block with the participant's tree fitted on the rest (None if it cannot be)."""
+    out: list[tuple[HrSeries, HrCoefficients | None]] = []
+    for fit_on, score_on in held_out_time_blocks(own):
+        try:
+            coef: HrCoefficients | None = fit_participant(fit_on, smooth_s)
+        except ValueError:  # e.g. the other session never crossed a threshold: no score
+            coef = None
+        out.extend((s, coef) for s in score_on)
+    return out
+
+
+def evaluate_hr_models(series: Sequence[HrSeries], smooth_s: int = DEFAULT_SMOOTH_S) -> HrEvaluation:
+    """Score the heart-rate models by simulating whole sessions (see :data:`MODELS`).
+
+    ``per_participant`` is fitted on the participant's other sessions (or the other half of a
+    single session) and scored on the held-out one; ``per_participant_in_sample`` is fitted and
+    scored on all the participant's sessions (paper Fig. 2a); the pooled threshold tree and the
+    training-level model are fitted without the scored participant (leave one participant out).
 
     Parameters
     ----------
@@ -497,18 +538,37 @@ def evaluate_hr_models(series: Sequence[HrSeries], smooth_s: int = DEFAULT_SMOOT
     Returns
     -------
     HrEvaluation
+        A held-out block that cannot be fitted (too little work variation in the other sessions) is
+        not scored; ``summary()``'s ``n_sessions`` counts the scored ones.
     """
     fit = fit_hr_model(series, smooth_s)
     groups = by_participant(series)
     scores, preds = [], {}
+
+    def add(name: str, s: HrSeries, coef: HrCoefficients, key: str) -> None:
+        pred = simulate_series(s, coef)
+        preds[(name, key)] = pred
+        scores.append(score_series(s, pred, name))
+
     for code, own in groups.items():
-        others = [s for s in series if s.participant != code]
-        held = fit_hr_model(others, smooth_s)
-        models = {"per_participant": fit.per_participant[code], "pooled": held.pooled,
-                  "tl_regression": held.tl_regression.at(own[0].training_level)}
-        for name, coef in models.items():
-            for s in own:
-                pred = simulate_series(s, coef)
-                preds[(name, s.session)] = pred
-                scores.append(score_series(s, pred, name))
+        held = fit_hr_model([s for s in series if s.participant != code], smooth_s)
+        for s in own:
+            add("per_participant_in_sample", s, fit.per_participant[code], s.session)
+            add("pooled_threshold", s, held.pooled, s.session)
+            add("tl_regression", s, held.tl_regression.at(own[0].training_level), s.session)
+        for block, coef in _held_out_time(own, smooth_s):
+            if coef is not None:
+                add("per_participant", block, coef, f"{block.session}@{block.t_s[0]:g}")
+        for s in own:  # whole-session curve for Fig. 2 (halves joined for a single session)
+            preds[("per_participant", s.session)] = _joined(preds, s)
     return HrEvaluation(scores, preds, fit)
+
+
+def _joined(preds: dict[tuple[str, str], np.ndarray], s: HrSeries) -> np.ndarray:
+    """The held-out per-participant curve of a whole session (NaN where no block was scored)."""
+    keys = sorted((k for m, k in preds if m == "per_participant" and k.startswith(f"{s.session}@")),
+                  key=lambda k: float(k.rsplit("@", 1)[1]))
+    if len(keys) == 1:
+        return preds[("per_participant", keys[0])]
+    return np.concatenate([preds[("per_participant", k)] for k in keys]) if keys \
+        else np.full(len(s.t_s), np.nan)

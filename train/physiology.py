@@ -229,19 +229,87 @@ def rr_max_per_min(training_level: float) -> float:
 
 # --------------------------------------------------------------------------- NHR recursion
 
+#: METs of the reference activities (2024 Adult Compendium of Physical Activities, Herrmann et al.
+#: 2024; activity, Compendium description) used to calibrate the built-in model. See
+#: docs/SCIENCE_NOTES.md for the codes and for cycling, which is not calibrated through w.
+COMPENDIUM_METS: dict[str, float] = {
+    "standing": 1.3,        # standing quietly
+    "squats": 3.8,          # calisthenics (e.g. squats, lunges), moderate effort
+    "walking": 4.0,         # walking 3.4 mph (1.5 m/s), level, firm surface (3.5 @ 3.0, 4.3 @ 3.5 mph)
+    "jumping jacks": 8.0,   # calisthenics (e.g. jumping jacks), vigorous effort
+    "running": 11.8,        # running 7.5 mph (3.4 m/s)
+}
+
+
+@dataclasses.dataclass(frozen=True)
+class MetCurve:
+    """Metabolic rate (METs) of steady activity as a function of the work w (W/kg).
+
+    ``METs(w) = met_at_rest + met_per_w * w ** exponent``, fitted by least squares to the
+    Compendium METs of the reference clips (:data:`COMPENDIUM_METS`) against their measured w
+    (:func:`fit_met_curve`). Through Swain's %VO2R = %HRR it gives the NHR a steady activity
+    holds: ``NHR_ss = (METs(w) - 1) / (VO2max / 3.5 - 1)``.
+    """
+
+    met_at_rest: float = 1.3
+    met_per_w: float = 1.156
+    exponent: float = 0.735
+
+    def mets(self, w_per_kg: Any) -> np.ndarray:
+        """METs of steady work ``w_per_kg`` (W/kg, >= 0)."""
+        return self.met_at_rest + self.met_per_w * np.maximum(np.asarray(w_per_kg, float), 0.0) ** self.exponent
+
+    def hold_w_per_kg(self, nhr: Any, reserve_mets: Any) -> np.ndarray:
+        """Work (W/kg) that holds ``nhr`` steady: METs(w) = 1 + NHR * reserve (0 below standing's NHR).
+
+        ``reserve_mets`` is the character's VO2 reserve in METs, ``VO2max / 3.5 - 1``.
+        """
+        extra = 1.0 + np.asarray(nhr, float) * reserve_mets - self.met_at_rest
+        return (np.maximum(extra, 0.0) / self.met_per_w) ** (1.0 / self.exponent)
+
+
+def fit_met_curve(w_per_kg: Any, mets: Any, met_at_rest: float = COMPENDIUM_METS["standing"]) -> MetCurve:
+    """Least-squares fit of ``METs = met_at_rest + a w^b`` (a, b) to activities' work and METs.
+
+    Parameters
+    ----------
+    w_per_kg, mets : array_like, shape (n,)
+        Measured work of each reference clip (W/kg) and its Compendium METs.
+    met_at_rest : float
+        METs at w = 0 (standing quietly, 1.3).
+
+    Returns
+    -------
+    MetCurve
+    """
+    from scipy.optimize import curve_fit  # only the calibration needs it, not the runtime
+
+    w, y = np.asarray(w_per_kg, float), np.asarray(mets, float)
+    (a, b), _ = curve_fit(lambda x, a, b: met_at_rest + a * x ** b, w, y, p0=(1.0, 0.8))
+    return MetCurve(met_at_rest, float(a), float(b))
+
+
 @dataclasses.dataclass(frozen=True)
 class NhrRegression:
     """Linear regressions of the NHR coefficients on training level: ``(intercept, slope)`` each.
 
-    The defaults are the paper's fit; the training stage plugs in its own.
+    The defaults are the paper's fit; the training stage plugs in its own. ``met_curve`` (None
+    for the paper and for trained bundles) adds the work needed to hold the current NHR to the
+    threshold (see :meth:`NhrParams.threshold_w_per_kg`): the Compendium-calibrated built-in model.
     """
 
     t_root: tuple[float, float] = (7.13, 0.42)
     c_inc: tuple[float, float] = (0.0056, -0.00043)
     c_dec: tuple[float, float] = (0.0009, 0.00025)
+    met_curve: MetCurve | None = None
 
 
+#: The paper's coefficients (Boukhalfi et al. 2015): the ``paper-2015`` built-in model.
 PAPER_REGRESSION = NhrRegression()
+#: The built-in ``default`` model: the paper's rates c_inc and c_dec, and a threshold that is the
+#: work needed to hold the current NHR under the Compendium calibration (t_root = 0 + hold(NHR)),
+#: so standing stays at rest and steady activities settle at their Compendium %VO2R.
+CALIBRATED_REGRESSION = NhrRegression(t_root=(0.0, 0.0), met_curve=MetCurve())
 
 
 @dataclasses.dataclass(frozen=True)
@@ -254,32 +322,57 @@ class NhrParams:
         Work threshold (W/kg) above which NHR rises.
     c_inc, c_dec : float or ndarray
         Rates of increase and decrease (per W/kg per second).
+    reserve_mets : float or ndarray
+        VO2 reserve in METs, ``VO2max / 3.5 - 1`` (used with ``met_curve`` only).
+    met_curve : MetCurve or None
+        None: the paper's constant threshold. Otherwise the threshold adds the work that holds the
+        current NHR (Compendium calibration).
     """
 
     t_root: Any
     c_inc: Any
     c_dec: Any
+    reserve_mets: Any = 0.0
+    met_curve: MetCurve | None = None
 
     @classmethod
     def from_training_level(cls, training_level: Any,
-                            regression: NhrRegression = PAPER_REGRESSION) -> NhrParams:
+                            regression: NhrRegression = PAPER_REGRESSION,
+                            vo2max: Any = None) -> NhrParams:
         """Coefficients for a training level (scalar or array) from a TL regression.
 
         The rates ``c_inc`` and ``c_dec`` are floored at 0 **(choice)**: a regression fitted on a
         lab's training levels can cross zero when extrapolated (a steep negative c_inc slope reaching
         TL 10), and a negative rate would make heart rate fall under effort. At 0 NHR holds instead.
+        ``vo2max`` (ml/kg/min) is needed when the regression has a ``met_curve``.
         """
         tl = np.asarray(training_level, dtype=float)
         t_root = regression.t_root[0] + regression.t_root[1] * tl
         rates = [np.maximum(a + b * tl, 0.0) for a, b in (regression.c_inc, regression.c_dec)]
-        return cls(*(float(v) if v.ndim == 0 else v for v in (t_root, *rates)))
+        t, c_inc, c_dec = (float(v) if v.ndim == 0 else v for v in (t_root, *rates))
+        if regression.met_curve is None:
+            return cls(t, c_inc, c_dec)
+        if vo2max is None:
+            raise UserError("vo2max: expected the character's VO2max for the Compendium-calibrated "
+                            "NHR model, found none")
+        reserve = np.asarray(vo2max, dtype=float) / VO2_REST_ML_PER_KG_MIN - 1.0
+        return cls(t, c_inc, c_dec, float(reserve) if reserve.ndim == 0 else reserve,
+                   regression.met_curve)
+
+    def threshold_w_per_kg(self, nhr: Any) -> Any:
+        """The work threshold at this NHR: ``t_root`` (+ the work holding NHR, if calibrated)."""
+        if self.met_curve is None:
+            return self.t_root
+        return self.t_root + self.met_curve.hold_w_per_kg(nhr, self.reserve_mets)
 
 
 def nhr_step(nhr: Any, w_per_kg: Any, params: NhrParams, dt_s: float = 1.0) -> np.ndarray:
     """One step of the paper's NHR recursion with dt scaling.
 
-    ``dNHR = c_inc (w - t_root) (1 - NHR)^2`` if ``w > t_root`` else ``c_dec (w - t_root) NHR^2``;
-    ``NHR <- clip(NHR + dt dNHR, 0, 1)`` (``dt = 1`` is the paper).
+    ``dNHR = c_inc (w - t) (1 - NHR)^2`` if ``w > t`` else ``c_dec (w - t) NHR^2``;
+    ``NHR <- clip(NHR + dt dNHR, 0, 1)`` (``dt = 1`` is the paper). ``t`` is t_root for the
+    paper's model; the calibrated model adds the work that holds the current NHR
+    (:meth:`NhrParams.threshold_w_per_kg`), which gives a plateau at the Compendium's %VO2R.
 
     Parameters
     ----------
@@ -298,7 +391,7 @@ def nhr_step(nhr: Any, w_per_kg: Any, params: NhrParams, dt_s: float = 1.0) -> n
         NHR after the step, in [0, 1].
     """
     nhr = np.asarray(nhr, dtype=float)
-    excess = np.asarray(w_per_kg, dtype=float) - params.t_root
+    excess = np.asarray(w_per_kg, dtype=float) - params.threshold_w_per_kg(nhr)
     up = params.c_inc * excess * (1.0 - nhr) ** 2
     down = params.c_dec * excess * nhr ** 2
     return np.clip(nhr + dt_s * np.where(excess > 0.0, up, down), 0.0, 1.0)
@@ -372,11 +465,10 @@ class PhysiologyParams:
         if hr_max <= hr_rest:
             raise UserError(f"heart rate: expected hr_max_bpm > hr_rest_bpm, found max {hr_max:g} "
                             f"<= rest {hr_rest:g}")
-        return cls(hr_rest_bpm=float(hr_rest), hr_max_bpm=float(hr_max),
-                   vo2max=vo2max_ml_per_kg_min(c.age, c.sex, c.height_m, c.mass_kg,
-                                               c.training_level),
+        vo2max = vo2max_ml_per_kg_min(c.age, c.sex, c.height_m, c.mass_kg, c.training_level)
+        return cls(hr_rest_bpm=float(hr_rest), hr_max_bpm=float(hr_max), vo2max=vo2max,
                    rr_max=rr_max_per_min(c.training_level),
-                   nhr=nhr or NhrParams.from_training_level(c.training_level, regression),
+                   nhr=nhr or NhrParams.from_training_level(c.training_level, regression, vo2max),
                    epoc=epoc, update_period_s=update_period_s)
 
     @classmethod
@@ -391,7 +483,8 @@ class PhysiologyParams:
             first, hr_rest_bpm=arr(lambda p: p.hr_rest_bpm), hr_max_bpm=arr(lambda p: p.hr_max_bpm),
             vo2max=arr(lambda p: p.vo2max), rr_max=arr(lambda p: p.rr_max),
             nhr=NhrParams(arr(lambda p: p.nhr.t_root), arr(lambda p: p.nhr.c_inc),
-                          arr(lambda p: p.nhr.c_dec)))
+                          arr(lambda p: p.nhr.c_dec), arr(lambda p: p.nhr.reserve_mets),
+                          first.nhr.met_curve))
 
 
 def derived(nhr: Any, epoc: Any, params: PhysiologyParams) -> dict[str, np.ndarray]:

@@ -32,14 +32,10 @@ from effortface.core.version import __version__
 from effortface.train.dataset import hr_series, prepare, read_table, sessions_table
 from effortface.train.face_fit import (GRIDS, MIN_ROWS_PER_PARTICIPANT, FaceFitConfig, FaceModelFit,
                                        check_face_table, fit_face_models, held_out_scores,
-                                       protocol_scores)
-from effortface.train.hr_fit import HrEvaluation, HrSeries, check_hr_series, evaluate_hr_models
+                                       protocol_scores, training_scores)
+from effortface.train.hr_fit import PAPER_HR, HrEvaluation, HrSeries, check_hr_series, evaluate_hr_models
 
 REPORT_DIR = "report"
-#: the paper's heart-rate results (section 3 of SCIENCE.md), shown beside ours
-PAPER_HR = {"per_participant": {"r": 0.88, "rmse_pct": 19.0},
-            "pooled": {"r": 0.21, "rmse_pct": 79.0},
-            "tl_regression": {"r": 0.87, "rmse_pct": 24.0}}
 #: fraction of the progress reached after each step of :func:`train_models` (the CV folds fill the middle)
 _STEP_FRACTION = {"prepare": 0.05, "hr": 0.2, "folds": 0.8, "held_out": 0.85, "protocols": 1.0}
 
@@ -202,7 +198,8 @@ class TrainingOutcome:
     def hr_table(self) -> pd.DataFrame:
         """Heart-rate models (held out) beside the paper's figures."""
         rows = [{"model": k, "r": v["r"], "RMSE %": v["rmse_pct"], "HR RMSE bpm": v["hr_rmse_bpm"],
-                 "paper r": PAPER_HR[k]["r"], "paper RMSE %": PAPER_HR[k]["rmse_pct"]}
+                 "paper r": PAPER_HR.get(k, {}).get("r", np.nan),
+                 "paper RMSE %": PAPER_HR.get(k, {}).get("rmse_pct", np.nan)}
                 for k, v in self.hr_eval.summary().items()]
         return pd.DataFrame(rows)
 
@@ -414,6 +411,7 @@ def training_metrics(hr_eval: Any, face: Any, held: pd.DataFrame, protos: pd.Dat
         "hr_per_participant": {p: c.as_dict() for p, c in hr_eval.fit.per_participant.items()},
         "hr_tl_regression": hr_eval.fit.tl_regression.as_dict(),
         "face_held_out": held.to_dict("records"),
+        "face_in_sample": training_scores(face).to_dict("records"),
         "face_protocols": protos.to_dict("records"),
         "face_cv": {b: {"best": s.best, "cv_mse": s.cv_mse, "cv_r": s.cv_r} for b, s in face.search.items()},
         "expressiveness": {p: {b: float(v) for b, v in row.items()}

@@ -36,9 +36,11 @@ from effortface.core.errors import UserError
 from effortface.core.participant import LIMITS, check_limit, check_sex
 from effortface.train.bundle import default_physiology, read_bundle
 from effortface.train.energy import EnergyCrowd, EnergyStream, work_and_power
-from effortface.train.face import RuleFaceModel, SvrModel, apply_expressiveness
+from effortface.train.face import (DEFAULT_FILTER_TAU_S, RuleFaceModel, SvrModel, WeightFilter,
+                                   apply_expressiveness, check_filter_tau, filter_weights)
 from effortface.train.motion import Motion, read_motion
-from effortface.train.physiology import (PAPER_REGRESSION, EpocParams, NhrRegression, PhysiologyParams,
+from effortface.train.physiology import (CALIBRATED_REGRESSION, PAPER_REGRESSION, EpocParams, NhrRegression,
+                                         PhysiologyParams,
                               PhysiologyState, simulate)
 from effortface.train.segments import BodyModel, Loads, build_body
 
@@ -136,12 +138,26 @@ class FaceModel:
 
     def __init__(self, face: SvrModel | RuleFaceModel, blendshapes: BlendshapeSet,
                  nhr_regression: NhrRegression = PAPER_REGRESSION,
-                 physiology: dict[str, Any] | None = None, name: str = "default") -> None:
+                 physiology: dict[str, Any] | None = None, name: str = "default",
+                 filter_tau_s: Any = DEFAULT_FILTER_TAU_S) -> None:
         self.face = face
         self.blendshapes = blendshapes
         self.nhr_regression = nhr_regression
         self.physiology = physiology or default_physiology()
         self.name = name
+        self.filter_tau_s = check_filter_tau(filter_tau_s, len(blendshapes))
+
+    def filter_taus(self, filter_tau_s: Any = None) -> np.ndarray:
+        """Output-filter time constants (B,): the model's, or ``filter_tau_s`` (0 = no filter).
+
+        Raises
+        ------
+        UserError
+            Unless ``filter_tau_s`` is None, one number >= 0 or one per blendshape.
+        """
+        if filter_tau_s is None:
+            return self.filter_tau_s
+        return check_filter_tau(filter_tau_s, len(self.blendshapes))
 
     @property
     def columns(self) -> tuple[str, ...]:
@@ -174,7 +190,8 @@ class FaceModel:
                           reference_positions_m=skeleton.positions_m[::step])
 
     def synthesize(self, motion: str | os.PathLike[str] | Motion, character: Character, *,
-                   mapping: Any = None, causal: bool = False) -> dict[str, np.ndarray]:
+                   mapping: Any = None, causal: bool = False, filter_tau_s: Any = None
+                   ) -> dict[str, np.ndarray]:
         """Per-frame curves for a whole clip.
 
         Parameters
@@ -188,6 +205,9 @@ class FaceModel:
         causal : bool
             Use the streaming (causal) energy filter instead of the zero-phase one, to match
             :meth:`stream` frame for frame.
+        filter_tau_s : float or sequence of float, optional
+            Output-filter time constant(s) in seconds (:class:`~effortface.train.face.WeightFilter`;
+            default: the model's, from its bundle); 0 gives the raw, unfiltered weights.
 
         Returns
         -------
@@ -199,16 +219,20 @@ class FaceModel:
         body = self.body(character, motion, mapping)
         energy = work_and_power(motion, body, zero_phase=not causal)
         return self.curves_from_work(motion.t_s, energy.w_per_kg, energy.p_per_kg,
-                                     1.0 / motion.fps, character, e)
+                                     1.0 / motion.fps, character, e, filter_tau_s=filter_tau_s)
 
     def curves_from_work(self, t_s: Any, w_per_kg: Any, p_per_kg: Any, dt_s: float,
-                         character: Character, e: np.ndarray | None = None
-                         ) -> dict[str, np.ndarray]:
-        """Physiology and face curves from work and power curves (e.g. a session's work.csv)."""
+                         character: Character, e: np.ndarray | None = None, *,
+                         filter_tau_s: Any = None) -> dict[str, np.ndarray]:
+        """Physiology and face curves from work and power curves (e.g. a session's work.csv).
+
+        ``filter_tau_s`` as in :meth:`synthesize` (None: the model's output filter).
+        """
         e = self.expressiveness(character) if e is None else e
+        taus = self.filter_taus(filter_tau_s)
         phys = simulate(w_per_kg, dt_s, self.physiology_params(character))
         features = np.column_stack([w_per_kg, p_per_kg, phys["nhr"], phys["epoc_norm"]])
-        weights = apply_expressiveness(self.face.predict(features), e)
+        weights = filter_weights(apply_expressiveness(self.face.predict(features), e), dt_s, taus)
         curves = {"t_s": np.asarray(t_s, float), "w_per_kg": np.asarray(w_per_kg, float),
                   "p_per_kg": np.asarray(p_per_kg, float)}
         curves.update({k: phys[k] for k in CURVE_COLUMNS[3:]})
@@ -216,7 +240,7 @@ class FaceModel:
         return curves
 
     def stream(self, character: Character, skeleton: Motion, *, mapping: Any = None,
-               fps: float | None = None) -> CharacterStream:
+               fps: float | None = None, filter_tau_s: Any = None) -> CharacterStream:
         """A live stream for one character on a skeleton.
 
         Parameters
@@ -228,16 +252,20 @@ class FaceModel:
         mapping : dict or path, optional
             A user joint-to-segment mapping.
         fps : float, optional
-            Nominal frame rate for the causal filter (default: the skeleton's).
+            Nominal frame rate: the energy filter's cut-off is checked against it (default: the
+            skeleton's); the stream follows the ``dt_s`` of every step.
+        filter_tau_s : float or sequence of float, optional
+            Output-filter time constant(s), seconds, as in :meth:`synthesize`.
         """
-        return CharacterStream(self, character, skeleton, mapping=mapping, fps=fps)
+        return CharacterStream(self, character, skeleton, mapping=mapping, fps=fps,
+                               filter_tau_s=filter_tau_s)
 
     def stream_batch(self, characters: Sequence[Character], skeleton: Motion, *,
                      mapping: Any = None, fps: float | None = None,
-                     single_precision: bool = False) -> CrowdStream:
+                     single_precision: bool = False, filter_tau_s: Any = None) -> CrowdStream:
         """A live stream for N characters on one skeleton layout (see :class:`CrowdStream`)."""
         return CrowdStream(self, characters, skeleton, mapping=mapping, fps=fps,
-                           single_precision=single_precision)
+                           single_precision=single_precision, filter_tau_s=filter_tau_s)
 
 
 # --------------------------------------------------------------------------- streams
@@ -252,9 +280,10 @@ class CharacterStream:
     """
 
     def __init__(self, model: FaceModel, character: Character, skeleton: Motion, *,
-                 mapping: Any = None, fps: float | None = None) -> None:
+                 mapping: Any = None, fps: float | None = None, filter_tau_s: Any = None) -> None:
         self.model = model
         self._e = model.expressiveness(character)
+        self._filter = WeightFilter(model.filter_taus(filter_tau_s))
         self._energy = EnergyStream(model.body(character, skeleton, mapping), fps or skeleton.fps)
         self._state = PhysiologyState(model.physiology_params(character))
         self.t_s = 0.0
@@ -282,7 +311,7 @@ class CharacterStream:
         self._frames += 1
         phys = self._state.step(w_per_kg, dt_s)
         x = np.array([[w_per_kg, p_per_kg, phys["nhr"], phys["epoc_norm"]]], dtype=float)
-        weights = apply_expressiveness(self.model.face.predict(x)[0], self._e)
+        weights = self._filter.step(apply_expressiveness(self.model.face.predict(x)[0], self._e), dt_s)
         self.last = {"t_s": self.t_s, "w_per_kg": float(w_per_kg), "p_per_kg": float(p_per_kg),
                      **{k: float(phys[k]) for k in CURVE_COLUMNS[3:]},
                      **dict(zip(self.model.blendshapes.names, weights.tolist()))}
@@ -300,12 +329,13 @@ class CrowdStream:
 
     def __init__(self, model: FaceModel, characters: Sequence[Character], skeleton: Motion, *,
                  mapping: Any = None, fps: float | None = None,
-                 single_precision: bool = False) -> None:
+                 single_precision: bool = False, filter_tau_s: Any = None) -> None:
         if not characters:
             raise UserError("characters: expected at least one character, found none")
         self.model = model
         self._e = np.array([model.expressiveness(c) for c in characters])
         self._n = len(characters)
+        self._filter = WeightFilter(model.filter_taus(filter_tau_s))
         self._energy = EnergyCrowd([model.body(c, skeleton, mapping) for c in characters],
                                    fps or skeleton.fps)
         params = PhysiologyParams.stack([model.physiology_params(c) for c in characters])
@@ -330,19 +360,31 @@ class CrowdStream:
         phys = self._state.step(w_per_kg, dt_s)
         x = np.column_stack([w_per_kg, p_per_kg, phys["nhr"], phys["epoc_norm"]])
         weights = apply_expressiveness(self.model.face.predict(x, **self._predict_kw), self._e)
+        weights = self._filter.step(weights, dt_s)
         self.last = dict(phys, w_per_kg=np.asarray(w_per_kg), p_per_kg=np.asarray(p_per_kg))
         return weights
 
 
 # --------------------------------------------------------------------------- loading
 
+#: Built-in models by name: the rule face model with the Compendium-calibrated NHR model
+#: (``default``) or with the paper's exact coefficients (``paper-2015``); docs/SCIENCE_NOTES.md.
+BUILT_IN_MODELS: dict[str, tuple[NhrRegression, str]] = {
+    "default": (CALIBRATED_REGRESSION, "default (rule model, Compendium-calibrated heart rate)"),
+    "paper-2015": (PAPER_REGRESSION, "paper-2015 (rule model, the paper's heart-rate coefficients)"),
+}
+
+
 def load_model(path: str | os.PathLike[str] | None = "default") -> FaceModel:
-    """Load a model bundle folder, or the built-in rule model for ``"default"`` / None.
+    """Load a model bundle folder, or a built-in rule model by name.
 
     Parameters
     ----------
-    path : path, "default" or None
-        A folder with ``model.json`` and ``svr.npz`` (see :mod:`effortface.train.bundle`).
+    path : path, "default", "paper-2015" or None
+        A folder with ``model.json`` and ``svr.npz`` (see :mod:`effortface.train.bundle`), or a
+        name of :data:`BUILT_IN_MODELS`: ``"default"`` (also None) calibrates heart rate against
+        the 2024 Adult Compendium of Physical Activities; ``"paper-2015"`` keeps the paper's
+        coefficients (t_root = 7.13 + 0.42 TL, above walking and jumping jacks in W/kg).
 
     Returns
     -------
@@ -353,12 +395,14 @@ def load_model(path: str | os.PathLike[str] | None = "default") -> FaceModel:
     UserError
         A missing or malformed bundle (the message names the file and field).
     """
-    if path is None or str(path) == "default":
-        return FaceModel(RuleFaceModel(DEFAULT_SET), DEFAULT_SET, name="default (rule model)")
-    bundle = read_bundle(Path(path))
+    name = "default" if path is None else str(path)
+    if name in BUILT_IN_MODELS:
+        regression, label = BUILT_IN_MODELS[name]
+        return FaceModel(RuleFaceModel(DEFAULT_SET), DEFAULT_SET, regression, name=label)
+    bundle = read_bundle(Path(path))  # type: ignore[arg-type]
     return FaceModel(bundle.face_model(), bundle.blendshapes, bundle.nhr_regression,
-                     bundle.physiology, name=str(path))
+                     bundle.physiology, name=str(path), filter_tau_s=bundle.filter_tau_s)
 
 
-__all__ = ["Character", "CharacterStream", "CrowdStream", "FaceModel", "load_model",
+__all__ = ["BUILT_IN_MODELS", "Character", "CharacterStream", "CrowdStream", "FaceModel", "load_model",
            "CURVE_COLUMNS", "AGE_RANGE", "HEIGHT_RANGE_M", "MASS_RANGE_KG", "TRAINING_LEVEL_RANGE"]

@@ -2,9 +2,9 @@
 
 :class:`QtReliabilityPanel` views a :class:`~effortface.annotate.annotate_session.BlindRound` (one rater's blind
 ratings of ``reliability/poses.csv``) and the lab's :class:`~effortface.annotate.agreement.AgreementReport`:
-per-pose and per-blendshape tables (mean absolute difference in % of the weight range, ICC(A,1),
-ICC(C,1), Krippendorff's alpha), flagged poses in red and the Bland-Altman plot of every rater
-pair. The report appears only once this rater has rated every pose, so nobody sees the others'
+per-pose and per-blendshape tables (mean absolute difference in % of the weight range, ICC(A,1) and
+ICC(C,1) each with its 95 % confidence interval, Krippendorff's alpha), flagged poses in red and the
+Bland-Altman plot of every rater pair. The report appears only once this rater has rated every pose, so nobody sees the others'
 ratings before giving their own. A lab without a pose set can propose one from HR and phase
 extremes (written to ``reliability/poses.csv``, never over an existing one).
 """
@@ -18,7 +18,8 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6 import QtCore, QtGui, QtWidgets
 
-from effortface.annotate.agreement import FLAG_PCT, N_POSES, AgreementReport, agreement_report, gather_ratings, propose_poses
+from effortface.annotate.agreement import (FLAG_PCT, N_POSES, AgreementReport, agreement_report, format_ci,
+                                           gather_ratings, propose_poses)
 from effortface.annotate.gui.image_view import QtImageView
 from effortface.annotate.reliability import Pose, write_poses
 from effortface.annotate.annotate_session import BlindRound
@@ -111,7 +112,8 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         self.threshold.valueChanged.connect(lambda *_: self.refresh_report())
         self.report_note = QtWidgets.QLabel(wordWrap=True)
         self.per_pose = _table(["pose", "mean |diff| %", "review"])  # sorted worst first
-        self.per_shape = _table(["blendshape", "items", "diff %", "ICC(A,1)", "ICC(C,1)", "alpha"])
+        self.per_shape = _table(["blendshape", "items", "diff %", "ICC(A,1)", "95 % CI", "ICC(C,1)", "95 % CI",
+                                 "alpha"])
         self.pairs = QtWidgets.QLabel(wordWrap=True)
         self.ba_plot = pg.PlotWidget(background="w", title="Bland-Altman: rater a - rater b")
         self.ba_plot.setLabel("bottom", "mean weight of the pair")
@@ -265,7 +267,8 @@ class QtReliabilityPanel(QtWidgets.QWidget):
             o = self.report.overall
             self.report_note.setText(
                 f"{len(self.report.raters)} raters, {len(self.report.poses)} poses: mean |difference| "
-                f"<b>{o.disagreement_pct:.1f} %</b> of the weight range (paper: 11 %), ICC(A,1) {o.icc_a1:.2f}, "
+                f"<b>{o.disagreement_pct:.1f} %</b> of the weight range (paper: 11 %), ICC(A,1) {o.icc_a1:.2f} "
+                f"(95 % CI {o.icc_a1_ci[0]:.2f}-{o.icc_a1_ci[1]:.2f}), "
                 f"alpha {o.alpha:.2f}. Flagged for review: {', '.join(self.report.flagged) or 'none'}.")
         self._show_report()
 
@@ -282,7 +285,8 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         _fill(self.per_pose, [[p, f"{v:.1f}", "FLAG" if p in rep.flagged else ""] for p, v in poses],
               {i for i, (p, _) in enumerate(poses) if p in rep.flagged})
         _fill(self.per_shape, [[s.name, str(s.n_items), f"{s.disagreement_pct:.1f}", f"{s.icc_a1:.3f}",
-                                f"{s.icc_c1:.3f}", f"{s.alpha:.3f}"] for s in [*rep.per_blendshape, rep.overall]])
+                                format_ci(s.icc_a1_ci), f"{s.icc_c1:.3f}", format_ci(s.icc_c1_ci),
+                                f"{s.alpha:.3f}"] for s in [*rep.per_blendshape, rep.overall]])
         self.pairs.setText("   ".join(f"{p.rater_a}-{p.rater_b}: bias {p.bias:+.3f}, limits "
                                       f"{p.loa_low:+.3f} .. {p.loa_high:+.3f}" for p in rep.pairs))
         self._plot_bland_altman(rep)

@@ -22,7 +22,7 @@ import time
 from pathlib import Path
 
 from effortface.core.errors import UserError
-from effortface.demo import (CAPTURE_S, REPLAY_SPEED, capture_step, decode_step, demo_out_dir,
+from effortface.demo import (CAPTURE_S, REPLAY_SPEED, capture_step, decode_step, demo_out_dir, held_out_summary,
                              replace_out, synth_step)
 from effortface.samplelab import sample_lab
 from effortface.train.face_fit import MIN_ROWS_PER_PARTICIPANT
@@ -81,8 +81,9 @@ def run(args: argparse.Namespace) -> int:
                           settings=TrainSettings(max_rows_per_participant=args.max_rows), sources=sources)
     ev = evaluate_bundle(out / "model", table, str(lab))
     write_evaluation(ev, out / "evaluation.md", out / "model", str(lab))
-    _say("evaluate", f"heart rate r {ev.hr['r'].mean():.2f}; face r {ev.face['r'].mean():.2f} "
-                     f"({out / 'evaluation.md'})")
+    _say("evaluate", f"in-sample (the model re-scored on the lab it was trained on): heart rate r "
+                     f"{ev.hr['r'].mean():.2f}; face r {ev.face['r'].mean():.2f} ({out / 'evaluation.md'})")
+    _say("evaluate", held_out_summary(result.metrics))
     _say("synth", f"face curves: {synth_step(out / 'model', lab, out)}")
     _say("done", f"in {time.monotonic() - t0:.0f} s")
     print(f"report: {result.report}")

@@ -75,6 +75,43 @@ def test_iccs_match_pingouin_on_the_sample_raters_and_shrout_fleiss() -> None:
         assert ag.icc_c1(x) == pytest.approx(table["ICC"].iloc[2], abs=1e-12)
 
 
+def test_icc_intervals_match_shrout_fleiss_1979() -> None:
+    """Shrout & Fleiss (1979) give 95 % intervals for their Table 2 example: ICC(2,1) .29 in
+    (.019, .761) and ICC(3,1) .71 in (.342, .946)."""
+    low, up = ag.icc_a1_ci(SF_TABLE)
+    assert (round(low, 2), round(up, 2)) == (0.02, 0.76)
+    low, up = ag.icc_c1_ci(SF_TABLE)
+    assert (round(low, 2), round(up, 2)) == (0.34, 0.95)
+
+
+@pytest.mark.filterwarnings("ignore::DeprecationWarning", "ignore::FutureWarning")
+def test_icc_intervals_match_pingouin() -> None:
+    """pingouin's CI95% (rounded there to 2 decimals) on Shrout & Fleiss, all sample raters, one blendshape."""
+    import pandas as pd
+    import pingouin as pg
+
+    cube, *_ = ag.ratings_cube(read_ratings(RATINGS))
+    for x in (SF_TABLE, cube.reshape(-1, cube.shape[2]), cube[:, 1, :]):
+        n, k = x.shape
+        long = pd.DataFrame({"target": np.repeat(np.arange(n), k), "rater": np.tile(np.arange(k), n),
+                             "rating": x.ravel()})
+        table = pg.intraclass_corr(long, targets="target", raters="rater", ratings="rating")
+        ci = table[[c for c in table.columns if c.startswith("CI")][0]]
+        np.testing.assert_allclose(ag.icc_a1_ci(x), ci.iloc[1], atol=0.0051)
+        np.testing.assert_allclose(ag.icc_c1_ci(x), ci.iloc[2], atol=0.0051)
+
+
+def test_icc_intervals_are_wide_with_18_poses_and_in_the_report() -> None:
+    """The sample lab's blind round (18 poses): each blendshape's interval contains its ICC and spans
+    more than 0.1; the report prints them."""
+    report = ag.agreement_report(read_ratings(RATINGS))
+    for s in report.per_blendshape:
+        assert s.icc_a1_ci[0] < s.icc_a1 < s.icc_a1_ci[1] and s.icc_a1_ci[1] - s.icc_a1_ci[0] > 0.1
+        assert s.icc_c1_ci[0] < s.icc_c1 < s.icc_c1_ci[1]
+    text = ag.format_report(report)
+    assert "95 % CI" in text and ag.format_ci(report.overall.icc_a1_ci) in text
+
+
 def _alpha_interval_by_hand(x: np.ndarray) -> float:
     """Krippendorff's alpha, interval metric, from its pairable-values definition (units x raters)."""
     units = [row[np.isfinite(row)] for row in x]

@@ -17,6 +17,7 @@ from PySide6 import QtCore
 from PySide6.QtTest import QTest
 
 from effortface.annotate.agreement import agreement_report, gather_ratings
+from effortface.annotate.agreement import format_ci as ag_format_ci
 from effortface.annotate.gui.annotate_stage import QtAnnotateStage
 from effortface.annotate.keyframes import read_annotations
 from effortface.annotate.reliability import read_ratings
@@ -238,7 +239,8 @@ def test_reliability_report_matches_the_library(qtbot, stage: QtAnnotateStage, l
     expected = agreement_report(ratings, source=source)
     assert panel.per_shape.rowCount() == 5
     assert panel.per_shape.item(4, 3).text() == f"{expected.overall.icc_a1:.3f}"
-    assert panel.per_shape.item(4, 5).text() == f"{expected.overall.alpha:.3f}"
+    assert panel.per_shape.item(4, 4).text() == ag_format_ci(expected.overall.icc_a1_ci)
+    assert panel.per_shape.item(4, 7).text() == f"{expected.overall.alpha:.3f}"
     flagged = [panel.per_pose.item(r, 0).text() for r in range(panel.per_pose.rowCount())
                if panel.per_pose.item(r, 2).text() == "FLAG"]
     assert sorted(flagged) == sorted(expected.flagged) and flagged == [panel.per_pose.item(0, 0).text()]

@@ -150,3 +150,15 @@ def test_force_never_replaces_the_lab_or_the_current_directory(tmp_path, monkeyp
     assert main(["demo", "--lab", str(fake_lab), "--out", ".", "--force"]) == 2
     assert "found the current directory" in _one_line(capsys.readouterr().err)
     assert (work / "mine.txt").read_text() == "mine"
+
+
+def test_held_out_summary_names_what_is_held_out() -> None:
+    from effortface.commands.demo import held_out_summary
+
+    metrics = {"hr": {"tl_regression": {"r": 0.95}, "per_participant": {"r": 0.91},
+                      "per_participant_in_sample": {"r": 0.96}},
+               "face_held_out": [{"model": "svr", "r": 0.6}, {"model": "svr", "r": 0.8},
+                                 {"model": "svr_known_expressiveness", "r": 0.96}]}
+    line = held_out_summary(metrics)
+    assert line == ("held out (not fitted on the scored participant or session): heart rate TL model r 0.95; "
+                    "own model on other sessions r 0.91; face r 0.70")

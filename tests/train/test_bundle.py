@@ -13,7 +13,7 @@ from sklearn.svm import SVR
 from effortface.core.blendshapes import DEFAULT_SET
 from effortface.core.errors import UserError
 from effortface.train.bundle import BundleFormatError, ModelBundle, read_bundle, write_bundle
-from effortface.train.face import SvrModel
+from effortface.train.face import DEFAULT_FILTER_TAU_S, SvrModel
 from effortface.train.physiology import NhrParams, NhrRegression
 
 
@@ -154,7 +154,24 @@ BAD = {
         lambda f: _edit_json(f, lambda d: d["physiology"]["epoc"].update(threshold=1.5)),
     r"model.json.physiology.epoc.tau_s: expected a positive finite number, found 0":
         lambda f: _edit_json(f, lambda d: d["physiology"]["epoc"].update(tau_s=0)),
+    r"model.json.output_filter.kind: expected 'critically_damped', found 'one_euro'":
+        lambda f: _edit_json(f, lambda d: d["output_filter"].update(kind="one_euro")),
+    r"model.json.output_filter.time_constant_s: expected time constants of 0 s or more, found \[0.1, -1, 0.1, 0.1\]":
+        lambda f: _edit_json(f, lambda d: d["output_filter"].update(time_constant_s=[0.1, -1, 0.1, 0.1])),
+    r"model.json.output_filter.time_constant_s: expected 4 numbers \(one per blendshape\), found \[0.1\]":
+        lambda f: _edit_json(f, lambda d: d["output_filter"].update(time_constant_s=[0.1])),
 }
+
+
+def test_output_filter_round_trip_and_old_bundles_get_the_default(tmp_path: Path) -> None:
+    bundle = make_bundle()
+    bundle.filter_tau_s = (0.1, 0.2, 0.0, 0.3)
+    folder = write_bundle(bundle, tmp_path / "m")
+    assert read_bundle(folder).filter_tau_s == (0.1, 0.2, 0.0, 0.3)
+    doc = json.loads((folder / "model.json").read_text())
+    assert doc["output_filter"] == {"kind": "critically_damped", "time_constant_s": [0.1, 0.2, 0.0, 0.3]}
+    _edit_json(folder, lambda d: d.pop("output_filter"))  # a bundle written before the filter existed
+    assert read_bundle(folder).filter_tau_s == (DEFAULT_FILTER_TAU_S,) * 4
 
 
 @pytest.mark.parametrize(("message", "corrupt"), BAD.items(), ids=list(BAD))

@@ -205,6 +205,59 @@ def test_stream_equals_whole_clip_causal_path(shared_data: Path, clip: str, with
     assert whole.w_per_kg[-1] > 1.0  # a moving clip, not a trivially equal zero
 
 
+def _bobbing_rod(t_s: np.ndarray, amp_m: float = 0.05, freq_hz: float = 2.0) -> np.ndarray:
+    """Joint positions (T, 2, 3) of the horizontal rod bobbing z = 1 + A sin(2 pi f t)."""
+    com = np.zeros((t_s.size, 3))
+    com[:, 2] = 1.0 + amp_m * np.sin(2 * np.pi * freq_hz * t_s)
+    half = np.array([0.0, 0.2, 0.0])
+    return np.stack([com - half, com + half], axis=1)
+
+
+@pytest.mark.parametrize(("fps", "jitter"), [(30.0, 0.0), (60.0, 0.0), (120.0, 0.0), (60.0, 0.3),
+                                             (30.0, 0.3), (120.0, 0.3)],
+                         ids=["30fps", "60fps", "120fps", "60fps+-30%", "30fps+-30%", "120fps+-30%"])
+def test_stream_work_does_not_depend_on_the_game_frame_rate(fps: float, jitter: float) -> None:
+    """A body bobbing 5 cm at 2 Hz, streamed on a 60 fps skeleton at another or a jittering frame rate.
+
+    z = A sin(wt) with A w^2 = 0.05 (4 pi)^2 = 7.9 m/s^2 < g: the energy m g z + 1/2 m v^2 only
+    turns at the top and bottom, so each period's total variation is 4 m g A and
+    w = 4 g A f = 4 * 9.81 * 0.05 * 2 = 3.924 W/kg (M = m). Before the windows were measured in
+    seconds of time (they counted frames at the nominal rate) this gave 7.3 W/kg at 30 fps, 2.0 at
+    120 fps and 4.7 with +-30 % jitter.
+    """
+    exact = 4 * G_M_PER_S2 * 0.05 * 2.0
+    rng = np.random.default_rng(18)
+    dt_s = (1.0 + rng.uniform(-jitter, jitter, int(7 * fps))) / fps
+    t_s = np.concatenate([[0.0], np.cumsum(dt_s[1:])])
+    stream = EnergyStream(_one_segment_body(), 60.0)
+    pos = _bobbing_rod(t_s)
+    w = np.array([stream.step(pos[k], dt_s[k])[0] for k in range(t_s.size)])
+    steady = (t_s >= 2.0) & (t_s < 6.0)
+    assert np.average(w[steady], weights=dt_s[steady]) == pytest.approx(exact, rel=0.05)
+
+
+@pytest.mark.parametrize("fps", [30.0, 120.0])
+def test_free_fall_does_no_work(fps: float) -> None:
+    """z = z0 - g t^2 / 2: kinetic energy gained equals potential energy lost, so w must be ~0.
+
+    With the kinetic energy taken half a frame before the potential energy (backward velocity,
+    height of the frame itself) it was g^2 dt / 2: 0.40 W/kg at 120 Hz, 1.6 at 30 Hz.
+    """
+    t_s = np.arange(int(3 * fps)) / fps
+    com = np.zeros((t_s.size, 3))
+    com[:, 2] = 30.0 - 0.5 * G_M_PER_S2 * t_s**2
+    half = np.array([0.0, 0.2, 0.0])
+    pos = np.stack([com - half, com + half], axis=1)
+    motion = motion_from_positions(pos, ("a", "b"), (-1, 0), fps, source="free fall")
+    stream = EnergyStream(_one_segment_body(), fps)
+    streamed = np.array([stream.step(pos[k], 1 / fps)[0] for k in range(t_s.size)])
+    steady = (t_s >= 1.5) & (t_s < 2.5)  # windows filled, away from the zero-phase filter's clip end
+    for zero_phase in (True, False):
+        w = work_and_power(motion, _one_segment_body(), zero_phase=zero_phase).w_per_kg
+        assert np.max(w[steady]) < 0.05, zero_phase
+    assert np.max(streamed[steady]) < 0.05
+
+
 def test_zero_phase_and_causal_agree_on_average(shared_data: Path) -> None:
     """The causal filter delays the curve but barely changes the mean work of a cyclic clip."""
     motion = read_motion(shared_data / "motion/cmu_13_29_jumping_jacks_120fps.bvh")

@@ -90,6 +90,8 @@ def test_model_json_has_gamma_numbers_and_parity(model_dir):
     card = (model_dir / MODEL_CARD).read_text()
     for section in ("## Intended use", "## Data", "## Metrics", "## Limitations"):
         assert section in card
+    assert "output filter: critically damped" in card and "mouth_open 0.15 s" in card
+    assert "svr_known_expressiveness" in card and "17-26 %" in card and "## Built-in models" in card
 
 
 def test_existing_folder_needs_force(fitted, model_dir):
@@ -136,3 +138,4 @@ def test_model_card_warns_when_tl_model_generalises_worse():
     worse = hr_warnings({"tl_regression": {"rmse_pct": 23.0}, "pooled": {"rmse_pct": 9.0}})
     assert len(worse) == 1 and "23.0 % RMSE" in worse[0] and "9.0 %" in worse[0]
     assert hr_warnings({"tl_regression": {"rmse_pct": 8.0}, "pooled": {"rmse_pct": 9.0}}) == []
+    assert hr_warnings({"tl_regression": {"rmse_pct": 23.0}, "pooled_threshold": {"rmse_pct": 9.0}})

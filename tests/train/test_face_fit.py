@@ -15,7 +15,8 @@ from sklearn.svm import SVR
 from effortface.core.blendshapes import DEFAULT_SET
 from effortface.train.dataset import prepare, sessions_table, synthetic_table
 from effortface.train.face_fit import (FEATURES, PROTOCOLS, FaceFitConfig, expressiveness, face_data,
-                            fit_face_models, grid_search, held_out_scores, protocol_scores, subsample)
+                            fit_face_models, grid_search, held_out_predictions, held_out_scores,
+                            protocol_scores, subsample)
 
 SAMPLE_LAB = Path(__file__).resolve().parents[2] / "sample_sessions"
 SMALL = {"C": [1.0, 10.0], "gamma": [0.1, 0.5], "epsilon": [0.05]}
@@ -58,7 +59,7 @@ def test_grouped_cv_is_the_default_and_gamma_is_a_number(synthetic):
     assert fit.config.cv == "lopo"
     for svr in fit.svrs.values():
         assert isinstance(svr.gamma, float) and svr.kernel == "rbf"
-    assert set(held_out_scores(fit)["model"]) == {"svr", "mean", "linear"}
+    assert set(held_out_scores(fit)["model"]) == {"svr", "mean", "linear", "svr_known_expressiveness"}
 
 
 def test_cached_search_equals_plain_gridsearchcv(synthetic):
@@ -84,6 +85,50 @@ def test_protocols_on_synthetic(synthetic):
     assert preds["unseen_exercise"].shape == fit.data.y_norm.shape
 
 
+ONE_POINT = {"C": [1.0], "gamma": [0.5], "epsilon": [0.05]}  # nothing for the labels to choose
+
+
+def _relabel(table: pd.DataFrame, participant: str, how: str) -> pd.DataFrame:
+    """The table with one participant's key-framed weights shuffled in time or halved."""
+    out = table.copy()
+    rows = out["participant"] == participant
+    names = list(DEFAULT_SET.names)
+    if how == "shuffle":
+        order = np.random.default_rng(5).permutation(int(rows.sum()))
+        out.loc[rows, names] = out.loc[rows, names].to_numpy()[order]
+    else:
+        out.loc[rows, names] = out.loc[rows, names].to_numpy() * 0.5
+    return out
+
+
+@pytest.mark.parametrize("how", ["shuffle", "halve"])
+def test_held_out_predictions_do_not_depend_on_the_scored_participants_labels(synthetic, how):
+    """The held-out participant's headline predictions are unchanged when their own key-frames are
+    shuffled in time or halved (which changes their maximum); the known-expressiveness predictions,
+    labelled as borrowing from the labels, do change when the maximum changes."""
+    config = FaceFitConfig(grid=ONE_POINT, max_rows_per_participant=100)
+    who = sorted(synthetic["participant"].unique())[1]
+    fits = [fit_face_models(t, DEFAULT_SET.names, config) for t in (synthetic, _relabel(synthetic, who, how))]
+    rows = fits[0].data.groups == who
+    np.testing.assert_array_equal(fits[1].data.groups, fits[0].data.groups)
+    headline = [held_out_predictions(f)[rows] for f in fits]
+    np.testing.assert_allclose(headline[1], headline[0], rtol=1e-9, atol=1e-12)
+    assert np.isfinite(headline[0]).any() and np.nanstd(headline[0]) > 0.01
+    known = [held_out_predictions(f, known_expressiveness=True)[rows] for f in fits]
+    if how == "halve":
+        assert np.nanmax(np.abs(known[1] - known[0])) > 0.05
+
+
+def test_unseen_participant_protocol_uses_no_test_labels(synthetic):
+    """The Fig. 3 'unseen participant' predictions of a participant ignore their key-frames too."""
+    config = FaceFitConfig(grid=ONE_POINT, max_rows_per_participant=100)
+    who = sorted(synthetic["participant"].unique())[2]
+    fits = [fit_face_models(t, DEFAULT_SET.names, config) for t in (synthetic, _relabel(synthetic, who, "halve"))]
+    rows = fits[0].data.groups == who
+    preds = [protocol_scores(f, ["unseen_participant"])[1]["unseen_participant"][rows] for f in fits]
+    np.testing.assert_allclose(preds[1], preds[0], rtol=1e-9, atol=1e-12)
+
+
 def test_bad_config():
     with pytest.raises(ValueError, match="cv: expected one of"):
         FaceFitConfig(cv="random")
@@ -96,6 +141,7 @@ def test_bad_config():
 
 def test_svr_beats_both_baselines_on_held_out_participants(lab_fit):
     scores = held_out_scores(lab_fit).groupby("model")[["r", "rmse_pct_unit"]].mean()
+    print(scores)
     assert scores.loc["svr", "rmse_pct_unit"] < scores.loc["mean", "rmse_pct_unit"]
     assert scores.loc["svr", "rmse_pct_unit"] < scores.loc["linear", "rmse_pct_unit"]
     assert scores.loc["svr", "r"] > scores.loc["linear", "r"]

@@ -12,6 +12,7 @@ from effortface.core.errors import UserError
 from tests.train.test_bundle import make_bundle
 from effortface.train.bundle import write_bundle
 from effortface.train.motion import motion_from_positions, read_motion
+from effortface.train.face import DEFAULT_FILTER_TAU_S, WeightFilter, filter_weights, jitter
 from effortface.train.runtime import CURVE_COLUMNS, Character, load_model
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -133,12 +134,57 @@ def test_crowd_equals_single_streams(jumping_jacks, tmp_path: Path) -> None:
 def test_bundle_model_uses_its_svr(jumping_jacks, tmp_path: Path) -> None:
     bundle = make_bundle(3)
     model = load_model(write_bundle(bundle, tmp_path / "m"))
-    curves = model.synthesize(jumping_jacks, Character())
+    curves = model.synthesize(jumping_jacks, Character(), filter_tau_s=0)
     x = np.column_stack([curves["w_per_kg"], curves["p_per_kg"], curves["nhr"],
                          curves["epoc"] / bundle.epoc_params().scale_ml_per_kg])
     expected = np.clip(bundle.face_model().predict(x), 0, 1)
-    np.testing.assert_allclose(np.column_stack([curves[n] for n in model.blendshapes.names]),
-                               expected, atol=1e-10)
+    raw = np.column_stack([curves[n] for n in model.blendshapes.names])
+    np.testing.assert_allclose(raw, expected, atol=1e-10)
+    smooth = model.synthesize(jumping_jacks, Character())  # the bundle's output filter, on by default
+    np.testing.assert_allclose(np.column_stack([smooth[n] for n in model.blendshapes.names]),
+                               filter_weights(expected, 1 / jumping_jacks.fps, DEFAULT_FILTER_TAU_S),
+                               atol=1e-10)
+
+
+def test_output_filter_removes_the_jump_rhythm(jumping_jacks, tmp_path: Path) -> None:
+    """Jumping jacks through an SVR bundle: the filter cuts the jitter (median largest frame-to-frame
+    step of any weight) at least 3x and keeps the mean face within 0.03 once effort has built up."""
+    model = load_model(write_bundle(make_bundle(), tmp_path / "m"))
+    raw = model.synthesize(jumping_jacks, Character(), filter_tau_s=0)
+    smooth = model.synthesize(jumping_jacks, Character())
+    names = model.blendshapes.names
+    raw_w, smooth_w = (np.column_stack([c[n] for n in names]) for c in (raw, smooth))
+    print(f"jitter: raw {jitter(raw_w):.5f}, filtered {jitter(smooth_w):.5f}")
+    assert jitter(smooth_w) < jitter(raw_w) / 3
+    late = raw["t_s"] >= 1.0
+    np.testing.assert_allclose(smooth_w[late].mean(axis=0), raw_w[late].mean(axis=0), atol=0.03)
+
+
+@pytest.mark.parametrize("fps", [30.0, 120.0])
+def test_weight_filter_is_critically_damped_at_any_frame_time(fps: float) -> None:
+    """A unit step through the filter with +-30 % jittering frame times follows the critically
+    damped response 1 - (1 + t/tau) exp(-t/tau): no overshoot, same curve at 30 and 120 fps."""
+    tau = 0.15
+    rng = np.random.default_rng(3)
+    dt_s = (1.0 + rng.uniform(-0.3, 0.3, int(2 * fps))) / fps
+    f = WeightFilter(np.full(2, tau))
+    f.step(np.zeros(2), dt_s[0])
+    t_s = np.cumsum(dt_s[1:])
+    y = np.array([f.step(np.ones(2), dt)[0] for dt in dt_s[1:]])
+    exact = 1 - (1 + t_s / tau) * np.exp(-t_s / tau)
+    assert np.all(np.diff(y) >= 0) and y.max() <= 1.0
+    np.testing.assert_allclose(y, exact, atol=0.05)  # first-order in dt / tau: 0.037 at 30 fps
+
+
+def test_filter_tau_is_checked_and_zero_passes_through(jumping_jacks) -> None:
+    model = load_model("default")
+    with pytest.raises(UserError, match=r"filter_tau_s: expected time constants of 0 s or more, found -1"):
+        model.synthesize(jumping_jacks, Character(), filter_tau_s=-1)
+    with pytest.raises(UserError, match=r"filter_tau_s: expected a time constant in seconds \(>= 0\) or 4"):
+        model.stream(Character(), jumping_jacks, filter_tau_s=(0.1, 0.2))
+    f = WeightFilter(np.zeros(4))
+    f.step(np.zeros(4), 0.01)
+    np.testing.assert_array_equal(f.step(np.full(4, 0.7), 0.01), np.full(4, 0.7))
 
 
 def test_load_model_errors(tmp_path: Path) -> None:
@@ -156,3 +202,42 @@ def test_rule_face_orders_the_real_clips(shared_data: Path) -> None:
         curves = model.synthesize(shared_data / "motion" / name, Character(training_level=0))
         squint.append(curves["eye_squint"][len(curves["t_s"]) // 4:].mean())
     assert max(squint[:2]) < 0.2 < squint[2] < squint[3]
+
+
+def test_character_stream_work_does_not_depend_on_the_game_frame_rate(jumping_jacks) -> None:
+    """The jumping-jacks skeleton is 120 fps; a game stepping it at 30 fps (every 4th frame) or with
+    jittering frame times gets the same mean work (issue 18: 30 fps used to give 10.5 instead of 8.7 W/kg)."""
+    model = load_model("default")
+    hero = Character()
+
+    def mean_w(idx: np.ndarray) -> float:
+        live = model.stream(hero, jumping_jacks)
+        t = jumping_jacks.t_s[idx]
+        dt = np.diff(t, prepend=t[0] - 1 / 120)
+        w = np.array([(live.step(jumping_jacks.positions_m[i], d), live.last["w_per_kg"])[1]
+                      for i, d in zip(idx, dt)])
+        keep = t >= 1.0
+        return float(np.average(w[keep], weights=dt[keep]))
+
+    n = jumping_jacks.n_frames
+    every = mean_w(np.arange(n))
+    rng = np.random.default_rng(0)
+    jittered = np.unique(np.cumsum(rng.integers(1, 4, n)))  # frame gaps of 1-3 skeleton frames
+    for idx in (np.arange(0, n, 4), jittered[jittered < n]):
+        assert mean_w(idx) == pytest.approx(every, rel=0.05)
+
+
+def test_synthesize_stage_curves_use_the_output_filter(jumping_jacks) -> None:
+    """The Synthesize stage's session (what its plots, preview and Live Link export show) gets the
+    model's filtered weights: the same as synthesize(), with less jitter than the raw weights."""
+    from effortface.train.synth_session import SynthSession
+
+    session = SynthSession("default")
+    session.load_motion(jumping_jacks)
+    model = session.model
+    names = model.blendshapes.names
+    shown = np.column_stack([session.curves[n] for n in names])
+    raw = model.synthesize(jumping_jacks, session.character, filter_tau_s=0)
+    filtered = model.synthesize(jumping_jacks, session.character)
+    np.testing.assert_allclose(shown, np.column_stack([filtered[n] for n in names]), atol=1e-9)
+    assert jitter(shown) < jitter(np.column_stack([raw[n] for n in names])) / 2

@@ -15,6 +15,8 @@ from effortface.cli import main
 from tests.train.test_bundle import make_bundle
 from effortface.train.bundle import write_bundle
 from effortface.train.curves_io import LIVELINK_BLENDSHAPES, livelink_timecode
+from effortface.train.face import jitter
+from effortface.core.blendshapes import DEFAULT_SET
 
 ROOT = Path(__file__).resolve().parents[2]
 JJ = "motion/cmu_13_29_jumping_jacks_120fps.bvh"
@@ -137,6 +139,8 @@ BAD_CLI = {
     r"character options: sex: expected one of female, male": lambda d, t: [str(d / JJ), "--sex", "x"],
     r"character options: load_back_kg: expected a load of 0 kg or more":
         lambda d, t: [str(d / JJ), "--load-back", "-1"],
+    r"--filter-tau-s: filter_tau_s: expected time constants of 0 s or more, found -0.5":
+        lambda d, t: [str(d / JJ), "--filter-tau-s", "-0.5"],
     r"clip\.txt: expected a motion file ending in \.bvh or \.npz":
         lambda d, t: [str(t / "clip.txt")],
 }
@@ -297,3 +301,14 @@ def test_livelink_bad_arkit_entry_is_one_line(shared_data: Path, tmp_path: Path,
     assert status == 2 and err.count("\n") == 1, err
     assert re.search(r"model\.json\.blendshapes\[1\]\.arkit: expected ARKit blendshape names", err), err
     assert not out.exists()
+
+
+def test_synth_filters_the_weights_by_default(shared_data: Path, tmp_path: Path) -> None:
+    """synth's weights go through the output filter (0.15 s) unless --filter-tau-s 0 asks for raw ones."""
+    smooth, raw = tmp_path / "smooth.csv", tmp_path / "raw.csv"
+    assert main(["synth", "default", str(shared_data / JJ), "--out", str(smooth)]) == 0
+    assert main(["synth", "default", str(shared_data / JJ), "--out", str(raw), "--filter-tau-s", "0"]) == 0
+    names = list(DEFAULT_SET.names)
+    weights = [np.genfromtxt(f, delimiter=",", names=True) for f in (smooth, raw)]
+    smooth_w, raw_w = (np.column_stack([w[n] for n in names]) for w in weights)
+    assert jitter(smooth_w) < jitter(raw_w) / 2

@@ -37,7 +37,8 @@ def test_train_writes_bundle_and_report(trained, capsys):
     assert "fig2_nhr.png" in report and "fig3_blendshapes.png" in report
     assert (trained / "report" / "fig2_nhr.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     doc = json.loads((trained / "model.json").read_text())
-    assert set(doc["metrics"]["hr"]) == {"per_participant", "pooled", "tl_regression"}
+    assert set(doc["metrics"]["hr"]) == {"per_participant", "per_participant_in_sample", "pooled_threshold",
+                                         "tl_regression"}
     assert doc["provenance"]["cv"] == "lopo" and doc["provenance"]["n_participants"] == 3
 
 

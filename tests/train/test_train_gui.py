@@ -61,7 +61,8 @@ def test_train_export_and_refuse_overwrite(qtbot, stage: QtTrainStage, tmp_path:
     _train(qtbot, stage)
     outcome = stage.session.outcome
     assert outcome is not None and outcome.sessions == CARDIO
-    assert set(outcome.hr_table()["model"]) == {"per_participant", "pooled", "tl_regression"}
+    assert set(outcome.hr_table()["model"]) == {"per_participant", "per_participant_in_sample", "pooled_threshold",
+                                                "tl_regression"}
     x, y = stage.hr_results.curves["tl"].getData()          # Fig. 2 is drawn from the results
     np.testing.assert_allclose(y, outcome.fig2(CARDIO[0])["tl"])
     assert stage.face_results.table.rowCount() == len(outcome.face.blendshapes) + 1  # + mean row

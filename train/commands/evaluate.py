@@ -35,8 +35,8 @@ def check_model_dir(model: str) -> Path:
         For ``default``, a missing path, or a file.
     """
     expected = f"{model}: expected a model folder written by 'effortface train' (model.json, svr.npz)"
-    if model == "default":
-        raise UserError(f"{expected}, found 'default' (the built-in rule model has no fitted models "
+    if model in ("default", "paper-2015"):  # runtime.BUILT_IN_MODELS
+        raise UserError(f"{expected}, found {model!r} (a built-in rule model has no fitted models "
                         "to evaluate)")
     path = Path(model)
     if not path.is_dir():

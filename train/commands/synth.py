@@ -38,6 +38,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--load-back", type=float, default=0.0, metavar="KG", help="on the back")
     parser.add_argument("--mapping", default=None, metavar="JSON",
                         help="joint-to-segment mapping file (default: built-in conventions)")
+    parser.add_argument("--filter-tau-s", type=float, default=None, metavar="S",
+                        help="output filter time constant on the weights, seconds (default: the "
+                             "model's, 0.15; 0 writes the raw, unfiltered weights)")
     parser.add_argument("--unit-m", type=float, default=None, metavar="M",
                         help="BVH length unit in metres (default: detected from the rest pose; "
                              "CMU cgspeed 0.05644)")
@@ -75,6 +78,10 @@ def run(args: argparse.Namespace) -> int:
     if args.unit_m is not None and not (math.isfinite(args.unit_m) and args.unit_m > 0):
         raise UserError(f"--unit-m: expected a length in metres above 0, found {args.unit_m:g}")
     motion = read_motion(args.motion, unit_m=args.unit_m)
-    curves = model.synthesize(motion, character, mapping=args.mapping)
+    try:
+        taus = model.filter_taus(args.filter_tau_s)
+    except UserError as exc:
+        raise UserError(f"--filter-tau-s: {exc}") from None
+    curves = model.synthesize(motion, character, mapping=args.mapping, filter_tau_s=taus)
     write_curves(out, curves, model, fmt=args.format, force=args.force)
     return 0

@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
                           sources=sources)
     hr = result.metrics["hr"]
     print(f"model: {result.model_dir}")
-    print("heart rate (pooled and TL models on held-out participants): " + "; ".join(
+    print("heart rate (held out unless marked in-sample): " + "; ".join(
         f"{k} r={v['r']:.2f} RMSE={v['rmse_pct']:.1f}%" for k, v in hr.items()))
     print(f"report: {result.report}")
     return 0

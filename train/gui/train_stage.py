@@ -276,8 +276,9 @@ class QtHeartRateResults(QtWidgets.QWidget):
         layout = QtWidgets.QVBoxLayout(self)
         layout.addLayout(row)
         layout.addWidget(self.plot, 3)
-        layout.addWidget(caption("Heart-rate models (pooled and TL model fitted without the scored "
-                                 "participant; the paper's figures in the last columns):"))
+        layout.addWidget(caption("Heart-rate models (held out: own model on the participant's other "
+                                 "sessions, pooled threshold and TL models without the participant; "
+                                 "per_participant_in_sample is in-sample; the paper's figures last):"))
         layout.addWidget(self.table, 1)
         session.results_changed.connect(self.show_results)
 

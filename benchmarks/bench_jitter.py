@@ -1,0 +1,133 @@
+"""Jitter of the blendshape weights before and after the output filter, and the filter's cost.
+
+On the real CMU jumping-jacks clip (``tests/data/motion``, 120 Hz, looped 10 times = 37 s so
+heart rate and fatigue build up), with an SVR bundle trained here on the sample lab (``effortface
+train sample_sessions``, in a temporary folder; or ``--model DIR``) and with the built-in rule model:
+
+1. **Jitter**: the median over frames of the largest frame-to-frame step of any blendshape
+   weight (:func:`effortface.train.face.jitter`), raw (``filter_tau_s=0``) and filtered (the
+   model's time constant, 0.15 s by default); also each weight's mean, to show the face keeps
+   its level. Ratio raw / filtered.
+2. **Cost per frame**: one :class:`~effortface.train.face.WeightFilter` step, against a baseline
+   measured in the same process: one step of the live stream the filter sits in
+   (``model.stream(...).step``: energies, physiology, face model and filter). Also the whole-clip
+   filter (:func:`~effortface.train.face.filter_weights`) against the whole-clip synthesis.
+
+Run: ``python benchmarks/bench_jitter.py [--model DIR] [--loops 10]``
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")  # one core
+
+import argparse  # noqa: E402
+import dataclasses  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from effortface.train.face import WeightFilter, filter_weights, jitter  # noqa: E402
+from effortface.train.motion import Motion, read_motion  # noqa: E402
+from effortface.train.runtime import Character, FaceModel, load_model  # noqa: E402
+
+CLIP = ROOT / "tests" / "data" / "motion" / "cmu_13_29_jumping_jacks_120fps.bvh"
+
+
+def looped_clip(loops: int) -> Motion:
+    """The clip played forwards then backwards ``loops`` times (a palindrome: no jumps at the seams)."""
+    clip = read_motion(CLIP)
+    order = np.r_[np.arange(clip.n_frames), np.arange(clip.n_frames)[::-1]]
+    idx = np.resize(order, loops * clip.n_frames)
+    assert clip.rotations is not None
+    return dataclasses.replace(clip, positions_m=clip.positions_m[idx], rotations=clip.rotations[idx])
+
+
+def train_model(folder: Path) -> Path:
+    """An SVR bundle trained on the sample lab with the command line (small grid)."""
+    out = folder / "model"
+    subprocess.run([sys.executable, "-m", "effortface", "train", str(ROOT / "sample_sessions"),
+                    "--out", str(out)], check=True, cwd=ROOT, stdout=subprocess.DEVNULL,
+                   stderr=subprocess.DEVNULL)
+    return out
+
+
+def _weights(curves: dict[str, np.ndarray], model: FaceModel) -> np.ndarray:
+    return np.column_stack([curves[n] for n in model.blendshapes.names])
+
+
+def jitter_figures(model: FaceModel, motion: Motion, label: str) -> None:
+    """Print jitter and mean weights, raw and filtered."""
+    hero = Character()
+    raw = _weights(model.synthesize(motion, hero, filter_tau_s=0), model)
+    smooth = _weights(model.synthesize(motion, hero), model)
+    j_raw, j_smooth = jitter(raw), jitter(smooth)
+    print(f"{label}: tau = {model.filter_tau_s[0]:g} s, {motion.n_frames} frames at {motion.fps:g} Hz")
+    print(f"  jitter (median largest frame-to-frame step): raw {j_raw:.5f}, filtered {j_smooth:.5f}, "
+          f"ratio {j_raw / j_smooth:.1f}x")
+    print(f"  largest step anywhere: raw {np.abs(np.diff(raw, axis=0)).max():.4f}, "
+          f"filtered {np.abs(np.diff(smooth, axis=0)).max():.4f}")
+    for i, name in enumerate(model.blendshapes.names):
+        print(f"  {name:14s} mean raw {raw[:, i].mean():.3f}  filtered {smooth[:, i].mean():.3f}")
+
+
+def _per_call_s(fn, n: int) -> float:
+    """Best of 3 runs of ``n`` calls: seconds per call."""
+    best = np.inf
+    for _ in range(3):
+        t0 = time.perf_counter()
+        for k in range(n):
+            fn(k)
+        best = min(best, (time.perf_counter() - t0) / n)
+    return best
+
+
+def cost_figures(model: FaceModel, motion: Motion, label: str) -> None:
+    """Print the filter's cost per frame and per clip, with same-process baselines."""
+    hero = Character()
+    dt = 1.0 / motion.fps
+    n = min(2000, motion.n_frames)
+    raw = _weights(model.synthesize(motion, hero, filter_tau_s=0), model)
+    filt = WeightFilter(model.filter_tau_s)
+    filter_s = _per_call_s(lambda k: filt.step(raw[k], dt), n)
+    live = model.stream(hero, motion)
+    assert motion.rotations is not None
+    rot = motion.rotations
+    stream_s = _per_call_s(lambda k: live.step(motion.positions_m[k % motion.n_frames], dt,
+                                               rot[k % motion.n_frames]), n)
+    clip_filter_s = _per_call_s(lambda k: filter_weights(raw, dt, model.filter_tau_s), 3)
+    clip_synth_s = _per_call_s(lambda k: model.synthesize(motion, hero), 1)
+    print(f"{label}: filter step {filter_s * 1e6:.1f} us/frame; baseline live stream step "
+          f"{stream_s * 1e6:.1f} us/frame; filter share {filter_s / stream_s:.1%}")
+    print(f"  whole clip: filter {clip_filter_s * 1e3:.2f} ms, synthesize {clip_synth_s * 1e3:.1f} ms, "
+          f"filter share {clip_filter_s / clip_synth_s:.1%} "
+          f"({clip_filter_s / motion.n_frames * 1e9:.0f} ns/frame)")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--model", type=Path, default=None, help="trained bundle (default: train one)")
+    parser.add_argument("--loops", type=int, default=10, help="clip passes (default 10)")
+    args = parser.parse_args(argv)
+    motion = looped_clip(args.loops)
+    with tempfile.TemporaryDirectory() as tmp:
+        model_dir = args.model or train_model(Path(tmp))
+        trained = load_model(model_dir)
+        for model, label in ((trained, f"trained SVR bundle ({model_dir.name})"),
+                             (load_model("default"), "built-in rule model")):
+            jitter_figures(model, motion, label)
+            cost_figures(model, motion, label)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
