@@ -30,14 +30,14 @@ from effortface.capture_tool.session import Session, read_session
 
 EVENTS = ("frame_changed", "blendshape_changed", "keys_changed", "saved", "pass_done")
 ANNOTATIONS_DIR = "annotations"
-_RATER_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,31}$")
+_RATER_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,31}")
 #: snapshots kept for undo
 UNDO_LIMIT = 500
 
 
 def check_rater(rater: str) -> str:
     """Return ``rater`` if it is a valid rater code (it names a file), else raise UserError."""
-    if not isinstance(rater, str) or not _RATER_RE.match(rater):
+    if not isinstance(rater, str) or not _RATER_RE.fullmatch(rater):
         raise UserError(f"rater: expected a code of 1-32 letters, digits, '_' or '-' (e.g. R1), found {rater!r}")
     return rater
 

@@ -43,9 +43,9 @@ FRAMES_HEADER = "frame,t_s"
 
 #: participant codes: a capital letter, then capitals / digits / '-', 2-16 characters, with a digit
 CODE_RULE = "a capital letter then capitals, digits or '-' (2-16 characters, at least one digit), e.g. P01"
-_CODE_RE = re.compile(r"^[A-Z][A-Z0-9-]{1,15}$")
-_LABEL_RE = re.compile(r"^[A-Za-z0-9-]{1,32}$")
-_ID_RE = re.compile(r"^(?P<code>[A-Z][A-Z0-9-]{1,15})_(?P<stamp>\d{8}-\d{6})(?:_(?P<label>[A-Za-z0-9-]{1,32}))?$")
+_CODE_RE = re.compile(r"[A-Z][A-Z0-9-]{1,15}")
+_LABEL_RE = re.compile(r"[A-Za-z0-9-]{1,32}")
+_ID_RE = re.compile(r"(?P<code>[A-Z][A-Z0-9-]{1,15})_(?P<stamp>\d{8}-\d{6})(?:_(?P<label>[A-Za-z0-9-]{1,32}))?")
 _STAMP_FMT = "%Y%m%d-%H%M%S"
 SEXES = ("female", "male")
 SEX_ALIASES = {"f": "female", "m": "male", "female": "female", "male": "male"}
@@ -156,7 +156,7 @@ def check_participant_code(code: str) -> str:
         If it does not follow :data:`CODE_RULE` (names such as ``"Jane Doe"`` or ``"jane"`` fail:
         they have spaces, lower case letters or no digit).
     """
-    if not isinstance(code, str) or not _CODE_RE.match(code) or not any(c.isdigit() for c in code):
+    if not isinstance(code, str) or not _CODE_RE.fullmatch(code) or not any(c.isdigit() for c in code):
         raise UserError(f"participant code: expected {CODE_RULE} (codes, never names), found {code!r}")
     return code
 
@@ -177,7 +177,7 @@ def make_session_id(code: str, when: _dt.datetime, label: str | None = None) -> 
     check_participant_code(code)
     sid = f"{code}_{when.strftime(_STAMP_FMT)}"
     if label:
-        if not _LABEL_RE.match(label):
+        if not _LABEL_RE.fullmatch(label):
             raise UserError(f"session label: expected 1-32 letters, digits or '-', found {label!r}")
         sid += f"_{label}"
     return sid
@@ -185,7 +185,7 @@ def make_session_id(code: str, when: _dt.datetime, label: str | None = None) -> 
 
 def parse_session_id(session_id: str) -> tuple[str, _dt.datetime, str | None]:
     """Split a session id into ``(code, start time, label or None)``; UserError if malformed."""
-    m = _ID_RE.match(session_id)
+    m = _ID_RE.fullmatch(session_id)
     if not m:
         raise UserError(
             f"session id: expected <code>_<YYYYmmdd-HHMMSS>[_<label>], found {session_id!r}"

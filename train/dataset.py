@@ -302,6 +302,7 @@ def session_table(folder: str | os.PathLike, blendshapes: BlendshapeSet = DEFAUL
         See :func:`sessions_table`.
     """
     s = read_session(folder)
+    _check_hr_samples(s)
     hr_t = [h.t_s for h in s.heart_rate if h.valid and h.hr_bpm is not None]
     if len(hr_t) < 2:
         raise DatasetError(f"{s.path / 'heart_rate.csv'}: expected valid heart-rate samples, "
@@ -320,6 +321,16 @@ def session_table(folder: str | os.PathLike, blendshapes: BlendshapeSet = DEFAUL
     df["exercise"] = _session_label(s.info.session_id)
     df["hr_rest_bpm"], df["hr_max_bpm"] = part.hr_rest_bpm, part.hr_max_bpm
     return df
+
+
+def _check_hr_samples(s: Session) -> None:
+    """DatasetError for a valid strap sample outside the hr_bpm range, checked before interpolation
+    (which would hide it: -70 bpm between two 72 bpm samples became 50.8 bpm at the second)."""
+    lo, hi = VALUE_RANGES["hr_bpm"]
+    for i, h in enumerate(s.heart_rate):
+        if h.valid and h.hr_bpm is not None and not lo <= h.hr_bpm <= hi:
+            raise DatasetError(f"{s.path / 'heart_rate.csv'}: line {i + 2}: expected hr_bpm from {lo:g} to "
+                               f"{hi:g} on a valid row, found {h.hr_bpm:g}")
 
 
 def _hr_per_second(s: Session, t: np.ndarray) -> np.ndarray:
