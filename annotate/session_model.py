@@ -26,7 +26,7 @@ from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
 from effortface.annotate.keyframes import INTERPOLATIONS, Keyframe, KeyframeTrack, RaterAnnotations, read_annotations
 from effortface.annotate.video_index import FrameTimes
 from effortface.core.errors import UserError
-from effortface.capture_tool.session import Session, read_session
+from effortface.capture_tool.session import Session, check_not_recording, read_session
 
 EVENTS = ("frame_changed", "blendshape_changed", "keys_changed", "saved", "pass_done")
 ANNOTATIONS_DIR = "annotations"
@@ -64,11 +64,13 @@ class AnnotationSession:
     Raises
     ------
     UserError
-        If the session has no video frames, the rater code is invalid, or the file is malformed.
+        If the session has no video frames, the rater code is invalid, or the file is malformed;
+        a LockedError if a capture is recording the session now.
     """
 
     def __init__(self, session_folder: str | os.PathLike, rater: str, *,
                  blendshapes: BlendshapeSet = DEFAULT_SET, autosave: bool = True) -> None:
+        check_not_recording(session_folder, "annotate")
         self.session: Session = read_session(session_folder)
         if not self.session.frame_times_s:
             raise UserError(f"{self.session.path}: expected a session with video_frames.csv, found no video frames")

@@ -38,7 +38,8 @@ from effortface.annotate.keyframes import read_annotations
 from effortface.core.errors import UserError
 from effortface.core.fileio import refuse_overwrite
 from effortface.capture_tool.session import PARTICIPANT_RANGES, SEX_ALIASES  # the limits capture enforces
-from effortface.capture_tool.session import SEXES, Session, list_sessions, parse_session_id, read_session
+from effortface.capture_tool.session import (SEXES, Session, check_not_recording, list_sessions, parse_session_id,
+                                             read_session)
 from effortface.train.hr_fit import HrSeries
 from effortface.train.physiology import (EpocParams, hr_max_bpm, hr_rest_bpm, epoc_step,
                               vo2max_ml_per_kg_min, VO2_REST_ML_PER_KG_MIN)
@@ -250,9 +251,14 @@ def _session_label(session_id: str) -> str:
 
 
 def expand_paths(paths: Iterable[str | os.PathLike]) -> list[Path]:
-    """Session folders from a mix of sessions and folders of sessions (UserError if none)."""
+    """Session folders from a mix of sessions and folders of sessions (UserError if none).
+
+    Sessions a capture is recording now are left out of folders, and refused when named.
+    """
     out: list[Path] = []
     for p in map(Path, paths):
+        if (p / "session.json").is_file():
+            check_not_recording(p, "train on")
         out.extend([p] if (p / "session.json").is_file() else list_sessions(p))
     if not out:
         raise DatasetError(f"{', '.join(map(str, paths))}: expected session folders, found none")
