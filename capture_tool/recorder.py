@@ -170,16 +170,29 @@ class Recorder:
             if self.camera is not None:
                 self.camera.stop()
             raise
+        try:
+            self._open_files()
+        except BaseException:  # e.g. a full disk: stop the devices and free the session's lock
+            self.link.stop()
+            if self.camera is not None:
+                self.camera.stop()
+            if self._lock is not None:
+                self._lock.release()
+            raise
+        self._writer_thread = threading.Thread(target=self._write_loop, name="recorder-writer", daemon=True)
+        self._writer_thread.start()
+        self.mark("sync", "session_start", self.info.created_utc)
+        return self.path
+
+    def _open_files(self) -> None:
+        """Create the session's files and start the link and camera threads writing them."""
+        assert self.path is not None
         self._hr = HrWriter(self.path / HEART_RATE_CSV)
         self._events = EventWriter(self.path / EVENTS_CSV)
         self._t0 = time.monotonic()
         self.link.start(self.path / SERIAL_DIR / f"{self.link.device}.serlog")
         if self.camera is not None:
             self.camera.start(self.path / VIDEO_AVI, self.path / VIDEO_FRAMES_CSV)
-        self._writer_thread = threading.Thread(target=self._write_loop, name="recorder-writer", daemon=True)
-        self._writer_thread.start()
-        self.mark("sync", "session_start", self.info.created_utc)
-        return self.path
 
     def _new_info(self) -> SessionInfo:
         now = _dt.datetime.now()
