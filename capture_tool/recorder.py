@@ -324,8 +324,16 @@ class Recorder:
         self.queue.put(("stop", None))
         if self._writer_thread is not None:
             self._writer_thread.join()
-        self._guarded(self._hr, self._hr.close)
-        self._guarded(self._events, self._events.close)
+        for writer in (self._hr, self._events):
+            self._close(writer)
+
+    def _close(self, writer: Any) -> None:
+        """Close a CSV writer even after a failed write (the file is released even when its last flush
+        fails; a fault not yet said is recorded)."""
+        try:
+            writer.close()
+        except OSError as exc:
+            self._file_faults.setdefault(writer.path, f"{writer.path}: could not write ({exc.strerror or exc})")
 
     def _save_info(self) -> None:
         """Write session.json; on failure the previous one (``complete: false``) stays, and it is a fault."""

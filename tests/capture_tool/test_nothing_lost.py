@@ -273,6 +273,15 @@ def _recording(tmp_path: Path) -> Recorder:
     return rec
 
 
+def _controller() -> type:
+    """The Capture stage's controller class (Qt-free), wherever the stage keeps it."""
+    try:
+        from effortface.capture_tool.controller import CaptureController  # type: ignore[import-not-found]
+    except ImportError:
+        from effortface.capture_tool.gui.controller import CaptureController
+    return CaptureController
+
+
 def test_a_recording_session_is_locked_with_a_visible_owner(tmp_path) -> None:
     from effortface.annotate.session_model import AnnotationSession
     from effortface.train.dataset import expand_paths
@@ -285,6 +294,7 @@ def test_a_recording_session_is_locked_with_a_visible_owner(tmp_path) -> None:
         with pytest.raises(LockedError, match=rf"being recorded by pid {os.getpid()} on .* since .*stop that"):
             recover_session(path)
         assert list_sessions(path.parent) == [] and list_sessions(path.parent, include_recording=True) == [path]
+        assert _controller()(tmp_path / "out").incomplete_sessions() == []  # the Capture stage's recovery offer
         with pytest.raises(LockedError, match="to annotate it"):
             AnnotationSession(path, "R1")
         with pytest.raises(LockedError, match="to train on it"):
