@@ -27,17 +27,17 @@ from effortface.annotate.keyframes import INTERPOLATIONS, Keyframe, KeyframeTrac
 from effortface.annotate.video_index import FrameTimes
 from effortface.core.errors import UserError
 from effortface.core.events import Emitter
-from effortface.capture_tool.session import Session, read_session
+from effortface.capture_tool.session import Session, check_not_recording, read_session
 
 ANNOTATIONS_DIR = "annotations"
-_RATER_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,31}$")
+_RATER_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,31}")
 #: snapshots kept for undo
 UNDO_LIMIT = 500
 
 
 def check_rater(rater: str) -> str:
     """Return ``rater`` if it is a valid rater code (it names a file), else raise UserError."""
-    if not isinstance(rater, str) or not _RATER_RE.match(rater):
+    if not isinstance(rater, str) or not _RATER_RE.fullmatch(rater):
         raise UserError(f"rater: expected a code of 1-32 letters, digits, '_' or '-' (e.g. R1), found {rater!r}")
     return rater
 
@@ -64,7 +64,8 @@ class AnnotateSession:
     Raises
     ------
     UserError
-        If the session has no video frames, the rater code is invalid, or the file is malformed.
+        If the session has no video frames, the rater code is invalid, or the file is malformed;
+        a LockedError if a capture is recording the session now.
 
     Notes
     -----
@@ -74,6 +75,7 @@ class AnnotateSession:
 
     def __init__(self, session_folder: str | os.PathLike, rater: str, *,
                  blendshapes: BlendshapeSet = DEFAULT_SET, autosave: bool = True) -> None:
+        check_not_recording(session_folder, "annotate")
         self.session: Session = read_session(session_folder)
         if not self.session.frame_times_s:
             raise UserError(f"{self.session.path}: expected a session with video_frames.csv, found no video frames")

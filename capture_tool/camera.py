@@ -5,10 +5,18 @@ Two threads: the grabber stamps each frame with the session clock the moment it 
 it in a bounded queue; the writer encodes and appends. When the writer cannot keep up, the queue is
 full and the grabber drops the frame and counts it (``dropped``), so the timing of the frames that
 are kept is never distorted. OpenCV is imported inside functions (it is heavy).
+
+OpenCV's writer reports no write error, so the writer watches the disk itself (issue 17): it stops
+the video cleanly, before a write can fail, when the disk or the process's file-size limit
+(``RLIMIT_FSIZE``) leaves too little room; and it notices a write that failed anyway (the AVI stops
+growing while frames go in). Either way the reason is :attr:`CameraSource.fault` (one line naming
+the file), later frames are counted in ``dropped``, and :attr:`CameraSource.write_failed` says the
+AVI may miss frames that ``video_frames.csv`` lists (then the session must be recovered).
 """
 
 from __future__ import annotations
 
+import math
 import os
 import queue
 import threading
@@ -17,11 +25,22 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+try:
+    import resource
+except ImportError:  # pragma: no cover - not POSIX: no file-size limit to watch
+    resource = None  # type: ignore[assignment]
+
 from effortface.core.errors import DeviceError, DeviceErrorReason, UserError
 from effortface.capture_tool.session import FrameTimeWriter
 
 FOURCC = "MJPG"
 _STOP = object()
+#: OpenCV's AVI muxer hands the file 32 KiB at a time
+MUXER_CHUNK_BYTES = 32768
+#: free disk kept for the heart-rate files, the events and session.json once the video stops
+DISK_RESERVE_BYTES = 2 << 20
+#: frames that may go in before the first byte reaches the disk (tiny frames fill a chunk slowly)
+FIRST_GROWTH_FRAMES = 300
 
 
 def _cv2() -> Any:
@@ -75,7 +94,12 @@ class CameraSource:
     Attributes
     ----------
     frames_written, dropped : int
-        Frames on disk and frames the writer could not keep up with.
+        Frames handed to the writer, and frames not recorded (the writer could not keep up, or
+        the video stopped on a fault).
+    fault : str or None
+        Why the video stopped early: one line naming the file.
+    write_failed : bool
+        True if a write failed: the AVI may miss frames ``video_frames.csv`` lists.
     width, height : int
     fps : float
         Nominal rate (what the camera or file claims).
@@ -87,8 +111,14 @@ class CameraSource:
         clock: Callable[[], float],
         queue_frames: int = 30,
         loop: bool = False,
+        on_fault: Callable[[str], None] | None = None,
     ) -> None:
         self.source = source
+        self.on_fault = on_fault
+        self.fault: str | None = None
+        self.write_failed = False
+        self._size_at_growth = 0
+        self._frames_at_growth = 0
         self.clock = clock
         self.loop = loop
         self.frames_written = 0
@@ -163,12 +193,64 @@ class CameraSource:
             item = self._queue.get()
             if item is _STOP:
                 break
-            frame, t_s = item
-            self._writer.write(frame)
-            self._times.write(self.frames_written, t_s)
-            self.frames_written += 1
-            if self._queue.empty():  # caught up: hand the rows to the OS (kill -9 keeps them)
-                self._times.flush()
+            if self.fault is None:
+                self._set_fault(self._room_problem())
+            if self.fault is not None:
+                self.dropped += 1  # the video stopped: the frame is counted, not written
+                continue
+            try:
+                self._write_frame(*item)
+            except OSError as exc:
+                self._set_fault(f"{exc.filename or self.frames_csv}: could not write ({exc.strerror}); video "
+                                f"stopped after frame {self.frames_written}", failed=True)
+
+    def _write_frame(self, frame: Any, t_s: float) -> None:
+        """Append one frame and its time; watch that the AVI keeps growing."""
+        self._writer.write(frame)
+        self._times.write(self.frames_written, t_s)
+        self.frames_written += 1
+        self._check_growth()
+        if self._queue.empty():  # caught up: hand the rows to the OS (kill -9 keeps them)
+            self._times.flush()
+
+    def _set_fault(self, message: str | None, failed: bool = False) -> None:
+        """Stop the video for ``message`` (nothing if None) and tell :attr:`on_fault` once."""
+        if message is None or self.fault is not None:
+            return
+        self.fault, self.write_failed = message, failed
+        if self.on_fault is not None:
+            self.on_fault(message)
+
+    def _room_problem(self) -> str | None:
+        """Why the next frame must not be written (the disk or the file-size limit is near), or None."""
+        size = self._size_at_growth
+        per_frame = size / self._frames_at_growth if self._frames_at_growth else 0.0
+        needed = 3 * MUXER_CHUNK_BYTES + 2 * per_frame + 16 * (self.frames_written + 1)  # + the index
+        limit = resource.getrlimit(resource.RLIMIT_FSIZE)[0] if resource else -1  # -1: RLIM_INFINITY
+        if limit >= 0 and os.stat(self.avi_path).st_size + needed > limit:
+            return (f"{self.avi_path}: video stopped after frame {self.frames_written}: the file-size limit "
+                    f"({limit} bytes) is reached; later frames are dropped")
+        st = os.statvfs(self.avi_path.parent)
+        free = st.f_bavail * st.f_frsize
+        if free < needed + DISK_RESERVE_BYTES:
+            return (f"{self.avi_path}: video stopped after frame {self.frames_written}: the disk is full "
+                    f"({free / 2**20:.1f} MiB left, {DISK_RESERVE_BYTES >> 20} MiB kept for heart rate and "
+                    "events); later frames are dropped")
+        return None
+
+    def _check_growth(self) -> None:
+        """Fault if the AVI stopped growing while frames went in (a write failed unseen)."""
+        size = os.stat(self.avi_path).st_size
+        if size > self._size_at_growth:
+            self._size_at_growth, self._frames_at_growth = size, self.frames_written
+            return
+        since = self.frames_written - self._frames_at_growth
+        per_frame = self._size_at_growth / self._frames_at_growth if self._frames_at_growth else 0.0
+        limit = max(8, math.ceil(3 * MUXER_CHUNK_BYTES / per_frame)) if per_frame else FIRST_GROWTH_FRAMES
+        if since > limit:
+            self._set_fault(f"{self.avi_path}: video writes failed: the file stopped growing at {size} bytes "
+                            f"after frame {self._frames_at_growth} while {since} more frames went in (disk full "
+                            "or file-size limit?); run 'effortface recover' on the session", failed=True)
 
     def stop(self, timeout_s: float = 10.0) -> None:
         """Stop grabbing, write the queued frames, close the files (idempotent)."""
@@ -178,8 +260,22 @@ class CameraSource:
         self._threads = []
         if hasattr(self, "_writer"):
             self._writer.release()
-            self._times.close()
+            try:
+                self._times.close()
+            except OSError as exc:
+                self._set_fault(f"{self.frames_csv}: could not write ({exc.strerror})", failed=True)
+            self._check_closed_video()
         self._cap.release()
+
+    def _check_closed_video(self) -> None:
+        """After release: the AVI's index must count every frame written (else a write failed)."""
+        if self.write_failed or self.frames_written == 0:
+            return
+        n_header = avi_header_frames(self.avi_path)
+        if n_header != self.frames_written:
+            self._set_fault(f"{self.avi_path}: holds {n_header} frames in its index, expected "
+                            f"{self.frames_written} (a write failed); run 'effortface recover' on the session",
+                            failed=True)
 
     def wait_ended(self, timeout_s: float | None = None) -> bool:
         """Wait until a (non-looping) video file source has been fully grabbed."""
@@ -203,6 +299,26 @@ def open_avi_writer(path: str | os.PathLike, fps: float, size: tuple[int, int]) 
     if not writer.isOpened():
         raise UserError(f"{path}: expected a writable MJPG video file, found OpenCV could not open it")
     return writer
+
+
+def avi_header_frames(path: str | os.PathLike) -> int:
+    """The frame count an AVI's header and index claim (quick: nothing is decoded; 0 if unreadable).
+
+    Parameters
+    ----------
+    path : path-like
+        The video file.
+
+    Returns
+    -------
+    int
+    """
+    cv2 = _cv2()
+    cap = cv2.VideoCapture(str(path))
+    try:
+        return int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) if cap.isOpened() else 0
+    finally:
+        cap.release()
 
 
 def index_video(path: str | os.PathLike) -> int:

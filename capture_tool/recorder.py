@@ -4,6 +4,11 @@ Producers (the serial link thread, the camera threads, :meth:`Recorder.mark` fro
 items on one :class:`queue.Queue`; one writer thread consumes it and appends ``heart_rate.csv`` and
 ``events.csv``, flushing whenever the queue runs empty (so at least once a second, usually within
 milliseconds). ``session.json`` says ``complete: false`` until :meth:`Recorder.stop`.
+
+While it records, the recorder holds the session's recording lock (``.recording.lock``, see
+:mod:`effortface.core.locks`): recovery, Annotate and Train leave the session alone. A write that
+fails (disk full, file-size limit) is a fault said in one line naming the file
+(:attr:`Recorder.faults`); a session with a failed write is never marked complete.
 """
 
 from __future__ import annotations
@@ -14,6 +19,7 @@ import os
 import queue
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +27,7 @@ from effortface.core.version import __version__
 from effortface.capture_tool.camera import CameraSource, index_video, rewrite_video
 from effortface.core.errors import SessionFormatError
 from effortface.core.fileio import not_a_file
+from effortface.core.locks import FileLock
 from effortface.capture_tool.hr_csv import HR_CSV_HEADER, read_hr_csv
 from effortface.capture_tool.protocols import DeviceEvent, HrSample, get_decoder, header_protocol
 from effortface.capture_tool.serial_link import SerialLink, check_port_exists, is_simulated_port
@@ -38,7 +45,13 @@ from effortface.capture_tool.session import (
     HrWriter,
     Participant,
     SessionInfo,
-    create_session,
+    RECORDING_LOCK,
+    check_not_recording,
+    create_recording_session,
+    read_events,
+    read_video_frames,
+    recording_owner,
+    video_problems,
     make_session_id,
     read_session_info,
     utc_now_iso,
@@ -60,6 +73,7 @@ class RecorderStatus:
     hr_bpm: float | None
     rr_ms: float | None
     link_state: str
+    fault: str | None = None  # the first fault (one line naming the file), if any
 
 
 def device_startup_frames(protocol: str, port: str) -> list[bytes]:
@@ -127,6 +141,9 @@ class Recorder:
         self._last: HrSample | None = None
         self._writer_thread: threading.Thread | None = None
         self._stopped = False
+        self._lock: FileLock | None = None
+        self._file_faults: dict[Path, str] = {}
+        self.warnings: list[str] = []
 
     def clock(self) -> float:
         """Session time in seconds (host monotonic clock since the start)."""
@@ -145,24 +162,37 @@ class Recorder:
         self.link.open()
         try:
             if self._video_source is not None:
-                self.camera = CameraSource(self._video_source, self.clock)
+                self.camera = CameraSource(self._video_source, self.clock, on_fault=self._camera_fault)
             self.info = self._new_info()
-            self.path = create_session(self.out_dir, self.info)
+            self.path, self._lock = create_recording_session(self.out_dir, self.info)
         except BaseException:
             self.link.stop()
             if self.camera is not None:
                 self.camera.stop()
             raise
+        try:
+            self._open_files()
+        except BaseException:  # e.g. a full disk: stop the devices and free the session's lock
+            self.link.stop()
+            if self.camera is not None:
+                self.camera.stop()
+            if self._lock is not None:
+                self._lock.release()
+            raise
+        self._writer_thread = threading.Thread(target=self._write_loop, name="recorder-writer", daemon=True)
+        self._writer_thread.start()
+        self.mark("sync", "session_start", self.info.created_utc)
+        return self.path
+
+    def _open_files(self) -> None:
+        """Create the session's files and start the link and camera threads writing them."""
+        assert self.path is not None
         self._hr = HrWriter(self.path / HEART_RATE_CSV)
         self._events = EventWriter(self.path / EVENTS_CSV)
         self._t0 = time.monotonic()
         self.link.start(self.path / SERIAL_DIR / f"{self.link.device}.serlog")
         if self.camera is not None:
             self.camera.start(self.path / VIDEO_AVI, self.path / VIDEO_FRAMES_CSV)
-        self._writer_thread = threading.Thread(target=self._write_loop, name="recorder-writer", daemon=True)
-        self._writer_thread.start()
-        self.mark("sync", "session_start", self.info.created_utc)
-        return self.path
 
     def _new_info(self) -> SessionInfo:
         now = _dt.datetime.now()
@@ -190,6 +220,10 @@ class Recorder:
         self.queue.put(("event", DeviceEvent(t_s, kind, label, str(value))))
         return t_s
 
+    def _camera_fault(self, message: str) -> None:
+        """The video stopped early (camera thread): a ``device_gap`` event for ``events.csv``."""
+        self.queue.put(("event", DeviceEvent(self.clock(), "device_gap", "camera", message)))
+
     def _write_loop(self) -> None:
         last_flush = time.monotonic()
         while True:
@@ -202,20 +236,44 @@ class Recorder:
             if item is not None:
                 self._write_item(item)
             if self.queue.empty() or time.monotonic() - last_flush >= FLUSH_INTERVAL_S:
-                self._hr.flush()
-                self._events.flush()
+                self._flush()
                 last_flush = time.monotonic()
-        self._hr.flush()
-        self._events.flush()
+        self._flush()
+
+    def _flush(self) -> None:
+        self._guarded(self._hr, self._hr.flush)
+        self._guarded(self._events, self._events.flush)
 
     def _write_item(self, item: tuple[str, Any]) -> None:
         kind, obj = item
         if kind == "hr":
-            self._hr.write(obj)
+            self._guarded(self._hr, lambda: self._hr.write(obj))
             self._samples += 1
             self._last = obj
         elif kind == "event":
-            self._events.write(Event(obj.t_s, obj.kind, obj.label, obj.value))
+            self._guarded(self._events, lambda: self._events.write(Event(obj.t_s, obj.kind, obj.label, obj.value)))
+
+    def _guarded(self, writer: Any, action: Callable[[], None]) -> None:
+        """Run a write of ``writer``'s file; a failure becomes a fault naming the file (said once)."""
+        if writer.path in self._file_faults:
+            return
+        try:
+            action()
+        except OSError as exc:
+            self._file_faults[writer.path] = (
+                f"{writer.path}: could not write ({exc.strerror or exc}); rows from {self.clock():.1f} s on are "
+                "missing (once there is room, 'effortface recover' rebuilds heart_rate.csv from the serial log)")
+
+    @property
+    def faults(self) -> list[str]:
+        """What went wrong while recording, one line each naming the file (empty: nothing)."""
+        out = [self.link.fault] + [self.camera.fault if self.camera else None]
+        return [f for f in out if f] + list(self._file_faults.values())
+
+    @property
+    def failed(self) -> bool:
+        """True if a write failed: a file may miss data, so the session cannot be marked complete."""
+        return bool(self.link.fault or (self.camera and self.camera.write_failed) or self._file_faults)
 
     def status(self) -> RecorderStatus:
         """A snapshot of the recording (thread-safe reads of counters)."""
@@ -231,14 +289,34 @@ class Recorder:
             hr_bpm=last.hr_bpm if last else None,
             rr_ms=last.rr_ms[-1] if last and last.rr_ms else None,
             link_state=self.link.state,
+            fault=next(iter(self.faults), None),
         )
 
     def stop(self) -> Path:
-        """Stop every device, write what is queued, and mark the session complete (idempotent)."""
+        """Stop every device, write what is queued, and mark the session complete (idempotent).
+
+        A session with a failed write (:attr:`failed`) stays ``complete: false``, its faults in
+        ``session.json`` (``faults``), for ``effortface recover``. The recording lock is released.
+        """
         assert self.path is not None and self.info is not None, "stop() before start()"
         if self._stopped:
             return self.path
         self._stopped = True
+        try:
+            self._stop_devices()
+            self.warnings = self._warnings()
+            self.info.complete = not self.failed
+            self.info.extra["stats"] = self._stats()
+            if self.faults:
+                self.info.extra["faults"] = self.faults
+            self._save_info()
+        finally:
+            if self._lock is not None:
+                self._lock.release()
+        return self.path
+
+    def _stop_devices(self) -> None:
+        """Stop camera and link, write what is queued, close the files."""
         self.mark("sync", "session_stop", utc_now_iso())
         if self.camera is not None:
             self.camera.stop()
@@ -246,12 +324,35 @@ class Recorder:
         self.queue.put(("stop", None))
         if self._writer_thread is not None:
             self._writer_thread.join()
-        self._hr.close()
-        self._events.close()
-        self.info.complete = True
-        self.info.extra["stats"] = self._stats()
-        self.info.save(self.path, overwrite=True)
-        return self.path
+        for writer in (self._hr, self._events):
+            self._close(writer)
+
+    def _close(self, writer: Any) -> None:
+        """Close a CSV writer even after a failed write (the file is released even when its last flush
+        fails; a fault not yet said is recorded)."""
+        try:
+            writer.close()
+        except OSError as exc:
+            self._file_faults.setdefault(writer.path, f"{writer.path}: could not write ({exc.strerror or exc})")
+
+    def _save_info(self) -> None:
+        """Write session.json; on failure the previous one (``complete: false``) stays, and it is a fault."""
+        assert self.path is not None and self.info is not None
+        try:
+            self.info.save(self.path, overwrite=True)
+        except OSError as exc:
+            path = self.path / "session.json"
+            self._file_faults[path] = (f"{path}: could not write ({exc.strerror or exc}); the session stays "
+                                       "incomplete: run 'effortface recover' on it once there is room")
+
+    def _warnings(self) -> list[str]:
+        """Soft problems worth a line: a port that delivered no valid heart-rate sample."""
+        st = self.link.decoder.stats
+        if st.samples - st.invalid_samples > 0 or self.link.fault:
+            return []
+        return [f"{self.link.port}: delivered no valid heart-rate sample ({st.bytes_in} bytes, {st.frames_ok} "
+                f"frames decoded, {st.frames_bad} bad, {st.invalid_samples} invalid samples): check --protocol "
+                "and the strap's contact"]
 
     def _stats(self) -> dict[str, Any]:
         cam = self.camera
@@ -263,6 +364,7 @@ class Recorder:
             "serial_reconnects": self.link.reconnects,
             "video_frames": cam.frames_written if cam else 0,
             "dropped_frames": cam.dropped if cam else 0,
+            **({"warnings": self.warnings} if self.warnings else {}),
         }
 
 
@@ -275,6 +377,8 @@ def _folder_bytes(path: Path) -> int:
 #: where recovery keeps a video with no whole frame, and its frame table (the session then has none)
 UNRECOVERABLE_AVI = "video.unrecoverable.avi"
 UNRECOVERABLE_FRAMES_CSV = "video_frames.unrecoverable.csv"
+#: where recovery keeps a heart_rate.csv with unreadable rows that it rebuilt from the serial log
+DAMAGED_HR_CSV = "heart_rate.damaged.csv"
 
 
 def recover_session(path: str | os.PathLike) -> dict[str, Any]:
@@ -286,6 +390,13 @@ def recover_session(path: str | os.PathLike) -> dict[str, Any]:
     lines, and marks ``session.json`` complete with a ``recovered`` note. A video with no frame that
     both decodes and has a time (a crash in the first second) is kept as ``video.unrecoverable.avi``
     (its table as ``video_frames.unrecoverable.csv``), so the session has no video.
+
+    Lines holding NUL bytes (a block of zeros a power cut can leave) are dropped like torn lines; a
+    ``heart_rate.csv`` with unreadable rows is rebuilt from the serial log (the damaged file kept as
+    ``heart_rate.damaged.csv``). Every repaired file is read back with the session readers before
+    anything changes. A session marked complete whose video does not match its frame table (an
+    older capture ignored failed video writes) is repaired too. Hidden temporary files a killed
+    program left (``.*.tmp``, a stale ``.recording.lock``) are removed.
 
     Every repair is first written to a hidden file beside its target; only when all are ready are
     they renamed over their targets, ``session.json`` last. A failure while preparing leaves the
@@ -304,28 +415,68 @@ def recover_session(path: str | os.PathLike) -> dict[str, Any]:
     Raises
     ------
     SessionFormatError
-        If the folder is not a session, it is already complete, or a file cannot be read (the
+        If the folder is not a session, it is already complete (and its video matches its frame
+        table), or a file cannot be read or repaired into one the session readers accept (the
         folder is left as it was).
+    LockedError
+        If a capture is recording the session now (its recording lock is held).
     OSError
         If a repair cannot be written (disk full...); the folder is left as it was.
     """
     folder = Path(path)
     info = read_session_info(folder)
-    if info.complete:
-        raise SessionFormatError(f"{folder / 'session.json'}: expected an incomplete session, found complete: true")
+    check_not_recording(folder, "recover")
     repairs = _Repairs()
+    if info.complete:
+        _check_complete_needs_repair(folder, repairs)
     try:
         _stage_text_file(folder / EVENTS_CSV, EVENTS_HEADER, repairs)
         _stage_heart_rate(folder, repairs)
         _stage_video(folder, repairs)
+        _check_read_back(folder, repairs)
         repairs.commit()
     finally:
         repairs.discard()
+    repairs.done += _remove_leftovers(folder)
     note = {"when": utc_now_iso(), "done": repairs.done or ["nothing to repair"]}
     info.complete = True
     info.extra["recovered"] = note
     info.save(folder, overwrite=True)
     return note
+
+
+def _check_complete_needs_repair(folder: Path, repairs: _Repairs) -> None:
+    """A complete session is recovered only if its video does not match its frame table."""
+    avi, frames = folder / VIDEO_AVI, folder / VIDEO_FRAMES_CSV
+    problems = []
+    if avi.is_file() and frames.is_file():
+        problems = video_problems(folder, len(_frame_rows(_kept_bytes(frames)[0], frames)))
+    if not problems:
+        raise SessionFormatError(f"{folder / 'session.json'}: expected an incomplete session, found complete: true")
+    repairs.done.append(f"session.json: was marked complete, but {problems[0]}")
+
+
+def _remove_leftovers(folder: Path) -> list[str]:
+    """Remove the hidden temporary files killed programs left in the session folder; say which."""
+    gone = [p for p in folder.glob(".*.tmp") if p.is_file()]
+    if (folder / RECORDING_LOCK).is_file() and recording_owner(folder) is None:
+        gone.append(folder / RECORDING_LOCK)
+    for p in gone:
+        p.unlink(missing_ok=True)
+    return [f"removed {len(gone)} leftover temporary file(s): {', '.join(p.name for p in gone)}"] if gone else []
+
+
+def _check_read_back(folder: Path, repairs: _Repairs) -> None:
+    """Read every session file as it will be after the renames; SessionFormatError naming it if not."""
+    for name, reader in ((EVENTS_CSV, read_events), (HEART_RATE_CSV, read_hr_csv),
+                         (VIDEO_FRAMES_CSV, read_video_frames)):
+        staged = repairs.final(folder / name)
+        if staged.is_file():
+            try:
+                reader(staged)
+            except SessionFormatError as exc:
+                raise SessionFormatError(str(exc).replace(str(staged), str(folder / name))
+                                         + "; recovery cannot repair it (nothing was changed)") from None
 
 
 class _Repairs:
@@ -345,6 +496,13 @@ class _Repairs:
         tmp.unlink(missing_ok=True)
         self._scratch.append(tmp)
         return tmp
+
+    def final(self, target: Path) -> Path:
+        """The file that will be ``target`` after :meth:`commit` (its scratch copy, or itself)."""
+        for src, dst in reversed(self._renames):
+            if dst == target:
+                return src
+        return target
 
     def replace(self, scratch: Path, target: Path, notes: list[str]) -> None:
         """At commit, rename the finished ``scratch`` over ``target``; ``notes`` say why."""
@@ -386,13 +544,19 @@ def _present(path: Path) -> bool:
 
 
 def _kept_bytes(path: Path) -> tuple[bytes, list[str]]:
-    """The bytes of a CSV a recovery keeps (a torn last line cut off) and what was cut."""
+    """The bytes of a CSV a recovery keeps (a torn last line and lines with NUL bytes cut) and what was cut."""
     _present(path)
     blob = path.read_bytes()
+    notes = []
+    if b"\0" in blob:
+        lines = blob.split(b"\n")
+        kept = [line for line in lines if b"\0" not in line]
+        blob = b"\n".join(kept)
+        notes.append(f"{path.name}: dropped {len(lines) - len(kept)} line(s) holding NUL bytes (a block of zeros)")
     if not blob or blob.endswith(b"\n"):
-        return blob, []
+        return blob, notes
     cut = blob.rfind(b"\n") + 1
-    return blob[:cut], [f"{path.name}: dropped a torn last line ({len(blob) - cut} bytes)"]
+    return blob[:cut], notes + [f"{path.name}: dropped a torn last line ({len(blob) - cut} bytes)"]
 
 
 def _stage_text_file(path: Path, header: str, repairs: _Repairs) -> None:
@@ -450,7 +614,14 @@ def _stage_heart_rate(folder: Path, repairs: _Repairs) -> None:
         notes.append(f"{HEART_RATE_CSV}: wrote the missing header")
     tmp = repairs.scratch(hr_path)
     tmp.write_bytes(kept or (HR_CSV_HEADER + "\n").encode())
-    missing = samples[len(_read_hr_rows(tmp, hr_path)):]
+    try:
+        rows = _read_hr_rows(tmp, hr_path)
+    except SessionFormatError as exc:  # a bad row: the serial log is the record, rebuild from it
+        _stage_hr_rebuild(hr_path, tmp, str(exc), len(samples), kept.count(b"\n") - 1, repairs)
+        notes.append(f"{HEART_RATE_CSV}: unreadable ({exc}); rebuilt from the serial log, the damaged file "
+                     f"kept as {DAMAGED_HR_CSV}")
+        rows = []
+    missing = samples[len(rows):]
     if missing:
         writer = HrWriter(tmp, append=True)
         for s in missing:
@@ -459,6 +630,23 @@ def _stage_heart_rate(folder: Path, repairs: _Repairs) -> None:
         notes.append(f"{HEART_RATE_CSV}: restored {len(missing)} rows from the serial log")
     if notes:
         repairs.replace(tmp, hr_path, notes)
+
+
+def _stage_hr_rebuild(hr_path: Path, tmp: Path, problem: str, n_samples: int, n_rows: int,
+                      repairs: _Repairs) -> None:
+    """Empty the staged heart_rate.csv to rebuild it from the serial log; keep the damaged one.
+
+    Raises
+    ------
+    SessionFormatError
+        If the serial log decodes to fewer samples than the damaged file has rows (rebuilding
+        would lose rows).
+    """
+    if n_samples < n_rows:
+        raise SessionFormatError(f"{problem}; the serial logs decode to {n_samples} samples, fewer than its "
+                                 f"{n_rows} rows: recovery cannot rebuild it (nothing was changed)")
+    tmp.write_bytes((HR_CSV_HEADER + "\n").encode())
+    repairs.keep_as(hr_path, hr_path.with_name(DAMAGED_HR_CSV))
 
 
 def _serial_samples(folder: Path, notes: list[str]) -> list[HrSample]:
@@ -483,7 +671,8 @@ def _stage_video(folder: Path, repairs: _Repairs) -> None:
     if not _present(avi) and not _present(frames_csv):
         return
     kept, torn = _kept_bytes(frames_csv) if frames_csv.exists() else (b"", [])
-    times = _frame_rows(kept, frames_csv)
+    times, filled = _fill_frame_gaps(_frame_rows(kept, frames_csv), frames_csv)
+    torn += filled
     n_decoded = index_video(avi) if avi.exists() else 0
     n_keep = _stage_avi(avi, n_decoded, len(times), repairs) if min(n_decoded, len(times)) else 0
     if n_keep == 0:
@@ -528,6 +717,36 @@ def _stage_no_video(avi: Path, frames_csv: Path, n_decoded: int, n_times: int, r
     found = f"{avi.stat().st_size} bytes, {n_decoded} frames decode" if avi.exists() else "missing"
     repairs.done.append(f"{VIDEO_AVI}: no whole frame that decodes and has a time ({found}, {n_times} rows "
                         f"in {VIDEO_FRAMES_CSV}); kept {' and '.join(kept)}; the session has 0 video frames")
+
+
+def _fill_frame_gaps(rows: list[str], path: Path) -> tuple[list[str], list[str]]:
+    """Rows of video_frames.csv with the rows a block of zeros erased put back, and a note.
+
+    The frames are in the video; only their times were lost: each gets a time interpolated between
+    its neighbours' (said in the note).
+
+    Raises
+    ------
+    SessionFormatError
+        If a row is not ``frame,t_s`` or the frame numbers go back or start late.
+    """
+    out: list[str] = []
+    for row in rows:
+        try:
+            frame_s, t_s = row.split(",")
+            frame, t = int(frame_s), float(t_s)
+        except ValueError:
+            raise SessionFormatError(f"{path}: expected frame,t_s rows, found {row!r}; recovery cannot "
+                                     "repair it") from None
+        if out and frame > len(out):
+            t0, k, n = float(out[-1].split(",")[1]), len(out), frame - len(out) + 1
+            out += [f"{j},{t0 + (t - t0) * (j - k + 1) / n:.4f}" for j in range(k, frame)]
+        if frame != len(out):
+            raise SessionFormatError(f"{path}: expected frame {len(out)}, found {frame}; recovery cannot repair it")
+        out.append(row)
+    filled = len(out) - len(rows)
+    return out, [f"{path.name}: gave {filled} frame(s) whose rows were lost a time interpolated between "
+                 "their neighbours'"] if filled else []
 
 
 def _frame_rows(blob: bytes, path: Path) -> list[str]:

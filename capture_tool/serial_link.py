@@ -5,6 +5,10 @@ OS has it even if the process is killed; ``fsync`` about once a second), fed to 
 decoder, and the samples and link events go to a :class:`queue.Queue` as ``("hr", HrSample)`` or
 ``("event", DeviceEvent)`` items. A vanished port is a gap: the link records it, re-opens the
 same path with back-off (0.1 s doubling to 2 s), records the reconnect and carries on.
+
+A log that cannot be written (disk full, file-size limit) is not a gap: the link stops, keeps what
+was written, sets :attr:`SerialLink.fault` (one line naming the log) and puts an ``error`` event
+on the queue; its state is ``"failed"``, never a ``"reconnecting"`` that would never end.
 """
 
 from __future__ import annotations
@@ -112,6 +116,14 @@ def list_ports() -> list[dict[str, str]]:
     return sorted(ports, key=lambda p: p["device"])
 
 
+class _LogFailed(Exception):
+    """The serial log could not be written (wraps the OSError): not a device gap."""
+
+    def __init__(self, exc: OSError) -> None:
+        super().__init__(str(exc))
+        self.exc = exc
+
+
 class SerialLink:
     """Reader thread of one strap.
 
@@ -136,7 +148,9 @@ class SerialLink:
     Attributes
     ----------
     state : str
-        ``"closed"``, ``"connected"``, ``"reconnecting"`` or ``"stopped"``.
+        ``"closed"``, ``"connected"``, ``"reconnecting"``, ``"failed"`` or ``"stopped"``.
+    fault : str or None
+        Why the link stopped on its own (its log could not be written...): one line naming the file.
     bytes_in, gaps, reconnects : int
         Counters for the status display.
     """
@@ -162,6 +176,7 @@ class SerialLink:
         self.bytes_in = 0
         self.gaps = 0
         self.reconnects = 0
+        self.fault: str | None = None
         self._ser: serial.SerialBase | None = None
         self._log: SerlogWriter | None = None
         self._stop = threading.Event()
@@ -204,19 +219,51 @@ class SerialLink:
         self._close_port()
         self._emit_samples(self.decoder.finish())
         if self._log is not None:
-            self._log.sync()
-            self._log.close()
-        self.state = "stopped"
+            try:
+                self._log.sync()
+                self._log.close()
+            except OSError as exc:
+                self._fail(_LogFailed(exc))
+        if self.state != "failed":
+            self.state = "stopped"
 
     def _run(self) -> None:
-        while not self._stop.is_set():
-            if self._ser is None:
-                self._reconnect()
-                continue
-            try:
-                self._read_once()
-            except (serial.SerialException, OSError) as exc:
-                self._gap(exc)
+        try:
+            while not self._stop.is_set():
+                if self._ser is None:
+                    self._reconnect()
+                    continue
+                try:
+                    self._read_once()
+                except (serial.SerialException, OSError) as exc:
+                    self._gap(exc)
+        except _LogFailed as exc:
+            self._fail(exc)
+        except Exception as exc:  # anything else: said plainly, never a dead thread
+            self._fail(exc)
+
+    def _fail(self, exc: Exception) -> None:
+        """Stop the link for good: close the port, keep the log as written, say why once."""
+        if self.fault is not None:
+            return
+        now = self.clock()
+        self._close_port()
+        if isinstance(exc, _LogFailed):
+            err = exc.exc
+            self.fault = (f"{self._log.path if self._log else 'serial log'}: could not write the serial log "
+                          f"({err.strerror or err}); heart-rate recording stopped at {now:.1f} s, what was "
+                          "written is kept")
+        else:
+            self.fault = f"{self.port}: the serial link stopped on an unexpected error ({type(exc).__name__}: {exc})"
+        self.state = "failed"
+        self.out.put(("event", DeviceEvent(now, "error", self.device, self.fault)))
+
+    def _log_call(self, method: Callable[..., None], *args: Any) -> None:
+        """Call a method of the serial log; its OSError becomes _LogFailed (a disk, not a device)."""
+        try:
+            method(*args)
+        except OSError as exc:
+            raise _LogFailed(exc) from exc
 
     def _read_once(self) -> None:
         ser = self._ser
@@ -226,7 +273,7 @@ class SerialLink:
         now = self.clock()
         if data:
             assert self._log is not None
-            self._log.write(now, data)
+            self._log_call(self._log.write, now, data)
             self.bytes_in += len(data)
             self._emit_samples(self.decoder.feed(data, now))
             self._emit_events(self.decoder.pop_events())
@@ -235,7 +282,7 @@ class SerialLink:
     def _housekeeping(self, now: float) -> None:
         """fsync the log about once a second and send poll bytes when due."""
         if now - self._last_sync >= FSYNC_INTERVAL_S and self._log is not None:
-            self._log.sync()
+            self._log_call(self._log.sync)
             self._last_sync = now
         interval = self.decoder.poll_interval_s
         if self.decoder.poll_bytes and interval > 0 and now - self._last_poll >= interval:
@@ -283,14 +330,17 @@ class SerialLink:
             self.reconnects += 1
             self.state = "connected"
             self._log_event(DeviceEvent(self.clock(), "reconnect", self.device, self.port))
-            self._send_startup()
+            try:
+                self._send_startup()
+            except (serial.SerialException, OSError) as exc:  # vanished again at once: another gap
+                self._gap(exc)
             return
 
     def _log_event(self, event: DeviceEvent) -> None:
         """Record a link event both in the serlog (for replay/recover) and for events.csv."""
-        if self._log is not None:
-            self._log.write_event(event.t_s, event.kind, event.label, event.value)
         self.out.put(("event", event))
+        if self._log is not None:
+            self._log_call(self._log.write_event, event.t_s, event.kind, event.label, event.value)
 
     def _close_port(self) -> None:
         if self._ser is not None:

@@ -15,6 +15,7 @@ truncated last record is ignored and counted by :func:`read_serlog`.
 from __future__ import annotations
 
 import dataclasses
+import errno
 import json
 import os
 import struct
@@ -106,13 +107,23 @@ class SerlogWriter:
     def write(self, t_s: float, data: bytes) -> None:
         """Append one read's bytes received at ``t_s``."""
         if data:
-            self._fh.write(_REC.pack(DATA, t_s, len(data)) + data)
+            self._write_all(_REC.pack(DATA, t_s, len(data)) + data)
             self.bytes_written += len(data)
 
     def write_event(self, t_s: float, kind: str, label: str = "", value: str = "") -> None:
         """Append a link event (gap, reconnect...) so a replay can reproduce it."""
         payload = json.dumps({"kind": kind, "label": label, "value": value}).encode("utf-8")
-        self._fh.write(_REC.pack(EVENT, t_s, len(payload)) + payload)
+        self._write_all(_REC.pack(EVENT, t_s, len(payload)) + payload)
+
+    def _write_all(self, record: bytes) -> None:
+        """Write a whole record. An unbuffered write may be short (the disk filled mid-record): the
+        rest is retried, so a full disk raises OSError instead of leaving a record silently torn."""
+        view = memoryview(record)
+        while view:
+            n = self._fh.write(view)
+            if not n:
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(self.path))
+            view = view[n:]
 
     def sync(self) -> None:
         """Force the data to disk (``os.fsync``); called about once a second by the link."""

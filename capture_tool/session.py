@@ -31,6 +31,7 @@ from effortface.core.fileio import refuse_overwrite, write_json_atomic  # noqa: 
 # The participant record lives in the core (one limits table for every stage); re-exported here.
 from effortface.core.participant import (CODE_PATTERN, CODE_RULE, LIMITS, SEX_ALIASES,  # noqa: F401
                                          SEXES, Participant, check_participant_code)
+from effortface.core.locks import FileLock, LockedError, acquire_lock, describe_owner, lock_owner
 from effortface.capture_tool.hr_csv import HR_CSV_HEADER, format_hr_row, read_hr_csv
 from effortface.capture_tool.protocols import HrSample
 
@@ -43,9 +44,11 @@ VIDEO_FRAMES_CSV = "video_frames.csv"
 SERIAL_DIR = "serial"
 EVENTS_HEADER = "t_s,kind,label,value"
 FRAMES_HEADER = "frame,t_s"
+#: held (``fcntl.flock``) by the recorder while it records; names its owner (effortface.core.locks)
+RECORDING_LOCK = ".recording.lock"
 
-_LABEL_RE = re.compile(r"^[A-Za-z0-9-]{1,32}$")
-_ID_RE = re.compile(rf"^(?P<code>{CODE_PATTERN})_(?P<stamp>\d{{8}}-\d{{6}})(?:_(?P<label>[A-Za-z0-9-]{{1,32}}))?$")
+_LABEL_RE = re.compile(r"[A-Za-z0-9-]{1,32}")  # used with fullmatch (a final newline never matches)
+_ID_RE = re.compile(rf"(?P<code>{CODE_PATTERN})_(?P<stamp>\d{{8}}-\d{{6}})(?:_(?P<label>[A-Za-z0-9-]{{1,32}}))?")
 _STAMP_FMT = "%Y%m%d-%H%M%S"
 #: ``{field: (lo, hi)}`` of :data:`effortface.core.participant.LIMITS` (kept for callers).
 PARTICIPANT_RANGES = {name: limit.bounds for name, limit in LIMITS.items()}
@@ -67,7 +70,7 @@ def make_session_id(code: str, when: _dt.datetime, label: str | None = None) -> 
     check_participant_code(code)
     sid = f"{code}_{when.strftime(_STAMP_FMT)}"
     if label:
-        if not _LABEL_RE.match(label):
+        if not _LABEL_RE.fullmatch(label):
             raise UserError(f"session label: expected 1-32 letters, digits or '-', found {label!r}")
         sid += f"_{label}"
     return sid
@@ -75,7 +78,7 @@ def make_session_id(code: str, when: _dt.datetime, label: str | None = None) -> 
 
 def parse_session_id(session_id: str) -> tuple[str, _dt.datetime, str | None]:
     """Split a session id into ``(code, start time, label or None)``; UserError if malformed."""
-    m = _ID_RE.match(session_id)
+    m = _ID_RE.fullmatch(session_id)
     if not m:
         raise UserError(
             f"session id: expected <code>_<YYYYmmdd-HHMMSS>[_<label>], found {session_id!r}"
@@ -234,12 +237,38 @@ def create_session(out_dir: str | os.PathLike, info: SessionInfo) -> Path:
     FileExistsError
         If the folder exists already: a session folder is never reused.
     """
+    return create_recording_session(out_dir, info, lock=False)[0]
+
+
+def create_recording_session(out_dir: str | os.PathLike, info: SessionInfo,
+                             *, lock: bool = True) -> tuple[Path, FileLock | None]:
+    """Create the session folder as :func:`create_session` does, holding its recording lock.
+
+    The lock (:data:`RECORDING_LOCK`) is taken before ``session.json`` exists, so no program ever
+    sees the new session unlocked while it is being recorded.
+
+    Returns
+    -------
+    (Path, FileLock or None)
+        The folder, and the lock to release when the recording stops (None if ``lock`` is False).
+
+    Raises
+    ------
+    FileExistsError
+        If the folder exists already.
+    """
     folder = Path(out_dir) / info.session_id
     Path(out_dir).mkdir(parents=True, exist_ok=True)
     folder.mkdir(exist_ok=False)
-    (folder / SERIAL_DIR).mkdir()
-    info.save(folder)
-    return folder
+    held = acquire_lock(folder / RECORDING_LOCK, "capture") if lock else None
+    try:
+        (folder / SERIAL_DIR).mkdir()
+        info.save(folder)
+    except BaseException:
+        if held is not None:
+            held.release()
+        raise
+    return folder, held
 
 
 # ------------------------------------------------------------------------------------ csv files
@@ -456,7 +485,7 @@ def validate_session(path: str | os.PathLike) -> list[str]:
 
     Checks: readable files, folder name equals ``session_id``, ``complete`` true, the heart-rate
     and frame times non-decreasing, no invalid row carrying a heart rate, video and frame table
-    present together.
+    present together, and one row of the frame table per frame that decodes in the video.
     """
     folder = Path(path)
     try:
@@ -475,7 +504,34 @@ def validate_session(path: str | os.PathLike) -> list[str]:
         problems.append(f"{folder / HEART_RATE_CSV}: {len(bad)} rows with a missing or non-positive hr_bpm")
     if (folder / VIDEO_AVI).exists() != (folder / VIDEO_FRAMES_CSV).exists():
         problems.append(f"{folder}: video.avi and video_frames.csv must be present together")
+    elif (folder / VIDEO_AVI).is_file():
+        problems += video_problems(folder, len(s.frame_times_s))
     return problems
+
+
+def video_problems(folder: str | os.PathLike, n_rows: int) -> list[str]:
+    """One problem line if the frames of ``video.avi`` that decode are not ``n_rows`` (the frame table's).
+
+    Parameters
+    ----------
+    folder : path-like
+        The session folder.
+    n_rows : int
+        Rows of its ``video_frames.csv``.
+
+    Returns
+    -------
+    list of str
+        Empty when they match.
+    """
+    folder = Path(folder)
+    from effortface.capture_tool.camera import index_video
+
+    n_decoded = index_video(folder / VIDEO_AVI)
+    if n_decoded == n_rows:
+        return []
+    return [f"{folder / VIDEO_FRAMES_CSV}: lists {n_rows} frames, found {n_decoded} that decode in {VIDEO_AVI} "
+            f"(run 'effortface recover {folder}')"]
 
 
 def _monotonic_problems(path: Path, times: list[float]) -> list[str]:
@@ -484,8 +540,16 @@ def _monotonic_problems(path: Path, times: list[float]) -> list[str]:
     return [f"{path}: t_s decreases {back} times"] if back else []
 
 
-def list_sessions(directory: str | os.PathLike) -> list[Path]:
+def list_sessions(directory: str | os.PathLike, *, include_recording: bool = False) -> list[Path]:
     """Session folders (those with a ``session.json``) directly inside ``directory``, sorted by name.
+
+    Parameters
+    ----------
+    directory : path-like
+        The folder of sessions.
+    include_recording : bool
+        Also list sessions a running capture is recording (hidden by default: nothing may read
+        them as finished, recover them or annotate them while they grow).
 
     Raises
     ------
@@ -495,7 +559,30 @@ def list_sessions(directory: str | os.PathLike) -> list[Path]:
     d = Path(directory)
     if not d.is_dir():
         raise UserError(f"{d}: expected a folder of sessions, found {'a file' if d.exists() else 'nothing'}")
-    return sorted(p for p in d.iterdir() if p.is_dir() and (p / SESSION_JSON).is_file())
+    found = sorted(p for p in d.iterdir() if p.is_dir() and (p / SESSION_JSON).is_file())
+    return found if include_recording else [p for p in found if recording_owner(p) is None]
+
+
+def recording_owner(folder: str | os.PathLike) -> dict[str, Any] | None:
+    """Who is recording the session ``folder`` now (pid, host, started_utc), or None.
+
+    A lock file left by a killed capture is stale (its ``flock`` died with the process): None.
+    """
+    return lock_owner(Path(folder) / RECORDING_LOCK)
+
+
+def check_not_recording(folder: str | os.PathLike, action: str) -> None:
+    """Refuse to ``action`` (``"recover"``, ``"annotate"``...) a session a capture is recording.
+
+    Raises
+    ------
+    LockedError
+        One line naming the session, the action and the recording's owner.
+    """
+    owner = recording_owner(folder)
+    if owner is not None:
+        raise LockedError(f"{folder}: expected a session no capture is recording (to {action} it), found it "
+                          f"being recorded by {describe_owner(owner)}; stop that capture first")
 
 
 def utc_now_iso() -> str:

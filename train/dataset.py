@@ -39,7 +39,8 @@ from effortface.annotate.keyframes import read_annotations
 from effortface.core.errors import UserError
 from effortface.core.fileio import refuse_overwrite
 from effortface.core.participant import LIMITS, SEX_ALIASES, SEXES  # the one limits table
-from effortface.capture_tool.session import Session, list_sessions, parse_session_id, read_session
+from effortface.capture_tool.session import (Session, check_not_recording, list_sessions, parse_session_id,
+                                             read_session)
 from effortface.train.hr_fit import HrSeries
 from effortface.train.physiology import (EpocParams, hr_max_bpm, hr_rest_bpm, epoc_step,
                               vo2max_ml_per_kg_min, VO2_REST_ML_PER_KG_MIN)
@@ -251,9 +252,14 @@ def _session_label(session_id: str) -> str:
 
 
 def expand_paths(paths: Iterable[str | os.PathLike]) -> list[Path]:
-    """Session folders from a mix of sessions and folders of sessions (UserError if none)."""
+    """Session folders from a mix of sessions and folders of sessions (UserError if none).
+
+    Sessions a capture is recording now are left out of folders, and refused when named.
+    """
     out: list[Path] = []
     for p in map(Path, paths):
+        if (p / "session.json").is_file():
+            check_not_recording(p, "train on")
         out.extend([p] if (p / "session.json").is_file() else list_sessions(p))
     if not out:
         raise DatasetError(f"{', '.join(map(str, paths))}: expected session folders, found none")
@@ -303,6 +309,7 @@ def session_table(folder: str | os.PathLike, blendshapes: BlendshapeSet = DEFAUL
         See :func:`sessions_table`.
     """
     s = read_session(folder)
+    _check_hr_samples(s)
     hr_t = [h.t_s for h in s.heart_rate if h.valid and h.hr_bpm is not None]
     if len(hr_t) < 2:
         raise DatasetError(f"{s.path / 'heart_rate.csv'}: expected valid heart-rate samples, "
@@ -321,6 +328,16 @@ def session_table(folder: str | os.PathLike, blendshapes: BlendshapeSet = DEFAUL
     df["exercise"] = _session_label(s.info.session_id)
     df["hr_rest_bpm"], df["hr_max_bpm"] = part.hr_rest_bpm, part.hr_max_bpm
     return df
+
+
+def _check_hr_samples(s: Session) -> None:
+    """DatasetError for a valid strap sample outside the hr_bpm range, checked before interpolation
+    (which would hide it: -70 bpm between two 72 bpm samples became 50.8 bpm at the second)."""
+    lo, hi = VALUE_RANGES["hr_bpm"]
+    for i, h in enumerate(s.heart_rate):
+        if h.valid and h.hr_bpm is not None and not lo <= h.hr_bpm <= hi:
+            raise DatasetError(f"{s.path / 'heart_rate.csv'}: line {i + 2}: expected hr_bpm from {lo:g} to "
+                               f"{hi:g} on a valid row, found {h.hr_bpm:g}")
 
 
 def _hr_per_second(s: Session, t: np.ndarray) -> np.ndarray:

@@ -2,7 +2,10 @@
 
 Runs until ``--duration`` or Ctrl-C / SIGTERM, then stops cleanly (``complete: true``). The first
 stdout line is the session folder (flushed at once); a status line follows every few seconds on
-stderr.
+stderr. A fault (a file that cannot be written: disk full, file-size limit) is one line on stderr
+naming the file as soon as it happens; a failed write stops the capture, which then leaves the
+session incomplete for ``effortface recover`` and exits with status 2 (the video stopping early
+on a nearly full disk only degrades it: the heart rate goes on).
 """
 
 from __future__ import annotations
@@ -68,18 +71,39 @@ def run(args: argparse.Namespace) -> int:
     recorder = Recorder(args.out, _participant(args), args.port, args.protocol, _video_source(args), label=args.label)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    if hasattr(signal, "SIGXFSZ"):  # a file-size limit then fails the write (EFBIG): a fault, not a kill
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
     path = _start(recorder, args.out)
     print(path, flush=True)
+    said: list[str] = []  # the faults already printed
     try:
-        _wait(recorder, stop, args.duration)
+        _wait(recorder, stop, args.duration, said)
     except KeyboardInterrupt:
         pass
     finally:
         recorder.stop()
+    return _report(recorder, path, said)
+
+
+def _report(recorder: Recorder, path: Path, said: list[str]) -> int:
+    """The closing lines: faults not yet said, warnings, then what was recorded; the exit status."""
+    _say_new_faults(recorder, said)
+    for line in recorder.warnings:
+        print(f"warning: {line}", file=sys.stderr)
     st = recorder.status()
-    print(f"complete: {st.samples} heart-rate samples, {st.frames} frames ({st.dropped_frames} dropped) in {path}",
+    complete = recorder.info is not None and recorder.info.complete
+    state = "complete" if complete else f"INCOMPLETE (run 'effortface recover {path}')"
+    print(f"{state}: {st.samples} heart-rate samples, {st.frames} frames ({st.dropped_frames} dropped) in {path}",
           file=sys.stderr)
-    return 0
+    return 2 if recorder.faults else 0
+
+
+def _say_new_faults(recorder: Recorder, said: list[str]) -> None:
+    """Print each fault not in ``said`` (then add it): one line naming the file, as soon as it appears."""
+    for line in recorder.faults:
+        if line not in said:
+            print(f"capture: {line}", file=sys.stderr, flush=True)
+            said.append(line)
 
 
 def _start(recorder: Recorder, out: str) -> Path:
@@ -116,17 +140,19 @@ def _is_under(path: str | os.PathLike, folder: str) -> bool:
     return path == folder_path or folder_path in path.parents or path in folder_path.parents
 
 
-def _wait(recorder: Recorder, stop: threading.Event, duration_s: float | None) -> None:
+def _wait(recorder: Recorder, stop: threading.Event, duration_s: float | None, said: list[str]) -> None:
     """Sleep until the duration is over or ``stop`` is set, printing a status line now and then."""
     deadline = None if duration_s is None else time.monotonic() + duration_s
     next_status = time.monotonic() + STATUS_INTERVAL_S
     while not stop.is_set():
         now = time.monotonic()
-        if deadline is not None and now >= deadline:
+        _say_new_faults(recorder, said)
+        if (deadline is not None and now >= deadline) or recorder.failed:
             return
         if now >= next_status:
             s = recorder.status()
             print(f"{s.elapsed_s:7.1f} s  HR {s.hr_bpm or '-'}  samples {s.samples}  frames {s.frames} "
-                  f"dropped {s.dropped_frames}  link {s.link_state}", file=sys.stderr, flush=True)
+                  f"dropped {s.dropped_frames}  link {s.link_state}" + (" (video stopped)" if recorder.camera and
+                  recorder.camera.fault else ""), file=sys.stderr, flush=True)
             next_status = now + STATUS_INTERVAL_S
         stop.wait(0.1 if deadline is None else min(0.1, max(0.0, deadline - now)))

@@ -262,7 +262,7 @@ class QtCaptureStage(QtWidgets.QWidget):
             "samples": status.samples, "contact_loss": self._contact_lost,
             "bad": f"{update.frames_bad} / {status.bad_bytes} B", "frames": status.frames,
             "dropped": status.dropped_frames, "size": format_bytes(status.bytes_on_disk)})
-        self._update_banner(status.link_state, update.camera_ended, self._contact_ok)
+        self._update_banner(status.link_state, update.camera_ended, self._contact_ok, status.fault)
 
     def _plot_rows(self, hr_rows: list[HrRow]) -> None:
         """Plot the valid rows; count contact losses and remember whether contact is on now."""
@@ -281,9 +281,13 @@ class QtCaptureStage(QtWidgets.QWidget):
                 title = PHASE_TITLES.get(event.label, event.label)
                 self.live.add_marker(event.t_s, text.format(label=event.label, title=title), colour)
 
-    def _update_banner(self, link_state: str, camera_ended: bool, contact_ok: bool) -> None:
-        """Show the most urgent device problem (strap lost, camera stopped, no contact) or hide."""
-        if link_state == "reconnecting":
+    def _update_banner(self, link_state: str, camera_ended: bool, contact_ok: bool,
+                       fault: str | None = None) -> None:
+        """Show the most urgent problem (a fault: a file that cannot be written; strap lost, camera
+        stopped, no contact) or hide."""
+        if fault:
+            reason = f"{fault}. Stop the recording and free some disk space."
+        elif link_state == "reconnecting":
             reason = "Strap lost: reconnecting by itself. The recording goes on."
         elif camera_ended:
             reason = "The camera stopped delivering frames. The heart-rate recording goes on."
@@ -294,7 +298,7 @@ class QtCaptureStage(QtWidgets.QWidget):
         if reason != self._banner_reason:
             self._banner_reason = reason
             if reason:
-                self.show_banner(reason, "warn")
+                self.show_banner(reason, "error" if fault else "warn")
             else:
                 self.banner.hide()
 

@@ -15,6 +15,7 @@ from collections.abc import Iterable, Mapping
 from typing import ClassVar
 
 from effortface.core.errors import SessionFormatError, UserError
+from effortface.core.physio_limits import hr_plausible, rr_plausible
 
 #: protocol name -> module in this package that defines ``DECODER`` (a Decoder subclass)
 PROTOCOLS: dict[str, str] = {
@@ -112,10 +113,31 @@ class Decoder:
         self._t_s = t_s
         self.stats.bytes_in += len(data)
         self._buf += data
-        samples = self._consume()
-        self.stats.samples += len(samples)
-        self.stats.invalid_samples += sum(not s.valid for s in samples)
-        return samples
+        return self._born(self._consume())
+
+    def _born(self, samples: list[HrSample]) -> list[HrSample]:
+        """Samples leaving the decoder: physiological limits applied (counted), then counted.
+
+        A heart rate outside :data:`effortface.core.physio_limits.HR_BPM` makes the sample invalid
+        (``implausible_hr``); an R-R interval outside ``RR_MS`` is dropped (``implausible_rr``).
+        """
+        out = [self._within_limits(s) for s in samples]
+        self.stats.samples += len(out)
+        self.stats.invalid_samples += sum(not s.valid for s in out)
+        return out
+
+    def _within_limits(self, s: HrSample) -> HrSample:
+        """``s`` with an implausible heart rate marked invalid and implausible RR dropped."""
+        rr = tuple(r for r in s.rr_ms if rr_plausible(r))
+        if len(rr) != len(s.rr_ms):
+            self.stats.count("implausible_rr", len(s.rr_ms) - len(rr))
+        bad_hr = s.hr_bpm is not None and not hr_plausible(s.hr_bpm)
+        if bad_hr:
+            self.stats.count("implausible_hr")
+        if not bad_hr and len(rr) == len(s.rr_ms):
+            return s
+        valid = s.valid and not bad_hr
+        return dataclasses.replace(s, hr_bpm=s.hr_bpm if valid else None, rr_ms=rr, valid=valid)
 
     def finish(self) -> list[HrSample]:
         """End of stream: count a truncated trailing frame as dropped and return any last samples."""

@@ -188,10 +188,7 @@ class AntDecoder(Decoder):
 
     def finish(self) -> list[HrSample]:
         """End of stream: resync through an incomplete tail (a real frame may follow a false sync)."""
-        samples = self._consume(eof=True)
-        self.stats.samples += len(samples)
-        self.stats.invalid_samples += sum(not s.valid for s in samples)
-        return samples
+        return self._born(self._consume(eof=True))
 
     # -- messages ------------------------------------------------------------------------
     def _on_message(self, msg_id: int, data: bytes) -> list[HrSample]:

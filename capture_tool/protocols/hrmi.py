@@ -22,10 +22,10 @@ import re
 
 from effortface.capture_tool.protocols import HrSample
 from effortface.capture_tool.protocols.lines import LineDecoderBase
+from effortface.core.physio_limits import hr_plausible
 
 MAX_LINE = 200  # "255 255" + 32 values of 3 digits: a longer line is garbage
-_REPLY_RE = re.compile(rb"^(\d{1,3})((?: \d{1,3})+)$")
-PLAUSIBLE_HR_BPM = (20, 250)
+_REPLY_RE = re.compile(rb"(\d{1,3})((?: \d{1,3})+)")
 
 
 class HrmiDecoder(LineDecoderBase):
@@ -60,7 +60,7 @@ class HrmiDecoder(LineDecoderBase):
     def _parse_line(self, line: bytes, n_bytes: int) -> list[HrSample]:
         if not line:
             return []  # the \n of a \r\n pair, or an empty reply
-        m = _REPLY_RE.match(line)
+        m = _REPLY_RE.fullmatch(line)
         values = [int(v) for v in m.group(2).split()] if m else []
         if not m or len(values) < 2 or max(values[:1] + [int(m.group(1))]) > 255:
             self._unparsed(n_bytes)
@@ -73,7 +73,7 @@ class HrmiDecoder(LineDecoderBase):
             self.stats.count("no_new_value")
             return []
         self._last_count = count
-        valid = not status & self.invalid_status_mask and PLAUSIBLE_HR_BPM[0] <= hr <= PLAUSIBLE_HR_BPM[1]
+        valid = not status & self.invalid_status_mask and hr_plausible(hr)
         return [HrSample(self._t_s, float(hr) if valid else None, (), count, self.device, valid)]
 
 

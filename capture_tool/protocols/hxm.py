@@ -26,8 +26,6 @@ MAX_DLC = 128
 MSG_HXM = 0x26
 HXM_DLC = 55
 N_TIMESTAMPS = 15
-#: RR intervals outside this range (ms) come from timestamp glitches, not beats
-RR_RANGE_MS = (100.0, 3000.0)
 
 
 def _crc8_table() -> bytes:
@@ -162,10 +160,7 @@ class HxmDecoder(Decoder):
 
     def finish(self) -> list[HrSample]:
         """End of stream: resync through an incomplete tail (e.g. a lone trailing STX)."""
-        samples = self._consume(eof=True)
-        self.stats.samples += len(samples)
-        self.stats.invalid_samples += sum(not s.valid for s in samples)
-        return samples
+        return self._born(self._consume(eof=True))
 
     def _sample(self, pkt: HxmPacket) -> HrSample:
         rr = self._new_rr(pkt)
@@ -182,11 +177,7 @@ class HxmDecoder(Decoder):
         ts = pkt.beat_ts_ms
         rr: list[float] = []
         for i in range(n_new - 1, -1, -1):  # oldest new beat first
-            interval = float((ts[i] - ts[i + 1]) & 0xFFFF)  # 16-bit timestamp wrap
-            if RR_RANGE_MS[0] <= interval <= RR_RANGE_MS[1]:
-                rr.append(interval)
-            else:
-                self.stats.count("rr_implausible")
+            rr.append(float((ts[i] - ts[i + 1]) & 0xFFFF))  # 16-bit wrap; limits: Decoder._born
         return tuple(rr)
 
 

@@ -15,14 +15,14 @@ from __future__ import annotations
 import re
 
 from effortface.capture_tool.protocols import Decoder, HrSample
+from effortface.core.physio_limits import hr_plausible
 
 MAX_LINE = 80
-PLAUSIBLE_HR_BPM = (20.0, 250.0)
-_BEAT_RE = re.compile(rb"^B(\d{1,3}(?:\.\d+)?)$")
-_HR_RE = re.compile(rb"^HR:?\s*(\d{1,3}(?:\.\d+)?)$", re.IGNORECASE)
-_IBI_RE = re.compile(rb"^Q(\d{2,5})$")
-_RAW_RE = re.compile(rb"^S-?\d+$")
-_CSV_RE = re.compile(rb"^(\d{1,3}(?:\.\d+)?)(?:[,;\s]+(\d{2,5}(?:\.\d+)?))?$")
+_BEAT_RE = re.compile(rb"B(\d{1,3}(?:\.\d+)?)")
+_HR_RE = re.compile(rb"HR:?\s*(\d{1,3}(?:\.\d+)?)", re.IGNORECASE)
+_IBI_RE = re.compile(rb"Q(\d{2,5})")
+_RAW_RE = re.compile(rb"S-?\d+")
+_CSV_RE = re.compile(rb"(\d{1,3}(?:\.\d+)?)(?:[,;\s]+(\d{2,5}(?:\.\d+)?))?")
 
 
 class LineDecoderBase(Decoder):
@@ -95,10 +95,7 @@ class LinesDecoder(LineDecoderBase):
 
     def finish(self) -> list[HrSample]:
         """End of stream: release a held beat and count an unterminated last line."""
-        out = self._release()
-        self.stats.samples += len(out)
-        self.stats.invalid_samples += sum(not s.valid for s in out)
-        return out + super().finish()
+        return self._born(self._release()) + super().finish()
 
     def _release(self) -> list[HrSample]:
         pending, self._pending = self._pending, None
@@ -107,19 +104,19 @@ class LinesDecoder(LineDecoderBase):
     def _parse_line(self, line: bytes, n_bytes: int) -> list[HrSample]:
         if not line:
             return []
-        m = _IBI_RE.match(line)
+        m = _IBI_RE.fullmatch(line)
         if m:
             self.stats.frames_ok += 1
             return self._ibi(float(m.group(1)))
         out = self._release()
-        if _RAW_RE.match(line):
+        if _RAW_RE.fullmatch(line):
             return out  # PulseSensor raw signal: nothing to decode, nothing lost
-        m = _BEAT_RE.match(line)
+        m = _BEAT_RE.fullmatch(line)
         if m:
             self.stats.frames_ok += 1
             self._pending = self._sample(float(m.group(1)), ())
             return out
-        m = _HR_RE.match(line) or _CSV_RE.match(line)
+        m = _HR_RE.fullmatch(line) or _CSV_RE.fullmatch(line)
         if m:
             self.stats.frames_ok += 1
             rr = (float(m.group(2)),) if m.lastindex == 2 and m.group(2) else ()
@@ -139,7 +136,7 @@ class LinesDecoder(LineDecoderBase):
         return [HrSample(self._t_s, self._last_hr, (ibi_ms,), None, self.device, True)]
 
     def _sample(self, hr: float, rr: tuple[float, ...]) -> HrSample:
-        valid = PLAUSIBLE_HR_BPM[0] <= hr <= PLAUSIBLE_HR_BPM[1]
+        valid = hr_plausible(hr)
         self._last_hr = hr if valid else None
         return HrSample(self._t_s, hr if valid else None, rr, None, self.device, valid)
 

@@ -1,7 +1,10 @@
 """Crash-safe file writes shared by every stage (stdlib only, so the runtime may import it).
 
 A write goes to a temporary file in the same folder, is flushed and fsynced, then renamed over the
-target with ``os.replace``: a reader (or a crash) sees the old file or the new one, never half.
+target with ``os.replace``, and the folder is fsynced so the rename itself survives a power cut: a
+reader (or a crash) sees the old file or the new one, never half. A failed write (disk full...) is
+an OSError naming the target file; temporary files a killed writer left are removed by the next
+write of the same file once they are :data:`STALE_TMP_S` old.
 """
 
 from __future__ import annotations
@@ -11,11 +14,15 @@ import json
 import os
 import secrets
 import stat
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any
 
 from effortface.core.errors import UserError
+
+#: a temporary file of an atomic write older than this was left by a killed writer (no write takes so long)
+STALE_TMP_S = 300.0
 
 
 def refuse_overwrite(path: str | os.PathLike[str], *, overwrite: bool = False, what: str = "file",
@@ -100,7 +107,7 @@ def check_new_png(option: str, value: str | os.PathLike[str]) -> Path:
 
 
 def atomic_write(path: str | os.PathLike[str], write: Callable[[IO[bytes]], Any]) -> Path:
-    """Call ``write(fh)`` on a temp file beside ``path``, fsync it, then rename it over ``path``.
+    """Call ``write(fh)`` on a temp file beside ``path``, fsync it, rename it over ``path``, fsync the folder.
 
     The new file's mode is what ``open(path, "w")`` would give: an existing file keeps its mode, a new
     one gets 0666 minus the umask (0644 under the usual umask 022), so that colleagues on a shared lab
@@ -117,9 +124,19 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[IO[bytes]], Any]
     -------
     Path
         The written path.
+
+    Raises
+    ------
+    OSError
+        If the file cannot be written (disk full, read-only...): its ``filename`` is ``path``,
+        and the previous file, if any, is left as it was.
     """
     path = Path(path)
-    fd, tmp = _create_temp_beside(path)
+    remove_stale_temps(path)
+    try:
+        fd, tmp = _create_temp_beside(path)
+    except OSError as exc:
+        raise OSError(exc.errno, exc.strerror, str(path)) from None
     try:
         _keep_mode(fd, tmp, path)
         with os.fdopen(fd, "wb") as fh:
@@ -127,9 +144,12 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[IO[bytes]], Any]
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         tmp.unlink(missing_ok=True)
+        if isinstance(exc, OSError) and exc.errno is not None and exc.filename is None:  # ENOSPC...: name it
+            raise OSError(exc.errno, exc.strerror, str(path)) from None
         raise
+    fsync_folder(path.parent)
     return path
 
 
@@ -165,6 +185,48 @@ def _keep_mode(fd: int, tmp: Path, path: Path) -> None:
         os.fchmod(fd, mode)
     else:  # pragma: no cover - Windows has no fchmod
         os.chmod(tmp, mode)
+
+
+def fsync_folder(folder: str | os.PathLike[str]) -> None:
+    """fsync a folder so the renames and creations in it survive a power cut (no-op where unsupported)."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass  # some file systems cannot fsync a folder; the rename is still atomic
+    finally:
+        os.close(fd)
+
+
+def remove_stale_temps(path: str | os.PathLike[str], min_age_s: float = STALE_TMP_S) -> list[Path]:
+    """Remove the temporary files of atomic writes of ``path`` that are ``min_age_s`` old or older.
+
+    Parameters
+    ----------
+    path : path-like
+        The target file whose ``.<name>.*.tmp`` siblings are looked at.
+    min_age_s : float
+        Younger temporary files may belong to a write under way and are kept.
+
+    Returns
+    -------
+    list of Path
+        The files removed.
+    """
+    path = Path(path)
+    now = time.time()
+    gone = []
+    for tmp in path.parent.glob(f".{path.name}.*.tmp"):
+        try:
+            if now - tmp.stat().st_mtime >= min_age_s:
+                tmp.unlink()
+                gone.append(tmp)
+        except OSError:
+            continue
+    return gone
 
 
 def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:

@@ -89,7 +89,7 @@ SEX_ALIASES: Mapping[str, str] = types.MappingProxyType(
 CODE_RULE = "a capital letter then capitals, digits or '-' (2-16 characters, at least one digit), e.g. P01"
 #: The code pattern (the digit is checked apart); session ids embed it.
 CODE_PATTERN = r"[A-Z][A-Z0-9-]{1,15}"
-_CODE_RE = re.compile(rf"^{CODE_PATTERN}$")
+_CODE_RE = re.compile(CODE_PATTERN)  # used with fullmatch: "P01\n" is refused
 
 
 def check_limit(name: str, value: object, label: str = "") -> float:
@@ -147,7 +147,7 @@ def check_participant_code(code: str) -> str:
         If it does not follow :data:`CODE_RULE` (names such as ``"Jane Doe"`` or ``"jane"`` fail:
         they have spaces, lower case letters or no digit).
     """
-    if not isinstance(code, str) or not _CODE_RE.match(code) or not any(c.isdigit() for c in code):
+    if not isinstance(code, str) or not _CODE_RE.fullmatch(code) or not any(c.isdigit() for c in code):
         raise UserError(f"participant code: expected {CODE_RULE} (codes, never names), found {code!r}")
     return code
 

@@ -230,3 +230,16 @@ def test_no_work_at_all(lab):
     (folder / "work.csv").unlink()
     with pytest.raises(DatasetError, match=r"P01_\S+: expected work.csv or a motion/ folder"):
         session_table(folder)
+
+
+def test_an_impossible_valid_sample_is_refused_before_interpolation(lab):
+    """Issue 17 case 6: -70 bpm between two plausible samples became 50.8 bpm after 1 Hz interpolation."""
+    f = sorted(lab.glob("P02_*"))[0] / "heart_rate.csv"
+    lines = f.read_text().splitlines()
+    fields = lines[5].split(",")
+    fields[1] = "-70"
+    lines[5] = ",".join(fields)
+    f.write_text("\n".join(lines) + "\n")
+    with pytest.raises(DatasetError, match=r"heart_rate.csv: line 6: expected hr_bpm from 25 to 250 on a valid "
+                                           r"row, found -70"):
+        sessions_table([lab])
