@@ -119,8 +119,8 @@ def recover_trial(work: Path, video: Path, rng: random.Random) -> dict[str, obje
 
 _ANNOTATE = """
 import sys
-from effortface.annotate.session_model import AnnotationSession
-m = AnnotationSession(sys.argv[1], "R1", autosave=True)
+from effortface.annotate.annotate_session import AnnotateSession
+m = AnnotateSession(sys.argv[1], "R1", autosave=True)
 for k in range(1, 100000):
     m.set_key((k % 100) / 100, frame=(7 * k) % m.n_frames)
     print((7 * k) % m.n_frames, flush=True)

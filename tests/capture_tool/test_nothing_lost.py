@@ -274,16 +274,13 @@ def _recording(tmp_path: Path) -> Recorder:
 
 
 def _controller() -> type:
-    """The Capture stage's controller class (Qt-free), wherever the stage keeps it."""
-    try:
-        from effortface.capture_tool.controller import CaptureController  # type: ignore[import-not-found]
-    except ImportError:
-        from effortface.capture_tool.gui.controller import CaptureController
-    return CaptureController
+    """The Capture stage's model class (Qt-free)."""
+    from effortface.capture_tool.capture_session import CaptureSession
+    return CaptureSession
 
 
 def test_a_recording_session_is_locked_with_a_visible_owner(tmp_path) -> None:
-    from effortface.annotate.session_model import AnnotationSession
+    from effortface.annotate.annotate_session import AnnotateSession
     from effortface.train.dataset import expand_paths
 
     rec = _recording(tmp_path)
@@ -296,7 +293,7 @@ def test_a_recording_session_is_locked_with_a_visible_owner(tmp_path) -> None:
         assert list_sessions(path.parent) == [] and list_sessions(path.parent, include_recording=True) == [path]
         assert _controller()(tmp_path / "out").incomplete_sessions() == []  # the Capture stage's recovery offer
         with pytest.raises(LockedError, match="to annotate it"):
-            AnnotationSession(path, "R1")
+            AnnotateSession(path, "R1")
         with pytest.raises(LockedError, match="to train on it"):
             expand_paths([path])
     finally:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from effortface.annotate.session_model import check_rater
+from effortface.annotate.annotate_session import check_rater
 from effortface.capture_tool.protocols import get_decoder
 from effortface.capture_tool.protocols.encode import encode_ant_broadcast, encode_hxm_packet, encode_line
 from effortface.capture_tool.session import check_participant_code, make_session_id, parse_session_id
