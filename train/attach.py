@@ -36,7 +36,7 @@ from effortface.train.motion import Motion, read_motion
 from effortface.train.work import MOTION_DIR, MOTION_JSON, read_motion_index
 
 #: the kinds of clip ``motion attach`` copies (by suffix)
-CLIP_FORMATS = {".bvh": "bvh", ".csv": "joint positions csv", ".npz": "npz"}
+CLIP_FORMATS = {".bvh": "bvh", ".c3d": "c3d", ".csv": "joint positions csv", ".npz": "npz"}
 SYNC_LABEL = "jump"
 MIN_JUMP_RISE_M = 0.05
 MIN_TAKEOFF_M_S = 0.8
@@ -189,7 +189,7 @@ def attach_clip(session: str | os.PathLike, clip: str | os.PathLike, *, offset_s
     session : path-like
         The session folder.
     clip : path-like
-        A BVH, joint-positions CSV or npz clip (read and checked before anything is written).
+        A BVH, C3D, joint-positions CSV or npz clip (read and checked before anything is written).
     offset_s : float, optional
         Session time of the clip's first frame.
     sync : bool

@@ -40,7 +40,7 @@ from effortface.core.fileio import refuse_overwrite
 from effortface.capture_tool.session import PARTICIPANT_RANGES, SEX_ALIASES  # the limits capture enforces
 from effortface.capture_tool.session import SEXES, Session, list_sessions, parse_session_id, read_session
 from effortface.train.hr_fit import HrSeries
-from effortface.train.work import derive_work
+from effortface.train.work import WORK_CSV, derive_work
 from effortface.train.physiology import (EpocParams, hr_max_bpm, hr_rest_bpm, epoc_step,
                               vo2max_ml_per_kg_min, VO2_REST_ML_PER_KG_MIN)
 
@@ -52,7 +52,6 @@ OPTIONAL_COLUMNS = ("exercise", "hr_rest_bpm", "hr_max_bpm")
 PARTICIPANT_COLUMNS = ("sex", "age", "height_m", "mass_kg", "training_level")
 #: longest strap gap bridged by interpolation, seconds (choice)
 MAX_HR_GAP_S = 5.0
-WORK_CSV = "work.csv"
 ANNOTATIONS_DIR = "annotations"
 
 

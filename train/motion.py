@@ -233,7 +233,8 @@ def motion_from_positions(
 
 
 def read_motion(path: str | Path, *, unit_m: float | None = None) -> Motion:
-    """Read a motion file, choosing the reader by suffix (``.bvh``, ``.npz`` or joint-positions ``.csv``).
+    """Read a motion file, choosing the reader by suffix (``.bvh``, ``.npz``, joint-positions ``.csv``
+    or ``.c3d`` through :mod:`effortface.train.motion_c3d`).
 
     Parameters
     ----------
@@ -259,7 +260,12 @@ def read_motion(path: str | Path, *, unit_m: float | None = None) -> Motion:
         return read_npz_motion(path)
     if suffix == ".csv":
         return read_positions_csv(path)
-    raise MotionFormatError(f"{path}: expected a motion file ending in .bvh, .npz or .csv, got suffix {suffix!r}")
+    if suffix == ".c3d":
+        from effortface.train.motion_c3d import read_c3d  # optional package, never loaded by the runtime
+
+        return read_c3d(path)
+    raise MotionFormatError(f"{path}: expected a motion file ending in .bvh, .npz, .csv or .c3d, "
+                            f"got suffix {suffix!r}")
 
 
 #: the first column of a joint-positions CSV

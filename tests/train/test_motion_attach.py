@@ -111,7 +111,7 @@ BAD = {
                       r"{session}/events.csv: expected a sync row labelled 'jump' \(t_s,sync,jump,\) to align "
                       r"the clip with, found none"),
     "not a clip": ("../motion_and_physiology_PROVENANCE.md", ["--offset", "1"], [],
-                   r"{clip}: expected a clip ending in .bvh, .csv, .npz, found '.md'"),
+                   r"{clip}: expected a clip ending in .bvh, .c3d, .csv, .npz, found '.md'"),
     "not finite": (FULL, ["--offset", "nan"], [], r"--offset: expected a finite number of seconds, found nan"),
 }
 
