@@ -18,8 +18,11 @@ phase is open ends that phase. Other kinds (``sync``, ``marker``, ``link``, ``de
 part of the log and are ignored here.
 
 Rows written by earlier releases are read too: phase labels such as ``walk 1.5 m/s`` /
-``run 3.4 m/s`` (treadmill walk / run at that speed), ``jumping jacks`` (spaces for ``_``), and
-``speed`` rows labelled ``treadmill_m_s``.
+``run 3.4 m/s`` (treadmill walk / run at that speed), ``jumping jacks`` (spaces for ``_``),
+``speed`` rows labelled ``treadmill_m_s``, and the Capture stage's ``load_kg=5;speed_kmh=8.5``
+values (on ``phase_start`` or on ``load`` rows labelled with the phase): the speed in km/h becomes
+the phase's speed in m/s and the load the exercise's lifted load (``machine_kg``, choice: the stage
+did not say where it was carried). Any other number on ``phase_start`` is ignored.
 """
 
 from __future__ import annotations
@@ -45,6 +48,7 @@ PHASE_KINDS = ("phase_start", "phase_end")
 LOG_KINDS = (*PHASE_KINDS, *PARAMETER_KINDS, "reps", "load")
 _LEGACY_GAIT = re.compile(r"^(walk|run)\s+(\d+(?:\.\d+)?)\s*m/s$")
 _LEGACY_PARAMETER_LABELS = {"treadmill_m_s": "treadmill"}
+_LEGACY_STAGE_VALUE = re.compile(r"^load_kg=([^;]*);speed_kmh=(.*)$")
 
 
 def exercise_id(label: str) -> str:
@@ -228,6 +232,7 @@ def exercise_log(events: Sequence[Event], source: str = EVENTS_CSV) -> ExerciseL
             if open_phase is not None:
                 log.phases.append(Phase(*open_phase[:2], open_phase[2], ev.t_s, *open_phase[3:]))
             open_phase = (exercise_id(ev.label), ev.label, ev.t_s, line, _implied(ev.label))
+            _add_stage_value(log, ev, line, source)
         elif ev.kind == "phase_end":
             if open_phase is None or exercise_id(ev.label) != open_phase[0]:
                 found = f"phase {open_phase[1]!r} open" if open_phase else "no phase open"
@@ -235,6 +240,8 @@ def exercise_log(events: Sequence[Event], source: str = EVENTS_CSV) -> ExerciseL
                                          f"of an open phase of that exercise, found {found}")
             log.phases.append(Phase(*open_phase[:2], open_phase[2], ev.t_s, *open_phase[3:]))
             open_phase = None
+        elif ev.kind == "load" and _LEGACY_STAGE_VALUE.match(ev.value):
+            _add_stage_value(log, ev, line, source)
         elif ev.kind == "load":
             _add_load(log, ev, line, source)
         elif ev.kind in PARAMETER_KINDS or ev.kind == "reps":
@@ -249,6 +256,17 @@ def _implied(label: str) -> dict[str, float]:
     """Parameters carried by a legacy label (``walk 1.5 m/s`` -> speed 1.5)."""
     gait = _LEGACY_GAIT.match(label.strip().lower())
     return {"speed_m_s": float(gait[2])} if gait else {}
+
+
+def _add_stage_value(log: ExerciseLog, ev: Event, line: int, source: str) -> None:
+    """The Capture stage's ``load_kg=X;speed_kmh=Y`` value: X as machine_kg, Y / 3.6 as the speed."""
+    stage = _LEGACY_STAGE_VALUE.match(ev.value)
+    if not stage:
+        return
+    load = _number(Event(ev.t_s, "load", "machine_kg", stage[1]), line, source)
+    speed = _number(Event(ev.t_s, "speed", ev.label, stage[2]), line, source)
+    log.loads.setdefault("machine_kg", []).append(Change(ev.t_s, load, line))
+    log.parameters.setdefault((exercise_id(ev.label), "speed"), []).append(Change(ev.t_s, speed / 3.6, line))
 
 
 def _add_load(log: ExerciseLog, ev: Event, line: int, source: str) -> None:

@@ -53,6 +53,16 @@ def test_sessions_of_earlier_releases_stay_readable() -> None:
     assert exercise_id("Jumping Jacks") == exercise_id("jumping-jacks") == "jumping_jacks"
 
 
+def test_the_capture_stage_values_of_earlier_releases(tmp_path: Path) -> None:
+    """``load_kg=5;speed_kmh=7.2`` on phase_start and on load rows labelled with the phase."""
+    log = read_exercise_log(_events(tmp_path, ["0,phase_start,treadmill,load_kg=0;speed_kmh=7.2",
+                                               "30,load,treadmill,load_kg=10;speed_kmh=10.8",
+                                               "60,phase_end,treadmill,", "60,phase_start,recovery,"]))
+    (_, _, first), (_, _, second) = log.states(log.phases[0])
+    assert first.speed_m_s == pytest.approx(2.0) and second.speed_m_s == pytest.approx(3.0)
+    assert second.load_kg("machine_kg") == 10
+
+
 BAD_LOGS = {
     r"line 3: speed treadmill: expected a number >= 0 m/s, found '-1'": ["0,phase_start,treadmill,",
                                                                         "0,speed,treadmill,-1"],
@@ -60,6 +70,7 @@ BAD_LOGS = {
     r"line 2: load label: expected one of back_kg, left_kg, right_kg, machine_kg, found 'head_kg'":
         ["0,load,head_kg,5"],
     r"line 2: power cycle_ergometer: expected a number >= 0 W, found 'fast'": ["0,power,cycle_ergometer,fast"],
+    r"line 2: speed exercise: expected a number >= 0 m/s, found '-3'": ["0,phase_start,exercise,load_kg=1;speed_kmh=-3"],
     r"line 3: phase_end 'squats': expected the end of an open phase of that exercise, found phase 'rest' open":
         ["0,phase_start,rest,", "5,phase_end,squats,"],
 }
