@@ -1,7 +1,8 @@
 """The exercise catalog: how w and p (W/kg) are estimated from what the exercise log says.
 
-The entries are data (``data/exercise_catalog.csv``, one row per exercise id, with the source of
-every number); this module reads them and applies their model. The models (``model`` column):
+The entries are data (``effortface/core/data/exercise_catalog.csv``, one row per exercise id, with
+the source of every number; in the core because capture logs and plans exercises by the same ids);
+this module reads them and applies their model. The models (``model`` column):
 
 * ``constant``: ``w = w_ref``.
 * ``gait``: ``w = w_ref * v / v_ref + g * v * grade / 100`` (lifting the body up the slope).
@@ -22,7 +23,6 @@ the estimate of p is w.
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import math
 import os
@@ -30,9 +30,9 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from effortface.core.errors import UserError
+from effortface.core.exercises import CATALOG_CSV, read_catalog_rows
 from effortface.train.exercise_log import PhaseState
 
-CATALOG_CSV = Path(__file__).with_name("data") / "exercise_catalog.csv"
 MODELS = ("constant", "gait", "treadmill", "reps", "ergometer", "lift")
 #: walk-run transition of the ``treadmill`` entry, m/s (choice: the preferred transition speed)
 WALK_RUN_SPEED_M_S = 2.0
@@ -191,8 +191,10 @@ def read_catalog(path: str | os.PathLike = CATALOG_CSV) -> Catalog:
         that is not finite (``w_ref_per_kg``, ``ref_value`` > 0 where the model uses them).
     """
     path = Path(path)
-    with open(path, encoding="utf-8", newline="") as fh:
-        rows = list(csv.DictReader(line for line in fh if not line.startswith("#")))
+    try:
+        rows = read_catalog_rows(path)
+    except UserError as exc:
+        raise CatalogError(str(exc)) from None
     if not rows or any(c not in rows[0] for c in _COLUMNS):
         raise CatalogError(f"{path}: expected columns {','.join(_COLUMNS)}, found "
                            f"{','.join(rows[0]) if rows else 'no rows'}")
