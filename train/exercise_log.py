@@ -168,7 +168,8 @@ class ExerciseLog:
         values: dict[str, float | None] = {}
         for kind, name in PARAMETER_KINDS.items():
             found = [_held(self.parameters.get((label, kind), []), t_s) for label in labels]
-            values[name] = next((v for v in found if v is not None), phase.implied.get(name))
+            late = [_first_inside(self.parameters.get((label, kind), []), phase) for label in labels]
+            values[name] = next((v for v in [*found, phase.implied.get(name), *late] if v is not None), None)
         rate = _pace_per_min(phase, [c for label in labels for c in self.parameters.get((label, "reps"), [])])
         loads = tuple((label, _held(self.loads.get(label, []), t_s) or 0.0) for label in LOAD_LABELS)
         return PhaseState(**values, reps_per_min=rate, loads_kg=loads)  # type: ignore[arg-type]
@@ -181,6 +182,12 @@ def _pace_per_min(phase: Phase, reps: Sequence[Change]) -> float | None:
         return None
     last = max(inside, key=lambda c: c.t_s)
     return 60.0 * last.value / (last.t_s - phase.start_s)
+
+
+def _first_inside(changes: Sequence[Change], phase: Phase) -> float | None:
+    """The first value logged during the phase: it also holds from the phase's start when nothing
+    was logged before (the operator, or the recorder a moment after ``phase_start``, logs it late)."""
+    return next((c.value for c in changes if phase.start_s <= c.t_s < phase.end_s), None)
 
 
 def _held(changes: Sequence[Change], t_s: float) -> float | None:

@@ -83,6 +83,14 @@ def test_bad_logs_name_the_file_and_line(tmp_path: Path, message: str, rows: lis
         read_exercise_log(path)
 
 
+def test_a_parameter_logged_a_moment_late_applies_from_the_phase_start(tmp_path: Path) -> None:
+    """The recorder writes phase_start, then the plan's speed a fraction of a millisecond later."""
+    log = read_exercise_log(_events(tmp_path, ["0.0031,phase_start,treadmill,", "0.0032,speed,treadmill,1.5",
+                                               "20,speed,treadmill,3"]))
+    pieces = log.states(log.phases[0])
+    assert [(a, s.speed_m_s) for a, _, s in pieces] == [(0.0031, 1.5), (0.0032, 1.5), (20.0, 3.0)]
+
+
 def test_grade_may_be_negative_and_a_missing_file_is_an_empty_log(tmp_path: Path) -> None:
     log = read_exercise_log(_events(tmp_path, ["0,phase_start,treadmill,", "0,grade,treadmill,-3"]))
     assert log.states(log.phases[0])[0][2].grade_pct == -3
