@@ -13,9 +13,11 @@ capture time.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
-from collections.abc import Mapping
+import time
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 
 from effortface.core.errors import UserError
@@ -28,6 +30,8 @@ COLUMNS = ("participant_id", "sex", "age", "height_m", "mass_kg", "training_leve
 REQUIRED = {"sex": "--sex", "age": "--age", "height_m": "--height", "mass_kg": "--mass",
             "training_level": "--training-level"}
 MISSING = "n/a"
+#: how long a capture waits for another one registering in the same lab folder, seconds
+LOCK_TIMEOUT_S = 5.0
 
 
 class RegistryError(UserError):
@@ -173,13 +177,37 @@ def register(registry_path: str | os.PathLike, participant: Participant) -> Path
         If the registry already has that code (use :func:`resolve_participant` first).
     """
     registry_path = Path(registry_path)
-    people = read_registry(registry_path)
-    if participant.code in people:
-        raise RegistryError(f"{registry_path}: participant {participant.code}: expected a new code, found it registered")
-    text = registry_path.read_text(encoding="utf-8") if registry_path.exists() else "\t".join(COLUMNS) + "\n"
-    if not text.endswith("\n"):
-        text += "\n"
-    return atomic_write_text(registry_path, text + _line(participant) + "\n")
+    with _locked(registry_path):
+        people = read_registry(registry_path)
+        if participant.code in people:
+            raise RegistryError(f"{registry_path}: participant {participant.code}: expected a new code, "
+                                f"found it registered")
+        text = registry_path.read_text(encoding="utf-8") if registry_path.exists() else "\t".join(COLUMNS) + "\n"
+        if not text.endswith("\n"):
+            text += "\n"
+        return atomic_write_text(registry_path, text + _line(participant) + "\n")
+
+
+@contextlib.contextmanager
+def _locked(registry_path: Path) -> Iterator[None]:
+    """Hold ``.participants.tsv.lock`` beside the registry, so that two captures starting together
+    in one lab folder do not lose each other's row (a lock file: portable, no fcntl)."""
+    lock = registry_path.with_name(f".{registry_path.name}.lock")
+    deadline = time.monotonic() + LOCK_TIMEOUT_S
+    while True:
+        try:
+            os.close(os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+            break
+        except FileExistsError:
+            if time.monotonic() > deadline:
+                raise RegistryError(f"{lock}: expected the registry lock to be released within "
+                                    f"{LOCK_TIMEOUT_S:g} s, found it held (remove it if no capture is "
+                                    f"starting)") from None
+            time.sleep(0.01)
+    try:
+        yield
+    finally:
+        lock.unlink(missing_ok=True)
 
 
 def _line(p: Participant) -> str:

@@ -105,6 +105,24 @@ def test_no_heart_rate_ends_with_a_warning_and_status_1(tmp_path: Path) -> None:
     assert "complete:" not in done.stderr
 
 
+def test_captures_registering_together_lose_no_row(tmp_path: Path) -> None:
+    """Eight threads register eight participants in one registry at once: every row is kept."""
+    import threading
+
+    from effortface.capture_tool.participants import register
+    from effortface.capture_tool.session import Participant
+
+    path = tmp_path / REGISTRY_TSV
+    people = [Participant(f"P{i:02d}", "male", 30, 1.8, 80, 5) for i in range(8)]
+    threads = [threading.Thread(target=register, args=(path, p)) for p in people]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert sorted(read_registry(path)) == [p.code for p in people]
+    assert [p.name for p in tmp_path.iterdir()] == [REGISTRY_TSV]  # the lock is gone
+
+
 OVERLAP = "start_s,end_s,exercise\n0,30,rest\n20,60,squats\n"
 BAD = {
     "missing demographics": ([], None,
