@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import functools
 import math
 import os
 from collections.abc import Callable
@@ -184,11 +185,13 @@ class PlanRunner:
             title = f"phase {n}/{len(self.phases)} {phase.describe()}"
             for before in COUNTDOWN_S:
                 if phase.start_s - before >= 0:
-                    out.append((phase.start_s - before, 0, lambda b=before, t=title: self._say(f"{t} starts in {b} s")))
+                    say = functools.partial(self._say, f"{title} starts in {before} s")
+                    out.append((phase.start_s - before, 0, say))
                 if phase.end_s - before > phase.start_s:
-                    out.append((phase.end_s - before, 0, lambda b=before, p=phase: self._say(f"{p.exercise} ends in {b} s")))
-            out.append((phase.start_s, 2, lambda p=phase, t=title: self._start(p, t)))
-            out.append((phase.end_s, 1, lambda p=phase: self._end(p)))
+                    say = functools.partial(self._say, f"{phase.exercise} ends in {before} s")
+                    out.append((phase.end_s - before, 0, say))
+            out.append((phase.start_s, 2, functools.partial(self._start, phase, title)))
+            out.append((phase.end_s, 1, functools.partial(self._end, phase)))
         return out
 
     def _start(self, phase: PlannedPhase, title: str) -> None:

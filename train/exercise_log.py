@@ -172,7 +172,7 @@ class ExerciseLog:
             values[name] = next((v for v in [*found, phase.implied.get(name), *late] if v is not None), None)
         rate = _pace_per_min(phase, [c for label in labels for c in self.parameters.get((label, "reps"), [])])
         loads = tuple((label, _held(self.loads.get(label, []), t_s) or 0.0) for label in LOAD_LABELS)
-        return PhaseState(**values, reps_per_min=rate, loads_kg=loads)  # type: ignore[arg-type]
+        return PhaseState(**values, reps_per_min=rate, loads_kg=loads)
 
 
 def _pace_per_min(phase: Phase, reps: Sequence[Change]) -> float | None:

@@ -17,7 +17,7 @@ from effortface.core.errors import UserError
 CATALOG_CSV = Path(__file__).with_name("data") / "exercise_catalog.csv"
 
 
-def read_catalog_rows(path: str | os.PathLike = CATALOG_CSV) -> list[dict[str, str]]:
+def read_catalog_rows(path: str | os.PathLike[str] = CATALOG_CSV) -> list[dict[str, str]]:
     """The rows of an exercise catalog CSV as dicts (``#`` lines are comments).
 
     Raises
@@ -33,13 +33,17 @@ def read_catalog_rows(path: str | os.PathLike = CATALOG_CSV) -> list[dict[str, s
         raise UserError(f"{path}: expected an exercise catalog CSV, found {exc}") from None
 
 
+def exercise_ids(path: str | os.PathLike[str] = CATALOG_CSV) -> tuple[str, ...]:
+    """The exercise ids of a catalog, in file order (read once per path)."""
+    return _ids(str(path))
+
+
 @functools.lru_cache(maxsize=4)
-def exercise_ids(path: str | os.PathLike = CATALOG_CSV) -> tuple[str, ...]:
-    """The exercise ids of a catalog, in file order."""
+def _ids(path: str) -> tuple[str, ...]:
     return tuple(row["id"].strip() for row in read_catalog_rows(path) if row.get("id"))
 
 
-def check_exercise_id(exercise: str, where: str, path: str | os.PathLike = CATALOG_CSV) -> str:
+def check_exercise_id(exercise: str, where: str, path: str | os.PathLike[str] = CATALOG_CSV) -> str:
     """Return ``exercise`` if the catalog has it, else a UserError naming ``where`` and the catalog.
 
     Parameters
