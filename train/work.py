@@ -16,6 +16,8 @@ import math
 import os
 from pathlib import Path
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from effortface.core.errors import UserError
@@ -23,6 +25,10 @@ from effortface.core.fileio import atomic_write_text
 from effortface.capture_tool.session import Session, read_session
 from effortface.train.catalog import Catalog, CatalogError, default_catalog
 from effortface.train.exercise_log import ExerciseLog, exercise_log
+
+if TYPE_CHECKING:  # the energies load scipy: imported only when a session has motion
+    from effortface.train.energy import EnergyCurves
+    from effortface.train.motion import Motion
 
 WORK_CSV = "work.csv"
 WORK_HEADER = "t_s,w_per_kg,p_per_kg,source"
@@ -105,7 +111,7 @@ def derive_work(session: Session | str | os.PathLike, t_s: np.ndarray | None = N
     source = [""] * len(t)
     _fill_from_log(log, s.participant.mass_kg, t, w, p, source, catalog or default_catalog())
     if has_motion:
-        _fill_from_motion(s, t, w, p, source)
+        _fill_from_motion(s, log, t, w, p, source)
     return WorkTable(t, w, p, source)
 
 
@@ -130,11 +136,20 @@ def _fill_from_log(log: ExerciseLog, mass_kg: float | None, t: np.ndarray, w: np
             raise WorkError(f"{log.source}: line {phase.line}: {exc}") from None
 
 
-def _fill_from_motion(s: Session, t: np.ndarray, w: np.ndarray, p: np.ndarray, source: list[str]) -> None:
-    """Overwrite the seconds that a clip of ``motion/motion.json`` covers with its energies."""
-    from effortface.train.energy import work_and_power
+#: motion.json keys of a clip's loads, in the order of :class:`~effortface.train.segments.Loads`
+ENTRY_LOAD_KEYS = ("load_left_kg", "load_right_kg", "load_back_kg")
+#: the exercise log's load labels in the same order
+LOG_LOAD_LABELS = ("left_kg", "right_kg", "back_kg")
+
+
+def _fill_from_motion(s: Session, log: ExerciseLog, t: np.ndarray, w: np.ndarray, p: np.ndarray,
+                      source: list[str]) -> None:
+    """Overwrite the seconds that a clip of ``motion/motion.json`` covers with its energies.
+
+    A clip's loads are its entry's ``load_*_kg`` keys when it has any (earlier releases), else the
+    exercise log's ``load`` rows in force at each second: one energy computation per distinct set.
+    """
     from effortface.train.motion import read_motion
-    from effortface.train.segments import Loads, build_body
 
     index = s.path / MOTION_DIR / MOTION_JSON
     part = s.participant
@@ -143,16 +158,35 @@ def _fill_from_motion(s: Session, t: np.ndarray, w: np.ndarray, p: np.ndarray, s
                         f"work from motion/, found {part.mass_kg!r} and {part.sex!r}")
     for entry in read_motion_index(index):
         clip = read_motion(index.parent / str(entry["path"]))
-        loads = Loads(*(float(entry.get(k, 0.0)) for k in ("load_left_kg", "load_right_kg", "load_back_kg")))
-        body = build_body(clip.joint_names, clip.parents, part.mass_kg, part.sex, loads=loads,
-                          reference_positions_m=clip.positions_m)
-        curves = work_and_power(clip, body)
-        t_clip = curves.t_s + float(entry.get("offset_s", 0.0))
-        inside = np.flatnonzero((t >= t_clip[0]) & (t <= t_clip[-1]))
-        w[inside] = np.interp(t[inside], t_clip, curves.w_per_kg)
-        p[inside] = np.interp(t[inside], t_clip, curves.p_per_kg)
+        offset_s = float(entry.get("offset_s", 0.0))
+        inside = np.flatnonzero((t >= offset_s) & (t <= offset_s + (clip.n_frames - 1) / clip.fps))
+        if any(k in entry for k in ENTRY_LOAD_KEYS):
+            loads = [tuple(float(entry.get(k, 0.0)) for k in ENTRY_LOAD_KEYS)] * len(inside)
+        else:
+            loads = [tuple(_log_load(log, label, t[i]) for label in LOG_LOAD_LABELS) for i in inside]
+        for load in sorted(set(loads)):
+            rows = inside[[k for k, x in enumerate(loads) if x == load]]
+            curves = _clip_curves(clip, part.mass_kg, part.sex, load)
+            w[rows] = np.interp(t[rows], curves.t_s + offset_s, curves.w_per_kg)
+            p[rows] = np.interp(t[rows], curves.t_s + offset_s, curves.p_per_kg)
         for i in inside:
             source[i] = f"motion:{entry['path']}"
+
+
+def _log_load(log: ExerciseLog, label: str, t_s: float) -> float:
+    """The load of ``label`` logged last at or before ``t_s`` (0 kg when none)."""
+    held = [c.value for c in log.loads.get(label, []) if c.t_s <= t_s + 1e-9]
+    return held[-1] if held else 0.0
+
+
+def _clip_curves(clip: Motion, mass_kg: float, sex: str, load: tuple[float, ...]) -> EnergyCurves:
+    """Work and power of a clip for the participant's body carrying ``load`` (left, right, back kg)."""
+    from effortface.train.energy import work_and_power
+    from effortface.train.segments import Loads, build_body
+
+    body = build_body(clip.joint_names, clip.parents, mass_kg, sex, loads=Loads(*load),
+                      reference_positions_m=clip.positions_m)
+    return work_and_power(clip, body)
 
 
 def read_motion_index(path: str | os.PathLike) -> list[dict]:

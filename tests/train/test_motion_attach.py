@@ -138,3 +138,25 @@ def test_a_clip_already_attached_is_not_overwritten(shared_data: Path, tmp_path:
     assert _one_error_line(capsys).endswith(f"motion/{FULL}: expected a new clip name in motion/, found one "
                                             "(not overwritten)")
     assert (folder / "motion" / "motion.json").read_bytes() == before
+
+
+def test_a_clip_carries_the_loads_of_the_exercise_log(shared_data: Path, tmp_path: Path) -> None:
+    """Without load keys in motion.json, the log's load rows in force at each second load the body."""
+    clip = shared_data / "motion" / "cmu_13_29_squats_120fps.bvh"  # 6.8 s
+    offset_s = 20.0  # inside the sample log's first squat set: its loads are logged at 15 and 45 s
+    folder = _session(tmp_path, [])
+    with open(folder / "events.csv", "a", encoding="utf-8") as fh:
+        fh.write(f"{offset_s + 3.5:.4f},load,back_kg,20\n")  # the bar goes on mid-clip
+    assert _attach(folder, clip, "--offset", str(offset_s)) == 0
+    t, w_log = _clip_seconds(folder)
+    loaded = t >= offset_s + 3.5
+    index = folder / "motion" / "motion.json"
+    entries = json.loads(index.read_text())
+    fixed = {}
+    for load_kg in (0.0, 20.0):  # the same clip with one explicit load for the whole clip
+        entries["files"][0]["load_back_kg"] = load_kg
+        index.write_text(json.dumps(entries))
+        fixed[load_kg] = _clip_seconds(folder)[1]
+    np.testing.assert_allclose(w_log[~loaded], fixed[0.0][~loaded])
+    np.testing.assert_allclose(w_log[loaded], fixed[20.0][loaded])
+    assert (fixed[20.0][loaded] > fixed[0.0][loaded]).all()
