@@ -136,7 +136,7 @@ def main() -> None:
         log_s = _timed_work(log_only, root / "scratch", args.repeat)
         motion_s = _timed_work(with_motion, root / "scratch", args.repeat)
     print(f"1-hour session: 3600 s of heart rate, 108000 frame times, {n_events} events "
-          f"(best of {args.repeat}: the machine is shared)", file=sys.stderr)
+          f"(best of {args.repeat}: the machine is shared)")
     print(f"{'case':<44} {'seconds':>8} {'x baseline':>11} {'x real time':>12}")
     for name, secs in (("baseline: read_session", base), ("effortface work, exercise log only", log_s),
                        ("effortface work, log + 2 motion clips (76 s)", motion_s)):
