@@ -30,6 +30,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "train": ("effortface.train.commands.train", "fit the heart-rate and face models, export a bundle"),
     "evaluate": ("effortface.train.commands.evaluate", "re-score a model bundle on sessions or a table"),
     "synth": ("effortface.train.commands.synth", "synthesize face curves from a motion clip"),
+    "work": ("effortface.train.commands.work", "work.csv (w, p per second) from motion/ and the exercise log"),
+    "motion": ("effortface.train.commands.motion", "motion attach SESSION CLIP: align a mocap clip to a session"),
     "demo": ("effortface.commands.demo", "the whole pipeline on the sample lab"),
 }
 

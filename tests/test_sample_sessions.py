@@ -25,7 +25,7 @@ from effortface.capture_tool.recorder import decode_serlog
 from effortface.capture_tool.serlog import read_serlog
 from effortface.capture_tool.session import list_sessions, read_session, validate_session
 
-from .capture_tool.capture_helpers import content, effortface, start_replay
+from .capture_tool.capture_helpers import BODY, content, effortface, start_replay
 
 ROOT = Path(__file__).resolve().parents[1]
 LAB = ROOT / "sample_sessions"
@@ -148,7 +148,7 @@ def test_replaying_a_serlog_into_capture_reproduces_heart_rate_csv(tmp_path) -> 
     expected = read_session(session).heart_rate
     replay, pty = start_replay(read_session(session).serlog_paths()[0], "--speed", "25")
     cap = subprocess.Popen(effortface("capture", "--port", pty, "--protocol", "ant", "--participant", "P01",
-                                      "--no-video", "--out", tmp_path), stdout=subprocess.PIPE,
+                                      *BODY, "--no-video", "--out", tmp_path), stdout=subprocess.PIPE,
                            stderr=subprocess.PIPE, text=True)
     out = Path(cap.stdout.readline().strip())
     deadline = time.monotonic() + 60

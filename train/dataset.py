@@ -10,8 +10,9 @@ unseen-exercise protocol; default: the session id's label, e.g. ``cardio``), ``h
 
 From a session folder (:func:`session_table`), each second ``t_s = 0, 1, 2, ...`` gets:
 
-- ``w_per_kg``, ``p_per_kg`` from ``work.csv`` (previous value held), else from the clips of
-  ``motion/motion.json`` through :mod:`effortface.train.energy` (NaN where no clip covers the second);
+- ``w_per_kg``, ``p_per_kg`` from ``work.csv`` (previous value held), else derived the way
+  ``effortface work`` does (:mod:`effortface.train.work`: the clips of ``motion/motion.json`` where
+  they cover the time, the exercise log and its catalog elsewhere; NaN where neither does);
 - ``hr_bpm``: valid strap samples linearly interpolated, empty across gaps longer than
   ``MAX_HR_GAP_S`` (choice);
 - blendshape weights from each rater's key-frames evaluated at the video frame nearest that second;
@@ -24,7 +25,6 @@ measured NHR through :mod:`effortface.train.physiology`'s recursion), the inputs
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from collections.abc import Iterable, Sequence
@@ -42,6 +42,7 @@ from effortface.core.participant import LIMITS, SEX_ALIASES, SEXES  # the one li
 from effortface.capture_tool.session import (Session, check_not_recording, list_sessions, parse_session_id,
                                              read_session)
 from effortface.train.hr_fit import HrSeries
+from effortface.train.work import WORK_CSV, derive_work
 from effortface.train.physiology import (EpocParams, hr_max_bpm, hr_rest_bpm, epoc_step,
                               vo2max_ml_per_kg_min, VO2_REST_ML_PER_KG_MIN)
 
@@ -53,7 +54,6 @@ OPTIONAL_COLUMNS = ("exercise", "hr_rest_bpm", "hr_max_bpm")
 PARTICIPANT_COLUMNS = ("sex", "age", "height_m", "mass_kg", "training_level")
 #: longest strap gap bridged by interpolation, seconds (choice)
 MAX_HR_GAP_S = 5.0
-WORK_CSV = "work.csv"
 ANNOTATIONS_DIR = "annotations"
 
 
@@ -351,7 +351,9 @@ def _hr_per_second(s: Session, t: np.ndarray) -> np.ndarray:
 
 
 def _work(s: Session, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """w and p (W/kg) per second from work.csv, else from motion/ (effortface.train.energy)."""
+    """w and p (W/kg) per second from work.csv, else derived as ``effortface work`` does
+    (:func:`effortface.train.work.derive_work`: motion/ where clips cover the time, the exercise log
+    elsewhere)."""
     path = s.path / WORK_CSV
     if path.is_file():
         try:
@@ -361,42 +363,11 @@ def _work(s: Session, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             raise DatasetError(f"{path}: expected columns t_s,w_per_kg,p_per_kg, found {exc}") from None
         idx = np.clip(np.searchsorted(wt, t + 1e-9, side="right") - 1, 0, len(wt) - 1)
         return ww[idx], wp[idx]
-    if (s.path / "motion").is_dir():
-        return _work_from_motion(s, t)
-    raise DatasetError(f"{s.path}: expected work.csv or a motion/ folder for w and p, found neither")
-
-
-def _work_from_motion(s: Session, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """w and p per second from the clips listed in ``motion/motion.json`` (effortface.train.energy).
-
-    Each entry gives ``path``, ``offset_s`` (clip time 0 in session time) and optional
-    ``load_back_kg`` / ``load_left_kg`` / ``load_right_kg``; seconds no clip covers get NaN.
-    """
-    from effortface.train.energy import work_and_power
-    from effortface.train.motion import read_motion
-    from effortface.train.segments import Loads, build_body
-
-    index = s.path / "motion" / "motion.json"
     try:
-        entries = json.loads(index.read_text(encoding="utf-8"))["files"]
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise DatasetError(f"{index}: expected {{\"files\": [{{path, offset_s}}]}}, found {exc!r}") from None
-    w, p = np.full(len(t), np.nan), np.full(len(t), np.nan)
-    part = s.participant
-    if part.mass_kg is None or part.sex is None:  # the segment model needs both (found by mypy)
-        raise DatasetError(f"{s.path / 'session.json'}: participant {part.code}: expected mass_kg and sex "
-                           f"for the motion clips' work, found mass_kg {part.mass_kg}, sex {part.sex}")
-    for entry in entries:
-        clip = read_motion(index.parent / str(entry["path"]))
-        loads = Loads(*(float(entry.get(k, 0.0)) for k in ("load_left_kg", "load_right_kg", "load_back_kg")))
-        body = build_body(clip.joint_names, clip.parents, part.mass_kg, part.sex, loads=loads,
-                          reference_positions_m=clip.positions_m)
-        curves = work_and_power(clip, body)
-        t_clip = curves.t_s + float(entry.get("offset_s", 0.0))
-        inside = (t >= t_clip[0]) & (t <= t_clip[-1])
-        w[inside] = np.interp(t[inside], t_clip, curves.w_per_kg)
-        p[inside] = np.interp(t[inside], t_clip, curves.p_per_kg)
-    return w, p
+        table = derive_work(s, t)
+    except UserError as exc:
+        raise DatasetError(str(exc)) from None
+    return table.w_per_kg, table.p_per_kg
 
 
 def _weights(s: Session, t: np.ndarray, blendshapes: BlendshapeSet, rater_policy: str) -> np.ndarray:

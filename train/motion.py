@@ -234,7 +234,8 @@ def motion_from_positions(
 
 
 def read_motion(path: str | Path, *, unit_m: float | None = None) -> Motion:
-    """Read a motion file, choosing the reader by suffix (``.bvh`` or ``.npz``).
+    """Read a motion file, choosing the reader by suffix (``.bvh``, ``.npz``, joint-positions ``.csv``
+    or ``.c3d`` through :mod:`effortface.train.motion_c3d`).
 
     Parameters
     ----------
@@ -258,7 +259,105 @@ def read_motion(path: str | Path, *, unit_m: float | None = None) -> Motion:
         return read_bvh(path, unit_m=unit_m)
     if suffix == ".npz":
         return read_npz_motion(path)
-    raise MotionFormatError(f"{path}: expected a motion file ending in .bvh or .npz, got suffix {suffix!r}")
+    if suffix == ".csv":
+        return read_positions_csv(path)
+    if suffix == ".c3d":
+        from effortface.train.motion_c3d import read_c3d  # optional package, never loaded by the runtime
+
+        return read_c3d(path)
+    raise MotionFormatError(f"{path}: expected a motion file ending in .bvh, .npz, .csv or .c3d, "
+                            f"got suffix {suffix!r}")
+
+
+#: the first column of a joint-positions CSV
+POSITIONS_TIME_COLUMN = "t_s"
+#: tolerated spread of the frame intervals of a joint-positions CSV (fraction of the median)
+POSITIONS_DT_TOLERANCE = 0.05
+
+
+def read_positions_csv(path: str | Path) -> Motion:
+    """Read a joint-positions CSV: ``t_s,<joint>_x,<joint>_y,<joint>_z,...`` in metres, Z up.
+
+    Lines starting with ``#`` are comments; an optional ``# parents: Spine=Hips, Head=Spine, ...``
+    comment gives the skeleton tree (joints not named there hang from the first joint, which is the
+    root). Energies need positions only, so the tree matters little; frames must be evenly spaced
+    (within 5 %).
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    Motion
+        Without rotations.
+
+    Raises
+    ------
+    MotionFormatError
+        Header not of that form, a row of another length, a value that is not a number, fewer than
+        two frames, or uneven frame times; the message names the file and line.
+    """
+    path = Path(path)
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise MotionFormatError(f"{path}: expected a joint-positions CSV (UTF-8 text), found {exc}") from None
+    comments = [ln for ln in lines if ln.startswith("#")]
+    rows = [(i + 1, ln) for i, ln in enumerate(lines) if ln.strip() and not ln.startswith("#")]
+    if not rows:
+        raise MotionFormatError(f"{path}: expected a header t_s,<joint>_x,<joint>_y,<joint>_z,..., found no rows")
+    header_line, header = rows[0]
+    names = _positions_joint_names(path, header_line, header.split(","))
+    values = np.array([_positions_row(path, line, text, 1 + 3 * len(names)) for line, text in rows[1:]])
+    if len(values) < 2:
+        raise MotionFormatError(f"{path}: expected at least 2 frames, found {len(values)}")
+    dt = np.diff(values[:, 0])
+    median = float(np.median(dt))
+    if median <= 0 or np.abs(dt - median).max() > POSITIONS_DT_TOLERANCE * median:
+        raise MotionFormatError(f"{path}: column t_s: expected increasing, evenly spaced frame times, found "
+                                f"intervals from {dt.min():g} to {dt.max():g} s")
+    positions = values[:, 1:].reshape(len(values), len(names), 3)
+    parents = _positions_parents(path, names, comments)
+    return motion_from_positions(positions, names, parents, 1.0 / median, source=str(path))
+
+
+def _positions_joint_names(path: Path, line: int, header: list[str]) -> list[str]:
+    """Joint names from a ``t_s,<joint>_x,<joint>_y,<joint>_z,...`` header."""
+    cols = [c.strip() for c in header]
+    names = [c[:-2] for c in cols[1::3]]
+    expected = [POSITIONS_TIME_COLUMN] + [f"{n}_{axis}" for n in names for axis in "xyz"]
+    if cols != expected or not names:
+        raise MotionFormatError(f"{path}: line {line}: expected the header t_s,<joint>_x,<joint>_y,<joint>_z,... "
+                                f"(metres, Z up), found {','.join(cols)[:120]!r}")
+    return names
+
+
+def _positions_row(path: Path, line: int, text: str, n_columns: int) -> list[float]:
+    """One data row as floats (MotionFormatError naming the line otherwise)."""
+    cells = text.split(",")
+    try:
+        if len(cells) != n_columns:
+            raise ValueError
+        return [float(c) for c in cells]
+    except ValueError:
+        raise MotionFormatError(f"{path}: line {line}: expected {n_columns} numbers, found {text[:80]!r}") from None
+
+
+def _positions_parents(path: Path, names: list[str], comments: list[str]) -> list[int]:
+    """Parents from an optional ``# parents: child=parent, ...`` comment (default: the first joint)."""
+    parents = [-1] + [0] * (len(names) - 1)
+    for comment in comments:
+        key, _, spec = comment.lstrip("#").partition(":")
+        if key.strip().lower() != "parents":
+            continue
+        for pair in filter(None, (p.strip() for p in spec.split(","))):
+            child, _, parent = pair.partition("=")
+            if child.strip() not in names or parent.strip() not in names:
+                raise MotionFormatError(f"{path}: parents: expected child=parent joint names of the header, "
+                                        f"found {pair!r}")
+            parents[names.index(child.strip())] = names.index(parent.strip())
+    return parents
 
 
 # --------------------------------------------------------------------------------------------

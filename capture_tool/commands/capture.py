@@ -1,8 +1,12 @@
 """``effortface capture``: record a strap (and video) into a new session folder, headless.
 
-Runs until ``--duration`` or Ctrl-C / SIGTERM, then stops cleanly (``complete: true``). The first
-stdout line is the session folder (flushed at once); a status line follows every few seconds on
-stderr. A fault (a file that cannot be written: disk full, file-size limit) is one line on stderr
+Runs until ``--duration`` (by default the end of ``--plan``) or Ctrl-C / SIGTERM, then stops cleanly
+(``complete: true``). The first stdout line is the session folder (flushed at once); with ``--plan``
+the phases' countdown follows on stdout (:mod:`effortface.capture_tool.plan`); a status line follows
+every few seconds on stderr. Demographics come from the options or the lab's ``participants.tsv`` in
+``--out`` (:mod:`effortface.capture_tool.participants`); a new participant is registered there once the
+recording has started. A capture that received no heart-rate sample ends with a warning and exit
+status 1. A fault (a file that cannot be written: disk full, file-size limit) is one line on stderr
 naming the file as soon as it happens; a failed write stops the capture, which then leaves the
 session incomplete for ``effortface recover`` and exits with status 2 (the video stopping early
 on a nearly full disk only degrades it: the heart rate goes on).
@@ -19,6 +23,8 @@ import time
 from pathlib import Path
 
 from effortface.core.errors import UserError
+from effortface.capture_tool.participants import REGISTRY_TSV, register, resolve_participant
+from effortface.capture_tool.plan import PlanRunner, read_plan
 from effortface.capture_tool.protocols import PROTOCOLS, check_protocol
 from effortface.capture_tool.recorder import Recorder
 from effortface.capture_tool.session import Participant
@@ -40,17 +46,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--height", type=float, metavar="M", help="height in metres")
     parser.add_argument("--mass", type=float, metavar="KG", help="mass in kilograms")
     parser.add_argument("--training-level", type=float, metavar="TL", help="training level 0-10")
+    parser.add_argument("--plan", metavar="PLAN.csv",
+                        help="timed phases to step through and log (start_s,end_s,exercise[,parameters])")
     parser.add_argument("--label", help="appended to the session folder name")
-    parser.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: Ctrl-C)")
-    parser.add_argument("--out", required=True, metavar="DIR", help="folder that receives the session folder")
+    parser.add_argument("--duration", type=float, metavar="S",
+                        help="stop after S seconds (default: the end of --plan, else Ctrl-C)")
+    parser.add_argument("--out", required=True, metavar="DIR",
+                        help=f"lab folder: receives the session folder; holds {REGISTRY_TSV}")
 
 
-def _participant(args: argparse.Namespace) -> Participant:
+def _participant(args: argparse.Namespace) -> tuple[Participant, bool]:
+    """The participant from the options and the lab's registry, and whether it is new there."""
     try:
-        return Participant(code=args.participant, sex=args.sex, age=args.age, height_m=args.height,
-                           mass_kg=args.mass, training_level=args.training_level)
+        code = Participant(code=args.participant).code
     except UserError as exc:
-        raise UserError(f"--participant / body options: {exc}") from None
+        raise UserError(f"--participant: {exc}") from None
+    options = {"sex": args.sex, "age": args.age, "height_m": args.height, "mass_kg": args.mass,
+               "training_level": args.training_level}
+    return resolve_participant(code, options, Path(args.out) / REGISTRY_TSV)
 
 
 def _video_source(args: argparse.Namespace) -> int | str | None:
@@ -68,33 +81,47 @@ def run(args: argparse.Namespace) -> int:
     check_protocol(args.protocol)
     if args.camera is not None and args.camera < 0:
         raise UserError(f"--camera: expected a camera index >= 0, found {args.camera}")
-    recorder = Recorder(args.out, _participant(args), args.port, args.protocol, _video_source(args), label=args.label)
+    _check_out(args.out)
+    participant, new = _participant(args)
+    phases = read_plan(args.plan) if args.plan else []
+    recorder = Recorder(args.out, participant, args.port, args.protocol, _video_source(args), label=args.label)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     if hasattr(signal, "SIGXFSZ"):  # a file-size limit then fails the write (EFBIG): a fault, not a kill
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
     path = _start(recorder, args.out)
     print(path, flush=True)
+    if new:
+        register(Path(args.out) / REGISTRY_TSV, participant)
+    plan = PlanRunner(phases, recorder.mark, lambda line: print(line, flush=True)) if phases else None
+    duration = args.duration if args.duration is not None or plan is None else plan.end_s
     said: list[str] = []  # the faults already printed
     try:
-        _wait(recorder, stop, args.duration, said)
+        _wait(recorder, stop, duration, said, plan)
     except KeyboardInterrupt:
         pass
     finally:
+        if plan is not None:
+            plan.finish()
         recorder.stop()
-    return _report(recorder, path, said)
+    return _report(recorder, path, said, args)
 
 
-def _report(recorder: Recorder, path: Path, said: list[str]) -> int:
-    """The closing lines: faults not yet said, warnings, then what was recorded; the exit status."""
+def _report(recorder: Recorder, path: Path, said: list[str], args: argparse.Namespace) -> int:
+    """The closing lines: faults not yet said, warnings, then what was recorded; the exit status
+    (2 after a fault, 1 when no heart-rate sample arrived, else 0)."""
     _say_new_faults(recorder, said)
     for line in recorder.warnings:
         print(f"warning: {line}", file=sys.stderr)
     st = recorder.status()
+    counts = f"{st.samples} heart-rate samples, {st.frames} frames ({st.dropped_frames} dropped) in {path}"
+    if st.samples == 0:
+        print(f"warning: no heart-rate sample received from --port {args.port} (--protocol {args.protocol}): "
+              f"{counts}; check the strap's contact, pairing and protocol", file=sys.stderr)
+        return 2 if recorder.faults else 1
     complete = recorder.info is not None and recorder.info.complete
     state = "complete" if complete else f"INCOMPLETE (run 'effortface recover {path}')"
-    print(f"{state}: {st.samples} heart-rate samples, {st.frames} frames ({st.dropped_frames} dropped) in {path}",
-          file=sys.stderr)
+    print(f"{state}: {counts}", file=sys.stderr)
     return 2 if recorder.faults else 0
 
 
@@ -104,6 +131,12 @@ def _say_new_faults(recorder: Recorder, said: list[str]) -> None:
         if line not in said:
             print(f"capture: {line}", file=sys.stderr, flush=True)
             said.append(line)
+
+
+def _check_out(out: str) -> None:
+    """UserError if ``--out`` is a file (before the registry in it is read)."""
+    if os.path.exists(out) and not os.path.isdir(out):
+        raise UserError(f"--out {out}: expected a folder, found a file")
 
 
 def _start(recorder: Recorder, out: str) -> Path:
@@ -121,8 +154,7 @@ def _start(recorder: Recorder, out: str) -> Path:
     Path
         The new session folder.
     """
-    if os.path.exists(out) and not os.path.isdir(out):
-        raise UserError(f"--out {out}: expected a folder, found a file")
+    _check_out(out)
     try:
         return recorder.start()
     except FileExistsError as exc:
@@ -140,13 +172,17 @@ def _is_under(path: str | os.PathLike, folder: str) -> bool:
     return path == folder_path or folder_path in path.parents or path in folder_path.parents
 
 
-def _wait(recorder: Recorder, stop: threading.Event, duration_s: float | None, said: list[str]) -> None:
-    """Sleep until the duration is over or ``stop`` is set, printing a status line now and then."""
+def _wait(recorder: Recorder, stop: threading.Event, duration_s: float | None, said: list[str],
+          plan: PlanRunner | None = None) -> None:
+    """Sleep until the duration is over, ``stop`` is set or a write failed, stepping the plan and
+    printing faults at once and a status line now and then."""
     deadline = None if duration_s is None else time.monotonic() + duration_s
     next_status = time.monotonic() + STATUS_INTERVAL_S
     while not stop.is_set():
         now = time.monotonic()
         _say_new_faults(recorder, said)
+        if plan is not None:
+            plan.step(recorder.clock())
         if (deadline is not None and now >= deadline) or recorder.failed:
             return
         if now >= next_status:

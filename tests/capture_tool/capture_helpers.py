@@ -15,6 +15,8 @@ from effortface.capture_tool.protocols import HrSample, get_decoder
 from effortface.capture_tool.serlog import SerlogWriter
 
 HXM_DAT = Path("serial/zephyr-bt/120-second-bt-stream-hxm.dat")
+#: the demographics a capture requires (options of ``effortface capture``)
+BODY = ("--sex", "female", "--age", "30", "--height", "1.68", "--mass", "60", "--training-level", "4")
 BITS = 12  # frame numbers up to 4095, one 10 x 10 block per bit along the top of the image
 BLOCK = 10
 

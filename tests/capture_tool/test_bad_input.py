@@ -18,6 +18,8 @@ from effortface.capture_tool.serlog import EVENT, SerlogWriter, _REC, read_serlo
 from effortface.capture_tool.session import EVENTS_HEADER, Participant, SessionInfo, read_events, read_session_info
 from effortface.cli import main
 
+from .capture_helpers import BODY
+
 BINARY = bytes(range(128, 256)) * 4
 
 
@@ -45,7 +47,7 @@ def _session(root: Path, **overrides: object) -> Path:
 # ------------------------------------------------------------------------------ 1. negative camera
 def test_capture_negative_camera_is_one_line(tmp_path, capsys) -> None:
     line = _one_error_line(capsys, ["capture", "--port", "loop://", "--protocol", "hxm", "--camera", "-1",
-                                    "--participant", "P01", "--out", tmp_path / "out", "--duration", "1"])
+                                    "--participant", "P01", *BODY, "--out", tmp_path / "out", "--duration", "1"])
     assert "--camera: expected a camera index >= 0, found -1" in line
     assert not (tmp_path / "out").exists()
 
@@ -150,7 +152,7 @@ def test_capture_unwritable_out_names_out(tmp_path, capsys, out: str) -> None:
     (tmp_path / "file").write_text("x")
     out = out.format(file=tmp_path / "file")
     line = _one_error_line(capsys, ["capture", "--port", "loop://", "--protocol", "hxm", "--no-video",
-                                    "--participant", "P01", "--out", out, "--duration", "1"])
+                                    "--participant", "P01", *BODY, "--out", out, "--duration", "1"])
     assert f"--out {out}: expected a folder" in line
 
 
@@ -241,7 +243,7 @@ def test_capture_missing_ant_port_before_key(tmp_path, capsys, monkeypatch) -> N
     monkeypatch.setenv("HOME", str(tmp_path))
     monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path))
     line = _one_error_line(capsys, ["capture", "--port", tmp_path / "ttyNOPE", "--protocol", "ant", "--no-video",
-                                    "--participant", "P01", "--out", tmp_path / "out", "--duration", "1"])
+                                    "--participant", "P01", *BODY, "--out", tmp_path / "out", "--duration", "1"])
     assert f"--port {tmp_path / 'ttyNOPE'}: expected a serial port, found no such device" in line
 
 

@@ -17,6 +17,7 @@ from effortface.capture_tool.replay import PtyReplay
 from effortface.capture_tool.session import read_session, validate_session
 
 from .capture_helpers import (
+    BODY,
     HXM_DAT,
     content,
     decode,
@@ -33,8 +34,8 @@ SPEED = "10"
 
 
 def _start_capture(port: str, out: Path, *extra: str) -> subprocess.Popen:
-    cmd = effortface("capture", "--port", port, "--protocol", "hxm", "--participant", "P01", "--age", "30",
-                     "--sex", "female", "--out", out, *extra)
+    cmd = effortface("capture", "--port", port, "--protocol", "hxm", "--participant", "P01", *BODY,
+                     "--out", out, *extra)
     return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
@@ -158,7 +159,7 @@ def test_user_errors_are_one_line_exit_2(tmp_path, busy_port, case: str) -> None
     if case == "bad speed":
         args[1] = str(shared_hxm())
     if args[0] == "capture":
-        args += ["--out", str(tmp_path / "out")]
+        args += ["--out", str(tmp_path / "out"), *BODY]
     proc = subprocess.run(effortface(*args), capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2, proc.stderr
     lines = proc.stderr.splitlines()

@@ -19,7 +19,7 @@ from effortface.capture_tool.recorder import decode_serlog, recover_session
 from effortface.capture_tool.serlog import read_serlog
 from effortface.capture_tool.session import read_session, validate_session
 
-from .capture_helpers import content, effortface, frame_number, hxm_chunks, make_numbered_video, start_replay, write_serlog
+from .capture_helpers import BODY, content, effortface, frame_number, hxm_chunks, make_numbered_video, start_replay, write_serlog
 
 
 def _rows(path: Path) -> int:
@@ -34,7 +34,7 @@ def killed_session(tmp_path_factory, shared_data) -> dict:
     chunks = hxm_chunks(shared_data, 0, 120)
     video = make_numbered_video(tmp / "face.avi", 600)
     replay, pty = start_replay(write_serlog(tmp / "strap.serlog", chunks), "--speed", "10")
-    cap = subprocess.Popen(effortface("capture", "--port", pty, "--protocol", "hxm", "--participant", "P02",
+    cap = subprocess.Popen(effortface("capture", "--port", pty, "--protocol", "hxm", "--participant", "P02", *BODY,
                                       "--video", video, "--out", tmp / "out"), stdout=subprocess.PIPE, text=True)
     path = Path(cap.stdout.readline().strip())
     deadline = time.monotonic() + 40

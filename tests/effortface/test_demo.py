@@ -34,7 +34,7 @@ def test_demo_runs_the_whole_pipeline(lab, tmp_path, capsys, monkeypatch):
     assert (out / "model" / "report" / "report.md").is_file()
     assert (out / ".effortface-demo").is_file()  # marks it as replaceable by --force
     # capture through the pseudo-terminal recorded real decoded samples, and decode agrees
-    captured = next((out / "captured").iterdir())
+    captured = next(p for p in (out / "captured").iterdir() if p.is_dir())  # beside it: participants.tsv
     live = pd.read_csv(captured / "heart_rate.csv")
     decoded = pd.read_csv(out / "decoded_heart_rate.csv")
     assert len(live) > 20 and abs(len(decoded) - len(live)) <= 1

@@ -197,13 +197,19 @@ def test_work_from_a_motion_clip_when_there_is_no_work_log(tmp_path):
     src = next((p.parent.parent for p in lab.glob("*/motion/motion.json")), None)
     if src is None:
         pytest.skip("sample_sessions/ has no session with motion/ yet")
+    from effortface.train.work import derive_work
+
     folder = Path(shutil.copytree(src, tmp_path / src.name))
     log = pd.read_csv(folder / "work.csv")
     (folder / "work.csv").unlink()
-    got = session_table(folder).dropna(subset=["w_per_kg"]).merge(log, on="t_s", suffixes=("", "_log"))
+    table = session_table(folder)
+    derived = derive_work(folder, table["t_s"].to_numpy())
+    from_clip = np.array([s.startswith("motion:") for s in derived.source])
+    got = table[from_clip].merge(log, on="t_s", suffixes=("", "_log"))
     assert len(got) >= 20
     assert got["w_per_kg"].mean() == pytest.approx(got["w_per_kg_log"].mean(), rel=0.25)
-    assert np.isnan(session_table(folder)["w_per_kg"].iloc[0])  # before the clip: unknown, not 0
+    # before the clip: the exercise log (rest), not 0 and not the clip
+    assert derived.source[0] == "log:rest" and table["w_per_kg"].iloc[0] == pytest.approx(0.1)
 
 
 def test_work_from_a_motion_clip_needs_mass_and_sex(tmp_path):
@@ -228,7 +234,8 @@ def test_work_from_a_motion_clip_needs_mass_and_sex(tmp_path):
 def test_no_work_at_all(lab):
     folder = sorted(lab.glob("P01_*"))[0]
     (folder / "work.csv").unlink()
-    with pytest.raises(DatasetError, match=r"P01_\S+: expected work.csv or a motion/ folder"):
+    with pytest.raises(DatasetError, match=r"P01_\S+: expected a motion/ folder \(motion.json\) or exercise "
+                                           r"phases \(phase_start rows in events.csv\) to derive work, found neither"):
         session_table(folder)
 
 

@@ -20,7 +20,7 @@ from effortface.train.runtime import Character, FaceModel, load_model
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of DESIGN.md's synth line."""
     parser.add_argument("model_dir", metavar="MODEL_DIR", help="model bundle folder, or 'default'")
-    parser.add_argument("motion", metavar="MOTION", help="motion clip (.bvh or .npz)")
+    parser.add_argument("motion", metavar="MOTION", help="motion clip (.bvh, .npz, joint-positions .csv or .c3d)")
     parser.add_argument("--out", required=True, metavar="CSV", help="output CSV file")
     parser.add_argument("--format", choices=CURVE_FORMATS, default="csv",
                         help="per-frame curves (default) or a Live Link Face CSV")

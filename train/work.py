@@ -1,0 +1,236 @@
+"""Work and power per second of a session: from motion/ where clips cover the time, else from the log.
+
+``work.csv`` (``t_s,w_per_kg,p_per_kg,source`` at 1 Hz, t_s = 0, 1, 2, ... to the end of the heart
+rate or video) is what :func:`derive_work` computes and :func:`write_work` saves. ``source`` says
+where each second comes from: ``motion:<clip>``, ``log:<exercise id>``, or empty (no clip and no
+phase covers it: w and p are empty). The same function feeds training when a session has no
+work.csv (:mod:`effortface.train.dataset`), so a captured session trains with no extra step.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import json
+import math
+import os
+from pathlib import Path
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from effortface.core.errors import UserError
+from effortface.core.fileio import atomic_write_text
+from effortface.capture_tool.session import Session, read_session
+from effortface.train.catalog import Catalog, CatalogError, default_catalog
+from effortface.train.exercise_log import ExerciseLog, exercise_log
+
+if TYPE_CHECKING:  # the energies load scipy: imported only when a session has motion
+    from effortface.train.energy import EnergyCurves
+    from effortface.train.motion import Motion
+
+WORK_CSV = "work.csv"
+WORK_HEADER = "t_s,w_per_kg,p_per_kg,source"
+MOTION_DIR = "motion"
+MOTION_JSON = "motion.json"
+
+
+class WorkError(UserError):
+    """A session whose work cannot be derived; the message names the session or file."""
+
+
+@dataclasses.dataclass(frozen=True)
+class WorkTable:
+    """w and p per second of one session.
+
+    Attributes
+    ----------
+    t_s, w_per_kg, p_per_kg : ndarray
+        1 Hz; NaN where nothing covers the second.
+    source : list of str
+        Per second: ``motion:<clip>``, ``log:<exercise id>`` or ``""``.
+    """
+
+    t_s: np.ndarray
+    w_per_kg: np.ndarray
+    p_per_kg: np.ndarray
+    source: list[str]
+
+    def to_csv(self) -> str:
+        """The work.csv text."""
+        out = io.StringIO()
+        out.write(WORK_HEADER + "\n")
+        for t, w, p, src in zip(self.t_s, self.w_per_kg, self.p_per_kg, self.source):
+            out.write(f"{t:g},{_num(w)},{_num(p)},{src}\n")
+        return out.getvalue()
+
+
+def _num(x: float) -> str:
+    """A CSV cell: 4 decimals, empty for NaN."""
+    return "" if math.isnan(x) else f"{x:.4f}"
+
+
+def session_seconds(s: Session) -> np.ndarray:
+    """t_s = 0, 1, ... to the last heart-rate sample or video frame (or the last logged event)."""
+    ends = [h.t_s for h in s.heart_rate[-1:]] + s.frame_times_s[-1:] + [e.t_s for e in s.events[-1:]]
+    return np.arange(0.0, math.floor(max(ends, default=0.0)) + 1.0)
+
+
+def derive_work(session: Session | str | os.PathLike, t_s: np.ndarray | None = None,
+                catalog: Catalog | None = None) -> WorkTable:
+    """w and p per second from ``motion/`` where clips cover the time, else from the exercise log.
+
+    Parameters
+    ----------
+    session : Session or path-like
+        A read session or its folder.
+    t_s : ndarray, optional
+        The seconds wanted (default :func:`session_seconds`).
+    catalog : Catalog, optional
+        Default: the shipped catalog.
+
+    Returns
+    -------
+    WorkTable
+
+    Raises
+    ------
+    WorkError
+        If the session has neither a motion/ folder nor a phase in its exercise log, or a phase's
+        exercise or parameters cannot be estimated (names events.csv, its line and the catalog).
+    """
+    s = session if isinstance(session, Session) else read_session(session)
+    t = session_seconds(s) if t_s is None else np.asarray(t_s, dtype=float)
+    log = exercise_log(s.events, str(s.path / "events.csv"))
+    has_motion = (s.path / MOTION_DIR / MOTION_JSON).is_file()
+    if not has_motion and not log.phases:
+        raise WorkError(f"{s.path}: expected a motion/ folder (motion.json) or exercise phases "
+                        f"(phase_start rows in events.csv) to derive work, found neither")
+    w, p = np.full(len(t), np.nan), np.full(len(t), np.nan)
+    source = [""] * len(t)
+    _fill_from_log(log, s.participant.mass_kg, t, w, p, source, catalog or default_catalog())
+    if has_motion:
+        _fill_from_motion(s, log, t, w, p, source)
+    return WorkTable(t, w, p, source)
+
+
+def _fill_from_log(log: ExerciseLog, mass_kg: float | None, t: np.ndarray, w: np.ndarray, p: np.ndarray,
+                   source: list[str], catalog: Catalog) -> None:
+    """Write each phase's catalog estimate into the seconds it covers."""
+    if not log.phases:
+        return
+    if mass_kg is None:
+        raise WorkError(f"{log.source}: expected the participant's mass_kg in session.json to estimate work "
+                        f"from the exercise log, found none")
+    for phase in log.phases:
+        try:
+            pieces = log.states(phase, catalog.keys_for(phase.exercise))
+            for start, end, state in pieces:
+                inside = np.flatnonzero((t >= start - 1e-9) & (t < end - 1e-9))
+                value = catalog.work_per_kg(phase.exercise, state, mass_kg)
+                w[inside] = p[inside] = value
+                for i in inside:
+                    source[i] = f"log:{phase.exercise}"
+        except CatalogError as exc:
+            raise WorkError(f"{log.source}: line {phase.line}: {exc}") from None
+
+
+#: motion.json keys of a clip's loads, in the order of :class:`~effortface.train.segments.Loads`
+ENTRY_LOAD_KEYS = ("load_left_kg", "load_right_kg", "load_back_kg")
+#: the exercise log's load labels in the same order
+LOG_LOAD_LABELS = ("left_kg", "right_kg", "back_kg")
+
+
+def _fill_from_motion(s: Session, log: ExerciseLog, t: np.ndarray, w: np.ndarray, p: np.ndarray,
+                      source: list[str]) -> None:
+    """Overwrite the seconds that a clip of ``motion/motion.json`` covers with its energies.
+
+    A clip's loads are its entry's ``load_*_kg`` keys when it has any (earlier releases), else the
+    exercise log's ``load`` rows in force at each second: one energy computation per distinct set.
+    """
+    from effortface.train.motion import read_motion
+
+    index = s.path / MOTION_DIR / MOTION_JSON
+    part = s.participant
+    if part.mass_kg is None or part.sex is None:
+        raise WorkError(f"{s.path / 'session.json'}: expected the participant's mass_kg and sex to compute "
+                        f"work from motion/, found {part.mass_kg!r} and {part.sex!r}")
+    for entry in read_motion_index(index):
+        clip = read_motion(index.parent / str(entry["path"]))
+        offset_s = float(entry.get("offset_s", 0.0))
+        inside = np.flatnonzero((t >= offset_s) & (t <= offset_s + (clip.n_frames - 1) / clip.fps))
+        if any(k in entry for k in ENTRY_LOAD_KEYS):
+            loads = [tuple(float(entry.get(k, 0.0)) for k in ENTRY_LOAD_KEYS)] * len(inside)
+        else:
+            loads = [tuple(_log_load(log, label, t[i]) for label in LOG_LOAD_LABELS) for i in inside]
+        for load in sorted(set(loads)):
+            rows = inside[[k for k, x in enumerate(loads) if x == load]]
+            curves = _clip_curves(clip, part.mass_kg, part.sex, load)
+            w[rows] = np.interp(t[rows], curves.t_s + offset_s, curves.w_per_kg)
+            p[rows] = np.interp(t[rows], curves.t_s + offset_s, curves.p_per_kg)
+        for i in inside:
+            source[i] = f"motion:{entry['path']}"
+
+
+def _log_load(log: ExerciseLog, label: str, t_s: float) -> float:
+    """The load of ``label`` logged last at or before ``t_s`` (0 kg when none)."""
+    held = [c.value for c in log.loads.get(label, []) if c.t_s <= t_s + 1e-9]
+    return held[-1] if held else 0.0
+
+
+def _clip_curves(clip: Motion, mass_kg: float, sex: str, load: tuple[float, ...]) -> EnergyCurves:
+    """Work and power of a clip for the participant's body carrying ``load`` (left, right, back kg)."""
+    from effortface.train.energy import work_and_power
+    from effortface.train.segments import Loads, build_body
+
+    body = build_body(clip.joint_names, clip.parents, mass_kg, sex, loads=Loads(*load),
+                      reference_positions_m=clip.positions_m)
+    return work_and_power(clip, body)
+
+
+def read_motion_index(path: str | os.PathLike) -> list[dict]:
+    """The clip entries of a ``motion/motion.json`` (``{"files": [{path, offset_s, ...}]}``).
+
+    Raises
+    ------
+    WorkError
+        If the file is not JSON of that form (each entry needs ``path``).
+    """
+    path = Path(path)
+    try:
+        entries = json.loads(path.read_text(encoding="utf-8"))["files"]
+        if not isinstance(entries, list) or not all(isinstance(e, dict) and "path" in e for e in entries):
+            raise TypeError("entries without 'path'")
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise WorkError(f"{path}: expected {{\"files\": [{{path, offset_s}}]}}, found {exc!r}") from None
+    return entries
+
+
+def write_work(folder: str | os.PathLike, *, force: bool = False) -> tuple[Path, WorkTable]:
+    """Derive a session's work and save ``work.csv`` atomically.
+
+    Parameters
+    ----------
+    folder : path-like
+        The session folder.
+    force : bool
+        Replace an existing work.csv (which may be hand-made).
+
+    Returns
+    -------
+    (Path, WorkTable)
+
+    Raises
+    ------
+    WorkError
+        If work.csv exists and ``force`` is False (nothing is written), or see :func:`derive_work`.
+    """
+    s = read_session(folder)
+    path = s.path / WORK_CSV
+    if path.exists() and not force:
+        raise WorkError(f"{path}: expected no work.csv (it may be hand-made), found one; "
+                        f"use --force to replace it")
+    table = derive_work(s)
+    atomic_write_text(path, table.to_csv())
+    return path, table
