@@ -20,8 +20,6 @@ Run: ``python benchmarks/bench_work.py [--repeat 5]``
 from __future__ import annotations
 
 import argparse
-import contextlib
-import io
 import shutil
 import sys
 import tempfile
@@ -37,7 +35,7 @@ from effortface.capture_tool.protocols import HrSample  # noqa: E402
 from effortface.capture_tool.session import (Event, EventWriter, FrameTimeWriter, HrWriter, Participant,  # noqa: E402
                                              SessionInfo, create_session, read_session)
 from effortface.train.attach import attach_clip  # noqa: E402
-from effortface.train.commands.work import run as work_run  # noqa: E402
+from effortface.train.work import write_works  # noqa: E402
 
 HOUR_S = 3600.0
 CLIP = ROOT / "tests" / "data" / "motion" / "cmu_13_29_full_30fps.bvh"
@@ -112,8 +110,7 @@ def _timed_work(template: Path, scratch: Path, repeat: int) -> float:
         shutil.rmtree(copy, ignore_errors=True)
         shutil.copytree(template, copy)
         start = time.perf_counter()
-        with contextlib.redirect_stdout(io.StringIO()):
-            work_run(argparse.Namespace(sessions=[str(copy)], force=False))
+        write_works([copy])
         times.append(time.perf_counter() - start)
     return min(times)
 

@@ -14,6 +14,7 @@ import io
 import json
 import math
 import os
+from collections.abc import Sequence
 from pathlib import Path
 
 from typing import TYPE_CHECKING
@@ -22,7 +23,7 @@ import numpy as np
 
 from effortface.core.errors import UserError
 from effortface.core.fileio import atomic_write_text
-from effortface.capture_tool.session import Session, read_session
+from effortface.capture_tool.session import SESSION_JSON, Session, list_sessions, read_session
 from effortface.train.catalog import Catalog, CatalogError, default_catalog
 from effortface.train.exercise_log import ExerciseLog, exercise_log
 
@@ -207,6 +208,22 @@ def read_motion_index(path: str | os.PathLike) -> list[dict]:
     return entries
 
 
+def plan_work(folder: str | os.PathLike, *, force: bool = False) -> tuple[Path, WorkTable]:
+    """Derive a session's work without writing it: the work.csv path and the table.
+
+    Raises
+    ------
+    WorkError
+        If work.csv exists and ``force`` is False, or see :func:`derive_work`.
+    """
+    s = read_session(folder)
+    path = s.path / WORK_CSV
+    if path.exists() and not force:
+        raise WorkError(f"{path}: expected no work.csv (it may be hand-made), found one; "
+                        f"use --force to replace it")
+    return path, derive_work(s)
+
+
 def write_work(folder: str | os.PathLike, *, force: bool = False) -> tuple[Path, WorkTable]:
     """Derive a session's work and save ``work.csv`` atomically.
 
@@ -226,11 +243,23 @@ def write_work(folder: str | os.PathLike, *, force: bool = False) -> tuple[Path,
     WorkError
         If work.csv exists and ``force`` is False (nothing is written), or see :func:`derive_work`.
     """
-    s = read_session(folder)
-    path = s.path / WORK_CSV
-    if path.exists() and not force:
-        raise WorkError(f"{path}: expected no work.csv (it may be hand-made), found one; "
-                        f"use --force to replace it")
-    table = derive_work(s)
-    atomic_write_text(path, table.to_csv())
-    return path, table
+    return write_works([folder], force=force)[0]
+
+
+def work_folders(paths: Sequence[str | os.PathLike]) -> list[Path]:
+    """Session folders from session folders and folders of sessions (UserError if none)."""
+    out: list[Path] = []
+    for p in map(Path, paths):
+        out.extend([p] if (p / SESSION_JSON).is_file() or not p.is_dir() else list_sessions(p))
+    if not out:
+        raise UserError(f"{', '.join(map(str, paths))}: expected session folders, found none")
+    return out
+
+
+def write_works(folders: Sequence[str | os.PathLike], *, force: bool = False) -> list[tuple[Path, WorkTable]]:
+    """``effortface work``: derive every session's work first (so a refusal writes nothing), then
+    write each ``work.csv`` atomically; the paths and tables, in order."""
+    planned = [plan_work(folder, force=force) for folder in folders]
+    for target, table in planned:
+        atomic_write_text(target, table.to_csv())
+    return planned

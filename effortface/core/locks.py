@@ -86,7 +86,7 @@ def _read_owner(path: Path) -> dict[str, Any]:
     return owner if isinstance(owner, dict) else {}
 
 
-def lock_owner(path: str | os.PathLike) -> dict[str, Any] | None:
+def lock_owner(path: str | os.PathLike[str]) -> dict[str, Any] | None:
     """Who holds the lock file ``path``, or None if nobody does (no file, or a stale one).
 
     Parameters
@@ -112,7 +112,7 @@ def lock_owner(path: str | os.PathLike) -> dict[str, Any] | None:
         os.close(fd)
 
 
-def acquire_lock(path: str | os.PathLike, what: str) -> FileLock:
+def acquire_lock(path: str | os.PathLike[str], what: str) -> FileLock:
     """Take the lock file ``path`` (created if needed; a stale one is taken over).
 
     Parameters

@@ -48,7 +48,7 @@ from effortface.core import fileio
 from effortface.core.errors import SessionFormatError
 from effortface.core.locks import LockedError, acquire_lock, lock_owner
 
-from .capture_helpers import content, effortface, hxm_chunks, make_numbered_video, start_replay, write_serlog
+from .capture_helpers import BODY, content, effortface, hxm_chunks, make_numbered_video, start_replay, write_serlog
 from .test_recover_partial import _crashed_session
 
 SPEED = "10"
@@ -68,7 +68,7 @@ def _capture(port: str, out: Path, *extra: str, fsize_limit: int | None = None) 
         if fsize_limit is not None:
             resource.setrlimit(resource.RLIMIT_FSIZE, (fsize_limit, fsize_limit))
 
-    cmd = effortface("capture", "--port", port, "--protocol", "hxm", "--participant", "P01", "--out", out, *extra)
+    cmd = effortface("capture", "--port", port, "--protocol", "hxm", "--participant", "P01", *BODY, "--out", out, *extra)
     return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, errors="replace",
                             preexec_fn=limit, env={**os.environ, "PYTHONUNBUFFERED": "1"})
 

@@ -226,8 +226,9 @@ def test_work_from_a_motion_clip_needs_mass_and_sex(tmp_path):
     info = json.loads((folder / "session.json").read_text())
     del info["participant"]["mass_kg"]
     (folder / "session.json").write_text(json.dumps(info))
-    with pytest.raises(DatasetError, match=rf"{src.name}/session.json: participant P\d+: expected "
-                                           r"mass_kg and sex for the motion clips' work, found mass_kg None"):
+    # derived as `effortface work` does: the exercise log's seconds need the mass first
+    with pytest.raises(DatasetError, match=rf"{src.name}/events.csv: expected the participant's mass_kg in "
+                                           r"session.json to estimate work from the exercise log, found none"):
         session_table(folder)
 
 

@@ -9,30 +9,16 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 import numpy as np
 
-from effortface.capture_tool.session import SESSION_JSON, list_sessions, read_session
-from effortface.core.errors import UserError
-from effortface.core.fileio import atomic_write_text
-from effortface.train.work import WORK_CSV, WorkError, WorkTable, derive_work
+from effortface.train.work import WorkTable, work_folders, write_works
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``effortface work``."""
     parser.add_argument("sessions", nargs="+", metavar="SESSION", help="session folders (or folders of sessions)")
     parser.add_argument("--force", action="store_true", help="replace an existing (maybe hand-made) work.csv")
-
-
-def _folders(paths: list[str]) -> list[Path]:
-    """Session folders from sessions and folders of sessions."""
-    out: list[Path] = []
-    for p in map(Path, paths):
-        out.extend([p] if (p / SESSION_JSON).is_file() or not p.is_dir() else list_sessions(p))
-    if not out:
-        raise UserError(f"{', '.join(paths)}: expected session folders, found none")
-    return out
 
 
 def summary(table: WorkTable) -> str:
@@ -45,16 +31,7 @@ def summary(table: WorkTable) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Derive every session's work, then write the work.csv files."""
-    planned = []
-    for folder in _folders(args.sessions):
-        session = read_session(folder)
-        target = session.path / WORK_CSV
-        if target.exists() and not args.force:
-            raise WorkError(f"{target}: expected no work.csv (it may be hand-made), found one; "
-                            f"use --force to replace it")
-        planned.append((target, derive_work(session)))
-    for target, table in planned:
-        atomic_write_text(target, table.to_csv())
+    """Derive every session's work, then write the work.csv files (one line each on stdout)."""
+    for target, table in write_works(work_folders(args.sessions), force=args.force):
         print(f"{target}: {summary(table)}", file=sys.stdout)
     return 0
