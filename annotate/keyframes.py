@@ -34,7 +34,7 @@ import numpy as np
 
 from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
 from effortface.core.errors import SessionFormatError, UserError
-from effortface.core.fileio import atomic_write_text, refuse_overwrite
+from effortface.core.fileio import atomic_write_text, read_json, refuse_overwrite
 
 SCHEMA_VERSION = 1
 INTERPOLATIONS = ("hold", "linear", "smooth")
@@ -274,10 +274,7 @@ def read_annotations(path: str | os.PathLike) -> RaterAnnotations:
         the message names the file and the field.
     """
     path = Path(path)
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise AnnotationFormatError(f"{path}: expected a JSON annotation file, found {exc}") from None
+    doc = read_json(path, "a JSON annotation file", AnnotationFormatError)
     try:
         return _from_dict(doc)
     except UserError as exc:
@@ -288,7 +285,7 @@ def _from_dict(doc: object) -> RaterAnnotations:
     """Build annotations from a parsed document; UserError naming the bad field."""
     if not isinstance(doc, Mapping):
         raise UserError(f"expected a JSON object, found {type(doc).__name__}")
-    if doc.get("schema_version") != SCHEMA_VERSION:
+    if isinstance(doc.get("schema_version"), bool) or doc.get("schema_version") != SCHEMA_VERSION:
         raise UserError(
             f"schema_version: expected {SCHEMA_VERSION}, found {doc.get('schema_version')!r}"
         )

@@ -19,7 +19,6 @@ from __future__ import annotations
 import csv
 import dataclasses
 import datetime as _dt
-import json
 import os
 import re
 from collections.abc import Iterable
@@ -27,7 +26,8 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from effortface.core.errors import SessionFormatError, UserError, not_text_error
-from effortface.core.fileio import refuse_overwrite, write_json_atomic  # noqa: F401  (re-exported for callers)
+from effortface.core import bounds
+from effortface.core.fileio import check_regular_file, read_json, refuse_overwrite, write_json_atomic  # noqa: F401  (re-exported for callers)
 from effortface.capture_tool.hr_csv import HR_CSV_HEADER, format_hr_row, read_hr_csv
 from effortface.capture_tool.protocols import HrSample
 
@@ -244,7 +244,7 @@ class SessionInfo:
         missing = [k for k in ("schema_version", "session_id", "complete", "participant") if k not in data]
         if missing:
             raise SessionFormatError(f"{source}: expected keys {missing}, found {sorted(data)}")
-        if data["schema_version"] != SCHEMA_VERSION:
+        if isinstance(data["schema_version"], bool) or data["schema_version"] != SCHEMA_VERSION:
             raise SessionFormatError(
                 f"{source}: expected schema_version {SCHEMA_VERSION}, found {data['schema_version']!r}"
             )
@@ -325,12 +325,9 @@ def read_session_info(folder: str | os.PathLike) -> SessionInfo:
         raise SessionFormatError(f"{folder}: expected a session folder, found a file")
     if path.is_dir():
         raise SessionFormatError(f"{path}: expected a session.json file, found a folder")
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise SessionFormatError(f"{path}: expected a session.json in the session folder, found none") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise SessionFormatError(f"{path}: expected JSON, found invalid text ({exc})") from None
+    if not path.exists():
+        raise SessionFormatError(f"{path}: expected a session.json in the session folder, found none")
+    data = read_json(path, "JSON (session.json)", SessionFormatError)
     if not isinstance(data, dict):
         raise SessionFormatError(f"{path}: expected a JSON object, found {type(data).__name__}")
     return SessionInfo.from_dict(data, path)
@@ -441,8 +438,7 @@ def _read_csv_rows(path: Path, header: str) -> list[tuple[int, list[str]]]:
     SessionFormatError
         If the file is a folder, is not UTF-8 CSV text, or its header differs.
     """
-    if path.is_dir():
-        raise SessionFormatError(f"{path}: expected a CSV file, found a folder")
+    check_regular_file(path, "a CSV file", SessionFormatError)
     try:
         with open(path, newline="", encoding="utf-8") as fh:
             reader = csv.reader(fh)
@@ -461,9 +457,10 @@ def read_events(path: str | os.PathLike) -> list[Event]:
     for line, row in _read_csv_rows(path, EVENTS_HEADER):
         try:
             t_s, kind, label, value = row
-            out.append(Event(float(t_s), kind, label, value))
-        except ValueError:
-            raise SessionFormatError(f"{path}: line {line}: expected t_s,kind,label,value, found {row!r}") from None
+            out.append(Event(bounds.check("t_s", float(t_s)), kind, label, value))
+        except ValueError as exc:
+            why = f" ({exc})" if isinstance(exc, UserError) else ""
+            raise SessionFormatError(f"{path}: line {line}: expected t_s,kind,label,value, found {row!r}{why}") from None
     return out
 
 
@@ -474,8 +471,10 @@ def read_video_frames(path: str | os.PathLike) -> list[float]:
     for line, row in _read_csv_rows(path, FRAMES_HEADER):
         try:
             frame, t_s = int(row[0]), float(row[1])
-        except (ValueError, IndexError):
-            raise SessionFormatError(f"{path}: line {line}: expected frame,t_s, found {row!r}") from None
+            bounds.check("t_s", t_s)
+        except (ValueError, IndexError) as exc:
+            why = f" ({exc})" if isinstance(exc, UserError) else ""
+            raise SessionFormatError(f"{path}: line {line}: expected frame,t_s, found {row!r}{why}") from None
         if frame != len(out):
             raise SessionFormatError(f"{path}: line {line}: expected frame {len(out)}, found {frame}")
         out.append(t_s)

@@ -22,9 +22,10 @@ from typing import Any
 
 import numpy as np
 
+from effortface.core import bounds
 from effortface.core.blendshapes import BlendshapeSet
 from effortface.core.errors import UserError
-from effortface.core.fileio import atomic_write, atomic_write_text
+from effortface.core.fileio import atomic_write, atomic_write_text, read_json
 from effortface.train.face import FEATURE_NAMES, FEATURE_UNITS, SvrModel
 from effortface.train.physiology import HR_MAX_FORMULAS, EpocParams, NhrParams, NhrRegression
 
@@ -191,7 +192,7 @@ def _number(d: Mapping[str, Any], key: str, where: str, *, positive: bool = Fals
     return float(value)
 
 
-def _vector(d: Mapping[str, Any], key: str, where: str, n: int) -> np.ndarray:
+def _vector(d: Mapping[str, Any], key: str, where: str, n: int, bound: str) -> np.ndarray:
     values = _get(d, key, where, list)
     try:
         arr = np.asarray(values, dtype=float)
@@ -199,6 +200,11 @@ def _vector(d: Mapping[str, Any], key: str, where: str, n: int) -> np.ndarray:
         arr = np.empty(0)
     if arr.shape != (n,) or not np.all(np.isfinite(arr)):
         raise BundleFormatError(f"{where}.{key}: expected {n} finite numbers, found {values!r:.80}")
+    for i, value in enumerate(arr):
+        try:
+            bounds.check(bound, float(value), f"{where}.{key}[{i}]")
+        except UserError as exc:
+            raise BundleFormatError(str(exc)) from None
     return arr
 
 
@@ -206,15 +212,12 @@ def _read_json(path: Path) -> dict[str, Any]:
     if not path.is_file():
         raise BundleFormatError(f"{path}: expected a model file, found none "
                                 "(give a model folder or 'default')")
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError) as exc:
-        raise BundleFormatError(f"{path}: expected JSON, found {exc}") from None
+    doc = read_json(path, "JSON (model.json)", BundleFormatError)
     if not isinstance(doc, dict):
         raise BundleFormatError(f"{path}: expected a JSON object, found {type(doc).__name__}")
     version = _get(doc, "schema_version", str(path), int)
-    if version != SCHEMA_VERSION:
-        raise BundleFormatError(f"{path}: schema_version: expected {SCHEMA_VERSION}, found {version}")
+    if isinstance(version, bool) or version != SCHEMA_VERSION:  # True == 1 in Python, not in JSON
+        raise BundleFormatError(f"{path}: schema_version: expected {SCHEMA_VERSION}, found {version!r}")
     return doc
 
 
@@ -291,11 +294,11 @@ def _read_physiology(doc: dict[str, Any], where: str) -> dict[str, Any]:
     if formula not in HR_MAX_FORMULAS:
         raise BundleFormatError(f"{where}.physiology.hr_max_formula: expected one of "
                                 f"{', '.join(HR_MAX_FORMULAS)}, found {formula!r}")
-    period = _number(phys, "update_period_s", f"{where}.physiology", positive=True)
+    period = _bounded(phys, "update_period_s", f"{where}.physiology")
     epoc = _get(phys, "epoc", f"{where}.physiology", dict)
     fields = [f.name for f in dataclasses.fields(EpocParams)]
-    epoc_vals = {k: _number(epoc, k, f"{where}.physiology.epoc", positive=k != "threshold")
-                 for k in fields}
+    epoc_vals = {k: _number(epoc, k, f"{where}.physiology.epoc") if k == "threshold"
+                 else _bounded(epoc, k, f"{where}.physiology.epoc") for k in fields}
     if not 0.0 <= epoc_vals["threshold"] < 1.0:
         raise BundleFormatError(f"{where}.physiology.epoc.threshold: expected a fraction of VO2max from 0 "
                                 f"to below 1, found {epoc_vals['threshold']:g}")
@@ -307,14 +310,23 @@ def _read_svr_json(doc: dict[str, Any], where: str, names: tuple[str, ...]) -> l
     if [d.get("blendshape") if isinstance(d, dict) else None for d in items] != list(names):
         raise BundleFormatError(f"{where}.svr: expected one entry per blendshape {list(names)}, "
                                 f"found {len(items)} entries")
-    return [{k: _number(d, k, f"{where}.svr[{i}]", positive=True) for k in ("C", "gamma", "epsilon")}
+    return [{k: _bounded(d, k, f"{where}.svr[{i}]") for k in ("C", "gamma", "epsilon")}
             for i, d in enumerate(items)]
+
+
+def _bounded(d: Mapping[str, Any], key: str, where: str, name: str = "") -> float:
+    """A number of the model file checked against the bounds table (effortface.core.bounds)."""
+    try:
+        return bounds.check(name or key, _number(d, key, where, positive=True), f"{where}.{key}")
+    except UserError as exc:
+        raise BundleFormatError(str(exc)) from None
 
 
 def _read_npz(path: Path, names: tuple[str, ...]) -> tuple[list, list, np.ndarray]:
     """The SVR arrays of ``svr.npz``: support vectors (n_b, 4), dual coefs (n_b,), intercept (B,)."""
     if not path.is_file():
         raise BundleFormatError(f"{path}: expected the SVR arrays file, found none")
+    _check_npz_sizes(path)
     try:
         with np.load(path, allow_pickle=False) as npz:
             arrays = {k: npz[k] for k in npz.files}
@@ -330,9 +342,53 @@ def _read_npz(path: Path, names: tuple[str, ...]) -> tuple[list, list, np.ndarra
     if bad:
         raise BundleFormatError(f"{path}: {bad[0]}: expected finite numbers, found dtype "
                                 f"{arrays[bad[0]].dtype}")
+    limit = bounds.BOUNDS["svr_value"]
+    huge = [k for k in wanted if arrays[k].size and np.abs(arrays[k]).max() > limit.high]
+    if huge:
+        raise BundleFormatError(f"{path}: {huge[0]}: expected values within +-{limit.high:g}, found "
+                                f"{np.abs(arrays[huge[0]]).max():g}")
     _check_svr_shapes(path, arrays, names)
     return ([arrays[f"support_vectors_{n}"].astype(float) for n in names],
             [arrays[f"dual_coef_{n}"].astype(float) for n in names], arrays["intercept"].astype(float))
+
+
+#: the largest svr.npz content accepted, uncompressed (a trained bundle holds a few MB)
+MAX_NPZ_BYTES = 256 * 1024 * 1024
+
+
+def _check_npz_sizes(path: Path) -> None:
+    """Refuse a zip bomb: members whose sizes, or arrays whose headers, exceed what the file holds.
+
+    Each member's declared size is summed against :data:`MAX_NPZ_BYTES`, and each ``.npy`` header's
+    shape times item size must fit in its member, before numpy allocates anything.
+    """
+    try:
+        with zipfile.ZipFile(path) as zf:
+            total = 0
+            for info in zf.infolist():
+                total += info.file_size
+                if total > MAX_NPZ_BYTES:
+                    raise BundleFormatError(f"{path}: expected at most {MAX_NPZ_BYTES} bytes of arrays, "
+                                            f"found {total} or more once uncompressed")
+                with zf.open(info) as fh:
+                    _check_npy_header(path, info, fh)
+    except (zipfile.BadZipFile, OSError, EOFError):
+        return  # np.load names what is wrong with the file itself
+
+
+def _check_npy_header(path: Path, info: zipfile.ZipInfo, fh: Any) -> None:
+    """Raise unless the ``.npy`` member's header declares no more data than the member holds."""
+    fmt = np.lib.format
+    try:
+        version = fmt.read_magic(fh)
+        read = fmt.read_array_header_1_0 if version == (1, 0) else fmt.read_array_header_2_0
+        shape, _, dtype = read(fh)
+    except ValueError as exc:
+        raise BundleFormatError(f"{path}: {info.filename}: expected a .npy array, found {exc}") from None
+    declared = int(np.prod(shape, dtype=object)) * dtype.itemsize
+    if declared > info.file_size:
+        raise BundleFormatError(f"{path}: {info.filename}: expected an array of at most {info.file_size} "
+                                f"bytes (its stored size), found a header declaring shape {shape}")
 
 
 def _check_svr_shapes(path: Path, arrays: Mapping[str, np.ndarray], names: tuple[str, ...]) -> None:
@@ -381,8 +437,8 @@ def read_bundle(directory: str | os.PathLike) -> ModelBundle:
     scaler = _get(doc, "scaler", where, dict)
     nhr_coef, nhr_reg = _read_nhr(doc, where)
     bundle = ModelBundle(
-        blendshapes=shapes, scaler_mean=_vector(scaler, "mean", f"{where}.scaler", 4),
-        scaler_scale=_vector(scaler, "scale", f"{where}.scaler", 4),
+        blendshapes=shapes, scaler_mean=_vector(scaler, "mean", f"{where}.scaler", 4, "scaler_mean"),
+        scaler_scale=_vector(scaler, "scale", f"{where}.scaler", 4, "scaler_scale"),
         nhr_coefficients=nhr_coef, nhr_regression=nhr_reg,
         svr_hyperparameters=_read_svr_json(doc, where, shapes.names),
         support_vectors=[], dual_coef=[], intercept=np.empty(0),

@@ -8,11 +8,11 @@ Pure Python (no numpy), so the runtime can import it.
 from __future__ import annotations
 
 import dataclasses
-import json
 import os
 from pathlib import Path
 
 from effortface.core.errors import UserError
+from effortface.core.fileio import read_json
 
 
 @dataclasses.dataclass(frozen=True)
@@ -77,10 +77,10 @@ def load_blendshape_set(path: str | os.PathLike | None = None) -> BlendshapeSet:
     if path is None:
         return DEFAULT_SET
     path = Path(path)
+    items = read_json(path, "a JSON list of {name, drives, arkit}")
     try:
-        items = json.loads(path.read_text(encoding="utf-8"))
         shapes = BlendshapeSet.from_dict(items)
-    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:
         raise UserError(f"{path}: expected a JSON list of {{name, drives, arkit}}, found {exc}") from None
     if not shapes.shapes or len(set(shapes.names)) != len(shapes.names):
         raise UserError(f"{path}: expected unique, non-empty blendshape names, found {shapes.names}")

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from effortface.core import bounds
 from effortface.core.blendshapes import BlendshapeSet
 from effortface.core.errors import UserError
 from effortface.core.fileio import atomic_write_text
@@ -188,6 +189,8 @@ def run(args: argparse.Namespace) -> int:
     character = _character(args, model)
     if args.unit_m is not None and not (math.isfinite(args.unit_m) and args.unit_m > 0):
         raise UserError(f"--unit-m: expected a length in metres above 0, found {args.unit_m:g}")
+    if args.unit_m is not None:
+        bounds.check("unit_m", args.unit_m, "--unit-m")
     motion = read_motion(args.motion, unit_m=args.unit_m)
     curves = model.synthesize(motion, character, mapping=args.mapping)
     text = (livelink_csv(curves, model.blendshapes) if args.format == "livelink"
