@@ -11,7 +11,7 @@ import json
 import os
 import re
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import IO, Any
 
@@ -209,3 +209,51 @@ def _json_depth(raw: bytes) -> int:
 
 _JSON_STRING = re.compile(rb'"(?:[^"\\]|\\.)*"', re.DOTALL)
 _NOT_BRACKET = bytes(b for b in range(256) if b not in b"[]{}")
+
+
+def check_apart(option: str, out: str | os.PathLike, inputs: Iterable[str | os.PathLike | None],
+                what: str = "an output") -> Path:
+    """Refuse an output path that is, holds or lies inside one of the inputs; return it as a Path.
+
+    The one rule of every writer, so that ``--force`` can never destroy an input. Paths are compared
+    both as given (made absolute) and resolved through symbolic links, and a folder input's entries
+    that are symbolic links (a session reached through a link) count as inputs too.
+
+    Parameters
+    ----------
+    option : str
+        The output option, for the message (``"--out"``).
+    out : path-like
+        The output file or folder (need not exist).
+    inputs : iterable of path-like or None
+        The files and folders the command reads (None entries are skipped).
+    what : str
+        What the output is, for the message (``"a model folder"``).
+
+    Raises
+    ------
+    UserError
+        One line naming the option, the output and the input it would overwrite.
+    """
+    out = Path(out)
+    targets = {Path(os.path.abspath(out)), out.resolve()}
+    for src in (Path(s) for s in inputs if s is not None):
+        for form in _input_forms(src):
+            for target in targets:
+                if form == target or target in form.parents or form in target.parents:
+                    where = "" if form == target else " inside it" if target in form.parents else " around it"
+                    link = "" if form == Path(os.path.abspath(src)) else f" (through a link, at {form})"
+                    raise UserError(f"{option} {out}: expected {what} apart from the inputs, found input "
+                                    f"{src}{where}{link}")
+    return out
+
+
+def _input_forms(src: Path) -> set[Path]:
+    """``src`` as given (absolute) and resolved, plus the resolved targets of links directly inside it."""
+    forms = {Path(os.path.abspath(src)), src.resolve()}
+    if src.is_dir():
+        try:
+            forms |= {entry.resolve() for entry in src.iterdir() if entry.is_symlink()}
+        except OSError:
+            pass  # an unreadable folder: the reader will say so
+    return forms

@@ -22,7 +22,7 @@ import numpy as np
 from effortface.core import bounds
 from effortface.core.blendshapes import BlendshapeSet
 from effortface.core.errors import UserError
-from effortface.core.fileio import atomic_write_text
+from effortface.core.fileio import atomic_write_text, check_apart
 from effortface.train.motion import read_motion
 from effortface.train.runtime import Character, FaceModel, load_model
 
@@ -184,6 +184,8 @@ def write_output(path: Path, text: str, force: bool) -> None:
 def run(args: argparse.Namespace) -> int:
     """Synthesize and write the curves; return 0."""
     out = Path(args.out)
+    model_dir = None if args.model_dir == "default" else args.model_dir
+    check_apart("--out", out, [model_dir, args.motion, args.mapping])
     check_output(out, args.force)  # fail before the work
     model = load_model(args.model_dir)
     character = _character(args, model)
