@@ -255,13 +255,17 @@ class RaterAnnotations:
         return path
 
 
-def read_annotations(path: str | os.PathLike) -> RaterAnnotations:
+def read_annotations(path: str | os.PathLike, *, session_id: str | None = None,
+                     rater: str | None = None) -> RaterAnnotations:
     """Read an ``annotations/<rater>.json`` file.
 
     Parameters
     ----------
     path : path-like
         The file.
+    session_id, rater : str, optional
+        The session and rater the file must belong to (a file copied from another session, or
+        another rater's file under this name, is refused).
 
     Returns
     -------
@@ -276,9 +280,15 @@ def read_annotations(path: str | os.PathLike) -> RaterAnnotations:
     path = Path(path)
     doc = read_json(path, "a JSON annotation file", AnnotationFormatError)
     try:
-        return _from_dict(doc)
+        ann = _from_dict(doc)
     except UserError as exc:
         raise AnnotationFormatError(f"{path}: {exc}") from None
+    for field, wanted in (("session_id", session_id), ("rater", rater)):
+        found = getattr(ann, field)
+        if wanted is not None and found != wanted:
+            raise AnnotationFormatError(f"{path}: {field}: expected {wanted!r} (this file's "
+                                        f"{'session' if field == 'session_id' else 'name'}), found {found!r}")
+    return ann
 
 
 def _from_dict(doc: object) -> RaterAnnotations:

@@ -577,14 +577,62 @@ def validate_session(path: str | os.PathLike) -> list[str]:
         problems.append(f"{folder}: folder name differs from session_id {s.info.session_id!r}")
     if not s.info.complete:
         problems.append(f"{folder / SESSION_JSON}: complete is false (run 'effortface recover {folder}')")
-    problems += _monotonic_problems(folder / HEART_RATE_CSV, [h.t_s for h in s.heart_rate])
-    problems += _monotonic_problems(folder / VIDEO_FRAMES_CSV, s.frame_times_s)
+    problems += _order_problems(s)
     bad = [h for h in s.heart_rate if (h.valid and h.hr_bpm is None) or (h.hr_bpm is not None and h.hr_bpm <= 0)]
     if bad:
         problems.append(f"{folder / HEART_RATE_CSV}: {len(bad)} rows with a missing or non-positive hr_bpm")
     if (folder / VIDEO_AVI).exists() != (folder / VIDEO_FRAMES_CSV).exists():
         problems.append(f"{folder}: video.avi and video_frames.csv must be present together")
     return problems
+
+
+def check_session(path: str | os.PathLike) -> Session:
+    """Read a session folder and refuse it if it cannot be used as it is: the one check before use.
+
+    Training, evaluation and annotation read sessions through this. On top of :func:`read_session`
+    (whose readers refuse unreadable rows, NaN, negative and absurd times): heart-rate and frame
+    times must not go back, and ``video.avi`` must hold as many frames as ``video_frames.csv`` has
+    rows (a table of another video, or a video cut short). Soft problems (``complete`` false) are
+    left to :func:`validate_session`.
+
+    Parameters
+    ----------
+    path : path-like
+        The session folder.
+
+    Returns
+    -------
+    Session
+
+    Raises
+    ------
+    SessionFormatError
+        One line naming the file, what was expected and what was found.
+    """
+    s = read_session(path)
+    problems = _order_problems(s) + _video_problems(s)
+    if problems:
+        raise SessionFormatError(problems[0])
+    return s
+
+
+def _order_problems(s: Session) -> list[str]:
+    """Lines for heart-rate or frame times that go back."""
+    return (_monotonic_problems(s.path / HEART_RATE_CSV, [h.t_s for h in s.heart_rate])
+            + _monotonic_problems(s.path / VIDEO_FRAMES_CSV, s.frame_times_s))
+
+
+def _video_problems(s: Session) -> list[str]:
+    """A line if the video's frame count differs from the frame table's rows."""
+    if s.video_path is None or not s.frame_times_s:
+        return []
+    from effortface.capture_tool.camera import avi_frame_count  # lazy: cv2 loads slowly
+
+    n_video = avi_frame_count(s.video_path)
+    if n_video != len(s.frame_times_s):
+        return [f"{s.path / VIDEO_FRAMES_CSV}: expected one row per frame of {VIDEO_AVI} ({n_video} frames), "
+                f"found {len(s.frame_times_s)} rows"]
+    return []
 
 
 def _monotonic_problems(path: Path, times: list[float]) -> list[str]:

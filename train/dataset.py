@@ -24,7 +24,6 @@ measured NHR through :mod:`effortface.train.physiology`'s recursion), the inputs
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from collections.abc import Iterable, Sequence
@@ -36,9 +35,10 @@ import pandas as pd
 from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
 from effortface.annotate.keyframes import read_annotations
 from effortface.core.errors import UserError
-from effortface.core.fileio import refuse_overwrite
+from effortface.core import bounds
+from effortface.core.fileio import read_json, refuse_overwrite
 from effortface.capture_tool.session import PARTICIPANT_RANGES, SEX_ALIASES  # the limits capture enforces
-from effortface.capture_tool.session import SEXES, Session, list_sessions, parse_session_id, read_session
+from effortface.capture_tool.session import SEXES, Session, check_session, list_sessions, parse_session_id
 from effortface.train.hr_fit import HrSeries
 from effortface.train.physiology import (EpocParams, hr_max_bpm, hr_rest_bpm, epoc_step,
                               vo2max_ml_per_kg_min, VO2_REST_ML_PER_KG_MIN)
@@ -301,7 +301,7 @@ def session_table(folder: str | os.PathLike, blendshapes: BlendshapeSet = DEFAUL
     DatasetError
         See :func:`sessions_table`.
     """
-    s = read_session(folder)
+    s = check_session(folder)
     hr_t = [h.t_s for h in s.heart_rate if h.valid and h.hr_bpm is not None]
     if len(hr_t) < 2:
         raise DatasetError(f"{s.path / 'heart_rate.csv'}: expected valid heart-rate samples, "
@@ -341,11 +341,26 @@ def _work(s: Session, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             wt, ww, wp = (work[c].to_numpy(float) for c in ("t_s", "w_per_kg", "p_per_kg"))
         except (KeyError, ValueError, pd.errors.ParserError) as exc:
             raise DatasetError(f"{path}: expected columns t_s,w_per_kg,p_per_kg, found {exc}") from None
+        _check_work_times(path, wt)
         idx = np.clip(np.searchsorted(wt, t + 1e-9, side="right") - 1, 0, len(wt) - 1)
         return ww[idx], wp[idx]
     if (s.path / "motion").is_dir():
         return _work_from_motion(s, t)
     raise DatasetError(f"{s.path}: expected work.csv or a motion/ folder for w and p, found neither")
+
+
+def _check_work_times(path: Path, t_s: np.ndarray) -> None:
+    """DatasetError unless work.csv's times are finite, within the bounds and strictly increasing."""
+    if len(t_s) == 0:
+        raise DatasetError(f"{path}: expected rows of t_s,w_per_kg,p_per_kg, found none")
+    bad = np.flatnonzero(~np.isfinite(t_s) | (t_s < bounds.BOUNDS["t_s"].low) | (t_s > bounds.BOUNDS["t_s"].high))
+    if bad.size:
+        raise DatasetError(f"{path}: row {bad[0] + 1}: t_s: expected {bounds.BOUNDS['t_s'].describe()}, "
+                           f"found {t_s[bad[0]]!r}")
+    back = np.flatnonzero(np.diff(t_s) <= 0)
+    if back.size:
+        raise DatasetError(f"{path}: row {back[0] + 2}: expected t_s increasing (rows sorted by time), "
+                           f"found {t_s[back[0] + 1]:g} after {t_s[back[0]]:g}")
 
 
 def _work_from_motion(s: Session, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -359,23 +374,60 @@ def _work_from_motion(s: Session, t: np.ndarray) -> tuple[np.ndarray, np.ndarray
     from effortface.train.segments import Loads, build_body
 
     index = s.path / "motion" / "motion.json"
-    try:
-        entries = json.loads(index.read_text(encoding="utf-8"))["files"]
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise DatasetError(f"{index}: expected {{\"files\": [{{path, offset_s}}]}}, found {exc!r}") from None
     w, p = np.full(len(t), np.nan), np.full(len(t), np.nan)
     part = s.participant
-    for entry in entries:
-        clip = read_motion(index.parent / str(entry["path"]))
-        loads = Loads(*(float(entry.get(k, 0.0)) for k in ("load_left_kg", "load_right_kg", "load_back_kg")))
+    for entry in read_motion_index(index):
+        clip = read_motion(index.parent / entry["path"])
+        loads = Loads(*(entry[k] for k in ("load_left_kg", "load_right_kg", "load_back_kg")))
         body = build_body(clip.joint_names, clip.parents, part.mass_kg, part.sex, loads=loads,
                           reference_positions_m=clip.positions_m)
         curves = work_and_power(clip, body)
-        t_clip = curves.t_s + float(entry.get("offset_s", 0.0))
+        t_clip = curves.t_s + entry["offset_s"]
         inside = (t >= t_clip[0]) & (t <= t_clip[-1])
         w[inside] = np.interp(t[inside], t_clip, curves.w_per_kg)
         p[inside] = np.interp(t[inside], t_clip, curves.p_per_kg)
     return w, p
+
+
+#: the numbers of a motion.json entry, with their bounds-table names and defaults
+MOTION_ENTRY_NUMBERS = {"offset_s": ("offset_s", 0.0), "load_left_kg": ("load_kg", 0.0),
+                        "load_right_kg": ("load_kg", 0.0), "load_back_kg": ("load_kg", 0.0)}
+
+
+def read_motion_index(path: Path) -> list[dict]:
+    """The entries of a session's ``motion/motion.json``: ``{"files": [{path, offset_s, load_*_kg}]}``.
+
+    Returns
+    -------
+    list of dict
+        Each with ``path`` (str, relative to the file's folder) and the four numbers (defaults 0).
+
+    Raises
+    ------
+    DatasetError
+        One line naming the file and the entry: not JSON, wrong shape, a value of the wrong type,
+        a number outside the bounds table (:mod:`effortface.core.bounds`).
+    """
+    doc = read_json(path, 'JSON {"files": [{path, offset_s}]}', DatasetError)
+    files = doc.get("files") if isinstance(doc, dict) else None
+    if not isinstance(files, list):
+        raise DatasetError(f'{path}: expected {{"files": [{{path, offset_s}}]}}, found {type(doc).__name__} '
+                           f"without a files list")
+    return [_motion_entry(path, i, e) for i, e in enumerate(files)]
+
+
+def _motion_entry(path: Path, i: int, entry: object) -> dict:
+    """One checked motion.json entry (see :func:`read_motion_index`)."""
+    where = f"{path}: files[{i}]"
+    if not isinstance(entry, dict) or not isinstance(entry.get("path"), str) or not entry["path"]:
+        raise DatasetError(f"{where}: expected {{path: str, offset_s: number}}, found {entry!r:.60}")
+    out: dict = {"path": entry["path"]}
+    for key, (bound, default) in MOTION_ENTRY_NUMBERS.items():
+        try:
+            out[key] = bounds.check(bound, entry.get(key, default), f"{where}.{key}")
+        except UserError as exc:
+            raise DatasetError(str(exc)) from None
+    return out
 
 
 def _weights(s: Session, t: np.ndarray, blendshapes: BlendshapeSet, rater_policy: str) -> np.ndarray:
@@ -392,7 +444,7 @@ def _weights(s: Session, t: np.ndarray, blendshapes: BlendshapeSet, rater_policy
                            f"and video_frames.csv, found {len(files)} annotation files and "
                            f"{len(s.frame_times_s)} frames")
     frames = _nearest_frames(np.asarray(s.frame_times_s), t)
-    stack = np.stack([_rater_weights(f, frames, blendshapes) for f in files])
+    stack = np.stack([_rater_weights(f, frames, blendshapes, s.info.session_id) for f in files])
     with np.errstate(all="ignore"):
         counts = np.isfinite(stack).sum(axis=0)
         mean = np.where(counts > 0, np.nansum(stack, axis=0) / np.maximum(counts, 1), np.nan)
@@ -407,9 +459,9 @@ def _nearest_frames(frame_t: np.ndarray, t: np.ndarray) -> np.ndarray:
     return np.where(np.abs(frame_t[i - 1] - t) <= np.abs(frame_t[i] - t), i - 1, i)
 
 
-def _rater_weights(path: Path, frames: np.ndarray, blendshapes: BlendshapeSet) -> np.ndarray:
+def _rater_weights(path: Path, frames: np.ndarray, blendshapes: BlendshapeSet, session_id: str) -> np.ndarray:
     """One rater's weights for our blendshape set (NaN for tracks the file lacks or left empty)."""
-    ann = read_annotations(path)
+    ann = read_annotations(path, session_id=session_id, rater=path.stem)
     cols = [ann.tracks[n].evaluate(frames) if n in ann.tracks else np.full(len(frames), np.nan)
             for n in blendshapes.names]
     return np.column_stack(cols).astype(float)
