@@ -39,7 +39,7 @@ TL_CHECK_RANGE = (0.0, 10.0)
 #: Largest accepted magnitude of an NHR coefficient or TL-regression value (choice): far above any
 #: fit (the paper: t_root 7-12 W/kg, rates below 0.01 per W/kg per s; odd small data sets give
 #: hundreds) and far enough from float overflow for the recursion (1e308 overflowed it).
-NHR_MAX_ABS = 1e6
+NHR_MAX_ABS = bounds.BOUNDS["nhr_coefficient"].high
 
 
 class BundleFormatError(UserError):

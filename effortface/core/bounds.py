@@ -56,6 +56,8 @@ BOUNDS: dict[str, Bound] = {
     "scaler_mean": Bound(-1e6, 1e6, ""),
     "scaler_scale": Bound(1e-9, 1e6, ""),
     "svr_value": Bound(-1e9, 1e9, ""),
+    # model.json: heart-rate coefficients (t_root, c_inc, c_dec; their TL lines within +-high)
+    "nhr_coefficient": Bound(0.0, 1e6, "", low_open=True),
     # model.json: physiology (1 ms to 1 min per update: one game frame to a coarse simulation)
     "update_period_s": Bound(1e-3, 60.0, "s"),
     "k_up": Bound(0.0, 1e3, "ml/kg/s", low_open=True),
