@@ -209,7 +209,7 @@ def _vector(d: Mapping[str, Any], key: str, where: str, n: int, bound: str) -> n
 
 
 def _read_json(path: Path) -> dict[str, Any]:
-    if not path.is_file():
+    if not path.exists():
         raise BundleFormatError(f"{path}: expected a model file, found none "
                                 "(give a model folder or 'default')")
     doc = read_json(path, "JSON (model.json)", BundleFormatError)

@@ -92,7 +92,8 @@ def check(name: str, value: object, where: str = "") -> float:
     label = where or name
     number = float(value) if isinstance(value, numbers.Real) and not isinstance(value, bool) else math.nan
     if not bound.contains(number):
-        raise UserError(f"{label}: expected {bound.describe()}, found {value!r:.40}")
+        shown = f"{number:g}" if isinstance(value, float) else f"{value!r:.40}"
+        raise UserError(f"{label}: expected {bound.describe()}, found {shown}")
     return number
 
 
