@@ -65,9 +65,9 @@ def _check_key(frame: object, weight: object, interp: object) -> None:
     if isinstance(frame, bool) or not isinstance(frame, (int, np.integer)) or frame < 0:
         raise UserError(f"key-frame frame: expected an integer >= 0, found {frame!r}")
     if isinstance(weight, bool) or not isinstance(weight, (int, float, np.floating, np.integer)):
-        raise UserError(f"key-frame weight: expected a number in [0, 1], found {weight!r}")
-    if not 0.0 <= float(weight) <= 1.0:
-        raise UserError(f"key-frame weight: expected a number in [0, 1], found {weight!r}")
+        raise UserError(f"key-frame weight: expected a number in [0, 1], found {weight!r:.40}")
+    if not 0.0 <= weight <= 1.0:  # compared as is: float() of a huge JSON integer overflows
+        raise UserError(f"key-frame weight: expected a number in [0, 1], found {weight!r:.40}")
     if interp not in INTERPOLATIONS:
         raise UserError(
             f"key-frame interp: expected one of {', '.join(INTERPOLATIONS)}, found {interp!r}"

@@ -250,7 +250,7 @@ class SessionInfo:
             )
         try:
             participant = Participant.from_dict(data["participant"])
-        except (UserError, TypeError, ValueError) as exc:
+        except (UserError, TypeError, ValueError, OverflowError) as exc:  # Overflow: an integer beyond float
             raise SessionFormatError(f"{source}: {exc}") from None
         if not isinstance(data["complete"], bool):
             raise SessionFormatError(f"{source}: field 'complete': expected true or false, "

@@ -186,10 +186,14 @@ def _kind_name(kind: type | tuple[type, ...]) -> str:
 
 def _number(d: Mapping[str, Any], key: str, where: str, *, positive: bool = False) -> float:
     value = _get(d, key, where, (int, float))
-    if isinstance(value, bool) or not np.isfinite(value) or (positive and value <= 0):
+    try:
+        number = float(value)
+    except OverflowError:  # a JSON integer beyond float range
+        number = float("inf")
+    if isinstance(value, bool) or not np.isfinite(number) or (positive and number <= 0):
         raise BundleFormatError(f"{where}.{key}: expected a {'positive ' if positive else ''}"
-                                f"finite number, found {value!r}")
-    return float(value)
+                                f"finite number, found {value!r:.40}")
+    return number
 
 
 def _vector(d: Mapping[str, Any], key: str, where: str, n: int, bound: str) -> np.ndarray:

@@ -90,11 +90,21 @@ def check(name: str, value: object, where: str = "") -> float:
     """
     bound = BOUNDS[name]
     label = where or name
-    number = float(value) if isinstance(value, numbers.Real) and not isinstance(value, bool) else math.nan
+    number = _as_float(value)
     if not bound.contains(number):
         shown = f"{number:g}" if isinstance(value, float) else f"{value!r:.40}"
         raise UserError(f"{label}: expected {bound.describe()}, found {shown}")
     return number
+
+
+def _as_float(value: object) -> float:
+    """``value`` as a float; NaN for a non-number or a bool, infinity for an int beyond float range."""
+    if not isinstance(value, numbers.Real) or isinstance(value, bool):
+        return math.nan
+    try:
+        return float(value)
+    except OverflowError:
+        return math.inf if value > 0 else -math.inf
 
 
 def option(name: str) -> Callable[[str], float]:
