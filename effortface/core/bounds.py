@@ -103,8 +103,8 @@ def _as_float(value: object) -> float:
         return math.nan
     try:
         return float(value)
-    except OverflowError:
-        return math.inf if value > 0 else -math.inf
+    except OverflowError:  # an int beyond float range
+        return -math.inf if str(value).startswith("-") else math.inf
 
 
 def option(name: str) -> Callable[[str], float]:

@@ -145,7 +145,7 @@ MAX_JSON_BYTES = 64 * 1024 * 1024
 MAX_JSON_DEPTH = 32
 
 
-def check_regular_file(path: str | os.PathLike, what: str = "a regular file",
+def check_regular_file(path: str | os.PathLike[str], what: str = "a regular file",
                        error: type[UserError] = UserError) -> Path:
     """Return ``path`` if it is a regular file, else raise ``error`` naming it and what is there.
 
@@ -157,7 +157,7 @@ def check_regular_file(path: str | os.PathLike, what: str = "a regular file",
     return Path(path)
 
 
-def read_json(path: str | os.PathLike, what: str = "a JSON file",
+def read_json(path: str | os.PathLike[str], what: str = "a JSON file",
               error: type[UserError] = UserError, *, max_bytes: int = MAX_JSON_BYTES) -> Any:
     """Parse a JSON file that was written by a person or a program that may have failed.
 
@@ -211,7 +211,7 @@ _JSON_STRING = re.compile(rb'"(?:[^"\\]|\\.)*"', re.DOTALL)
 _NOT_BRACKET = bytes(b for b in range(256) if b not in b"[]{}")
 
 
-def check_apart(option: str, out: str | os.PathLike, inputs: Iterable[str | os.PathLike | None],
+def check_apart(option: str, out: str | os.PathLike[str], inputs: Iterable[str | os.PathLike[str] | None],
                 what: str = "an output") -> Path:
     """Refuse an output path that is, holds or lies inside one of the inputs; return it as a Path.
 
