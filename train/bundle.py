@@ -200,7 +200,7 @@ def _vector(d: Mapping[str, Any], key: str, where: str, n: int, bound: str) -> n
     values = _get(d, key, where, list)
     try:
         arr = np.asarray(values, dtype=float)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # Overflow: an integer beyond float range
         arr = np.empty(0)
     if arr.shape != (n,) or not np.all(np.isfinite(arr)):
         raise BundleFormatError(f"{where}.{key}: expected {n} finite numbers, found {values!r:.80}")

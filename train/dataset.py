@@ -36,7 +36,7 @@ from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
 from effortface.annotate.keyframes import read_annotations
 from effortface.core.errors import UserError
 from effortface.core import bounds
-from effortface.core.fileio import read_json, refuse_overwrite
+from effortface.core.fileio import check_regular_file, read_json, refuse_overwrite
 from effortface.capture_tool.session import PARTICIPANT_RANGES, SEX_ALIASES  # the limits capture enforces
 from effortface.capture_tool.session import SEXES, Session, check_session, list_sessions, parse_session_id
 from effortface.train.hr_fit import HrSeries
@@ -85,7 +85,7 @@ def read_table(path: str | os.PathLike, blendshapes: BlendshapeSet | None = None
         :func:`check_participants`), or a participant's data contradict themselves; the message
         names the file.
     """
-    path = Path(path)
+    path = check_regular_file(path, "a CSV table", DatasetError)
     try:
         df = pd.read_csv(path, dtype={"participant": str, "session": str, "sex": str, "exercise": str})
     except (OSError, ValueError, pd.errors.ParserError) as exc:

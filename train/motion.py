@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from effortface.core.errors import UserError
+from effortface.core.fileio import check_regular_file
 
 #: CMU cgspeed ("MotionBuilder-friendly") BVH length unit: 1 unit = 1/0.45 inch = 0.05644 m.
 CMU_UNIT_M = 0.05644
@@ -253,6 +254,8 @@ def read_motion(path: str | Path, *, unit_m: float | None = None) -> Motion:
     """
     path = Path(path)
     suffix = path.suffix.lower()
+    if suffix in (".bvh", ".npz") and path.exists():  # a FIFO or device would block or read forever
+        check_regular_file(path, f"a motion file ({suffix})", MotionFormatError)
     if suffix == ".bvh":
         return read_bvh(path, unit_m=unit_m)
     if suffix == ".npz":

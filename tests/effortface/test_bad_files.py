@@ -262,6 +262,10 @@ MODELS = {
         lambda f: _edit(f, lambda d: d["physiology"]["epoc"].update(tau_s=1e200)),
     r"model.json.scaler.scale\[2\]: expected a number from 1e-09 to 1e\+06, found 1e-300":
         lambda f: _edit(f, lambda d: d["scaler"]["scale"].__setitem__(2, 1e-300)),
+    r"model.json.scaler.mean: expected 4 finite numbers, found \[1000000000": lambda f: _edit(
+        f, lambda d: d["scaler"]["mean"].__setitem__(0, 10 ** 400)),  # found by benchmarks/fuzz_long.py
+    r"model.json.nhr.tl_regression.t_root.intercept: expected a finite number, found 1000000000": lambda f: _edit(
+        f, lambda d: d["nhr"]["tl_regression"]["t_root"].update(intercept=10 ** 400)),
     r"svr.npz: intercept.npy: expected an array of at most \d+ bytes \(its stored size\), found a header "
     r"declaring shape \(100000000000, 4\)": _npz_member_lies,
     r"model.json: expected JSON \(model.json\), found a special file": lambda f: (
@@ -357,3 +361,13 @@ def test_bounds_table_describes_itself() -> None:
     for bad in (True, "1", float("nan"), float("inf"), None):
         with pytest.raises(UserError, match="gamma: expected a number above 0"):
             bounds.check("gamma", bad)
+
+
+@pytest.mark.parametrize(("command", "name"), [("synth", "clip.bvh"), ("synth", "clip.npz"), ("train", "t.csv")])
+def test_a_fifo_given_as_a_file_is_refused_at_once(tmp_path: Path, capsys, command: str, name: str) -> None:
+    fifo = tmp_path / name
+    os.mkfifo(fifo)  # reading it would block forever
+    args = (["synth", "default", str(fifo), "--out", str(tmp_path / "o.csv")] if command == "synth"
+            else ["train", "--table", str(fifo), "--out", str(tmp_path / "m")])
+    assert main(args) == 2
+    _one_line(capsys, command, rf"{name}: expected a (motion file|CSV table).*, found a special file \(FIFO")
