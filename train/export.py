@@ -223,7 +223,8 @@ def check_parity(face: FaceModelFit, folder: str | os.PathLike, onnx_tol: float 
 
 
 def export_model(bundle: ModelBundle, face: FaceModelFit, out_dir: str | os.PathLike, *,
-                 force: bool = False, card: str | None = None, onnx_dtype: str = "float64") -> Path:
+                 force: bool = False, card: str | None = None, onnx_dtype: str = "float64",
+                 inputs: Sequence[str | os.PathLike] = ()) -> Path:
     """Write the model folder: bundle, ``face.onnx``, parity check, ``MODEL_CARD.md``.
 
     Parameters
@@ -240,6 +241,9 @@ def export_model(bundle: ModelBundle, face: FaceModelFit, out_dir: str | os.Path
         Model card text; :func:`model_card` of the bundle by default.
     onnx_dtype : {"float64", "float32"}
         Tensor type of ``face.onnx`` (float32 is checked at 1e-4 instead of 1e-5).
+    inputs : sequence of path-like
+        What the model was trained from: the folder must lie apart from them
+        (:func:`check_model_target`).
 
     Returns
     -------
@@ -254,7 +258,7 @@ def export_model(bundle: ModelBundle, face: FaceModelFit, out_dir: str | os.Path
         If a parity check fails (the target is left untouched).
     """
     out = refuse_overwrite(out_dir, overwrite=force, what="model folder", hint=" (use --force)")
-    check_model_target(out, force=force)
+    check_model_target(out, force=force, inputs=inputs)
     out.parent.mkdir(parents=True, exist_ok=True)
     # a fresh private folder (mode 0700, unpredictable name, created by us): a planted file or link
     # at a guessable name can neither redirect the write nor be deleted in our place

@@ -54,7 +54,7 @@ def export_training(*, prepared: pd.DataFrame, series: Any, hr_eval: Any, face: 
     metrics = training_metrics(hr_eval, face, held_out, protocols)
     provenance = training_provenance(prepared, face, sources, rater_policy, config)
     bundle = build_bundle(face, hr_eval.fit, blendshapes, metrics, provenance)
-    model_dir = export_model(bundle, face, out, force=force)
+    model_dir = export_model(bundle, face, out, force=force, inputs=sources)
     if on_report is not None:
         on_report()
     report = write_report(model_dir / REPORT_DIR, evaluation=hr_eval, series=series, fit=face,

@@ -13,6 +13,7 @@ import onnx
 import pytest
 
 from effortface.core.blendshapes import DEFAULT_SET
+from effortface.core.errors import UserError
 from effortface.train import export
 from effortface.train.bundle import read_bundle
 from effortface.train.dataset import hr_series, prepare, synthetic_table
@@ -156,3 +157,13 @@ def test_export_never_follows_a_planted_link(fitted, tmp_path):
     umask = os.umask(0o022)
     os.umask(umask)
     assert out.stat().st_mode & 0o777 == 0o777 & ~umask  # an ordinary folder, not mkdtemp's 0700
+
+
+def test_export_refuses_a_folder_among_its_inputs(fitted, tmp_path):
+    """Issue 17 case 5 for the Train stage's export too: the model lies apart from its sessions."""
+    lab = tmp_path / "lab"
+    lab.mkdir()
+    with pytest.raises(UserError, match=r"--out \S+lab/m: expected a model folder apart from the inputs, "
+                                        r"found input \S+lab around it"):
+        export_model(_bundle(fitted), fitted[0], lab / "m", inputs=[str(lab)])
+    assert sorted(p.name for p in lab.iterdir()) == []
