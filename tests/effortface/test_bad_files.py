@@ -371,3 +371,10 @@ def test_a_fifo_given_as_a_file_is_refused_at_once(tmp_path: Path, capsys, comma
             else ["train", "--table", str(fifo), "--out", str(tmp_path / "m")])
     assert main(args) == 2
     _one_line(capsys, command, rf"{name}: expected a (motion file|CSV table).*, found a special file \(FIFO")
+
+
+def test_agreement_refuses_a_rater_file_copied_under_another_name(session: Path, capsys) -> None:
+    shutil.copytree(SAMPLES / "reliability", session.parent / "reliability")
+    shutil.copy(session / "annotations" / "R1.json", session / "annotations" / "R4.json")
+    assert main(["agreement", str(session)]) == 2  # R1's keys would have counted twice
+    _one_line(capsys, "agreement", r"R4.json: rater: expected 'R4' \(this file's name\), found 'R1'")
