@@ -1,6 +1,6 @@
 """Fuzzing (issue 17): the decoders and every session-file reader, with hypothesis.
 
-Brief on every change (fixed seed: ``derandomize=True``; about 20-30 s for the module, the CI job
+Brief on every change (fixed seed: ``derandomize=True``, 150 examples per property, about 15 s, the CI job
 ``.ci/fuzz``), long in ``benchmarks/fuzz_long.py`` (``EFFORTFACE_FUZZ_EXAMPLES`` examples per
 property, random seeds). The promises checked:
 
@@ -43,7 +43,7 @@ SESSION = ROOT / "sample_sessions" / "P03_20260113-094400_cardio"
 MOTION_JSON = ROOT / "sample_sessions" / "P02_20260112-113700_strength" / "motion" / "motion.json"
 SERIAL = ROOT / "tests" / "data" / "serial"
 #: examples per property (the long run raises it)
-EXAMPLES = int(os.environ.get("EFFORTFACE_FUZZ_EXAMPLES", "40"))
+EXAMPLES = int(os.environ.get("EFFORTFACE_FUZZ_EXAMPLES", "150"))
 #: seconds one reader call may take before it counts as a hang
 HANG_S = 10.0
 FUZZ = settings(max_examples=EXAMPLES, deadline=None, database=None,
