@@ -16,6 +16,7 @@ import dataclasses
 import json
 import os
 import zipfile
+import zlib
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -334,7 +335,7 @@ def _read_npz(path: Path, names: tuple[str, ...]) -> tuple[list, list, np.ndarra
     try:
         with np.load(path, allow_pickle=False) as npz:
             arrays = {k: npz[k] for k in npz.files}
-    except (OSError, ValueError, EOFError, TypeError, zipfile.BadZipFile) as exc:  # TypeError: a .npy
+    except _NPZ_ERRORS as exc:  # TypeError: a .npy
         raise BundleFormatError(f"{path}: expected a numpy .npz without pickles, "
                                 f"found {str(exc) or type(exc).__name__}") from None
     wanted = ["intercept"] + [f"{p}_{n}" for n in names for p in ("support_vectors", "dual_coef")]
@@ -356,6 +357,10 @@ def _read_npz(path: Path, names: tuple[str, ...]) -> tuple[list, list, np.ndarra
             [arrays[f"dual_coef_{n}"].astype(float) for n in names], arrays["intercept"].astype(float))
 
 
+#: what a damaged zip makes zipfile and numpy raise (names not UTF-8, an unknown compression
+#: method, an "encrypted" flag, corrupt deflate data...), found by benchmarks/fuzz_long.py
+_NPZ_ERRORS = (zipfile.BadZipFile, zlib.error, OSError, EOFError, ValueError, TypeError, NotImplementedError,
+               RuntimeError)
 #: the largest svr.npz content accepted, uncompressed (a trained bundle holds a few MB)
 MAX_NPZ_BYTES = 256 * 1024 * 1024
 
@@ -376,7 +381,9 @@ def _check_npz_sizes(path: Path) -> None:
                                             f"found {total} or more once uncompressed")
                 with zf.open(info) as fh:
                     _check_npy_header(path, info, fh)
-    except (zipfile.BadZipFile, OSError, EOFError):
+    except BundleFormatError:
+        raise
+    except _NPZ_ERRORS:
         return  # np.load names what is wrong with the file itself
 
 

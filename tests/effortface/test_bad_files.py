@@ -247,6 +247,19 @@ def _npz_member_lies(folder: Path) -> None:
             zf.writestr(name + ".npy", buf.getvalue())
 
 
+def _npz_name_not_utf8(folder: Path) -> None:
+    """A member name flagged UTF-8 that is not (found by benchmarks/fuzz_long.py: UnicodeDecodeError)."""
+    with np.load(folder / "svr.npz") as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    with zipfile.ZipFile(folder / "svr.npz", "w") as zf:
+        for name, arr in arrays.items():
+            buf = io.BytesIO()
+            np.save(buf, arr)
+            zf.writestr(("\u00e9" if name == "intercept" else "") + name + ".npy", buf.getvalue())  # flagged UTF-8
+    raw = (folder / "svr.npz").read_bytes()
+    (folder / "svr.npz").write_bytes(raw.replace("\u00e9intercept".encode(), b"\xa0\xa0intercept"))
+
+
 MODELS = {
     r"model.json: expected JSON nested at most 32 levels": lambda f: (f / "model.json").write_text(DEEP),
     r"model.json: schema_version: expected 1, found True": lambda f: _edit(f, lambda d: d.update(schema_version=True)),
@@ -268,6 +281,8 @@ MODELS = {
         f, lambda d: d["nhr"]["tl_regression"]["t_root"].update(intercept=10 ** 400)),
     r"svr.npz: intercept.npy: expected an array of at most \d+ bytes \(its stored size\), found a header "
     r"declaring shape \(100000000000, 4\)": _npz_member_lies,
+    r"svr.npz: expected a numpy .npz without pickles, found 'utf-8' codec can't decode byte 0xa0":
+        _npz_name_not_utf8,
     r"model.json: expected JSON \(model.json\), found a special file": lambda f: (
         (f / "model.json").unlink(), os.mkfifo(f / "model.json")),
 }
