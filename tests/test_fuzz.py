@@ -35,6 +35,7 @@ from effortface.capture_tool.session import read_events, read_session_info, read
 from effortface.core.errors import UserError
 from effortface.train.bundle import read_bundle, write_bundle
 from effortface.train.dataset import read_motion_index
+from effortface.train.motion import read_motion
 
 pytestmark = pytest.mark.fuzz
 
@@ -162,6 +163,7 @@ def workdir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     write_bundle(make_bundle(), root / "m")
     (root / "motion").mkdir()
     shutil.copy(MOTION_JSON, root / "motion" / "motion.json")
+    shutil.copy(ROOT / "tests" / "data" / "motion" / "amp_humanoid_run.npz", root / "motion" / "clip.npz")
     return root
 
 
@@ -176,6 +178,7 @@ READERS: dict[str, Callable[[Path], object]] = {
     "m/model.json": lambda p: read_bundle(p.parent),
     "m/svr.npz": lambda p: read_bundle(p.parent),
     "motion/motion.json": read_motion_index,
+    "motion/clip.npz": read_motion,
 }
 ORIGINALS: dict[str, bytes] = {}
 

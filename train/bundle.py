@@ -15,8 +15,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-import zipfile
-import zlib
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -27,6 +25,7 @@ from effortface.core import bounds
 from effortface.core.blendshapes import BlendshapeSet
 from effortface.core.errors import UserError
 from effortface.core.fileio import atomic_write, atomic_write_text, read_json
+from effortface.train.npzio import load_npz
 from effortface.train.face import FEATURE_NAMES, FEATURE_UNITS, SvrModel
 from effortface.train.physiology import HR_MAX_FORMULAS, EpocParams, NhrParams, NhrRegression
 
@@ -331,13 +330,7 @@ def _read_npz(path: Path, names: tuple[str, ...]) -> tuple[list, list, np.ndarra
     """The SVR arrays of ``svr.npz``: support vectors (n_b, 4), dual coefs (n_b,), intercept (B,)."""
     if not path.is_file():
         raise BundleFormatError(f"{path}: expected the SVR arrays file, found none")
-    _check_npz_sizes(path)
-    try:
-        with np.load(path, allow_pickle=False) as npz:
-            arrays = {k: npz[k] for k in npz.files}
-    except _NPZ_ERRORS as exc:  # TypeError: a .npy
-        raise BundleFormatError(f"{path}: expected a numpy .npz without pickles, "
-                                f"found {str(exc) or type(exc).__name__}") from None
+    arrays = load_npz(path, BundleFormatError, "a numpy .npz without pickles")
     wanted = ["intercept"] + [f"{p}_{n}" for n in names for p in ("support_vectors", "dual_coef")]
     missing = [k for k in wanted if k not in arrays]
     if missing:
@@ -355,51 +348,6 @@ def _read_npz(path: Path, names: tuple[str, ...]) -> tuple[list, list, np.ndarra
     _check_svr_shapes(path, arrays, names)
     return ([arrays[f"support_vectors_{n}"].astype(float) for n in names],
             [arrays[f"dual_coef_{n}"].astype(float) for n in names], arrays["intercept"].astype(float))
-
-
-#: what a damaged zip makes zipfile and numpy raise (names not UTF-8, an unknown compression
-#: method, an "encrypted" flag, corrupt deflate data...), found by benchmarks/fuzz_long.py
-_NPZ_ERRORS = (zipfile.BadZipFile, zlib.error, OSError, EOFError, ValueError, TypeError, NotImplementedError,
-               RuntimeError)
-#: the largest svr.npz content accepted, uncompressed (a trained bundle holds a few MB)
-MAX_NPZ_BYTES = 256 * 1024 * 1024
-
-
-def _check_npz_sizes(path: Path) -> None:
-    """Refuse a zip bomb: members whose sizes, or arrays whose headers, exceed what the file holds.
-
-    Each member's declared size is summed against :data:`MAX_NPZ_BYTES`, and each ``.npy`` header's
-    shape times item size must fit in its member, before numpy allocates anything.
-    """
-    try:
-        with zipfile.ZipFile(path) as zf:
-            total = 0
-            for info in zf.infolist():
-                total += info.file_size
-                if total > MAX_NPZ_BYTES:
-                    raise BundleFormatError(f"{path}: expected at most {MAX_NPZ_BYTES} bytes of arrays, "
-                                            f"found {total} or more once uncompressed")
-                with zf.open(info) as fh:
-                    _check_npy_header(path, info, fh)
-    except BundleFormatError:
-        raise
-    except _NPZ_ERRORS:
-        return  # np.load names what is wrong with the file itself
-
-
-def _check_npy_header(path: Path, info: zipfile.ZipInfo, fh: Any) -> None:
-    """Raise unless the ``.npy`` member's header declares no more data than the member holds."""
-    fmt = np.lib.format
-    try:
-        version = fmt.read_magic(fh)
-        read = fmt.read_array_header_1_0 if version == (1, 0) else fmt.read_array_header_2_0
-        shape, _, dtype = read(fh)
-    except ValueError as exc:
-        raise BundleFormatError(f"{path}: {info.filename}: expected a .npy array, found {exc}") from None
-    declared = int(np.prod(shape, dtype=object)) * dtype.itemsize
-    if declared > info.file_size:
-        raise BundleFormatError(f"{path}: {info.filename}: expected an array of at most {info.file_size} "
-                                f"bytes (its stored size), found a header declaring shape {shape}")
 
 
 def _check_svr_shapes(path: Path, arrays: Mapping[str, np.ndarray], names: tuple[str, ...]) -> None:

@@ -24,7 +24,7 @@ from effortface.capture_tool.session import check_session, read_session, read_se
 from effortface.cli import main
 from effortface.core import bounds
 from effortface.core.errors import SessionFormatError, UserError
-from effortface.train import bundle as bundle_module
+from effortface.train import npzio
 from effortface.train.bundle import BundleFormatError, read_bundle, write_bundle
 from effortface.train.dataset import DatasetError, read_motion_index, session_table
 from effortface.train.physiology import PhysiologyParams
@@ -299,7 +299,7 @@ def test_bad_models_are_one_line(tmp_path: Path, message: str, corrupt) -> None:
 
 def test_npz_content_over_the_limit(tmp_path: Path, monkeypatch) -> None:
     folder = write_bundle(make_bundle(), tmp_path / "m")
-    monkeypatch.setattr(bundle_module, "MAX_NPZ_BYTES", 1000)
+    monkeypatch.setattr(npzio, "MAX_NPZ_BYTES", 1000)
     with pytest.raises(BundleFormatError, match=r"svr.npz: expected at most 1000 bytes of arrays"):
         read_bundle(folder)
 
