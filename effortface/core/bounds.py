@@ -13,7 +13,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import numbers
-from collections.abc import Callable
 
 from effortface.core.errors import UserError
 
@@ -105,23 +104,3 @@ def _as_float(value: object) -> float:
         return float(value)
     except OverflowError:  # an int beyond float range
         return -math.inf if str(value).startswith("-") else math.inf
-
-
-def option(name: str) -> Callable[[str], float]:
-    """An argparse ``type=`` bounded by ``BOUNDS[name]``.
-
-    argparse turns its refusal into one line naming the option, exit status 2.
-    """
-    import argparse
-
-    def parse(text: str) -> float:
-        """The option's value as a bounded float."""
-        try:
-            number = float(text)
-        except ValueError:
-            number = math.nan
-        if not BOUNDS[name].contains(number):
-            raise argparse.ArgumentTypeError(f"expected {BOUNDS[name].describe()}, found {text!r:.40}")
-        return number
-
-    return parse
