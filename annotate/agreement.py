@@ -510,7 +510,7 @@ def ratings_from_keyframes(folder: str | os.PathLike, poses: Sequence[Pose]) -> 
     mine = [p for p in poses if p.session_id == sid]
     out: list[Rating] = []
     for path in sorted((folder / "annotations").glob("*.json")):
-        ann = read_annotations(path)
+        ann = read_annotations(path, session_id=sid, rater=path.stem)  # not a copy of another's file
         frames = np.array([p.frame for p in mine], dtype=float)
         for name in ann.blendshapes.names:
             values = ann.tracks[name].evaluate(frames)

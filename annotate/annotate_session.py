@@ -27,6 +27,7 @@ from effortface.annotate.keyframes import INTERPOLATIONS, Keyframe, KeyframeTrac
 from effortface.annotate.video_index import FrameTimes
 from effortface.core.errors import UserError
 from effortface.core.events import Emitter
+from effortface.core.locks import FileLock, LockedError, acquire_lock, describe_owner, lock_owner
 from effortface.capture_tool.session import Session, check_not_recording, read_session
 
 ANNOTATIONS_DIR = "annotations"
@@ -47,6 +48,39 @@ def annotation_path(session_folder: str | os.PathLike, rater: str) -> Path:
     return Path(session_folder) / ANNOTATIONS_DIR / f"{check_rater(rater)}.json"
 
 
+class RaterBusyError(UserError):
+    """The rater file is open in another Annotate (window or program); the message names its owner."""
+
+
+def lock_rater_file(path: Path) -> FileLock:
+    """Take ``.<rater>.lock`` beside the rater file ``path``: one writer of a rater's keys at a time.
+
+    Parameters
+    ----------
+    path : Path
+        ``<session>/annotations/<rater>.json`` (its folder is created if needed).
+
+    Returns
+    -------
+    FileLock
+        Hold it while keys may be saved; :meth:`FileLock.release` frees it.
+
+    Raises
+    ------
+    RaterBusyError
+        Another Annotate holds it: two writers would overwrite each other's keys.
+    """
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        return acquire_lock(path.parent / f".{path.stem}.lock", "annotate")
+    except LockedError:
+        owner = lock_owner(path.parent / f".{path.stem}.lock") or {}
+        raise RaterBusyError(f"{path}: expected rater {path.stem} free on this session, found it open in another "
+                             f"Annotate ({describe_owner(owner)}); close that one first") from None
+    except OSError as exc:
+        raise UserError(f"{path.parent}: expected a writable annotations folder, found {exc.strerror or exc}") from None
+
+
 class AnnotateSession:
     """One rater's key-framing of one session (the Annotate stage's model).
 
@@ -64,8 +98,12 @@ class AnnotateSession:
     Raises
     ------
     UserError
-        If the session has no video frames, the rater code is invalid, or the file is malformed;
-        a LockedError if a capture is recording the session now.
+        If the session has no video frames, the rater code is invalid, or the file is malformed
+        or belongs to another session or rater; a LockedError if a capture is recording the session now.
+    RaterBusyError
+        If another window or program has the same session open for the same rater (the message
+        names it: pid, host, since when). Its lock is held until :meth:`close`; the kernel frees it
+        if the holder dies, so a killed Annotate blocks nothing.
 
     Notes
     -----
@@ -81,9 +119,15 @@ class AnnotateSession:
             raise UserError(f"{self.session.path}: expected a session with video_frames.csv, found no video frames")
         self.times = FrameTimes(self.session.frame_times_s)
         self.path = annotation_path(self.session.path, rater)
-        self._file_is_ours = self.path.exists()  # a new file is created once, never over another's
-        self.annotations = (read_annotations(self.path) if self._file_is_ours
-                            else RaterAnnotations(rater, self.session.info.session_id, blendshapes))
+        self._lock: FileLock | None = lock_rater_file(self.path)
+        try:
+            self._file_is_ours = self.path.exists()  # a new file is created once, never over another's
+            self.annotations = (read_annotations(self.path, session_id=self.session.info.session_id, rater=rater)
+                                if self._file_is_ours
+                                else RaterAnnotations(rater, self.session.info.session_id, blendshapes))
+        except BaseException:
+            self.close()
+            raise
         self.autosave = autosave
         self.frame = 0
         self.blendshape = self.annotations.blendshapes.names[0]
@@ -292,6 +336,18 @@ class AnnotateSession:
         return self._swap(self._redo, self._undo)
 
     # ---------------------------------------------------------------------------------- files
+    def close(self) -> None:
+        """Release the rater file's lock (idempotent); the keys are already on disk."""
+        if self._lock is not None:
+            self._lock.release()
+            self._lock = None
+
+    def __del__(self) -> None:
+        """A model dropped without :meth:`close` releases its lock too."""
+        lock = getattr(self, "_lock", None)
+        if lock is not None:
+            lock.release()
+
     def save(self) -> Path:
         """Write ``annotations/<rater>.json`` atomically.
 
@@ -300,8 +356,18 @@ class AnnotateSession:
         FileExistsError
             If this session started without a file and one has appeared since (another program or
             window): it is never silently overwritten.
+        UserError
+            If the disk refuses the write (full, read-only...): the message names the file and the
+            cause, and the edit being saved is undone by :meth:`_edit` (the file keeps the last keys).
         """
-        path = self.annotations.save(self.path, overwrite=self._file_is_ours)
+        try:
+            path = self.annotations.save(self.path, overwrite=self._file_is_ours)
+        except OSError as exc:
+            if isinstance(exc, FileExistsError):
+                raise
+            raise UserError(f"{self.path}: expected to save the keys, found the write refused "
+                            f"({exc.strerror or exc}); the last edit was undone, the file keeps the "
+                            "keys before it") from None
         self._file_is_ours = True
         self.file_changed.emit(path)
         return path

@@ -34,7 +34,7 @@ import numpy as np
 
 from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
 from effortface.core.errors import SessionFormatError, UserError
-from effortface.core.fileio import atomic_write_text, refuse_overwrite
+from effortface.core.fileio import atomic_write_text, read_json, refuse_overwrite
 
 SCHEMA_VERSION = 1
 INTERPOLATIONS = ("hold", "linear", "smooth")
@@ -65,9 +65,9 @@ def _check_key(frame: object, weight: object, interp: object) -> None:
     if isinstance(frame, bool) or not isinstance(frame, (int, np.integer)) or frame < 0:
         raise UserError(f"key-frame frame: expected an integer >= 0, found {frame!r}")
     if isinstance(weight, bool) or not isinstance(weight, (int, float, np.floating, np.integer)):
-        raise UserError(f"key-frame weight: expected a number in [0, 1], found {weight!r}")
-    if not 0.0 <= float(weight) <= 1.0:
-        raise UserError(f"key-frame weight: expected a number in [0, 1], found {weight!r}")
+        raise UserError(f"key-frame weight: expected a number in [0, 1], found {weight!r:.40}")
+    if not 0.0 <= weight <= 1.0:  # compared as is: float() of a huge JSON integer overflows
+        raise UserError(f"key-frame weight: expected a number in [0, 1], found {weight!r:.40}")
     if interp not in INTERPOLATIONS:
         raise UserError(
             f"key-frame interp: expected one of {', '.join(INTERPOLATIONS)}, found {interp!r}"
@@ -255,13 +255,17 @@ class RaterAnnotations:
         return path
 
 
-def read_annotations(path: str | os.PathLike) -> RaterAnnotations:
+def read_annotations(path: str | os.PathLike, *, session_id: str | None = None,
+                     rater: str | None = None) -> RaterAnnotations:
     """Read an ``annotations/<rater>.json`` file.
 
     Parameters
     ----------
     path : path-like
         The file.
+    session_id, rater : str, optional
+        The session and rater the file must belong to (a file copied from another session, or
+        another rater's file under this name, is refused).
 
     Returns
     -------
@@ -274,21 +278,24 @@ def read_annotations(path: str | os.PathLike) -> RaterAnnotations:
         the message names the file and the field.
     """
     path = Path(path)
+    doc = read_json(path, "a JSON annotation file", AnnotationFormatError)
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise AnnotationFormatError(f"{path}: expected a JSON annotation file, found {exc}") from None
-    try:
-        return _from_dict(doc)
+        ann = _from_dict(doc)
     except UserError as exc:
         raise AnnotationFormatError(f"{path}: {exc}") from None
+    for field, wanted in (("session_id", session_id), ("rater", rater)):
+        found = getattr(ann, field)
+        if wanted is not None and found != wanted:
+            raise AnnotationFormatError(f"{path}: {field}: expected {wanted!r} (this file's "
+                                        f"{'session' if field == 'session_id' else 'name'}), found {found!r}")
+    return ann
 
 
 def _from_dict(doc: object) -> RaterAnnotations:
     """Build annotations from a parsed document; UserError naming the bad field."""
     if not isinstance(doc, Mapping):
         raise UserError(f"expected a JSON object, found {type(doc).__name__}")
-    if doc.get("schema_version") != SCHEMA_VERSION:
+    if isinstance(doc.get("schema_version"), bool) or doc.get("schema_version") != SCHEMA_VERSION:
         raise UserError(
             f"schema_version: expected {SCHEMA_VERSION}, found {doc.get('schema_version')!r}"
         )

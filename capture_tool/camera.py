@@ -345,6 +345,20 @@ def index_video(path: str | os.PathLike) -> int:
     return n
 
 
+def avi_frame_count(path: str | os.PathLike) -> int:
+    """Frames the video's header declares (cheap; :func:`index_video` decodes them all instead).
+
+    A finished or recovered capture's header is exact, so a frame table of another length means the
+    table or the video is not this session's.
+    """
+    cv2 = _cv2()
+    cap = cv2.VideoCapture(str(path))
+    try:
+        return int(cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0) if cap.isOpened() else 0
+    finally:
+        cap.release()
+
+
 def rewrite_video(src: str | os.PathLike, dst: str | os.PathLike, max_frames: int | None = None) -> int:
     """Copy the decodable frames of ``src`` into a fresh MJPG AVI ``dst`` (a correct index).
 

@@ -12,7 +12,9 @@ import csv
 import os
 from pathlib import Path
 
+from effortface.core import bounds
 from effortface.core.errors import SessionFormatError, not_text_error
+from effortface.core.fileio import check_regular_file
 from effortface.capture_tool.protocols import HrSample
 
 HR_CSV_COLUMNS = ("t_s", "hr_bpm", "rr_ms", "beat_count", "device", "valid")
@@ -50,7 +52,7 @@ def _parse_row(row: dict[str, str]) -> HrSample:
     hr = row["hr_bpm"].strip()
     beat = row["beat_count"].strip()
     return HrSample(
-        t_s=float(row["t_s"]),
+        t_s=bounds.check("t_s", float(row["t_s"])),
         hr_bpm=float(hr) if hr else None,
         rr_ms=tuple(float(r) for r in row["rr_ms"].split()),
         beat_count=int(beat) if beat else None,
@@ -77,9 +79,7 @@ def read_hr_csv(path: str | os.PathLike) -> list[HrSample]:
         If the file is a folder or not UTF-8 CSV text, the header differs or a row cannot be
         parsed (the message names the file and line).
     """
-    path = Path(path)
-    if path.is_dir():
-        raise SessionFormatError(f"{path}: expected a heart-rate CSV file, found a folder")
+    path = check_regular_file(path, "a heart-rate CSV file", SessionFormatError)
     try:
         with open(path, newline="", encoding="utf-8") as fh:
             return _read_rows(csv.DictReader(fh), path)

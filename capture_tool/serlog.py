@@ -50,7 +50,7 @@ class SerlogRecord:
         """
         try:
             event = json.loads(self.payload.decode("utf-8"))
-        except (UnicodeDecodeError, json.JSONDecodeError):
+        except (UnicodeDecodeError, json.JSONDecodeError, RecursionError):
             return {}
         return event if isinstance(event, dict) else {}
 
@@ -183,7 +183,7 @@ def read_serlog(path: str | os.PathLike) -> Serlog:
     nl = blob.find(b"\n", len(MAGIC))
     try:
         header = json.loads(blob[len(MAGIC):nl].decode("utf-8")) if nl > 0 else None
-    except (UnicodeDecodeError, json.JSONDecodeError):
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError):
         header = None
     if not isinstance(header, dict):
         raise SessionFormatError(f"{path}: expected a JSON header line after the magic, found none")
@@ -220,7 +220,7 @@ def read_serlog_header(path: str | os.PathLike) -> dict:
         raise SessionFormatError(f"{path}: expected a .serlog file starting with {MAGIC!r}, found {magic!r}")
     try:
         header = json.loads(line.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError):
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError):
         header = None
     if not isinstance(header, dict):
         raise SessionFormatError(f"{path}: expected a JSON header line after the magic, found none")

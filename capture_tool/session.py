@@ -19,15 +19,15 @@ from __future__ import annotations
 import csv
 import dataclasses
 import datetime as _dt
-import json
 import os
 import re
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any, TextIO
 
+from effortface.core import bounds
 from effortface.core.errors import SessionFormatError, UserError, json_type, not_text_error
-from effortface.core.fileio import refuse_overwrite, write_json_atomic  # noqa: F401  (re-exported for callers)
+from effortface.core.fileio import check_regular_file, read_json, refuse_overwrite, write_json_atomic  # noqa: F401  (re-exported for callers)
 # The participant record lives in the core (one limits table for every stage); re-exported here.
 from effortface.core.participant import (CODE_PATTERN, CODE_RULE, LIMITS, SEX_ALIASES,  # noqa: F401
                                          SEXES, Participant, check_participant_code)
@@ -137,13 +137,13 @@ class SessionInfo:
         missing = [k for k in ("schema_version", "session_id", "complete", "participant") if k not in data]
         if missing:
             raise SessionFormatError(f"{source}: expected keys {missing}, found {sorted(data)}")
-        if data["schema_version"] != SCHEMA_VERSION:
+        if isinstance(data["schema_version"], bool) or data["schema_version"] != SCHEMA_VERSION:
             raise SessionFormatError(
                 f"{source}: expected schema_version {SCHEMA_VERSION}, found {data['schema_version']!r}"
             )
         try:
             participant = Participant.from_dict(data["participant"])
-        except (UserError, TypeError, ValueError) as exc:
+        except (UserError, TypeError, ValueError, OverflowError) as exc:  # Overflow: an integer beyond float
             raise SessionFormatError(f"{source}: {exc}") from None
         if not isinstance(data["complete"], bool):
             raise SessionFormatError(f"{source}: field 'complete': expected true or false, "
@@ -218,12 +218,9 @@ def read_session_info(folder: str | os.PathLike) -> SessionInfo:
         raise SessionFormatError(f"{folder}: expected a session folder, found a file")
     if path.is_dir():
         raise SessionFormatError(f"{path}: expected a session.json file, found a folder")
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise SessionFormatError(f"{path}: expected a session.json in the session folder, found none") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise SessionFormatError(f"{path}: expected JSON, found invalid text ({exc})") from None
+    if not path.exists():
+        raise SessionFormatError(f"{path}: expected a session.json in the session folder, found none")
+    data = read_json(path, "JSON (session.json)", SessionFormatError)
     if not isinstance(data, dict):
         raise SessionFormatError(f"{path}: expected a JSON object, found {type(data).__name__}")
     return SessionInfo.from_dict(data, path)
@@ -360,8 +357,7 @@ def _read_csv_rows(path: Path, header: str) -> list[tuple[int, list[str]]]:
     SessionFormatError
         If the file is a folder, is not UTF-8 CSV text, or its header differs.
     """
-    if path.is_dir():
-        raise SessionFormatError(f"{path}: expected a CSV file, found a folder")
+    check_regular_file(path, "a CSV file", SessionFormatError)
     try:
         with open(path, newline="", encoding="utf-8") as fh:
             reader = csv.reader(fh)
@@ -380,9 +376,10 @@ def read_events(path: str | os.PathLike) -> list[Event]:
     for line, row in _read_csv_rows(path, EVENTS_HEADER):
         try:
             t_s, kind, label, value = row
-            out.append(Event(float(t_s), kind, label, value))
-        except ValueError:
-            raise SessionFormatError(f"{path}: line {line}: expected t_s,kind,label,value, found {row!r}") from None
+            out.append(Event(bounds.check("t_s", float(t_s)), kind, label, value))
+        except ValueError as exc:
+            why = f" ({exc})" if isinstance(exc, UserError) else ""
+            raise SessionFormatError(f"{path}: line {line}: expected t_s,kind,label,value, found {row!r}{why}") from None
     return out
 
 
@@ -393,8 +390,10 @@ def read_video_frames(path: str | os.PathLike) -> list[float]:
     for line, row in _read_csv_rows(path, FRAMES_HEADER):
         try:
             frame, t_s = int(row[0]), float(row[1])
-        except (ValueError, IndexError):
-            raise SessionFormatError(f"{path}: line {line}: expected frame,t_s, found {row!r}") from None
+            bounds.check("t_s", t_s)
+        except (ValueError, IndexError) as exc:
+            why = f" ({exc})" if isinstance(exc, UserError) else ""
+            raise SessionFormatError(f"{path}: line {line}: expected frame,t_s, found {row!r}{why}") from None
         if frame != len(out):
             raise SessionFormatError(f"{path}: line {line}: expected frame {len(out)}, found {frame}")
         out.append(t_s)
@@ -497,8 +496,7 @@ def validate_session(path: str | os.PathLike) -> list[str]:
         problems.append(f"{folder}: folder name differs from session_id {s.info.session_id!r}")
     if not s.info.complete:
         problems.append(f"{folder / SESSION_JSON}: complete is false (run 'effortface recover {folder}')")
-    problems += _monotonic_problems(folder / HEART_RATE_CSV, [h.t_s for h in s.heart_rate])
-    problems += _monotonic_problems(folder / VIDEO_FRAMES_CSV, s.frame_times_s)
+    problems += _order_problems(s)
     bad = [h for h in s.heart_rate if (h.valid and h.hr_bpm is None) or (h.hr_bpm is not None and h.hr_bpm <= 0)]
     if bad:
         problems.append(f"{folder / HEART_RATE_CSV}: {len(bad)} rows with a missing or non-positive hr_bpm")
@@ -532,6 +530,53 @@ def video_problems(folder: str | os.PathLike, n_rows: int) -> list[str]:
         return []
     return [f"{folder / VIDEO_FRAMES_CSV}: lists {n_rows} frames, found {n_decoded} that decode in {VIDEO_AVI} "
             f"(run 'effortface recover {folder}')"]
+def check_session(path: str | os.PathLike) -> Session:
+    """Read a session folder and refuse it if it cannot be used as it is: the one check before use.
+
+    Training, evaluation and annotation read sessions through this. On top of :func:`read_session`
+    (whose readers refuse unreadable rows, NaN, negative and absurd times): heart-rate and frame
+    times must not go back, and ``video.avi`` must hold as many frames as ``video_frames.csv`` has
+    rows (a table of another video, or a video cut short). Soft problems (``complete`` false) are
+    left to :func:`validate_session`.
+
+    Parameters
+    ----------
+    path : path-like
+        The session folder.
+
+    Returns
+    -------
+    Session
+
+    Raises
+    ------
+    SessionFormatError
+        One line naming the file, what was expected and what was found.
+    """
+    s = read_session(path)
+    problems = _order_problems(s) + _video_problems(s)
+    if problems:
+        raise SessionFormatError(problems[0])
+    return s
+
+
+def _order_problems(s: Session) -> list[str]:
+    """Lines for heart-rate or frame times that go back."""
+    return (_monotonic_problems(s.path / HEART_RATE_CSV, [h.t_s for h in s.heart_rate])
+            + _monotonic_problems(s.path / VIDEO_FRAMES_CSV, s.frame_times_s))
+
+
+def _video_problems(s: Session) -> list[str]:
+    """A line if the video's frame count differs from the frame table's rows."""
+    if s.video_path is None or not s.frame_times_s:
+        return []
+    from effortface.capture_tool.camera import avi_frame_count  # lazy: cv2 loads slowly
+
+    n_video = avi_frame_count(s.video_path)
+    if n_video != len(s.frame_times_s):
+        return [f"{s.path / VIDEO_FRAMES_CSV}: expected one row per frame of {VIDEO_AVI} ({n_video} frames), "
+                f"found {len(s.frame_times_s)} rows"]
+    return []
 
 
 def _monotonic_problems(path: Path, times: list[float]) -> list[str]:

@@ -15,16 +15,17 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-import zipfile
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from effortface.core import bounds
 from effortface.core.blendshapes import BlendshapeSet
 from effortface.core.errors import UserError
-from effortface.core.fileio import atomic_write, atomic_write_text
+from effortface.core.fileio import atomic_write, atomic_write_text, read_json
+from effortface.train.npzio import load_npz
 from effortface.train.face import DEFAULT_FILTER_TAU_S, FEATURE_NAMES, FEATURE_UNITS, SvrModel, check_filter_tau
 from effortface.train.physiology import HR_MAX_FORMULAS, EpocParams, NhrParams, NhrRegression
 
@@ -38,7 +39,7 @@ TL_CHECK_RANGE = (0.0, 10.0)
 #: Largest accepted magnitude of an NHR coefficient or TL-regression value (choice): far above any
 #: fit (the paper: t_root 7-12 W/kg, rates below 0.01 per W/kg per s; odd small data sets give
 #: hundreds) and far enough from float overflow for the recursion (1e308 overflowed it).
-NHR_MAX_ABS = 1e6
+NHR_MAX_ABS = bounds.BOUNDS["nhr_coefficient"].high
 
 
 #: The output filter on the blendshape weights (effortface.train.face.WeightFilter).
@@ -201,36 +202,42 @@ def _kind_name(kind: type | tuple[type, ...]) -> str:
 
 def _number(d: Mapping[str, Any], key: str, where: str, *, positive: bool = False) -> float:
     value = _get(d, key, where, (int, float))
-    if isinstance(value, bool) or not np.isfinite(value) or (positive and value <= 0):
+    try:
+        number = float(value)
+    except OverflowError:  # a JSON integer beyond float range
+        number = float("inf")
+    if isinstance(value, bool) or not np.isfinite(number) or (positive and number <= 0):
         raise BundleFormatError(f"{where}.{key}: expected a {'positive ' if positive else ''}"
-                                f"finite number, found {value!r}")
-    return float(value)
+                                f"finite number, found {value!r:.40}")
+    return number
 
 
-def _vector(d: Mapping[str, Any], key: str, where: str, n: int) -> np.ndarray:
+def _vector(d: Mapping[str, Any], key: str, where: str, n: int, bound: str) -> np.ndarray:
     values = _get(d, key, where, list)
     try:
         arr = np.asarray(values, dtype=float)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # Overflow: an integer beyond float range
         arr = np.empty(0)
     if arr.shape != (n,) or not np.all(np.isfinite(arr)):
         raise BundleFormatError(f"{where}.{key}: expected {n} finite numbers, found {values!r:.80}")
+    for i, value in enumerate(arr):
+        try:
+            bounds.check(bound, float(value), f"{where}.{key}[{i}]")
+        except UserError as exc:
+            raise BundleFormatError(str(exc)) from None
     return arr
 
 
 def _read_json(path: Path) -> dict[str, Any]:
-    if not path.is_file():
+    if not path.exists():
         raise BundleFormatError(f"{path}: expected a model file, found none "
                                 "(give a model folder or 'default')")
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError) as exc:
-        raise BundleFormatError(f"{path}: expected JSON, found {exc}") from None
+    doc = read_json(path, "JSON (model.json)", BundleFormatError)
     if not isinstance(doc, dict):
         raise BundleFormatError(f"{path}: expected a JSON object, found {type(doc).__name__}")
     version = _get(doc, "schema_version", str(path), int)
-    if version != SCHEMA_VERSION:
-        raise BundleFormatError(f"{path}: schema_version: expected {SCHEMA_VERSION}, found {version}")
+    if isinstance(version, bool) or version != SCHEMA_VERSION:  # True == 1 in Python, not in JSON
+        raise BundleFormatError(f"{path}: schema_version: expected {SCHEMA_VERSION}, found {version!r}")
     return doc
 
 
@@ -308,11 +315,11 @@ def _read_physiology(doc: dict[str, Any], where: str) -> dict[str, Any]:
     if formula not in HR_MAX_FORMULAS:
         raise BundleFormatError(f"{where}.physiology.hr_max_formula: expected one of "
                                 f"{', '.join(HR_MAX_FORMULAS)}, found {formula!r}")
-    period = _number(phys, "update_period_s", f"{where}.physiology", positive=True)
+    period = _bounded(phys, "update_period_s", f"{where}.physiology")
     epoc = _get(phys, "epoc", f"{where}.physiology", dict)
     fields = [f.name for f in dataclasses.fields(EpocParams)]
-    epoc_vals = {k: _number(epoc, k, f"{where}.physiology.epoc", positive=k != "threshold")
-                 for k in fields}
+    epoc_vals = {k: _number(epoc, k, f"{where}.physiology.epoc") if k == "threshold"
+                 else _bounded(epoc, k, f"{where}.physiology.epoc") for k in fields}
     if not 0.0 <= epoc_vals["threshold"] < 1.0:
         raise BundleFormatError(f"{where}.physiology.epoc.threshold: expected a fraction of VO2max from 0 "
                                 f"to below 1, found {epoc_vals['threshold']:g}")
@@ -342,8 +349,16 @@ def _read_svr_json(doc: dict[str, Any], where: str, names: tuple[str, ...]) -> l
     if [d.get("blendshape") if isinstance(d, dict) else None for d in items] != list(names):
         raise BundleFormatError(f"{where}.svr: expected one entry per blendshape {list(names)}, "
                                 f"found {len(items)} entries")
-    return [{k: _number(d, k, f"{where}.svr[{i}]", positive=True) for k in ("C", "gamma", "epsilon")}
+    return [{k: _bounded(d, k, f"{where}.svr[{i}]") for k in ("C", "gamma", "epsilon")}
             for i, d in enumerate(items)]
+
+
+def _bounded(d: Mapping[str, Any], key: str, where: str, name: str = "") -> float:
+    """A number of the model file checked against the bounds table (effortface.core.bounds)."""
+    try:
+        return bounds.check(name or key, _number(d, key, where, positive=True), f"{where}.{key}")
+    except UserError as exc:
+        raise BundleFormatError(str(exc)) from None
 
 
 def _read_npz(path: Path, names: tuple[str, ...]
@@ -351,12 +366,7 @@ def _read_npz(path: Path, names: tuple[str, ...]
     """The SVR arrays of ``svr.npz``: support vectors (n_b, 4), dual coefs (n_b,), intercept (B,)."""
     if not path.is_file():
         raise BundleFormatError(f"{path}: expected the SVR arrays file, found none")
-    try:
-        with np.load(path, allow_pickle=False) as npz:
-            arrays = {k: npz[k] for k in npz.files}
-    except (OSError, ValueError, EOFError, TypeError, zipfile.BadZipFile) as exc:  # TypeError: a .npy
-        raise BundleFormatError(f"{path}: expected a numpy .npz without pickles, "
-                                f"found {str(exc) or type(exc).__name__}") from None
+    arrays = load_npz(path, BundleFormatError, "a numpy .npz without pickles")
     wanted = ["intercept"] + [f"{p}_{n}" for n in names for p in ("support_vectors", "dual_coef")]
     missing = [k for k in wanted if k not in arrays]
     if missing:
@@ -366,6 +376,11 @@ def _read_npz(path: Path, names: tuple[str, ...]
     if bad:
         raise BundleFormatError(f"{path}: {bad[0]}: expected finite numbers, found dtype "
                                 f"{arrays[bad[0]].dtype}")
+    limit = bounds.BOUNDS["svr_value"]
+    huge = [k for k in wanted if arrays[k].size and np.abs(arrays[k]).max() > limit.high]
+    if huge:
+        raise BundleFormatError(f"{path}: {huge[0]}: expected values within +-{limit.high:g}, found "
+                                f"{np.abs(arrays[huge[0]]).max():g}")
     _check_svr_shapes(path, arrays, names)
     return ([arrays[f"support_vectors_{n}"].astype(float) for n in names],
             [arrays[f"dual_coef_{n}"].astype(float) for n in names], arrays["intercept"].astype(float))
@@ -417,8 +432,8 @@ def read_bundle(directory: str | os.PathLike[str]) -> ModelBundle:
     scaler = _get(doc, "scaler", where, dict)
     nhr_coef, nhr_reg = _read_nhr(doc, where)
     bundle = ModelBundle(
-        blendshapes=shapes, scaler_mean=_vector(scaler, "mean", f"{where}.scaler", 4),
-        scaler_scale=_vector(scaler, "scale", f"{where}.scaler", 4),
+        blendshapes=shapes, scaler_mean=_vector(scaler, "mean", f"{where}.scaler", 4, "scaler_mean"),
+        scaler_scale=_vector(scaler, "scale", f"{where}.scaler", 4, "scaler_scale"),
         nhr_coefficients=nhr_coef, nhr_regression=nhr_reg,
         svr_hyperparameters=_read_svr_json(doc, where, shapes.names),
         support_vectors=[], dual_coef=[], intercept=np.empty(0),

@@ -37,10 +37,11 @@ import pandas as pd
 from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
 from effortface.annotate.keyframes import read_annotations
 from effortface.core.errors import UserError
-from effortface.core.fileio import refuse_overwrite
+from effortface.core import bounds
+from effortface.core.fileio import check_regular_file, read_json, refuse_overwrite
 from effortface.core.participant import LIMITS, SEX_ALIASES, SEXES  # the one limits table
-from effortface.capture_tool.session import (Session, check_not_recording, list_sessions, parse_session_id,
-                                             read_session)
+from effortface.capture_tool.session import (Session, check_not_recording, check_session, list_sessions,
+                                             parse_session_id, read_session)
 from effortface.train.hr_fit import HrSeries
 from effortface.train.work import WORK_CSV, derive_work
 from effortface.train.physiology import (EpocParams, hr_max_bpm, hr_rest_bpm, epoc_step,
@@ -87,7 +88,7 @@ def read_table(path: str | os.PathLike, blendshapes: BlendshapeSet | None = None
         :func:`check_participants`), or a participant's data contradict themselves; the message
         names the file.
     """
-    path = Path(path)
+    path = check_regular_file(path, "a CSV table", DatasetError)
     try:
         df = pd.read_csv(path, dtype={"participant": str, "session": str, "sex": str, "exercise": str})
     except (OSError, ValueError, pd.errors.ParserError) as exc:
@@ -308,7 +309,7 @@ def session_table(folder: str | os.PathLike, blendshapes: BlendshapeSet = DEFAUL
     DatasetError
         See :func:`sessions_table`.
     """
-    s = read_session(folder)
+    s = check_session(folder)
     _check_hr_samples(s)
     hr_t = [h.t_s for h in s.heart_rate if h.valid and h.hr_bpm is not None]
     if len(hr_t) < 2:
@@ -361,6 +362,7 @@ def _work(s: Session, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             wt, ww, wp = (work[c].to_numpy(float) for c in ("t_s", "w_per_kg", "p_per_kg"))
         except (KeyError, ValueError, pd.errors.ParserError) as exc:
             raise DatasetError(f"{path}: expected columns t_s,w_per_kg,p_per_kg, found {exc}") from None
+        _check_work_times(path, wt)
         idx = np.clip(np.searchsorted(wt, t + 1e-9, side="right") - 1, 0, len(wt) - 1)
         return ww[idx], wp[idx]
     try:
@@ -370,6 +372,21 @@ def _work(s: Session, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return table.w_per_kg, table.p_per_kg
 
 
+def _check_work_times(path: Path, t_s: np.ndarray) -> None:
+    """DatasetError unless work.csv's times are finite, within the bounds and strictly increasing."""
+    if len(t_s) == 0:
+        raise DatasetError(f"{path}: expected rows of t_s,w_per_kg,p_per_kg, found none")
+    bad = np.flatnonzero(~np.isfinite(t_s) | (t_s < bounds.BOUNDS["t_s"].low) | (t_s > bounds.BOUNDS["t_s"].high))
+    if bad.size:
+        raise DatasetError(f"{path}: row {bad[0] + 1}: t_s: expected {bounds.BOUNDS['t_s'].describe()}, "
+                           f"found {t_s[bad[0]]!r}")
+    back = np.flatnonzero(np.diff(t_s) <= 0)
+    if back.size:
+        raise DatasetError(f"{path}: row {back[0] + 2}: expected t_s increasing (rows sorted by time), "
+                           f"found {t_s[back[0] + 1]:g} after {t_s[back[0]]:g}")
+
+
+#: the numbers of a motion.json entry, with their bounds-table names and defaults
 def _weights(s: Session, t: np.ndarray, blendshapes: BlendshapeSet, rater_policy: str) -> np.ndarray:
     """Per-second weights (len(t), B) under the rater policy; DatasetError if unannotated."""
     files = sorted((s.path / ANNOTATIONS_DIR).glob("*.json"))
@@ -384,7 +401,7 @@ def _weights(s: Session, t: np.ndarray, blendshapes: BlendshapeSet, rater_policy
                            f"and video_frames.csv, found {len(files)} annotation files and "
                            f"{len(s.frame_times_s)} frames")
     frames = _nearest_frames(np.asarray(s.frame_times_s), t)
-    stack = np.stack([_rater_weights(f, frames, blendshapes) for f in files])
+    stack = np.stack([_rater_weights(f, frames, blendshapes, s.info.session_id) for f in files])
     with np.errstate(all="ignore"):
         counts = np.isfinite(stack).sum(axis=0)
         mean = np.where(counts > 0, np.nansum(stack, axis=0) / np.maximum(counts, 1), np.nan)
@@ -399,9 +416,9 @@ def _nearest_frames(frame_t: np.ndarray, t: np.ndarray) -> np.ndarray:
     return np.where(np.abs(frame_t[i - 1] - t) <= np.abs(frame_t[i] - t), i - 1, i)
 
 
-def _rater_weights(path: Path, frames: np.ndarray, blendshapes: BlendshapeSet) -> np.ndarray:
+def _rater_weights(path: Path, frames: np.ndarray, blendshapes: BlendshapeSet, session_id: str) -> np.ndarray:
     """One rater's weights for our blendshape set (NaN for tracks the file lacks or left empty)."""
-    ann = read_annotations(path)
+    ann = read_annotations(path, session_id=session_id, rater=path.stem)
     cols = [ann.tracks[n].evaluate(frames) if n in ann.tracks else np.full(len(frames), np.nan)
             for n in blendshapes.names]
     return np.column_stack(cols).astype(float)

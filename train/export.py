@@ -21,6 +21,7 @@ from __future__ import annotations
 import datetime as _dt
 import os
 import shutil
+import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -31,7 +32,7 @@ from onnx import TensorProto, helper, numpy_helper
 
 from effortface.core.blendshapes import BlendshapeSet
 from effortface.core.errors import UserError
-from effortface.core.fileio import refuse_overwrite
+from effortface.core.fileio import check_apart, refuse_overwrite
 from effortface.train.bundle import ModelBundle, default_physiology, read_bundle, write_bundle
 from effortface.train.face import FEATURE_NAMES
 from effortface.train.face_fit import FaceModelFit
@@ -222,7 +223,8 @@ def check_parity(face: FaceModelFit, folder: str | os.PathLike, onnx_tol: float 
 
 
 def export_model(bundle: ModelBundle, face: FaceModelFit, out_dir: str | os.PathLike, *,
-                 force: bool = False, card: str | None = None, onnx_dtype: str = "float64") -> Path:
+                 force: bool = False, card: str | None = None, onnx_dtype: str = "float64",
+                 inputs: Sequence[str | os.PathLike] = ()) -> Path:
     """Write the model folder: bundle, ``face.onnx``, parity check, ``MODEL_CARD.md``.
 
     Parameters
@@ -239,6 +241,9 @@ def export_model(bundle: ModelBundle, face: FaceModelFit, out_dir: str | os.Path
         Model card text; :func:`model_card` of the bundle by default.
     onnx_dtype : {"float64", "float32"}
         Tensor type of ``face.onnx`` (float32 is checked at 1e-4 instead of 1e-5).
+    inputs : sequence of path-like
+        What the model was trained from: the folder must lie apart from them
+        (:func:`check_model_target`).
 
     Returns
     -------
@@ -253,10 +258,11 @@ def export_model(bundle: ModelBundle, face: FaceModelFit, out_dir: str | os.Path
         If a parity check fails (the target is left untouched).
     """
     out = refuse_overwrite(out_dir, overwrite=force, what="model folder", hint=" (use --force)")
-    check_model_target(out, force=force)
+    check_model_target(out, force=force, inputs=inputs)
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.parent / f".{out.name}.partial-{os.getpid()}"
-    shutil.rmtree(tmp, ignore_errors=True)
+    # a fresh private folder (mode 0700, unpredictable name, created by us): a planted file or link
+    # at a guessable name can neither redirect the write nor be deleted in our place
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
     try:
         write_bundle(bundle, tmp)
         onnx.save(face_onnx(bundle, onnx_dtype), str(tmp / FACE_ONNX))
@@ -264,6 +270,7 @@ def export_model(bundle: ModelBundle, face: FaceModelFit, out_dir: str | os.Path
         bundle.metrics["export_parity"] = {**check_parity(face, tmp, tol), "onnx_dtype": onnx_dtype}
         write_bundle(bundle, tmp, overwrite=True)  # again, now with the parity figures
         (tmp / MODEL_CARD).write_text(card or model_card(bundle), encoding="utf-8")
+        tmp.chmod(0o777 & ~_umask())  # mkdtemp's 0700 was for the build; the model is an ordinary folder
         _swap_into_place(tmp, out)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -303,11 +310,7 @@ def check_model_target(out_dir: str | os.PathLike, *, force: bool = False,
     if target == cwd or target in cwd.parents:
         raise UserError(f"--out {out}: expected a model folder to write, found the current directory"
                         + ("" if target == cwd else " inside it"))
-    for src in map(Path, inputs):
-        s = src.resolve()
-        if s == target or target in s.parents:
-            raise UserError(f"--out {out}: expected a model folder apart from the inputs, found input "
-                            f"{src}" + ("" if s == target else " inside it"))
+    check_apart("--out", out, inputs, "a model folder")
     if not out.exists() and not out.is_symlink():
         return out
     if not force:
@@ -332,13 +335,29 @@ def _describe(path: Path) -> str:
     return f"a folder with {len(entries)} entr{'ies' if len(entries) != 1 else 'y'} and no model.json"
 
 
+def _umask() -> int:
+    """The process umask (read by setting it and putting it back)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
 def _swap_into_place(tmp: Path, out: Path) -> None:
-    """Rename the finished folder over the target (the old one removed only after)."""
-    old = out.parent / f".{out.name}.old-{os.getpid()}"
+    """Rename the finished folder over the target (the old one removed only after).
+
+    The old folder moves into a fresh private folder first (never to a guessable name).
+    """
+    trash = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.parent))
+    old = trash / out.name
     if out.exists():
         os.replace(out, old)
-    os.replace(tmp, out)
-    shutil.rmtree(old, ignore_errors=True)
+    try:
+        os.replace(tmp, out)
+    except BaseException:
+        if old.exists():
+            os.replace(old, out)  # the previous model stays where it was
+        raise
+    shutil.rmtree(trash, ignore_errors=True)
 
 
 # --------------------------------------------------------------------------- model card

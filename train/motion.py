@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import zipfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import NoReturn
@@ -20,6 +19,8 @@ from typing import NoReturn
 import numpy as np
 
 from effortface.core.errors import UserError
+from effortface.core.fileio import check_regular_file
+from effortface.train.npzio import load_npz
 
 #: CMU cgspeed ("MotionBuilder-friendly") BVH length unit: 1 unit = 1/0.45 inch = 0.05644 m.
 CMU_UNIT_M = 0.05644
@@ -255,6 +256,8 @@ def read_motion(path: str | Path, *, unit_m: float | None = None) -> Motion:
     """
     path = Path(path)
     suffix = path.suffix.lower()
+    if suffix in (".bvh", ".npz") and path.exists():  # a FIFO or device would block or read forever
+        check_regular_file(path, f"a motion file ({suffix})", MotionFormatError)
     if suffix == ".bvh":
         return read_bvh(path, unit_m=unit_m)
     if suffix == ".npz":
@@ -859,18 +862,20 @@ def _check_npz_values(path: Path, offsets: np.ndarray, quats: np.ndarray, root: 
             f"{frame}, joint {joint}")
 
 
+def _is_lone_npy(path: Path) -> bool:
+    """True if ``path`` starts with the ``.npy`` magic (a single array, not an archive)."""
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(6) == b"\x93NUMPY"
+    except OSError:
+        return False
+
+
 def _load_npz(path: Path) -> dict[str, np.ndarray]:
     """Load the npz arrays (no pickle) and check the keys are present."""
-    try:
-        loaded = np.load(path, allow_pickle=False)
-        if isinstance(loaded, np.lib.npyio.NpzFile):
-            with loaded as npz:
-                loaded = {k: npz[k] for k in npz.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
-        raise MotionFormatError(
-            f"{path}: expected a readable .npz motion file, found {str(exc) or type(exc).__name__}") from None
-    if not isinstance(loaded, dict):
+    if _is_lone_npy(path):
         raise MotionFormatError(f"{path}: expected a .npz archive of arrays, found a single .npy array")
+    loaded = load_npz(path, MotionFormatError, "a readable .npz motion file")
     missing = [k for k in _NPZ_KEYS if k not in loaded]
     if missing:
         raise MotionFormatError(f"{path}: expected keys {', '.join(_NPZ_KEYS)}; missing {', '.join(missing)}")

@@ -27,6 +27,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from effortface.core import bounds
 from effortface.core.errors import UserError
 
 #: The resting-HR chart shipped with the package (copied from ../shared/data/tables).
@@ -459,6 +460,7 @@ class PhysiologyParams:
         come from ``regression`` at the character's training level.
         """
         c = character
+        bounds.check("update_period_s", update_period_s)
         hr_rest = c.hr_rest_bpm if c.hr_rest_bpm is not None else hr_rest_bpm(
             c.age, c.sex, c.training_level)
         hr_max = c.hr_max_bpm if c.hr_max_bpm is not None else hr_max_bpm(c.age, hr_max_formula)

@@ -325,7 +325,7 @@ def export_outcome(outcome: TrainingOutcome, out: str | Path, *, force: bool = F
     metrics = training_metrics(o.hr_eval, o.face, o.held_out, o.protocols)
     provenance = training_provenance(o.prepared, o.face, o.sources, o.settings.rater_policy, config)
     bundle = build_bundle(o.face, o.hr_eval.fit, o.blendshapes, metrics, provenance)
-    model_dir = export_model(bundle, o.face, out, force=force)
+    model_dir = export_model(bundle, o.face, out, force=force, inputs=o.sources)
     progress(0.8, "report")
     report = write_report(model_dir / REPORT_DIR, evaluation=o.hr_eval, series=o.series, fit=o.face,
                           held_out=o.held_out, protocols=o.protocols,

@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
+from effortface.core import bounds
 from effortface.core.errors import UserError
 from effortface.core.participant import LIMITS, check_limit, check_sex
 from effortface.train.bundle import default_physiology, read_bundle
@@ -109,6 +110,7 @@ class Character:
             if isinstance(value, bool) or not isinstance(value, numbers.Real) \
                     or not (math.isfinite(value) and float(value) >= 0):
                 raise UserError(f"{name}: expected a load of 0 kg or more, found {value!r}")
+            bounds.check("load_kg", value, name)
         for name in ("hr_rest_bpm", "hr_max_bpm"):
             if getattr(self, name) is not None:
                 check_limit(name, getattr(self, name))

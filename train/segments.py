@@ -11,14 +11,15 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import json
 import numbers
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 
+from effortface.core import bounds
 from effortface.core.errors import UserError
+from effortface.core.fileio import read_json
 from effortface.train.motion import check_parents
 
 TABLES_CSV = Path(__file__).with_name("data") / "segment_inertia_tables.csv"
@@ -197,6 +198,7 @@ class Loads:
             number = _finite_number(value)
             if number is None or number < 0:
                 raise UserError(f"{field.name}: expected a load of 0 kg or more, got {value!r}")
+            bounds.check("load_kg", number, field.name)
 
 
 # --------------------------------------------------------------------------------------------
@@ -222,11 +224,7 @@ def read_mapping(path: str | Path) -> dict[str, tuple[EndPoint, EndPoint]]:
         Unreadable JSON, or entries that are not ``[proximal, distal]`` pairs (named).
     """
     path = Path(path)
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise SegmentMappingError(
-            f"{path}: expected a JSON mapping segment -> [proximal, distal], got {exc}") from None
+    data = read_json(path, "a JSON mapping segment -> [proximal, distal]", SegmentMappingError)
     if not isinstance(data, dict):
         raise SegmentMappingError(
             f"{path}: expected a JSON object segment -> [proximal, distal], got {type(data).__name__}")
@@ -407,7 +405,7 @@ def check_mass(mass_kg: float) -> float:
     number = _finite_number(mass_kg)
     if number is None or number <= 0:
         raise UserError(f"mass_kg: expected a body mass above 0 kg, got {mass_kg!r}")
-    return number
+    return bounds.check("mass_kg", number, "mass_kg")
 
 
 def _end_weights(ends: Sequence[tuple[int, ...]], n_joints: int) -> np.ndarray:

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import dataclasses
 import io
-import json
 import math
 import os
 from collections.abc import Sequence
@@ -22,7 +21,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from effortface.core.errors import UserError
-from effortface.core.fileio import atomic_write_text
+from effortface.core import bounds
+from effortface.core.fileio import atomic_write_text, read_json
 from effortface.capture_tool.session import SESSION_JSON, Session, list_sessions, read_session
 from effortface.train.catalog import Catalog, CatalogError, default_catalog
 from effortface.train.exercise_log import ExerciseLog, exercise_log
@@ -190,22 +190,45 @@ def _clip_curves(clip: Motion, mass_kg: float, sex: str, load: tuple[float, ...]
     return work_and_power(clip, body)
 
 
+MOTION_ENTRY_NUMBERS = {"offset_s": ("offset_s", 0.0), "load_left_kg": ("load_kg", 0.0),
+                        "load_right_kg": ("load_kg", 0.0), "load_back_kg": ("load_kg", 0.0)}
+
+
 def read_motion_index(path: str | os.PathLike) -> list[dict]:
-    """The clip entries of a ``motion/motion.json`` (``{"files": [{path, offset_s, ...}]}``).
+    """The entries of a session's ``motion/motion.json``: ``{"files": [{path, offset_s, load_*_kg}]}``.
+
+    Returns
+    -------
+    list of dict
+        Each with ``path`` (str, relative to the file's folder) and the four numbers (defaults 0).
 
     Raises
     ------
     WorkError
-        If the file is not JSON of that form (each entry needs ``path``).
+        One line naming the file and the entry: not JSON, wrong shape, a value of the wrong type,
+        a number outside the bounds table (:mod:`effortface.core.bounds`).
     """
     path = Path(path)
-    try:
-        entries = json.loads(path.read_text(encoding="utf-8"))["files"]
-        if not isinstance(entries, list) or not all(isinstance(e, dict) and "path" in e for e in entries):
-            raise TypeError("entries without 'path'")
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise WorkError(f"{path}: expected {{\"files\": [{{path, offset_s}}]}}, found {exc!r}") from None
-    return entries
+    doc = read_json(path, 'JSON {"files": [{path, offset_s}]}', WorkError)
+    files = doc.get("files") if isinstance(doc, dict) else None
+    if not isinstance(files, list):
+        raise WorkError(f'{path}: expected {{"files": [{{path, offset_s}}]}}, found {type(doc).__name__} '
+                           f"without a files list")
+    return [_motion_entry(path, i, e) for i, e in enumerate(files)]
+
+
+def _motion_entry(path: Path, i: int, entry: object) -> dict:
+    """One checked motion.json entry (see :func:`read_motion_index`)."""
+    where = f"{path}: files[{i}]"
+    if not isinstance(entry, dict) or not isinstance(entry.get("path"), str) or not entry["path"]:
+        raise WorkError(f"{where}: expected {{path: str, offset_s: number}}, found {entry!r:.60}")
+    out: dict = dict(entry)  # other keys (how the clip was aligned...) are kept as they are
+    for key, (bound, default) in MOTION_ENTRY_NUMBERS.items():
+        try:
+            out[key] = bounds.check(bound, entry.get(key, default), f"{where}.{key}")
+        except UserError as exc:
+            raise WorkError(str(exc)) from None
+    return out
 
 
 def plan_work(folder: str | os.PathLike, *, force: bool = False) -> tuple[Path, WorkTable]:

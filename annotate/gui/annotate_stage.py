@@ -303,9 +303,10 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         self.face_view.set_image(render_face(weights, (320, 240)))
 
     def shutdown(self) -> None:
-        """Stop playback, forget the model's listeners and close the video."""
+        """Stop playback, forget the model's listeners, close the video and free the rater file."""
         self._play_timer.stop()
         self.session.disconnect_all()
+        self.session.close()
         self.video.close()
 
 

@@ -8,12 +8,12 @@ Pure Python (no numpy), so the runtime can import it.
 from __future__ import annotations
 
 import dataclasses
-import json
 import os
 from pathlib import Path
 from typing import Any
 
 from effortface.core.errors import UserError
+from effortface.core.fileio import read_json
 
 
 @dataclasses.dataclass(frozen=True)
@@ -54,9 +54,27 @@ class BlendshapeSet:
 
     @classmethod
     def from_dict(cls, items: list[dict[str, Any]]) -> BlendshapeSet:
-        """Inverse of :meth:`to_dict`."""
-        return cls(tuple(Blendshape(d["name"], d.get("drives", ""), tuple(d.get("arkit", ())))
-                         for d in items))
+        """Inverse of :meth:`to_dict`.
+
+        Raises
+        ------
+        UserError
+            If ``items`` is not a list of ``{name: str, drives: str, arkit: [str]}`` (names the entry).
+        """
+        if not isinstance(items, list):
+            raise UserError(f"blendshapes: expected a list of {{name, drives, arkit}}, found {type(items).__name__}")
+        return cls(tuple(_blendshape(i, d) for i, d in enumerate(items)))
+
+
+def _blendshape(i: int, d: object) -> Blendshape:
+    """One checked entry of a blendshape list (a file may hold any JSON value there)."""
+    if not isinstance(d, dict):
+        raise UserError(f"blendshapes[{i}]: expected {{name, drives, arkit}}, found {type(d).__name__}")
+    name, drives, arkit = d.get("name"), d.get("drives", ""), d.get("arkit", [])
+    if not isinstance(name, str) or not name or not isinstance(drives, str) \
+            or not isinstance(arkit, list) or not all(isinstance(a, str) for a in arkit):
+        raise UserError(f"blendshapes[{i}]: expected {{name: str, drives: str, arkit: [str]}}, found {d!r:.80}")
+    return Blendshape(name, drives, tuple(arkit))
 
 
 DEFAULT_SET = BlendshapeSet((
@@ -78,10 +96,10 @@ def load_blendshape_set(path: str | os.PathLike[str] | None = None) -> Blendshap
     if path is None:
         return DEFAULT_SET
     path = Path(path)
+    items = read_json(path, "a JSON list of {name, drives, arkit}")
     try:
-        items = json.loads(path.read_text(encoding="utf-8"))
         shapes = BlendshapeSet.from_dict(items)
-    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:
         raise UserError(f"{path}: expected a JSON list of {{name, drives, arkit}}, found {exc}") from None
     if not shapes.shapes or len(set(shapes.names)) != len(shapes.names):
         raise UserError(f"{path}: expected unique, non-empty blendshape names, found {shapes.names}")

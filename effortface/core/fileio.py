@@ -10,12 +10,15 @@ write of the same file once they are :data:`STALE_TMP_S` old.
 from __future__ import annotations
 
 import errno
+import itertools
 import json
 import os
+import re
 import secrets
 import stat
+import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import IO, Any
 
@@ -238,3 +241,123 @@ def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
 def write_json_atomic(path: str | os.PathLike[str], data: Any) -> Path:
     """Write ``data`` as indented JSON atomically (see :func:`atomic_write`)."""
     return atomic_write_text(path, json.dumps(data, indent=2, sort_keys=False) + "\n")
+
+
+#: the largest JSON file a reader accepts (session, annotation, model and motion index files are kB)
+MAX_JSON_BYTES = 64 * 1024 * 1024
+#: the deepest nesting a reader accepts (the formats nest 4 levels; Python's parser recurses)
+MAX_JSON_DEPTH = 32
+
+
+def check_regular_file(path: str | os.PathLike[str], what: str = "a regular file",
+                       error: type[UserError] = UserError) -> Path:
+    """Return ``path`` if it is a regular file, else raise ``error`` naming it and what is there.
+
+    A FIFO or a device (``/dev/zero``) would block or read forever, so readers refuse them first.
+    """
+    found = not_a_file(path)
+    if found is not None:
+        raise error(f"{path}: expected {what}, found {found}")
+    return Path(path)
+
+
+def read_json(path: str | os.PathLike[str], what: str = "a JSON file",
+              error: type[UserError] = UserError, *, max_bytes: int = MAX_JSON_BYTES) -> Any:
+    """Parse a JSON file that was written by a person or a program that may have failed.
+
+    Refuses, with one ``error`` line naming the file: a missing file, a folder, a FIFO or device,
+    a file over ``max_bytes``, bytes that are not UTF-8, invalid JSON, and nesting deeper than
+    :data:`MAX_JSON_DEPTH` (which would raise RecursionError in the parser or in later code).
+
+    Parameters
+    ----------
+    path : path-like
+        The file.
+    what : str
+        What it should be, for the message (``"a JSON annotation file"``).
+    error : type
+        The UserError subclass to raise (``SessionFormatError``, ``BundleFormatError``...).
+    max_bytes : int
+        Size limit.
+
+    Returns
+    -------
+    object
+        The parsed document (not yet checked for its shape).
+    """
+    path = check_regular_file(path, what, error)
+    try:
+        with open(path, "rb") as fh:
+            raw = fh.read(max_bytes + 1)
+    except OSError as exc:
+        raise error(f"{path}: expected {what} that can be read, found {exc.strerror or exc}") from None
+    if len(raw) > max_bytes:
+        raise error(f"{path}: expected {what} of at most {max_bytes} bytes, found a larger file")
+    depth = _json_depth(raw)
+    if depth > MAX_JSON_DEPTH:
+        raise error(f"{path}: expected JSON nested at most {MAX_JSON_DEPTH} levels, found {depth}")
+    try:
+        return json.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise error(f"{path}: expected {what} in UTF-8, found byte {raw[exc.start]:#04x} (a binary file?)") from None
+    except (ValueError, RecursionError) as exc:
+        raise error(f"{path}: expected {what}, found invalid JSON ({exc})") from None
+
+
+def _json_depth(raw: bytes) -> int:
+    """Deepest bracket nesting of JSON bytes outside strings (no recursion, linear time)."""
+    brackets = _JSON_STRING.sub(b"", raw).translate(None, _NOT_BRACKET)
+    steps = (1 if b in b"[{" else -1 for b in brackets)
+    return max(itertools.accumulate(steps, initial=0))
+
+
+_JSON_STRING = re.compile(rb'"(?:[^"\\]|\\.)*"', re.DOTALL)
+_NOT_BRACKET = bytes(b for b in range(256) if b not in b"[]{}")
+
+
+def check_apart(option: str, out: str | os.PathLike[str], inputs: Iterable[str | os.PathLike[str] | None],
+                what: str = "an output") -> Path:
+    """Refuse an output path that is, holds or lies inside one of the inputs; return it as a Path.
+
+    The one rule of every writer, so that ``--force`` can never destroy an input. Paths are compared
+    both as given (made absolute) and resolved through symbolic links, and a folder input's entries
+    that are symbolic links (a session reached through a link) count as inputs too.
+
+    Parameters
+    ----------
+    option : str
+        The output option, for the message (``"--out"``).
+    out : path-like
+        The output file or folder (need not exist).
+    inputs : iterable of path-like or None
+        The files and folders the command reads (None entries are skipped).
+    what : str
+        What the output is, for the message (``"a model folder"``).
+
+    Raises
+    ------
+    UserError
+        One line naming the option, the output and the input it would overwrite.
+    """
+    out = Path(out)
+    targets = {Path(os.path.abspath(out)), out.resolve()}
+    for src in (Path(s) for s in inputs if s is not None):
+        for form in _input_forms(src):
+            for target in targets:
+                if form == target or target in form.parents or form in target.parents:
+                    where = "" if form == target else " inside it" if target in form.parents else " around it"
+                    link = "" if form == Path(os.path.abspath(src)) else f" (through a link, at {form})"
+                    raise UserError(f"{option} {out}: expected {what} apart from the inputs, found input "
+                                    f"{src}{where}{link}")
+    return out
+
+
+def _input_forms(src: Path) -> set[Path]:
+    """``src`` as given (absolute) and resolved, plus the resolved targets of links directly inside it."""
+    forms = {Path(os.path.abspath(src)), src.resolve()}
+    if src.is_dir():
+        try:
+            forms |= {entry.resolve() for entry in src.iterdir() if entry.is_symlink()}
+        except OSError:
+            pass  # an unreadable folder: the reader will say so
+    return forms

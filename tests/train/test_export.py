@@ -4,6 +4,7 @@ no silent overwrite, a failed check leaves nothing behind."""
 from __future__ import annotations
 
 import json
+import os
 import zipfile
 from pathlib import Path
 
@@ -12,7 +13,9 @@ import onnx
 import pytest
 
 from effortface.core.blendshapes import DEFAULT_SET
+from effortface.core.errors import UserError
 from effortface.train import export
+from effortface.train.bundle import read_bundle
 from effortface.train.dataset import hr_series, prepare, synthetic_table
 from effortface.train.export import (FACE_ONNX, MODEL_CARD, STANDARD_OPS, ExportError, build_bundle, export_model,
                           parity_features, run_onnx)
@@ -139,3 +142,31 @@ def test_model_card_warns_when_tl_model_generalises_worse():
     assert len(worse) == 1 and "23.0 % RMSE" in worse[0] and "9.0 %" in worse[0]
     assert hr_warnings({"tl_regression": {"rmse_pct": 8.0}, "pooled": {"rmse_pct": 9.0}}) == []
     assert hr_warnings({"tl_regression": {"rmse_pct": 23.0}, "pooled_threshold": {"rmse_pct": 9.0}})
+
+
+def test_export_never_follows_a_planted_link(fitted, tmp_path):
+    """Issue 17 case 12: the build and the old-model folders have unpredictable names (mkdtemp)."""
+    victim = tmp_path / "victim"
+    victim.mkdir()
+    (victim / "keep.txt").write_text("a participant's data")
+    out = export_model(_bundle(fitted), fitted[0], tmp_path / "m")
+    for name in (f".m.partial-{os.getpid()}", f".m.old-{os.getpid()}"):  # the names the export used to use
+        (tmp_path / name).symlink_to(victim, target_is_directory=True)
+    export_model(_bundle(fitted), fitted[0], out, force=True)
+    assert sorted(p.name for p in victim.iterdir()) == ["keep.txt"]
+    assert (victim / "keep.txt").read_text() == "a participant's data"
+    assert read_bundle(out).blendshapes == DEFAULT_SET
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".m.") and not p.is_symlink()]
+    umask = os.umask(0o022)
+    os.umask(umask)
+    assert out.stat().st_mode & 0o777 == 0o777 & ~umask  # an ordinary folder, not mkdtemp's 0700
+
+
+def test_export_refuses_a_folder_among_its_inputs(fitted, tmp_path):
+    """Issue 17 case 5 for the Train stage's export too: the model lies apart from its sessions."""
+    lab = tmp_path / "lab"
+    lab.mkdir()
+    with pytest.raises(UserError, match=r"--out \S+lab/m: expected a model folder apart from the inputs, "
+                                        r"found input \S+lab around it"):
+        export_model(_bundle(fitted), fitted[0], lab / "m", inputs=[str(lab)])
+    assert sorted(p.name for p in lab.iterdir()) == []

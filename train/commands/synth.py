@@ -11,7 +11,9 @@ import argparse
 import math
 from pathlib import Path
 
+from effortface.core import bounds
 from effortface.core.errors import UserError
+from effortface.core.fileio import check_apart
 from effortface.train.curves_io import CURVE_FORMATS, check_output, write_curves
 from effortface.train.motion import read_motion
 from effortface.train.runtime import Character, FaceModel, load_model
@@ -72,11 +74,15 @@ def _character(args: argparse.Namespace, model: FaceModel) -> Character:
 def run(args: argparse.Namespace) -> int:
     """Synthesize and write the curves; return 0."""
     out = Path(args.out)
+    model_dir = None if args.model_dir == "default" else args.model_dir
+    check_apart("--out", out, [model_dir, args.motion, args.mapping])
     check_output(out, args.force)  # fail before the work
     model = load_model(args.model_dir)
     character = _character(args, model)
     if args.unit_m is not None and not (math.isfinite(args.unit_m) and args.unit_m > 0):
         raise UserError(f"--unit-m: expected a length in metres above 0, found {args.unit_m:g}")
+    if args.unit_m is not None:
+        bounds.check("unit_m", args.unit_m, "--unit-m")
     motion = read_motion(args.motion, unit_m=args.unit_m)
     try:
         taus = model.filter_taus(args.filter_tau_s)

@@ -48,7 +48,7 @@ def check_inputs(args: argparse.Namespace) -> None:
                         + ("both" if args.inputs else "neither"))
     if args.max_rows < MIN_ROWS_PER_PARTICIPANT:
         raise UserError(f"--max-rows: expected at least {MIN_ROWS_PER_PARTICIPANT}, found {args.max_rows}")
-    check_model_target(args.out, force=args.force, inputs=args.inputs or [args.table])
+    check_model_target(args.out, force=args.force, inputs=[*(args.inputs or [args.table]), args.blendshapes])
 
 
 def run(args: argparse.Namespace) -> int:
