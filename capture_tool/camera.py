@@ -304,6 +304,9 @@ def open_avi_writer(path: str | os.PathLike, fps: float, size: tuple[int, int]) 
 def avi_header_frames(path: str | os.PathLike) -> int:
     """The frame count an AVI's header and index claim (quick: nothing is decoded; 0 if unreadable).
 
+    A finished or recovered capture's header is exact, so a frame table of another length means the
+    table or the video is not this session's; :func:`index_video` decodes the frames instead.
+
     Parameters
     ----------
     path : path-like
@@ -316,7 +319,7 @@ def avi_header_frames(path: str | os.PathLike) -> int:
     cv2 = _cv2()
     cap = cv2.VideoCapture(str(path))
     try:
-        return int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) if cap.isOpened() else 0
+        return int(cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0) if cap.isOpened() else 0
     finally:
         cap.release()
 
@@ -343,20 +346,6 @@ def index_video(path: str | os.PathLike) -> int:
     finally:
         cap.release()
     return n
-
-
-def avi_frame_count(path: str | os.PathLike) -> int:
-    """Frames the video's header declares (cheap; :func:`index_video` decodes them all instead).
-
-    A finished or recovered capture's header is exact, so a frame table of another length means the
-    table or the video is not this session's.
-    """
-    cv2 = _cv2()
-    cap = cv2.VideoCapture(str(path))
-    try:
-        return int(cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0) if cap.isOpened() else 0
-    finally:
-        cap.release()
 
 
 def rewrite_video(src: str | os.PathLike, dst: str | os.PathLike, max_frames: int | None = None) -> int:

@@ -570,9 +570,9 @@ def _video_problems(s: Session) -> list[str]:
     """A line if the video's frame count differs from the frame table's rows."""
     if s.video_path is None or not s.frame_times_s:
         return []
-    from effortface.capture_tool.camera import avi_frame_count  # lazy: cv2 loads slowly
+    from effortface.capture_tool.camera import avi_header_frames  # lazy: cv2 loads slowly
 
-    n_video = avi_frame_count(s.video_path)
+    n_video = avi_header_frames(s.video_path)
     if n_video != len(s.frame_times_s):
         return [f"{s.path / VIDEO_FRAMES_CSV}: expected one row per frame of {VIDEO_AVI} ({n_video} frames), "
                 f"found {len(s.frame_times_s)} rows"]
