@@ -308,7 +308,7 @@ def test_npz_content_over_the_limit(tmp_path: Path, monkeypatch) -> None:
 def test_runtime_bounds_update_period_and_character() -> None:
     with pytest.raises(UserError, match=r"update_period_s: expected a number from 0.001 to 60 s, found 1e-300"):
         PhysiologyParams.from_character(Character(), update_period_s=1e-300)
-    with pytest.raises(UserError, match=r"mass_kg: expected a number above 0 and at most 650 kg, found 1e\+308"):
+    with pytest.raises(UserError, match=r"mass_kg: expected a number from 15 to 300 kg, found 1e\+308"):
         Character(mass_kg=1e308).loads()
     with pytest.raises(UserError, match=r"load_left_kg: expected a number from 0 to 500 kg, found 1e\+308"):
         Character(load_left_kg=1e308)
@@ -320,7 +320,7 @@ def test_runtime_bounds_update_period_and_character() -> None:
 def test_absurd_character_options_are_refused_before_nan(shared_data: Path, tmp_path: Path, capsys) -> None:
     clip, out = str(shared_data / JJ), tmp_path / "o.csv"
     assert main(["synth", "default", clip, "--out", str(out), "--mass", "1e308"]) == 2
-    _one_line(capsys, "synth", r"mass_kg: expected a number above 0 and at most 650 kg, found 1e\+308")
+    _one_line(capsys, "synth", r"mass_kg: expected a number from 15 to 300 kg, found 1e\+308")
     assert main(["synth", "default", clip, "--out", str(out), "--load-back", "1e308"]) == 2
     _one_line(capsys, "synth", r"load_back_kg: expected a number from 0 to 500 kg, found 1e\+308")
     assert main(["synth", "default", clip, "--out", str(out), "--unit-m", "1e308"]) == 2
