@@ -11,7 +11,6 @@ by the product.
 from __future__ import annotations
 
 import json
-import shutil
 import subprocess
 from pathlib import Path
 
@@ -54,6 +53,23 @@ def _body(source: Path) -> list[str]:
 
 
 @pytest.mark.slow
+def _key_like(source: Path, session: Path) -> None:
+    """Each rater's key-frames of ``source``, saved for ``session`` through the product's own writer.
+
+    An annotation file names its session (a file copied from another session is refused by
+    train: issue 17), so the keys are re-saved under the new session's id, as the rater would have
+    keyed them in Annotate.
+    """
+    import dataclasses
+
+    from effortface.annotate.keyframes import read_annotations
+
+    (session / "annotations").mkdir()
+    for path in sorted((source / "annotations").glob("*.json")):
+        keys = read_annotations(path)
+        dataclasses.replace(keys, session_id=session.name).save(session / "annotations" / path.name)
+
+
 def test_a_lab_recorded_by_the_product_trains(tmp_path: Path) -> None:
     lab = tmp_path / "lab"
     runs = []
@@ -75,7 +91,7 @@ def test_a_lab_recorded_by_the_product_trains(tmp_path: Path) -> None:
         assert cap.returncode == 0, err
         session = Path(out.splitlines()[0])
         assert read_session(session).info.complete and f"phase 1/" in out
-        shutil.copytree(source / "annotations", session / "annotations")  # the raters' own files
+        _key_like(source, session)  # the raters key the new session as they keyed its source
         sessions.append(session)
     registry = (lab / "participants.tsv").read_text().splitlines()
     assert registry[0].startswith("participant_id\t")  # three captures started together: none lost

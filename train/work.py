@@ -200,7 +200,9 @@ def read_motion_index(path: str | os.PathLike) -> list[dict]:
     Returns
     -------
     list of dict
-        Each with ``path`` (str, relative to the file's folder) and the four numbers (defaults 0).
+        Each with ``path`` (str, relative to the file's folder), ``offset_s`` (default 0) and the
+        ``load_*_kg`` keys the entry gives (checked; absent ones stay absent, so that the exercise
+        log's loads apply), other keys as they are.
 
     Raises
     ------
@@ -213,7 +215,7 @@ def read_motion_index(path: str | os.PathLike) -> list[dict]:
     files = doc.get("files") if isinstance(doc, dict) else None
     if not isinstance(files, list):
         raise WorkError(f'{path}: expected {{"files": [{{path, offset_s}}]}}, found {type(doc).__name__} '
-                           f"without a files list")
+                        f"without a files list")
     return [_motion_entry(path, i, e) for i, e in enumerate(files)]
 
 
@@ -224,6 +226,8 @@ def _motion_entry(path: Path, i: int, entry: object) -> dict:
         raise WorkError(f"{where}: expected {{path: str, offset_s: number}}, found {entry!r:.60}")
     out: dict = dict(entry)  # other keys (how the clip was aligned...) are kept as they are
     for key, (bound, default) in MOTION_ENTRY_NUMBERS.items():
+        if key != "offset_s" and key not in entry:
+            continue  # no load given: the exercise log's loads apply (see _fill_from_motion)
         try:
             out[key] = bounds.check(bound, entry.get(key, default), f"{where}.{key}")
         except UserError as exc:
