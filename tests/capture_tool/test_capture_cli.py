@@ -177,6 +177,23 @@ def shared_hxm() -> Path:
     return SHARED_DATA / HXM_DAT
 
 
+def test_replay_killed_while_waiting_exits_quietly() -> None:
+    """issue 16, 14: SIGTERM before any reader claimed "no program opened the port within 60 s"."""
+    proc, _ = start_replay(shared_hxm())
+    proc.send_signal(signal.SIGTERM)
+    out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 0 and err == "", err
+
+
+def test_replay_killed_while_playing_exits_quietly() -> None:
+    proc, path = start_replay(shared_hxm())
+    with serial.Serial(path, timeout=10) as port:
+        assert port.read(1)  # playing
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 0 and err == "", err
+
+
 def test_ports_lists_devices() -> None:
     proc = subprocess.run(effortface("ports"), capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr
