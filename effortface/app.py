@@ -13,6 +13,7 @@ Unexpected errors anywhere (GUI thread or worker threads) are logged and shown i
 from __future__ import annotations
 
 import argparse
+import functools
 import html
 import logging
 import os
@@ -22,6 +23,7 @@ import traceback
 from collections.abc import Callable
 from pathlib import Path
 from types import TracebackType
+from typing import Any
 
 from PySide6 import QtCore, QtGui, QtWidgets
 
@@ -256,19 +258,19 @@ class MainWindow(QtWidgets.QMainWindow):
         self.edit_menu.aboutToShow.connect(self._update_edit_actions)
         view_menu = bar.addMenu("&View")
         for row, (key, title) in enumerate(STAGES.items()):
-            action = view_menu.addAction(title, lambda k=key: self.show_stage(k))
+            action = view_menu.addAction(title, functools.partial(self.show_stage, key))
             action.setShortcut(QtGui.QKeySequence(f"Ctrl+{row + 1}"))
             action.setCheckable(True)
             self.stage_actions[key] = action
         help_menu = bar.addMenu("&Help")
         help_menu.addAction("&Keyboard map", self.show_keyboard_map)
         for cited, what in ((DESIGN, "Design: formats and commands"), (SCIENCE, "Science: the model")):
-            help_menu.addAction(f"{what} ({cited})", lambda c=cited: self.open_doc(c))
+            help_menu.addAction(f"{what} ({cited})", functools.partial(self.open_doc, cited))
         help_menu.addSeparator()
         help_menu.addAction("&About effortface", self.show_about)
         self._update_edit_actions()
 
-    def undo_target(self) -> object | None:
+    def undo_target(self) -> Any:
         """The current stage's model with undo/redo (the stage's ``undo_target()``), or None."""
         target = getattr(self.current_stage(), "undo_target", None)
         return target() if target is not None else None
@@ -280,19 +282,19 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def undo(self) -> None:
         """Edit > Undo: undo the last edit of the current stage's model."""
-        self._undo_redo("undo")
+        target = self.undo_target()
+        self._after_undo_redo("undo", target is not None and target.undo())
 
     def redo(self) -> None:
         """Edit > Redo: redo the last undone edit of the current stage's model."""
-        self._undo_redo("redo")
-
-    def _undo_redo(self, what: str) -> None:
         target = self.undo_target()
-        title = STAGES[self.current_key()]
-        if target is None:
-            self.statusBar().showMessage(f"{title}: nothing to {what} here", 5000)
-        elif not getattr(target, what)():
-            self.statusBar().showMessage(f"{title}: nothing to {what}", 5000)
+        self._after_undo_redo("redo", target is not None and target.redo())
+
+    def _after_undo_redo(self, what: str, done: bool) -> None:
+        """Say in the status bar when there was nothing to undo/redo; update the Edit menu."""
+        if not done:
+            where = "" if self.undo_target() is not None else " here"
+            self.statusBar().showMessage(f"{STAGES[self.current_key()]}: nothing to {what}{where}", 5000)
         self._update_edit_actions()
 
     def keyboard_map_html(self) -> str:

@@ -100,7 +100,7 @@ def training_table(sessions: Sequence[str | Path], table: str | Path | None, ble
     sessions : sequence of path-like
         Session folders, or folders of sessions (used when ``table`` is None).
     table : path-like or None
-        A long table CSV (DESIGN.md) instead of sessions.
+        A long table CSV (docs/DESIGN.md) instead of sessions.
     blendshapes : BlendshapeSet
         The blendshape set (the table's columns).
     rater_policy : str

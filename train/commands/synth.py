@@ -15,10 +15,15 @@ from pathlib import Path
 
 import numpy as np
 
+from effortface.core.docs import DESIGN, SCIENCE
 from effortface.core.errors import UserError
 from effortface.train.curves_io import CURVE_FORMATS, check_output, units_path, write_curves
 from effortface.train.motion import read_motion
 from effortface.train.runtime import Character, FaceModel, load_model
+
+
+#: the shipped documents ``--help`` cites (effortface.core.docs)
+HELP_DOCS = (DESIGN, SCIENCE)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

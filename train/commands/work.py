@@ -13,10 +13,15 @@ from pathlib import Path
 
 import numpy as np
 
+from effortface.core.docs import DESIGN, SCIENCE_NOTES
 from effortface.capture_tool.session import SESSION_JSON, list_sessions, read_session
 from effortface.core.errors import UserError
 from effortface.core.fileio import atomic_write_text
 from effortface.train.work import WORK_CSV, WorkError, WorkTable, derive_work
+
+
+#: the shipped documents ``--help`` cites (effortface.core.docs)
+HELP_DOCS = (DESIGN, SCIENCE_NOTES)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
