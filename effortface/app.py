@@ -189,7 +189,10 @@ class MainWindow(QtWidgets.QMainWindow):
     Capture is built at once (it offers to recover crashed sessions at start); the other stages
     are built the first time they are shown. A stage whose code is missing or cannot start shows
     a placeholder that says why and lists the sessions. A stage with a ``focus_main()`` method
-    gets the keyboard each time it is shown (it gives the focus to its main widget).
+    gets the keyboard each time it is shown (it gives the focus to its main widget); a stage with an
+    ``undo_target()`` method (returning a model with ``undo()``, ``redo()``, ``can_undo``,
+    ``can_redo``, or None) gets the Edit menu's Undo/Redo. The window's geometry and each stage's
+    splitters (``splitters/<stage>/<index>`` in the settings) are saved on close.
 
     Parameters
     ----------
