@@ -95,7 +95,9 @@ def render_face(
     numpy.ndarray
         BGR uint8 image of shape ``(height, width, 3)``.
     """
-    import cv2
+    from effortface.core.opencv import import_cv2
+
+    cv2 = import_cv2()
 
     w_px, h_px = int(size[0]), int(size[1])
     if w_px < 16 or h_px < 16:
@@ -138,14 +140,18 @@ def _ellipse(cx: float, cy: float, rx: float, ry: float, n: int = 48,
 
 def _fill(canvas: np.ndarray, to_px: ToPx, pts: np.ndarray, colour: BGR) -> None:
     """Fill the polygon ``pts`` (normalised coordinates), anti-aliased."""
-    import cv2
+    from effortface.core.opencv import import_cv2
+
+    cv2 = import_cv2()
 
     cv2.fillPoly(canvas, [to_px(pts)], colour, lineType=cv2.LINE_AA)
 
 
 def _line(canvas: np.ndarray, to_px: ToPx, pts: np.ndarray, colour: BGR, thick: float, ss: int) -> None:
     """Open polyline of ``thick`` output pixels (scaled by the supersampling ``ss``)."""
-    import cv2
+    from effortface.core.opencv import import_cv2
+
+    cv2 = import_cv2()
 
     cv2.polylines(canvas, [to_px(pts)], False, colour, max(1, round(thick * ss)), cv2.LINE_AA)
 

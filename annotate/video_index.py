@@ -30,9 +30,9 @@ from effortface.capture_tool.session import VIDEO_AVI, read_session
 
 
 def _cv2() -> Any:
-    import cv2
+    from effortface.core.opencv import import_cv2
 
-    return cv2
+    return import_cv2()
 
 
 class FrameTimes:

@@ -44,9 +44,9 @@ FIRST_GROWTH_FRAMES = 300
 
 
 def _cv2() -> Any:
-    import cv2
+    from effortface.core.opencv import import_cv2
 
-    return cv2
+    return import_cv2()
 
 
 def open_capture(source: int | str | os.PathLike) -> Any:

@@ -690,7 +690,9 @@ def _stage_avi(avi: Path, n_decoded: int, n_times: int, repairs: _Repairs) -> in
 
     Returns 0 when no frame could be rewritten (the caller then keeps no video).
     """
-    import cv2
+    from effortface.core.opencv import import_cv2
+
+    cv2 = import_cv2()
 
     n_keep = min(n_decoded, n_times)
     cap = cv2.VideoCapture(str(avi))

@@ -168,6 +168,11 @@ class PtyReplay:
         """Ask :meth:`play`, :meth:`hold` and :meth:`wait_for_reader` to return early."""
         self._stop.set()
 
+    @property
+    def stopped(self) -> bool:
+        """Whether :meth:`stop` was called (a signal, not a timeout, ended the wait)."""
+        return self._stop.is_set()
+
     def close(self) -> None:
         """Close the master end: the reader sees the device vanish (idempotent)."""
         if self._master >= 0:

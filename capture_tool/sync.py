@@ -67,7 +67,9 @@ def video_brightness(video_path: str | os.PathLike, first: int, last: int) -> li
     list of float
         One value per frame read (shorter if the file ends early).
     """
-    import cv2
+    from effortface.core.opencv import import_cv2
+
+    cv2 = import_cv2()
 
     cap = cv2.VideoCapture(os.fspath(video_path))
     try:

@@ -1,7 +1,11 @@
 """The effortface application: one main window hosting the stages Capture, Annotate, Train, Synthesize.
 
-``effortface app [DIR]`` opens it on a folder of sessions; ``--screenshot PATH [--stage NAME]``
-renders one stage offscreen to a PNG and exits (tests, docs, a look without a display).
+``effortface app [DIR]`` opens it on a folder of sessions; ``--screenshot PATH [--stage NAME]
+[--size WxH]`` renders one stage offscreen to a PNG and exits (tests, docs, a look without a display).
+The window has a menu bar (File: open a lab folder, quit; Edit: undo/redo of the current stage's
+model, for a stage that has one; View: the four stages, Ctrl+1..4; Help: the keyboard map, the
+shipped documents, About), a status bar naming the stage and the folder, and remembers its geometry
+and the stages' splitter positions in QSettings.
 Unexpected errors anywhere (GUI thread or worker threads) are logged and shown in a dialog
 (STYLE.md E4); expected ones are shown inside the stage that raised them.
 """
@@ -9,6 +13,7 @@ Unexpected errors anywhere (GUI thread or worker threads) are logged and shown i
 from __future__ import annotations
 
 import argparse
+import functools
 import html
 import logging
 import os
@@ -18,9 +23,11 @@ import traceback
 from collections.abc import Callable
 from pathlib import Path
 from types import TracebackType
+from typing import Any
 
 from PySide6 import QtCore, QtGui, QtWidgets
 
+from effortface.core.docs import DESIGN, SCIENCE, doc_path
 from effortface.core.errors import UserError
 from effortface.core.fileio import check_new_png
 from effortface.core.gui.gui_gc import collect_in_gui_thread
@@ -41,6 +48,26 @@ _WHAT = {
 }
 ORGANIZATION, APPLICATION = "effortface", "effortface"
 SCREENSHOT_SIZE = (1400, 900)
+#: keys the main window itself handles (Help > Keyboard map; the stages' keys follow)
+WINDOW_KEYS = (
+    ("Ctrl+1 .. Ctrl+4", "show Capture, Annotate, Train, Synthesize"),
+    ("Ctrl+O", "open a lab folder"),
+    ("Ctrl+Q", "quit"),
+)
+#: keys of the Annotate stage (README "Annotate")
+ANNOTATE_KEYS = (
+    ("Left / Right", "previous / next frame (Shift: ten frames)"),
+    ("Home / End", "first / last frame"),
+    ("Space", "play / pause"),
+    ("0 .. 9", "key the weight 0.0 .. 0.9 at this frame"),
+    ("M", "key the weight 1.0"),
+    ("Up / Down", "nudge the weight"),
+    ("Del", "delete the key"),
+    ("N", "next blendshape, after a pass over the video"),
+    ("Ctrl+Z / Ctrl+Y", "undo / redo (also Edit menu)"),
+    ("Ctrl+C / Ctrl+V", "copy / paste keys"),
+    ("Ctrl+G", "go to frame"),
+)
 
 
 def guard_refcounts() -> bool:
@@ -162,7 +189,10 @@ class MainWindow(QtWidgets.QMainWindow):
     Capture is built at once (it offers to recover crashed sessions at start); the other stages
     are built the first time they are shown. A stage whose code is missing or cannot start shows
     a placeholder that says why and lists the sessions. A stage with a ``focus_main()`` method
-    gets the keyboard each time it is shown (it gives the focus to its main widget).
+    gets the keyboard each time it is shown (it gives the focus to its main widget); a stage with an
+    ``undo_target()`` method (returning a model with ``undo()``, ``redo()``, ``can_undo``,
+    ``can_redo``, or None) gets the Edit menu's Undo/Redo. The window's geometry and each stage's
+    splitters (``splitters/<stage>/<index>`` in the settings) are saved on close.
 
     Parameters
     ----------
@@ -180,11 +210,14 @@ class MainWindow(QtWidgets.QMainWindow):
         self.setWindowTitle(f"effortface - {self.sessions_dir}")
         self.folder_label = QtWidgets.QLabel(folder_note(self.sessions_dir))
         self.folder_label.setTextInteractionFlags(QtCore.Qt.TextInteractionFlag.TextSelectableByMouse)
+        self.stage_label = QtWidgets.QLabel()
         self.stages: dict[str, QtWidgets.QWidget] = {}
         self.stage_list = QtWidgets.QListWidget()
         self.stack = QtWidgets.QStackedWidget()
         self._slots: dict[str, QtWidgets.QWidget] = {}
+        self.stage_actions: dict[str, QtGui.QAction] = {}
         self._build()
+        self._build_menus()
         self._restore_geometry()
 
     def _build(self) -> None:
@@ -206,8 +239,139 @@ class MainWindow(QtWidgets.QMainWindow):
         layout.addWidget(self.stage_list)
         layout.addWidget(self.stack, 1)
         self.setCentralWidget(central)
+        self.statusBar().addWidget(self.stage_label)
         self.statusBar().addPermanentWidget(self.folder_label, 1)
         self.stage_list.setCurrentRow(0)
+
+    # ------------------------------------------------------------------------------------ menus
+    def _build_menus(self) -> None:
+        """File, Edit, View and Help."""
+        bar = self.menuBar()
+        file_menu = bar.addMenu("&File")
+        self.open_action = file_menu.addAction("&Open lab folder\u2026", self.choose_folder)
+        self.open_action.setShortcut(QtGui.QKeySequence.StandardKey.Open)
+        file_menu.addSeparator()
+        quit_action = file_menu.addAction("&Quit", self.close)
+        quit_action.setShortcut(QtGui.QKeySequence.StandardKey.Quit)
+        self.edit_menu = bar.addMenu("&Edit")
+        # the stage binds Ctrl+Z / Ctrl+Y itself, on its own widgets: the menu shows the keys after a
+        # tab (not as shortcuts of its own, which Qt would find ambiguous with the stage's)
+        self.undo_action = self.edit_menu.addAction("&Undo\tCtrl+Z", self.undo)
+        self.redo_action = self.edit_menu.addAction("&Redo\tCtrl+Y", self.redo)
+        self.edit_menu.aboutToShow.connect(self._update_edit_actions)
+        view_menu = bar.addMenu("&View")
+        for row, (key, title) in enumerate(STAGES.items()):
+            action = view_menu.addAction(title, functools.partial(self.show_stage, key))
+            action.setShortcut(QtGui.QKeySequence(f"Ctrl+{row + 1}"))
+            action.setCheckable(True)
+            self.stage_actions[key] = action
+        help_menu = bar.addMenu("&Help")
+        help_menu.addAction("&Keyboard map", self.show_keyboard_map)
+        for cited, what in ((DESIGN, "Design: formats and commands"), (SCIENCE, "Science: the model")):
+            help_menu.addAction(f"{what} ({cited})", functools.partial(self.open_doc, cited))
+        help_menu.addSeparator()
+        help_menu.addAction("&About effortface", self.show_about)
+        self._update_edit_actions()
+
+    def undo_target(self) -> Any:
+        """The current stage's model with undo/redo (the stage's ``undo_target()``), or None."""
+        target = getattr(self.current_stage(), "undo_target", None)
+        return target() if target is not None else None
+
+    def _update_edit_actions(self) -> None:
+        target = self.undo_target()
+        self.undo_action.setEnabled(bool(target is not None and getattr(target, "can_undo", False)))
+        self.redo_action.setEnabled(bool(target is not None and getattr(target, "can_redo", False)))
+
+    def undo(self) -> None:
+        """Edit > Undo: undo the last edit of the current stage's model."""
+        target = self.undo_target()
+        self._after_undo_redo("undo", target is not None and target.undo())
+
+    def redo(self) -> None:
+        """Edit > Redo: redo the last undone edit of the current stage's model."""
+        target = self.undo_target()
+        self._after_undo_redo("redo", target is not None and target.redo())
+
+    def _after_undo_redo(self, what: str, done: bool) -> None:
+        """Say in the status bar when there was nothing to undo/redo; update the Edit menu."""
+        if not done:
+            where = "" if self.undo_target() is not None else " here"
+            self.statusBar().showMessage(f"{STAGES[self.current_key()]}: nothing to {what}{where}", 5000)
+        self._update_edit_actions()
+
+    def keyboard_map_html(self) -> str:
+        """The keyboard map (Help menu): the window's keys, Capture's hotkeys, Annotate's keys."""
+        from effortface.capture_tool.gui.phases import LOAD_KEY, MARKER_KEY, PHASES, SYNC_KEY
+
+        capture = [(key, f"phase: {text}") for _, text, key in PHASES]
+        capture += [(MARKER_KEY, "marker"), (LOAD_KEY, "load / speed change"),
+                    (SYNC_KEY, "sync test (a white flash)")]
+        sections = (("Everywhere", WINDOW_KEYS), ("Capture", capture), ("Annotate", ANNOTATE_KEYS))
+        rows = "".join(f"<tr><td colspan=2><b>{title}</b></td></tr>"
+                       + "".join(f"<tr><td>{html.escape(k)}</td><td>{html.escape(v)}</td></tr>" for k, v in keys)
+                       for title, keys in sections)
+        return f"<table cellspacing=4>{rows}</table>"
+
+    def show_keyboard_map(self) -> QtWidgets.QMessageBox:
+        """Help > Keyboard map (a non-modal box, returned)."""
+        return self._info_box("effortface: keyboard map", self.keyboard_map_html())
+
+    def about_html(self) -> str:
+        """Help > About: the version, what the program is, where its documents are."""
+        from effortface import __version__
+
+        docs = "".join(f"<br>{html.escape(c)}: {html.escape(str(doc_path(c)))}" for c in (DESIGN, SCIENCE))
+        return (f"<h3>effortface {__version__}</h3><p>Facial expressions of physical effort: capture, "
+                "annotate, train, synthesize (after Boukhalfi, Desrosiers &amp; Paquette, WSCG 2015).</p>"
+                f"<p>Documents:{docs}</p>")
+
+    def show_about(self) -> QtWidgets.QMessageBox:
+        """Help > About (a non-modal box, returned)."""
+        return self._info_box("About effortface", self.about_html())
+
+    def _info_box(self, title: str, text: str) -> QtWidgets.QMessageBox:
+        box = QtWidgets.QMessageBox(QtWidgets.QMessageBox.Icon.Information, title, text, parent=self)
+        box.setTextFormat(QtCore.Qt.TextFormat.RichText)
+        box.setAttribute(QtCore.Qt.WidgetAttribute.WA_DeleteOnClose)
+        box.open()
+        return box
+
+    def open_doc(self, cited: str) -> bool:
+        """Open a shipped document (``docs/DESIGN.md``) with the desktop's viewer."""
+        path = doc_path(cited)
+        self.statusBar().showMessage(f"opening {path}", 5000)
+        return QtGui.QDesktopServices.openUrl(QtCore.QUrl.fromLocalFile(str(path)))
+
+    # ------------------------------------------------------------------------------ lab folder
+    def choose_folder(self) -> None:
+        """File > Open lab folder: ask for a folder of sessions and open it."""
+        folder = QtWidgets.QFileDialog.getExistingDirectory(self, "Open lab folder", str(self.sessions_dir))
+        if folder:
+            self.open_folder(folder)
+
+    def open_folder(self, folder: str | os.PathLike) -> bool:
+        """Re-open every stage on ``folder`` (refused while a stage may not close, e.g. recording).
+
+        Returns
+        -------
+        bool
+            Whether the folder was opened.
+        """
+        if not self._stages_may_close():
+            return False
+        self._save_layout()
+        self.shutdown()
+        for widget in self.stages.values():
+            widget.setParent(None)
+            widget.deleteLater()
+        self.stages.clear()
+        self.sessions_dir = Path(folder)
+        self.setWindowTitle(f"effortface - {self.sessions_dir}")
+        self.folder_label.setText(folder_note(self.sessions_dir))
+        self._ensure_stage("capture")
+        self._on_stage_changed(self.stage_list.currentRow())
+        return True
 
     def _ensure_stage(self, key: str) -> QtWidgets.QWidget:
         """Build stage ``key`` into its slot if not done yet; return its widget."""
@@ -219,12 +383,26 @@ class MainWindow(QtWidgets.QMainWindow):
                 widget = QtPlaceholderStage(key, self.sessions_dir, reason=str(exc))
             self._slots[key].layout().addWidget(widget)  # type: ignore[union-attr]  # built with one
             self.stages[key] = widget
+            self._restore_splitters(key, widget)
         return self.stages[key]
+
+    def current_key(self) -> str:
+        """The key of the stage shown."""
+        return list(STAGES)[max(self.stage_list.currentRow(), 0)]
+
+    def current_stage(self) -> QtWidgets.QWidget | None:
+        """The widget of the stage shown (None before it is built)."""
+        return self.stages.get(self.current_key())
 
     def _on_stage_changed(self, row: int) -> None:
         key = list(STAGES)[row]
         widget = self._ensure_stage(key)
         self.stack.setCurrentIndex(row)
+        for other, action in self.stage_actions.items():
+            action.setChecked(other == key)
+        self.stage_label.setText(f"{STAGES[key]}  (Ctrl+{row + 1})")
+        if self.stage_actions:
+            self._update_edit_actions()
         if isinstance(widget, QtPlaceholderStage):
             widget.refresh(self.sessions_dir)
         focus_main = getattr(widget, "focus_main", None)
@@ -251,6 +429,34 @@ class MainWindow(QtWidgets.QMainWindow):
         else:
             self.resize(*SCREENSHOT_SIZE)
 
+    @staticmethod
+    def _splitters(widget: QtWidgets.QWidget) -> list[QtWidgets.QSplitter]:
+        """The splitters of a stage, in creation order (their settings keys are their index)."""
+        return widget.findChildren(QtWidgets.QSplitter)
+
+    def _restore_splitters(self, key: str, widget: QtWidgets.QWidget) -> None:
+        """Put back the splitter positions saved for stage ``key`` (``splitters/<stage>/<i>``)."""
+        for index, splitter in enumerate(self._splitters(widget)):
+            state = self.settings.value(f"splitters/{key}/{index}")
+            if isinstance(state, QtCore.QByteArray) and not state.isEmpty():
+                splitter.restoreState(state)
+
+    def _save_layout(self) -> None:
+        """Save the window geometry and every built stage's splitter positions."""
+        self.settings.setValue("main_window/geometry", self.saveGeometry())
+        for key, widget in self.stages.items():
+            for index, splitter in enumerate(self._splitters(widget)):
+                self.settings.setValue(f"splitters/{key}/{index}", splitter.saveState())
+        self.settings.sync()
+
+    def _stages_may_close(self) -> bool:
+        """Ask every stage whether it may close (Capture asks while recording)."""
+        for widget in self.stages.values():
+            may_close = getattr(widget, "may_close", None)
+            if may_close is not None and not may_close():
+                return False
+        return True
+
     def shutdown(self) -> None:
         """Stop every stage's timers and background work without asking or saving (screenshots)."""
         for widget in self.stages.values():
@@ -260,13 +466,10 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def closeEvent(self, event: QtGui.QCloseEvent) -> None:  # noqa: N802 - Qt override
         """Ask every stage whether it may close (Capture asks while recording); save the layout."""
-        for widget in self.stages.values():
-            may_close = getattr(widget, "may_close", None)
-            if may_close is not None and not may_close():
-                event.ignore()
-                return
-        self.settings.setValue("main_window/geometry", self.saveGeometry())
-        self.settings.sync()
+        if not self._stages_may_close():
+            event.ignore()
+            return
+        self._save_layout()
         self.shutdown()
         event.accept()
 
@@ -361,10 +564,27 @@ def wait_settled(window: MainWindow, timeout_s: float = 5.0) -> bool:
     return all(getattr(w, "settled", lambda: True)() for w in window.stages.values())
 
 
-def render_screenshot(window: MainWindow, stage: str, out: Path) -> Path:
-    """Show ``stage`` in ``window`` at the documentation size and save it as a PNG."""
+def parse_size(text: str | None) -> tuple[int, int]:
+    """``--size WxH`` (``1280x800``) as (width, height) in pixels; None gives :data:`SCREENSHOT_SIZE`.
+
+    Raises
+    ------
+    UserError
+        Unless ``text`` is two whole numbers from 320 to 8192 joined by ``x``.
+    """
+    if text is None:
+        return SCREENSHOT_SIZE
+    parts = text.lower().split("x")
+    if len(parts) != 2 or not all(p.isdigit() and 320 <= int(p) <= 8192 for p in parts):
+        raise UserError(f"--size: expected WIDTHxHEIGHT in pixels (320-8192 each, e.g. 1280x800), found {text!r}")
+    return int(parts[0]), int(parts[1])
+
+
+def render_screenshot(window: MainWindow, stage: str, out: Path,
+                      size: tuple[int, int] = SCREENSHOT_SIZE) -> Path:
+    """Show ``stage`` in ``window`` at ``size`` (default: the documentation size), save it as a PNG."""
     window.show_stage(stage)
-    window.resize(*SCREENSHOT_SIZE)
+    window.resize(*size)
     window.show()
     wait_settled(window)
     if not window.grab().save(str(out), "PNG"):
@@ -378,7 +598,8 @@ def main(args: argparse.Namespace) -> int:
     Parameters
     ----------
     args : argparse.Namespace
-        ``dir`` (sessions folder), ``screenshot`` (PNG path or None), ``stage`` (stage key).
+        ``dir`` (sessions folder), ``screenshot`` (PNG path or None), ``stage`` (stage key),
+        optionally ``size`` (``WxH`` of the screenshot).
 
     Raises
     ------
@@ -388,6 +609,7 @@ def main(args: argparse.Namespace) -> int:
     sessions_dir = _check_dir(args.dir)
     if args.stage not in STAGES:
         raise UserError(f"--stage: expected one of {', '.join(STAGES)}, found {args.stage!r}")
+    size = parse_size(getattr(args, "size", None))
     out = _check_screenshot_path(args.screenshot) if args.screenshot else None
     has_display = bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
                        or os.environ.get("QT_QPA_PLATFORM") or sys.platform in ("win32", "darwin"))
@@ -401,13 +623,14 @@ def main(args: argparse.Namespace) -> int:
     app.setOrganizationName(ORGANIZATION)
     app.setApplicationName(APPLICATION)
     with collect_in_gui_thread():
-        return _run_window(app, MainWindow(sessions_dir), args.stage, out)
+        return _run_window(app, MainWindow(sessions_dir), args.stage, out, size)
 
 
-def _run_window(app: QtCore.QCoreApplication, window: MainWindow, stage: str, out: Path | None) -> int:
-    """Render ``stage`` to ``out`` and close, or show the window until the user quits."""
+def _run_window(app: QtCore.QCoreApplication, window: MainWindow, stage: str, out: Path | None,
+                size: tuple[int, int] = SCREENSHOT_SIZE) -> int:
+    """Render ``stage`` to ``out`` at ``size`` and close, or show the window until the user quits."""
     if out is not None:
-        render_screenshot(window, stage, out)
+        render_screenshot(window, stage, out, size)
         print(out)
         window.shutdown()
         return 0

@@ -1,7 +1,9 @@
-"""The ``effortface`` command line (a contract: see DESIGN.md and the README).
+"""The ``effortface`` command line (a contract: see docs/DESIGN.md and the README).
 
 Each sub-command lives in its own module exposing ``add_arguments(parser)`` and ``run(args) -> int``;
-only the chosen one is imported, so ``effortface decode`` never pays for Qt or scikit-learn.
+only the chosen one is imported, so ``effortface decode`` never pays for Qt or scikit-learn. A module's
+``HELP_DOCS`` (paths such as ``docs/DESIGN.md``, :mod:`effortface.core.docs`) are cited at the end of
+its ``--help`` with where they are installed.
 A :class:`~effortface.core.errors.UserError` becomes one line on stderr and exit status 2; so does, as a
 last resort, an :class:`OSError` naming a path (a file or folder a command could not read or write).
 A first argument that is neither a command, an option nor an existing folder is refused the same way.
@@ -16,6 +18,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import NoReturn
 
+from effortface.core.docs import DESIGN, SCIENCE, cite
 from effortface.core.errors import UserError
 
 #: sub-command -> (module, one-line help)
@@ -48,11 +51,17 @@ def _top_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="effortface",
         description="Facial expressions of physical effort: capture, annotate, train, synthesize.",
-        epilog="commands:\n" + epilog + "\n\nRun 'effortface COMMAND --help' for a command's options.",
+        epilog="commands:\n" + epilog + "\n\nRun 'effortface COMMAND --help' for a command's options.\n\n"
+               + docs_epilog((DESIGN, SCIENCE)),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version=_version())
     return parser
+
+
+def docs_epilog(cited: Sequence[str]) -> str:
+    """The ``--help`` lines citing shipped documents, each with where it is installed."""
+    return "documents:\n" + "\n".join(f"  {cite(c)}" for c in cited) if cited else ""
 
 
 def _version() -> str:
@@ -81,7 +90,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     command = args[0] if args and args[0] in COMMANDS else "app"
     rest = args[1:] if args and args[0] in COMMANDS else args
     module = importlib.import_module(COMMANDS[command][0])
-    parser = _Parser(prog=f"effortface {command}", description=COMMANDS[command][1])
+    parser = _Parser(prog=f"effortface {command}", description=COMMANDS[command][1],
+                     epilog=docs_epilog(getattr(module, "HELP_DOCS", ())) or None,
+                     formatter_class=argparse.RawDescriptionHelpFormatter)
     module.add_arguments(parser)
     ns = parser.parse_args(rest)
     try:

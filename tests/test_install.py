@@ -23,7 +23,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 #: what a distribution is built from (the stage folders are reached through effortface/'s links)
-SOURCES = ("pyproject.toml", "README.md", "effortface", "capture_tool", "annotate", "train", "runtime-dist")
+SOURCES = ("pyproject.toml", "README.md", "effortface", "capture_tool", "annotate", "train", "docs",
+           "runtime-dist")
 HEAVY = ("PySide6", "cv2", "pandas", "sklearn", "onnxruntime", "matplotlib")
 CLIP = ROOT / "tests" / "data" / "motion" / "cmu_13_29_squats_120fps.bvh"
 #: a game's own train.py: it must not hide the runtime (the old top-level ``train.runtime`` it did)
@@ -140,6 +141,7 @@ def test_pip_install_dot_in_a_fresh_venv_works_from_any_folder(sources, tmp_path
     assert {f.split("/")[0] for f in files if not f.startswith("..")} == {"effortface",
                                                                           f"effortface-{__version__}.dist-info"}
     assert "effortface/samplelab/data/cmu_13_29_squats_120fps.bvh" in files  # the lab builds anywhere
+    assert {"effortface/docs/DESIGN.md", "effortface/docs/SCIENCE.md"} <= set(files)  # what --help cites
     work = _user_folder(tmp_path)
     got = _runtime_check(bin_ / "python", work)
     assert got["heavy"] == [] and Path(got["file"]).is_relative_to(tmp_path / "venv")

@@ -5,13 +5,16 @@ The CSV has the columns ``t_s,w_per_kg,p_per_kg,nhr,hr_bpm,vo2,resp_rate,epoc`` 
 blendshape (:attr:`effortface.train.runtime.FaceModel.columns`); the Live Link Face CSV is the one
 Unreal's importer reads (``Timecode``, ``BlendShapeCount``, the 52 ARKit blendshapes in the app's
 column order, then the nine head and eye rotations), with our blendshapes written under their ARKit
-names and every other column 0. An existing file is never replaced without ``force``.
+names and every other column 0. Beside the per-frame CSV, ``<name>.units.json`` gives each
+column's unit (:data:`CURVE_UNITS`; the CSV's header line stays as it was, for existing readers).
+An existing file is never replaced without ``force``.
 """
 
 from __future__ import annotations
 
 import csv
 import io
+import json
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -26,6 +29,13 @@ from effortface.train.runtime import FaceModel
 CURVE_FORMATS = ("csv", "livelink")
 #: significant digits of the per-frame CSV's values
 CSV_DIGITS = 10
+#: unit of each column of the per-frame CSV (a blendshape's weight is a fraction, "1"), written to
+#: the ``<name>.units.json`` sidecar
+CURVE_UNITS = {"t_s": "s", "w_per_kg": "W/kg", "p_per_kg": "W/kg",
+               "nhr": "1 (fraction of the heart-rate reserve, 0-1)", "hr_bpm": "beats/min",
+               "vo2": "ml/kg/min", "resp_rate": "breaths/min", "epoc": "ml/kg"}
+#: unit of a blendshape column
+WEIGHT_UNIT = "1 (blendshape weight, 0-1)"
 
 #: Live Link Face CSV columns after Timecode and BlendShapeCount: the 52 ARKit blendshapes in the
 #: app's order, then head and eye rotations (BlendShapeCount = 61 counts all of them).
@@ -89,7 +99,18 @@ def livelink_csv(curves: Mapping[str, np.ndarray], blendshapes: BlendshapeSet) -
     return buf.getvalue()
 
 
-def check_output(path: Path, force: bool) -> None:
+def units_path(path: Path) -> Path:
+    """The units sidecar of the per-frame CSV ``path``: ``face.csv`` -> ``face.units.json``."""
+    return path.with_name(path.stem + ".units.json")
+
+
+def units_json(columns: Sequence[str]) -> str:
+    """The sidecar text: ``{"units": {column: unit}}`` for ``columns`` (blendshapes: a weight)."""
+    units = {c: CURVE_UNITS.get(c, WEIGHT_UNIT) for c in columns}
+    return json.dumps({"units": units}, indent=2) + "\n"
+
+
+def check_output(path: Path, force: bool, fmt: str = "livelink") -> None:
     """Raise a UserError naming ``--out`` unless ``path`` can be (re)written as a file.
 
     Parameters
@@ -98,11 +119,15 @@ def check_output(path: Path, force: bool) -> None:
         The ``--out`` file.
     force : bool
         Whether an existing file may be replaced.
+    fmt : {"csv", "livelink"}
+        The format: a ``csv`` also writes its units sidecar (:func:`units_path`), checked too.
     """
     if path.is_dir():
         raise UserError(f"--out {path}: expected a file path, found a folder")
-    if path.exists() and not force:
-        raise UserError(f"--out {path}: expected a new file, found an existing one "
+    targets = [path, units_path(path)] if fmt == "csv" else [path]
+    existing = [t for t in targets if t.exists()]
+    if existing and not force:
+        raise UserError(f"--out {path}: expected a new file, found an existing {existing[0]} "
                         "(use --force to replace it)")
     if not path.parent.is_dir():
         raise UserError(f"--out {path}: expected an existing folder, found no {path.parent}")
@@ -175,11 +200,12 @@ def write_curves(path: str | Path, curves: Mapping[str, np.ndarray], model: Face
     curves, model, fmt, digits
         As for :func:`curves_text`.
     force : bool
-        Replace an existing file.
+        Replace an existing file (and, for ``csv``, its units sidecar).
 
     Returns
     -------
     Path
+        ``path`` (a ``csv`` also writes :func:`units_path` of it).
 
     Raises
     ------
@@ -187,5 +213,8 @@ def write_curves(path: str | Path, curves: Mapping[str, np.ndarray], model: Face
         As :func:`curves_text` and :func:`write_output`.
     """
     out = Path(path)
+    check_output(out, force, fmt)
     write_output(out, curves_text(curves, model, fmt, digits), force)
+    if fmt == "csv":
+        write_output(units_path(out), units_json(model.columns), force=True)  # checked with ``out``
     return out

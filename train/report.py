@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from effortface.core.docs import DESIGN, SCIENCE, cite
 from effortface.core.figures import agg_figure
 from effortface.train.export import hr_warnings
 from effortface.train.face_fit import PAPER_FACE_TRAINING_RMSE_PCT, FaceModelFit, training_scores
@@ -165,7 +166,8 @@ def _report_lines(evaluation: HrEvaluation, fit: FaceModelFit, held_out: pd.Data
     return [
         "# effortface training report", "",
         *[f"- {k}: {v}" for k, v in header.items()], "",
-        "## Heart rate (SCIENCE.md section 3)", "",
+        f"The science behind these figures: {cite(SCIENCE)}; the formats: {cite(DESIGN)}.", "",
+        f"## Heart rate ({SCIENCE} section 3)", "",
         "Simulated over whole sessions from the first measured value. RMSE in % of the NHR range [0, 1]. "
         f"Held out (scored on data the model was not fitted on): {', '.join(HELD_OUT_MODELS)}. "
         "per_participant is the participant's own tree fitted on their other sessions (or the other "
@@ -178,7 +180,7 @@ def _report_lines(evaluation: HrEvaluation, fit: FaceModelFit, held_out: pd.Data
         "Per-participant trees (fitted on all their sessions):", "", markdown_table(coef), "",
         "Regressions on training level (value = intercept + slope x TL):", "", markdown_table(reg), "",
         f"![Fig. 2]({FIG2_PNG})", "",
-        "## Face (SCIENCE.md section 5)", "",
+        f"## Face ({SCIENCE} section 5)", "",
         f"Hyper-parameters by {fit.config.cv} cross-validation over C {fit.config.grid['C']}, "
         f"gamma {fit.config.grid['gamma']}, epsilon {fit.config.grid['epsilon']}:", "", markdown_table(best), "",
         "Held-out participants, the headline (weights = prediction x an expressiveness estimated "

@@ -13,10 +13,15 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from effortface.core.docs import SCIENCE
 from effortface.annotate.agreement import FLAG_PCT, agreement_report, format_report, gather_ratings, save_bland_altman_png
 from effortface.annotate.reliability import read_ratings
 from effortface.core.errors import UserError
 from effortface.core.fileio import check_new_png
+
+
+#: the shipped documents ``--help`` cites (effortface.core.docs)
+HELP_DOCS = (SCIENCE,)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -427,6 +427,11 @@ class QtAnnotateStage(QtWidgets.QWidget):
         """The open session's editor if it is shown (its rater is the confirmed rater code), else None."""
         return self.editor if self.editor is not None and self.editor_host.currentWidget() is self.editor else None
 
+    def undo_target(self) -> AnnotateSession | None:
+        """The model the main window's Edit > Undo/Redo drive: the shown editor's session, or None."""
+        editor = self.shown_editor()
+        return editor.session if editor is not None else None
+
     # ----------------------------------------------------------------------------------- rater
     def _on_rater_edited(self, text: str) -> None:
         """Hide the open session and the reliability round as soon as the code no longer names their rater.

@@ -22,6 +22,7 @@ import threading
 import time
 from pathlib import Path
 
+from effortface.core.docs import DESIGN
 from effortface.core.errors import UserError
 from effortface.capture_tool.participants import REGISTRY_TSV, register, resolve_participant
 from effortface.capture_tool.plan import PlanRunner, read_plan
@@ -30,6 +31,10 @@ from effortface.capture_tool.recorder import Recorder
 from effortface.capture_tool.session import Participant
 
 STATUS_INTERVAL_S = 5.0
+
+
+#: the shipped documents ``--help`` cites (effortface.core.docs)
+HELP_DOCS = (DESIGN,)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

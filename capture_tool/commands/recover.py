@@ -4,7 +4,12 @@ from __future__ import annotations
 
 import argparse
 
+from effortface.core.docs import DESIGN
 from effortface.capture_tool.recorder import recover_session
+
+
+#: the shipped documents ``--help`` cites (effortface.core.docs)
+HELP_DOCS = (DESIGN,)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -2,7 +2,8 @@
 
 The first stdout line is the pseudo-terminal path (flushed at once, so a script can read it);
 replay starts when a program opens that path and ends when the recording has been played and the
-reader closes the port (or ``--unplug-after`` pulls it, or Ctrl-C / SIGTERM).
+reader closes the port (or ``--unplug-after`` pulls it, or Ctrl-C / SIGTERM). Stopped by SIGTERM
+it exits quietly with status 0 (a stop asked for is not an error).
 """
 
 from __future__ import annotations
@@ -37,10 +38,13 @@ def run(args: argparse.Namespace) -> int:
     print(replay.path, flush=True)
     try:
         if not replay.wait_for_reader(args.wait):
+            if replay.stopped:  # SIGTERM while waiting: not a timeout
+                return 0
             print(f"effortface replay: no program opened {replay.path} within {args.wait:g} s", file=sys.stderr)
             return 1
         n = replay.play()
-        print(f"replayed {n} bytes", file=sys.stderr, flush=True)
+        if not replay.stopped:
+            print(f"replayed {n} bytes", file=sys.stderr, flush=True)
         replay.hold()
     except KeyboardInterrupt:
         pass

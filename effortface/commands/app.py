@@ -18,6 +18,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "of the sample lab in the user data folder)")
     parser.add_argument("--screenshot", metavar="PATH", help="render offscreen to a PNG and exit")
     parser.add_argument("--stage", default="capture", help="stage to show (with --screenshot)")
+    parser.add_argument("--size", default=None, metavar="WxH",
+                        help="window size of the screenshot in pixels (default 1400x900)")
 
 
 def default_dir() -> str:

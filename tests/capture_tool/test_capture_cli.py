@@ -143,6 +143,9 @@ ERRORS = {
                      "expected a capital letter then capitals"),
     "unreadable video": (["capture", "--port", "loop://", "--protocol", "hxm", "--participant", "P01", "--video", "{tmp}/none.avi"],
                          "--video {tmp}/none.avi: expected a video file, found nothing"),
+    # OpenCV's own "[ WARN:0@...] can't open camera by index" lines came before ours (issue 16, 14)
+    "missing camera": (["capture", "--port", "loop://", "--protocol", "hxm", "--participant", "P01", "--camera", "37"],
+                       "--camera 37: expected a camera, found none at that index"),
     "unreadable log": (["replay", "{tmp}/none.serlog"], "{tmp}/none.serlog: expected a readable capture file"),
     "not a capture": (["replay", "{tmp}/notes.xyz"], "expected a .serlog, .pcap or raw"),
     "bad speed": (["replay", "{tmp}/notes.xyz", "--speed", "0"], "--speed: expected a number above 0, found 0"),
@@ -174,7 +177,39 @@ def shared_hxm() -> Path:
     return SHARED_DATA / HXM_DAT
 
 
+def test_replay_killed_while_waiting_exits_quietly() -> None:
+    """issue 16, 14: SIGTERM before any reader claimed "no program opened the port within 60 s"."""
+    proc, _ = start_replay(shared_hxm())
+    proc.send_signal(signal.SIGTERM)
+    out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 0 and err == "", err
+
+
+def test_replay_killed_while_playing_exits_quietly() -> None:
+    proc, path = start_replay(shared_hxm())
+    with serial.Serial(path, timeout=10) as port:
+        assert port.read(1)  # playing
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 0 and err == "", err
+
+
 def test_ports_lists_devices() -> None:
     proc = subprocess.run(effortface("ports"), capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.startswith("serial ports (") and "cameras (" in proc.stdout
+    lines = proc.stdout.splitlines()
+    if not lines[0].startswith("serial ports (0)"):  # issue 16, 14: the table has column headers
+        assert lines[1].split() == ["DEVICE", "DESCRIPTION", "HARDWARE", "ID"], proc.stdout
+
+
+def test_ports_tables_have_aligned_column_headers() -> None:
+    from effortface.capture_tool.commands.ports import CAMERA_COLUMNS, PORT_COLUMNS, table
+
+    lines = table(PORT_COLUMNS, [("/dev/ttyUSB0", "ANT USBStick2", "USB VID:PID=0FCF:1008"),
+                                 ("/dev/ttyS0", "n/a", "n/a")])
+    assert lines[0] == "  DEVICE        DESCRIPTION    HARDWARE ID"
+    assert lines[2] == "  /dev/ttyS0    n/a            n/a"
+    assert [line.index(lines[1].split()[1]) for line in lines[1:2]] == [lines[0].index("DESCRIPTION")]
+    assert table(CAMERA_COLUMNS, [("/dev/video0", "--camera 0")])[0] == "  DEVICE       OPTION"
+    assert table(CAMERA_COLUMNS, []) == []  # no header over an empty table

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import json
 import re
 import subprocess
 import sys
@@ -38,6 +39,8 @@ def test_synth_default_model_end_to_end(shared_data: Path, tmp_path: Path) -> No
     assert done.returncode == 0, done.stderr
     rows = _rows(out)
     assert list(rows[0]) == COLUMNS and len(rows) == 439
+    # issue 16, 14: it says what it wrote and the clip's duration (it printed nothing before)
+    assert done.stdout == f"wrote {out}: 439 frames, 3.65 s of motion, units in {tmp_path / 'x.units.json'}\n"
     t = np.array([float(r["t_s"]) for r in rows])
     np.testing.assert_allclose(np.diff(t), 1 / 120, atol=1e-8)
     assert max(float(r["eye_squint"]) for r in rows) > 0.3
@@ -108,6 +111,32 @@ def test_refuses_to_overwrite(shared_data: Path, tmp_path: Path, capsys) -> None
     assert out.read_text() == "keep me\n"
     assert main(["synth", "default", str(shared_data / JJ), "--out", str(out), "--force"]) == 0
     assert out.read_text().startswith("t_s,")
+
+
+def test_units_sidecar(shared_data: Path, tmp_path: Path) -> None:
+    """vo2, resp_rate and epoc have their units in ``<name>.units.json``; the CSV header is unchanged."""
+    out = tmp_path / "face.csv"
+    assert main(["synth", "default", str(shared_data / JJ), "--out", str(out)]) == 0
+    assert out.read_text().splitlines()[0] == ",".join(COLUMNS)
+    units = json.loads((tmp_path / "face.units.json").read_text())["units"]
+    assert list(units) == COLUMNS
+    assert (units["vo2"], units["resp_rate"], units["epoc"]) == ("ml/kg/min", "breaths/min", "ml/kg")
+    assert units["hr_bpm"] == "beats/min" and units["mouth_open"].startswith("1 ")
+
+
+def test_existing_units_sidecar_is_not_overwritten(shared_data: Path, tmp_path: Path, capsys) -> None:
+    out, sidecar = tmp_path / "face.csv", tmp_path / "face.units.json"
+    sidecar.write_text("mine\n")
+    assert main(["synth", "default", str(shared_data / JJ), "--out", str(out)]) == 2
+    assert f"found an existing {sidecar} (use --force" in capsys.readouterr().err
+    assert sidecar.read_text() == "mine\n" and not out.exists()
+
+
+def test_livelink_has_no_sidecar(shared_data: Path, tmp_path: Path, capsys) -> None:
+    out = tmp_path / "face.csv"
+    assert main(["synth", "default", str(shared_data / JJ), "--out", str(out), "--format", "livelink"]) == 0
+    assert capsys.readouterr().out.startswith(f"wrote {out}: 439 frames, 3.65 s of motion\n")
+    assert not (tmp_path / "face.units.json").exists()
 
 
 def _malformed_bvh(shared_data: Path, tmp_path: Path) -> Path:

@@ -4,6 +4,8 @@ one line naming the file or option and the problem."""
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import pandas as pd
@@ -40,6 +42,21 @@ def test_train_writes_bundle_and_report(trained, capsys):
     assert set(doc["metrics"]["hr"]) == {"per_participant", "per_participant_in_sample", "pooled_threshold",
                                          "tl_regression"}
     assert doc["provenance"]["cv"] == "lopo" and doc["provenance"]["n_participants"] == 3
+
+
+def test_progress_is_plain_lines_when_stderr_is_redirected(table_csv, tmp_path):
+    """issue 16, 14: tqdm wrote carriage returns and escape codes into redirected logs."""
+    log = tmp_path / "train.log"
+    with log.open("w") as stderr:
+        done = subprocess.run([sys.executable, "-m", "effortface", "train", "--table", str(table_csv),
+                               "--out", str(tmp_path / "model"), "--max-rows", "40"],
+                              stdout=subprocess.PIPE, stderr=stderr, text=True, timeout=600)
+    text = log.read_text()
+    assert done.returncode == 0, text
+    assert "\r" not in text and "\x1b" not in text
+    lines = [line for line in text.splitlines() if line.startswith(("train: ", "export: "))]
+    assert lines[0] == "train:   5% heart-rate models" and lines[-1] == "export: 100% done", text
+    assert len(lines) == len(set(lines)) and len(lines) < 60  # one per step or tenth, not per report
 
 
 def test_evaluate_rescoring(trained, table_csv, capsys):

@@ -9,9 +9,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from effortface.core.docs import DESIGN, SCIENCE
 from effortface.core.errors import UserError
 from effortface.train.evaluation import evaluate_bundle, evaluation_report
 from effortface.train.pipeline import training_table
+
+
+#: the shipped documents ``--help`` cites (effortface.core.docs)
+HELP_DOCS = (DESIGN, SCIENCE)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -9,8 +9,13 @@ from __future__ import annotations
 import argparse
 import math
 
+from effortface.core.docs import DESIGN
 from effortface.core.errors import UserError
 from effortface.train.attach import CLIP_FORMATS, attach_clip
+
+
+#: the shipped documents ``--help`` cites (effortface.core.docs)
+HELP_DOCS = (DESIGN,)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -1,5 +1,7 @@
 """``effortface synth``: a motion clip + a character -> per-frame face curves (CSV or Live Link Face).
 
+On success it prints one line on stdout: the file written, its frames and the clip's duration.
+
 ``MODEL_DIR`` is a model bundle folder or ``default`` (the built-in rule model). The file formats
 (the per-frame CSV, ``--format livelink`` for the Live Link Face CSV) are
 :mod:`effortface.train.curves_io`'s. An existing ``--out`` is never replaced without ``--force``.
@@ -11,12 +13,19 @@ import argparse
 import math
 from pathlib import Path
 
+import numpy as np
+
 from effortface.core import bounds
+from effortface.core.docs import DESIGN, SCIENCE
 from effortface.core.errors import UserError
 from effortface.core.fileio import check_apart
-from effortface.train.curves_io import CURVE_FORMATS, check_output, write_curves
+from effortface.train.curves_io import CURVE_FORMATS, check_output, units_path, write_curves
 from effortface.train.motion import read_motion
 from effortface.train.runtime import Character, FaceModel, load_model
+
+
+#: the shipped documents ``--help`` cites (effortface.core.docs)
+HELP_DOCS = (DESIGN, SCIENCE)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -76,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     model_dir = None if args.model_dir == "default" else args.model_dir
     check_apart("--out", out, [model_dir, args.motion, args.mapping])
-    check_output(out, args.force)  # fail before the work
+    check_output(out, args.force, args.format)  # fail before the work
     model = load_model(args.model_dir)
     character = _character(args, model)
     if args.unit_m is not None and not (math.isfinite(args.unit_m) and args.unit_m > 0):
@@ -90,4 +99,13 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--filter-tau-s: {exc}") from None
     curves = model.synthesize(motion, character, mapping=args.mapping, filter_tau_s=taus)
     write_curves(out, curves, model, fmt=args.format, force=args.force)
+    print(written_line(out, curves["t_s"], args.format))
     return 0
+
+
+def written_line(out: Path, t_s: np.ndarray, fmt: str) -> str:
+    """What ``synth`` wrote: the file, its frames and the clip's duration (and the units sidecar)."""
+    n_frames = len(t_s)
+    duration_s = float(t_s[-1] - t_s[0]) if n_frames else 0.0
+    units = f", units in {units_path(out)}" if fmt == "csv" else ""
+    return f"wrote {out}: {n_frames} frames, {duration_s:.2f} s of motion{units}"

@@ -12,17 +12,22 @@ from __future__ import annotations
 import argparse
 import sys
 
+from effortface.core.docs import DESIGN, SCIENCE
 from effortface.core.blendshapes import load_blendshape_set
 from effortface.core.errors import UserError
 from effortface.train.face_fit import GRIDS, MIN_ROWS_PER_PARTICIPANT, FaceFitConfig
 from effortface.train.pipeline import TrainSettings, run_training, training_table
 
 
+#: the shipped documents ``--help`` cites (effortface.core.docs)
+HELP_DOCS = (DESIGN, SCIENCE)
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``effortface train``."""
     parser.add_argument("inputs", nargs="*", metavar="SESSION|DIR",
                         help="session folders, or folders of sessions")
-    parser.add_argument("--table", metavar="CSV", help="long table instead of sessions (DESIGN.md)")
+    parser.add_argument("--table", metavar="CSV", help=f"long table instead of sessions (format: {DESIGN})")
     parser.add_argument("--out", required=True, metavar="MODEL_DIR", help="model folder to write")
     parser.add_argument("--force", action="store_true", help="replace an existing MODEL_DIR")
     parser.add_argument("--rater-policy", default="mean", metavar="mean|RATER",

@@ -12,7 +12,12 @@ import sys
 
 import numpy as np
 
+from effortface.core.docs import DESIGN, SCIENCE_NOTES
 from effortface.train.work import WorkTable, work_folders, write_works
+
+
+#: the shipped documents ``--help`` cites (effortface.core.docs)
+HELP_DOCS = (DESIGN, SCIENCE_NOTES)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

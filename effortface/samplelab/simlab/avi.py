@@ -48,7 +48,9 @@ def _headers(width: int, height: int, fps: float, n_frames: int, max_bytes: int)
 
 def encode_jpeg(frame_bgr: np.ndarray, quality: int) -> bytes:
     """JPEG bytes of one BGR frame at ``quality`` (1-100), with optimised Huffman tables."""
-    import cv2
+    from effortface.core.opencv import import_cv2
+
+    cv2 = import_cv2()
 
     ok, buf = cv2.imencode(".jpg", frame_bgr, [cv2.IMWRITE_JPEG_QUALITY, int(quality),
                                                 cv2.IMWRITE_JPEG_OPTIMIZE, 1])

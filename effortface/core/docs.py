@@ -1,0 +1,41 @@
+"""The documentation the product ships and cites: ``docs/`` in the repository, ``effortface/docs/`` installed.
+
+``--help`` texts, the training report and the main window's Help menu cite these documents by their
+repository path (``docs/DESIGN.md``); :func:`doc_path` finds the file wherever effortface runs from
+(the repository's ``effortface/docs`` is a link to ``../docs``; a wheel carries the files as package
+data). A test checks that every path cited exists in the repository and in a built wheel.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+#: the folder of the shipped documents (a link to the repository's docs/, or the installed copy)
+DOCS_DIR = Path(__file__).resolve().parents[1] / "docs"
+#: session folder, long table, exercise log, model bundle, command line and architecture
+DESIGN = "docs/DESIGN.md"
+#: the science the product implements (the paper's model and our marked choices)
+SCIENCE = "docs/SCIENCE.md"
+#: notes on where the code made or changed a choice of SCIENCE.md (calibrations, derivations)
+SCIENCE_NOTES = "docs/SCIENCE_NOTES.md"
+
+
+def doc_path(cited: str) -> Path:
+    """The file of a cited document (``"docs/DESIGN.md"``) where this effortface is installed.
+
+    Parameters
+    ----------
+    cited : str
+        The path as cited, relative to the repository root (``docs/<name>``).
+
+    Returns
+    -------
+    Path
+        The document (it exists in a repository checkout and in an installed wheel).
+    """
+    return DOCS_DIR / Path(cited).name
+
+
+def cite(cited: str) -> str:
+    """How a help text names a document: ``docs/DESIGN.md (installed: /.../effortface/docs/DESIGN.md)``."""
+    return f"{cited} (installed: {doc_path(cited)})"
