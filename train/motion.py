@@ -232,15 +232,25 @@ def motion_from_positions(
     return Motion(names, par, pos, None, float(fps), source)
 
 
+#: motion file suffixes :func:`read_motion` reads
+MOTION_SUFFIXES = (".bvh", ".npz", ".c3d", ".csv")
+
+
 def read_motion(path: str | Path, *, unit_m: float | None = None) -> Motion:
-    """Read a motion file, choosing the reader by suffix (``.bvh`` or ``.npz``).
+    """Read a motion file, choosing the reader by suffix (:data:`MOTION_SUFFIXES`).
+
+    ``.bvh`` (:func:`read_bvh`), ``.npz`` (:func:`read_npz_motion`), ``.csv`` joint positions
+    (:func:`effortface.train.motion_csv.read_positions_csv`) and ``.c3d`` with the Plug-in Gait
+    marker set (:func:`effortface.train.interop.c3d_motion.read_c3d`, which imports the ``c3d``
+    package only when called, so the runtime stays numpy and scipy only).
 
     Parameters
     ----------
     path : str or Path
         The motion file.
     unit_m : float, optional
-        BVH length unit in metres (see :func:`read_bvh`); ignored for ``.npz`` (already metres).
+        BVH length unit in metres (see :func:`read_bvh`); ignored for the others (in metres, or
+        in the units a C3D file declares).
 
     Returns
     -------
@@ -257,7 +267,16 @@ def read_motion(path: str | Path, *, unit_m: float | None = None) -> Motion:
         return read_bvh(path, unit_m=unit_m)
     if suffix == ".npz":
         return read_npz_motion(path)
-    raise MotionFormatError(f"{path}: expected a motion file ending in .bvh or .npz, got suffix {suffix!r}")
+    if suffix == ".csv":
+        from effortface.train.motion_csv import read_positions_csv  # imports this module
+
+        return read_positions_csv(path)
+    if suffix == ".c3d":
+        from effortface.train.interop.c3d_motion import read_c3d  # lazy: the c3d package
+
+        return read_c3d(path)
+    raise MotionFormatError(f"{path}: expected a motion file ending in {', '.join(MOTION_SUFFIXES)}, "
+                            f"got suffix {suffix!r}")
 
 
 # --------------------------------------------------------------------------------------------
