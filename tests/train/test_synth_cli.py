@@ -137,7 +137,7 @@ BAD_CLI = {
     r"character options: sex: expected 'male' or 'female'": lambda d, t: [str(d / JJ), "--sex", "x"],
     r"character options: load_back_kg: expected a load of 0 kg or more":
         lambda d, t: [str(d / JJ), "--load-back", "-1"],
-    r"clip\.txt: expected a motion file ending in \.bvh or \.npz":
+    r"clip\.txt: expected a motion file ending in \.bvh, \.npz, \.c3d, \.csv":
         lambda d, t: [str(t / "clip.txt")],
 }
 
