@@ -100,6 +100,9 @@ class Recorder:
         Appended to the session id.
     device : str
         Strap name: ``serial/<device>.serlog``.
+    lsl : bool
+        Also publish the strap and the events as LSL streams (:mod:`effortface.capture_tool.lsl`);
+        the LSL clock offset goes into ``session.json`` under ``lsl``.
     """
 
     def __init__(
@@ -111,8 +114,11 @@ class Recorder:
         video: int | str | os.PathLike | None = None,
         label: str | None = None,
         device: str | None = None,
+        lsl: bool = False,
     ) -> None:
         self.out_dir = Path(out_dir)
+        self._lsl_wanted = lsl
+        self.lsl: Any = None  # an LslPublisher once started with lsl=True
         self.participant = participant
         self.label = label
         self.queue: queue.Queue = queue.Queue()
@@ -147,6 +153,11 @@ class Recorder:
             if self._video_source is not None:
                 self.camera = CameraSource(self._video_source, self.clock)
             self.info = self._new_info()
+            if self._lsl_wanted:
+                from effortface.capture_tool.lsl import LslPublisher  # lazy: pylsl loads liblsl
+
+                self.lsl = LslPublisher(self.link.device, self.link.port, self.participant.code,
+                                        self.info.session_id)
             self.path = create_session(self.out_dir, self.info)
         except BaseException:
             self.link.stop()
@@ -156,6 +167,10 @@ class Recorder:
         self._hr = HrWriter(self.path / HEART_RATE_CSV)
         self._events = EventWriter(self.path / EVENTS_CSV)
         self._t0 = time.monotonic()
+        if self.lsl is not None:
+            self.lsl.sync(self.clock())
+            self.info.extra["lsl"] = self.lsl.session_record()
+            self.info.save(self.path, overwrite=True)
         self.link.start(self.path / SERIAL_DIR / f"{self.link.device}.serlog")
         if self.camera is not None:
             self.camera.start(self.path / VIDEO_AVI, self.path / VIDEO_FRAMES_CSV)
@@ -216,6 +231,8 @@ class Recorder:
             self._last = obj
         elif kind == "event":
             self._events.write(Event(obj.t_s, obj.kind, obj.label, obj.value))
+        if self.lsl is not None:
+            self.lsl(kind, obj)
 
     def status(self) -> RecorderStatus:
         """A snapshot of the recording (thread-safe reads of counters)."""
@@ -248,6 +265,8 @@ class Recorder:
             self._writer_thread.join()
         self._hr.close()
         self._events.close()
+        if self.lsl is not None:
+            self.lsl.close()
         self.info.complete = True
         self.info.extra["stats"] = self._stats()
         self.info.save(self.path, overwrite=True)

@@ -40,6 +40,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--label", help="appended to the session folder name")
     parser.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: Ctrl-C)")
     parser.add_argument("--out", required=True, metavar="DIR", help="folder that receives the session folder")
+    parser.add_argument("--lsl", action="store_true",
+                        help="also publish the strap (LSL type HeartRate) and the events (Markers) on the "
+                             "Lab Streaming Layer, for LabRecorder")
 
 
 def _participant(args: argparse.Namespace) -> Participant:
@@ -65,11 +68,15 @@ def run(args: argparse.Namespace) -> int:
     check_protocol(args.protocol)
     if args.camera is not None and args.camera < 0:
         raise UserError(f"--camera: expected a camera index >= 0, found {args.camera}")
-    recorder = Recorder(args.out, _participant(args), args.port, args.protocol, _video_source(args), label=args.label)
+    recorder = Recorder(args.out, _participant(args), args.port, args.protocol, _video_source(args), label=args.label,
+                        lsl=args.lsl)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     path = _start(recorder, args.out)
     print(path, flush=True)
+    if recorder.lsl is not None:
+        print(f"LSL: publishing HeartRate and Markers streams, source id {recorder.lsl.source_id}",
+              file=sys.stderr, flush=True)
     try:
         _wait(recorder, stop, args.duration)
     except KeyboardInterrupt:
