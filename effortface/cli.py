@@ -29,6 +29,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "train": ("effortface.train.commands.train", "fit the heart-rate and face models, export a bundle"),
     "evaluate": ("effortface.train.commands.evaluate", "re-score a model bundle on sessions or a table"),
     "synth": ("effortface.train.commands.synth", "synthesize face curves from a motion clip"),
+    "import": ("effortface.train.commands.import_data", "import xdf FILE: a LabRecorder recording -> a session"),
+    "export": ("effortface.train.commands.export_data", "export bids SESSIONS: sessions -> a BIDS dataset"),
     "serve": ("effortface.train.commands.serve", "live face from an LSL or OSC stream to LSL, OSC or Live Link"),
     "demo": ("effortface.commands.demo", "the whole pipeline on sample_sessions"),
 }
