@@ -139,8 +139,9 @@ class CaptureController:
         """True between :meth:`start` and :meth:`stop`."""
         return self.recorder is not None
 
-    def start(self, participant: Participant, choice: DeviceChoice, label: str = "") -> Path:
-        """Open the devices and start a new session; return its folder.
+    def start(self, participant: Participant, choice: DeviceChoice, label: str = "", lsl: bool = False) -> Path:
+        """Open the devices and start a new session; return its folder (``lsl``: also publish the
+        strap and events as LSL streams, see :mod:`effortface.capture_tool.lsl`).
 
         Raises
         ------
@@ -153,7 +154,7 @@ class CaptureController:
         if not choice.port:
             raise UserError("Strap port: expected a serial port or URL, found none chosen")
         recorder = Recorder(self.out_dir, participant, choice.port, choice.protocol,
-                            video=choice.camera, label=label or None)
+                            video=choice.camera, label=label or None, lsl=lsl)
         path = recorder.start()
         self.recorder, self.phase, self._latest_frame = recorder, None, None
         self._tails = (CsvTail(path / HEART_RATE_CSV), CsvTail(path / EVENTS_CSV))
