@@ -46,15 +46,18 @@ def run(args: argparse.Namespace) -> int:
     outputs = Outputs(model, args.output or ["lsl"], name=args.name,
                       osc_to=parse_host_port("--osc-out", args.osc_out),
                       livelink_to=parse_host_port("--livelink-out", args.livelink_out))
+    source: LslInput | OscInput
     if args.input == "lsl":
         source = LslInput(args.input_type, args.input_name)
+        where = args.input_type
     else:
         source = OscInput(args.osc_in_port)
+        where = f"port {source.port}"
         outputs.open_lsl(processor.columns, 0.0)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    print(f"serve: {model.name} -> {', '.join(outputs.kinds)}; input {args.input} "
-          f"{args.input_type if args.input == 'lsl' else source.port}", file=sys.stderr, flush=True)
+    print(f"serve: {model.name} -> {', '.join(outputs.kinds)}; input {args.input} {where}", file=sys.stderr,
+          flush=True)
     try:
         stats = serve(processor, source, outputs, stop=stop, duration_s=args.duration, report_s=args.report)
     except KeyboardInterrupt:

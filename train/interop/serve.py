@@ -237,8 +237,14 @@ class LslInput:
                                      1, 0.5)
         if not found:
             return False
-        self._inlet = pylsl.StreamInlet(found[0], max_buflen=10, recover=False)
-        self._inlet.open_stream(5.0)
+        from pylsl.util import LostError, TimeoutError as LslTimeout
+
+        inlet = pylsl.StreamInlet(found[0], max_buflen=10, recover=False)
+        try:
+            inlet.open_stream(2.0)
+        except (LostError, LslTimeout):  # a stream that just went (the resolver still lists it)
+            return False
+        self._inlet = inlet
         self.srate_hz = found[0].nominal_srate()
         self.channels = found[0].channel_count()
         stats.connects += 1

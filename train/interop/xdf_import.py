@@ -70,14 +70,14 @@ def describe(streams: Sequence[XdfStream]) -> str:
     return ", ".join(f"{_field(s, 'name')!r} ({_field(s, 'type')})" for s in streams) or "no streams"
 
 
-def pick_stream(path: Path, streams: Sequence[XdfStream], wanted: str | None, default_type: str,
-                option: str, required: bool = True) -> XdfStream | None:
-    """The one stream whose name or type is ``wanted`` (default: type ``default_type``).
+def find_stream(path: Path, streams: Sequence[XdfStream], wanted: str | None, default_type: str,
+                option: str) -> XdfStream | None:
+    """The one stream whose name or type is ``wanted`` (default: of type ``default_type``), or None.
 
     Raises
     ------
     XdfImportError
-        None found (when ``required``), or several (naming them and the option that chooses).
+        Several match (naming them and the option that chooses).
     """
     key = wanted or default_type
     found = [s for s in streams if key in (_field(s, "name"), _field(s, "type"))] if wanted else \
@@ -85,10 +85,17 @@ def pick_stream(path: Path, streams: Sequence[XdfStream], wanted: str | None, de
     if len(found) > 1:
         raise XdfImportError(f"{path}: expected one stream named or typed {key!r}, found {len(found)}: "
                              f"{describe(found)} (choose one by name with {option})")
-    if not found and required:
-        raise XdfImportError(f"{path}: expected a stream named or typed {key!r} ({option}), found "
-                             f"{describe(streams)}")
     return found[0] if found else None
+
+
+def pick_stream(path: Path, streams: Sequence[XdfStream], wanted: str | None, default_type: str,
+                option: str) -> XdfStream:
+    """Like :func:`find_stream`, but none found is an error naming the streams there are."""
+    found = find_stream(path, streams, wanted, default_type, option)
+    if found is None:
+        raise XdfImportError(f"{path}: expected a stream named or typed {wanted or default_type!r} ({option}), "
+                             f"found {describe(streams)}")
+    return found
 
 
 def channel_labels(stream: XdfStream) -> list[str]:
@@ -227,7 +234,7 @@ def import_xdf(path: str | os.PathLike, out_dir: str | os.PathLike, participant:
     hr = pick_stream(path, streams, hr_stream, "HeartRate", "--hr-stream")
     markers = ([pick_stream(path, streams, m, "Markers", "--marker-stream") for m in marker_streams]
                or [s for s in streams if _field(s, "type") == "Markers"])
-    work = pick_stream(path, streams, work_stream, "EffortWork", "--work-stream", required=work_stream is not None)
+    work = (pick_stream if work_stream else find_stream)(path, streams, work_stream, "EffortWork", "--work-stream")
     mocap = pick_stream(path, streams, mocap_stream, "MoCap", "--mocap-stream") if mocap_stream else None
     video_path = Path(video) if video is not None else None
     if video_path is not None and not video_path.is_file():
@@ -284,7 +291,7 @@ def _copy_video(src: Path, dst: Path) -> None:
         if not ok:
             break
         if writer is None:
-            writer = cv2.VideoWriter(str(dst), cv2.VideoWriter_fourcc(*"MJPG"), fps, frame.shape[1::-1])
+            writer = cv2.VideoWriter(str(dst), cv2.VideoWriter.fourcc(*"MJPG"), fps, frame.shape[1::-1])
         writer.write(frame)
     cap.release()
     if writer is not None:
