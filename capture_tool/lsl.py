@@ -90,6 +90,7 @@ class LslPublisher:
         self._events = pylsl.StreamOutlet(ev_info)
         self.clock_offset_s = 0.0
         self.pushed = 0
+        self.errors = 0
 
     def sync(self, session_clock_s: float) -> float:
         """Measure ``lsl_time - session_time`` now; return it (kept as :attr:`clock_offset_s`)."""
@@ -103,15 +104,22 @@ class LslPublisher:
                 "heart_rate_type": HEART_RATE_TYPE, "library_version": pylsl.library_version()}
 
     def __call__(self, kind: str, obj: Any) -> None:
-        """Publish one recorder item (``("hr", HrSample)`` or ``("event", event)``)."""
-        if kind == "hr":
-            stamp = obj.t_s + self.clock_offset_s
-            for row in hr_rows_to_lsl(obj):
-                self._hr.push_sample(row, stamp)
-                self.pushed += 1
-        elif kind == "event":
-            text = json.dumps({"kind": obj.kind, "label": obj.label, "value": obj.value})
-            self._events.push_sample([text], obj.t_s + self.clock_offset_s)
+        """Publish one recorder item (``("hr", HrSample)`` or ``("event", event)``).
+
+        Runs in the recorder's writer thread after the files are written: a failure here is
+        counted (:attr:`errors`), never raised, so publishing can never cost a row on disk.
+        """
+        try:
+            if kind == "hr":
+                stamp = obj.t_s + self.clock_offset_s
+                for row in hr_rows_to_lsl(obj):
+                    self._hr.push_sample(row, stamp)
+                    self.pushed += 1
+            elif kind == "event":
+                text = json.dumps({"kind": obj.kind, "label": obj.label, "value": obj.value})
+                self._events.push_sample([text], obj.t_s + self.clock_offset_s)
+        except Exception:  # noqa: BLE001 - the recording must go on whatever LSL does
+            self.errors += 1
 
     def close(self, linger_s: float = 0.5) -> None:
         """Close the outlets (consumers see the streams disappear).

@@ -114,3 +114,15 @@ def test_capture_without_lsl_keeps_no_lsl_record(tmp_path: Path, shared_data: Pa
     replay.wait(10)
     assert out.returncode == 0, out.stderr
     assert "lsl" not in read_session(Path(out.stdout.splitlines()[0])).info.extra
+
+
+def test_a_publishing_failure_never_stops_the_recording_thread() -> None:
+    from effortface.capture_tool.lsl import LslPublisher
+    from effortface.capture_tool.protocols import HrSample
+
+    pub = LslPublisher("lines", "/dev/null-test", "P07", "P07_20260101-000000")
+    pub("hr", HrSample(0.5, 70.0, (850.0,)))
+    assert pub.pushed == 1 and pub.errors == 0
+    pub("hr", object())          # not a sample: counted, not raised
+    assert pub.errors == 1
+    pub.close()
