@@ -154,3 +154,15 @@ def test_model_card_warns_when_tl_model_generalises_worse():
     worse = hr_warnings({"tl_regression": {"rmse_pct": 23.0}, "pooled": {"rmse_pct": 9.0}})
     assert len(worse) == 1 and "23.0 % RMSE" in worse[0] and "9.0 %" in worse[0]
     assert hr_warnings({"tl_regression": {"rmse_pct": 8.0}, "pooled": {"rmse_pct": 9.0}}) == []
+
+
+def test_float32_parity_over_target_is_reported_not_fatal(fitted, tmp_path, monkeypatch):
+    monkeypatch.setattr(export, "ONNX_TOL_FLOAT32", 1e-12)       # a model that misses the 1e-4 target
+    out = export_model(_bundle(fitted), fitted[0], tmp_path / "m")
+    parity = json.loads((out / "model.json").read_text())["metrics"]["export_parity"]
+    assert parity["float32_within_1e-4"] is False
+    assert "The float32 face.onnx differs from the numpy runtime by up to" in (out / MODEL_CARD).read_text()
+    monkeypatch.setattr(export, "ONNX_FAIL_FLOAT32", 1e-12)
+    with pytest.raises(ExportError, match=r"face\.onnx: expected float32 ONNX predictions within 1e-12 of the numpy runtime"):
+        export_model(_bundle(fitted), fitted[0], tmp_path / "m2")
+    assert not (tmp_path / "m2").exists()
