@@ -239,14 +239,15 @@ class LslInput:
             return False
         from pylsl.util import LostError, TimeoutError as LslTimeout
 
-        inlet = pylsl.StreamInlet(found[0], max_buflen=10, recover=False)
+        newest = max(found, key=lambda info: info.created_at())  # not a stream that just went
+        inlet = pylsl.StreamInlet(newest, max_buflen=10, recover=False)
         try:
             inlet.open_stream(2.0)
         except (LostError, LslTimeout):  # a stream that just went (the resolver still lists it)
             return False
         self._inlet = inlet
-        self.srate_hz = found[0].nominal_srate()
-        self.channels = found[0].channel_count()
+        self.srate_hz = newest.nominal_srate()
+        self.channels = newest.channel_count()
         stats.connects += 1
         return True
 

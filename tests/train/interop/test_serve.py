@@ -49,7 +49,8 @@ def test_serve_turns_effort_work_into_face_weights_and_recovers(tmp_path):
         values, stamps = pull_for(inlet, 3.0)
         sent = [s for s in sender.stamps if stamps and stamps[0] <= s <= stamps[-1]]
         rate_out = (len(stamps) - 1) / (stamps[-1] - stamps[0])
-        assert rate_out == pytest.approx(120.0, rel=0.05)
+        rate_in = (len(sent) - 1) / (sent[-1] - sent[0])       # what the sender managed on a busy machine
+        assert rate_out == pytest.approx(rate_in, rel=1e-6) and rate_in > 90
         assert len(stamps) == len(sent)                            # one output per input sample
         np.testing.assert_allclose(stamps, sent, atol=1e-6)        # time-stamped with the input's stamps
         rows = np.array(values)
@@ -58,12 +59,11 @@ def test_serve_turns_effort_work_into_face_weights_and_recovers(tmp_path):
         sender.close()                                             # the input disappears...
         time.sleep(2.0)
         sender = WorkSender(in_name, 120.0)                        # ...and comes back
-        values2, stamps2 = pull_for(inlet, 0.2)
-        deadline = time.monotonic() + 30
-        while not stamps2 and time.monotonic() < deadline:    # the server re-resolves the input
-            values2, stamps2 = pull_for(inlet, 0.2)
-        more_values, more_stamps = pull_for(inlet, 3.0)
-        values2, stamps2 = values2 + more_values, stamps2 + more_stamps
+        values2, stamps2 = [], []
+        deadline = time.monotonic() + 40
+        while len(stamps2) <= 200 and time.monotonic() < deadline:   # the server re-resolves the input
+            more_values, more_stamps = pull_for(inlet, 0.5)
+            values2, stamps2 = values2 + more_values, stamps2 + more_stamps
         assert len(stamps2) > 200 and set(stamps2) <= set(sender.stamps)
         assert np.array(values2)[0, 5] >= hr_before - 1.0          # the character's state carried on
     finally:
