@@ -194,8 +194,9 @@ class CaptureSession:
         self.state_changed.emit(state)
 
     # ---------------------------------------------------------------- blocking primitives
-    def start(self, participant: Participant, choice: DeviceChoice, label: str = "") -> Path:
-        """Open the devices and start a new session; return its folder (blocking).
+    def start(self, participant: Participant, choice: DeviceChoice, label: str = "", lsl: bool = False) -> Path:
+        """Open the devices and start a new session; return its folder (blocking). ``lsl``: also publish
+        the strap and events as LSL streams, see :mod:`effortface.capture_tool.lsl`.
 
         Raises
         ------
@@ -208,7 +209,7 @@ class CaptureSession:
         if not choice.port:
             raise UserError("Strap port: expected a serial port or URL, found none chosen")
         recorder = Recorder(self.out_dir, participant, choice.port, choice.protocol,
-                            video=choice.camera, label=label or None)
+                            video=choice.camera, label=label or None, lsl=lsl)
         path = recorder.start()
         self.recorder, self.phase, self._latest_frame = recorder, None, None
         self._tails = (CsvTail(path / HEART_RATE_CSV), CsvTail(path / EVENTS_CSV))
@@ -239,11 +240,12 @@ class CaptureSession:
         return recover_session(folder)
 
     # ------------------------------------------------------------------- background jobs
-    def start_in_background(self, participant: Participant, choice: DeviceChoice, label: str = "") -> None:
+    def start_in_background(self, participant: Participant, choice: DeviceChoice, label: str = "",
+                            lsl: bool = False) -> None:
         """Start a recording in a job: ``state_changed('starting')``, then ``recording_changed(path)``
         or ``status_changed(error, True)`` from :meth:`poll`."""
         self._set_state("starting")
-        self.jobs.submit("start", self.start, participant, choice, label, done=self._start_done)
+        self.jobs.submit("start", self.start, participant, choice, label, lsl, done=self._start_done)
 
     def stop_in_background(self) -> None:
         """Stop in a job; the session is closed, marked complete and summarised."""

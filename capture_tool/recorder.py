@@ -114,6 +114,9 @@ class Recorder:
         Appended to the session id.
     device : str
         Strap name: ``serial/<device>.serlog``.
+    lsl : bool
+        Also publish the strap and the events as LSL streams (:mod:`effortface.capture_tool.lsl`);
+        the LSL clock offset goes into ``session.json`` under ``lsl``.
     """
 
     def __init__(
@@ -125,8 +128,11 @@ class Recorder:
         video: int | str | os.PathLike | None = None,
         label: str | None = None,
         device: str | None = None,
+        lsl: bool = False,
     ) -> None:
         self.out_dir = Path(out_dir)
+        self._lsl_wanted = lsl
+        self.lsl: Any = None  # an LslPublisher once started with lsl=True
         self.participant = participant
         self.label = label
         self.queue: queue.Queue = queue.Queue()
@@ -164,6 +170,11 @@ class Recorder:
             if self._video_source is not None:
                 self.camera = CameraSource(self._video_source, self.clock, on_fault=self._camera_fault)
             self.info = self._new_info()
+            if self._lsl_wanted:
+                from effortface.capture_tool.lsl import LslPublisher  # lazy: pylsl loads liblsl
+
+                self.lsl = LslPublisher(self.link.device, self.link.port, self.participant.code,
+                                        self.info.session_id)
             self.path, self._lock = create_recording_session(self.out_dir, self.info)
         except BaseException:
             self.link.stop()
@@ -186,10 +197,14 @@ class Recorder:
 
     def _open_files(self) -> None:
         """Create the session's files and start the link and camera threads writing them."""
-        assert self.path is not None
+        assert self.path is not None and self.info is not None
         self._hr = HrWriter(self.path / HEART_RATE_CSV)
         self._events = EventWriter(self.path / EVENTS_CSV)
         self._t0 = time.monotonic()
+        if self.lsl is not None:
+            self.lsl.sync(self.clock())
+            self.info.extra["lsl"] = self.lsl.session_record()
+            self.info.save(self.path, overwrite=True)
         self.link.start(self.path / SERIAL_DIR / f"{self.link.device}.serlog")
         if self.camera is not None:
             self.camera.start(self.path / VIDEO_AVI, self.path / VIDEO_FRAMES_CSV)
@@ -252,6 +267,8 @@ class Recorder:
             self._last = obj
         elif kind == "event":
             self._guarded(self._events, lambda: self._events.write(Event(obj.t_s, obj.kind, obj.label, obj.value)))
+        if self.lsl is not None:
+            self.lsl(kind, obj)
 
     def _guarded(self, writer: Any, action: Callable[[], None]) -> None:
         """Run a write of ``writer``'s file; a failure becomes a fault naming the file (said once)."""
@@ -326,6 +343,8 @@ class Recorder:
             self._writer_thread.join()
         for writer in (self._hr, self._events):
             self._close(writer)
+        if self.lsl is not None:
+            self.lsl.close()
 
     def _close(self, writer: Any) -> None:
         """Close a CSV writer even after a failed write (the file is released even when its last flush

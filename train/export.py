@@ -1,17 +1,23 @@
-"""Export a trained model folder: ``model.json`` + ``svr.npz`` (train/bundle.py), ``face.onnx``, ``MODEL_CARD.md``.
+"""Export a trained model folder: ``model.json`` + ``svr.npz`` (train/bundle.py), ``face.onnx``,
+``face_f64.onnx``, ``MODEL_CARD.md``.
 
-- ``face.onnx`` uses standard ONNX operators only (Sub, Div, Mul, MatMul, ReduceSum, Add, Relu, Exp),
-  so engines without the ``ai.onnx.ml`` domain (Unity Sentis, Unreal NNE) can run it. Input
-  ``features`` (N, 4) = [w_per_kg, p_per_kg, nhr, epoc_norm]; output ``normalised_weights`` (N, B),
-  one column per blendshape in the bundle's order, before expressiveness and clipping. The scaler is
-  inside the graph; the RBF kernel is ``||z||^2 - 2 z.SV^T + ||SV||^2`` for all blendshapes' support
-  vectors stacked, so one MatMul serves every output. float64 by default, which meets the 1e-5
-  parity bound; ``onnx_dtype="float32"`` (for engines that only run float32) is checked at 1e-4,
-  because float32 rounding alone measures about 6e-5 on the sample lab.
+- ``face.onnx`` is the engine file: float32, opset 15 (:data:`ONNX_OPSET`), standard operators only
+  (Sub, Div, Mul, MatMul, ReduceSum, Add, Relu, Exp), so engines without the ``ai.onnx.ml`` domain
+  and limited to float32 and opsets 7-15 (Unity Sentis, Unreal NNE) can run it. Input ``features``
+  (N, 4) = [w_per_kg, p_per_kg, nhr, epoc_norm]; output ``normalised_weights`` (N, B), one column
+  per blendshape in the bundle's order, before expressiveness and clipping. Its metadata
+  (``metadata_props``) names the blendshapes, the feature order and units, and the parity figures
+  (see docs/ENGINE.md). ``face_f64.onnx`` is the same graph in float64 (for Python and tools).
+- The scaler is inside the graph; the RBF kernel is ``||z||^2 - 2 z.SV^T + ||SV||^2`` for all
+  blendshapes' support vectors stacked, so one MatMul serves every output.
 - At export, predictions of scikit-learn, of the numpy runtime loading the written files
   (:class:`effortface.train.face.SvrModel`) and of onnxruntime are compared on the training features and
   random rows around them; the export fails (nothing is left at the target) if the runtime differs
-  by more than 1e-9 or ONNX by more than 1e-5.
+  by more than 1e-9 or the float64 graph by more than 1e-5. The float32 graph's largest difference
+  from the numpy runtime is reported (``model.json`` and the graph's metadata); its target is 1e-4,
+  met by small models, but summing thousands of float32 kernel terms with dual coefficients of 10
+  measures about 7e-4 on the sample lab with the default grid: between 1e-4 and 2e-3 the export
+  goes on and the model card says so (use ``face_f64.onnx`` where float64 runs); above, it fails.
 - The folder is built beside the target and renamed into place, so a failed export never leaves a
   half-written model; an existing target is replaced only with ``force=True``. Never pickle.
 """
@@ -19,6 +25,7 @@
 from __future__ import annotations
 
 import datetime as _dt
+import json
 import os
 import shutil
 import tempfile
@@ -40,11 +47,19 @@ from effortface.train.hr_fit import HrModelFit
 from effortface.train.physiology import NhrParams
 
 FACE_ONNX = "face.onnx"
+#: the same graph in float64 (the float32 face.onnx is the engine file)
+FACE_F64_ONNX = "face_f64.onnx"
 MODEL_CARD = "MODEL_CARD.md"
 RUNTIME_TOL = 1e-9
 ONNX_TOL = 1e-5
+#: the float32 target: met by small models; a model with large dual coefficients (C = 10) and
+#: thousands of support vectors sums thousands of float32 terms and measures up to ~7e-4 (the sample
+#: lab with the default grid), which is reported, noted in the model card, and accepted up to
+#: ONNX_FAIL_FLOAT32 (weights are shown on a 0-1 scale; 1e-3 is invisible on a face)
 ONNX_TOL_FLOAT32 = 1e-4
-ONNX_OPSET = 17
+ONNX_FAIL_FLOAT32 = 2e-3
+#: Unity Sentis runs opsets 7-15; every operator used here is unchanged since opset 13 or earlier
+ONNX_OPSET = 15
 #: IR version 8 (ONNX 1.10+): loadable by older onnxruntime builds and by engines
 ONNX_IR_VERSION = 8
 #: every operator the graph may use (a test checks the exported graph against it)
@@ -132,8 +147,41 @@ def face_onnx(bundle: ModelBundle, dtype: str = "float64") -> onnx.ModelProto:
                         f"[{', '.join(bundle.blendshapes.names)}], multiply by expressiveness and clip")
     model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", ONNX_OPSET)],
                               producer_name="effortface", ir_version=ONNX_IR_VERSION)
+    onnx.helper.set_model_props(model, onnx_metadata(bundle, dtype))
     onnx.checker.check_model(model)
     return model
+
+
+#: units of the graph's input columns, in FEATURE_NAMES order
+FEATURE_UNITS = ("W/kg", "W/kg", "1 (0-1)", "1 (EPOC / 100 ml/kg)")
+
+
+def onnx_metadata(bundle: ModelBundle, dtype: str) -> dict[str, str]:
+    """``metadata_props`` of the graph: what an engine needs to wire it (docs/ENGINE.md).
+
+    Parameters
+    ----------
+    bundle : ModelBundle
+        The model.
+    dtype : str
+        The graph's tensor type.
+
+    Returns
+    -------
+    dict of str
+        ``effortface.blendshapes``, ``effortface.feature_names``, ``effortface.feature_units`` (JSON
+        lists), ``effortface.output``, ``effortface.dtype``, ``effortface.epoc_scale_ml_per_kg``.
+    """
+    return {
+        "effortface.blendshapes": json.dumps(list(bundle.blendshapes.names)),
+        "effortface.feature_names": json.dumps(list(FEATURE_NAMES)),
+        "effortface.feature_units": json.dumps(list(FEATURE_UNITS)),
+        "effortface.output": "normalised_weights (N, B): multiply column b by the character's "
+                             "expressiveness[b], then clip to [0, 1]",
+        "effortface.dtype": dtype,
+        "effortface.epoc_scale_ml_per_kg": repr(float(bundle.physiology["epoc"]["scale_ml_per_kg"])),
+        "effortface.state_update": "w, p, nhr and epoc_norm are computed by the caller; see docs/ENGINE.md",
+    }
 
 
 def _onnx_constants(bundle: ModelBundle) -> dict[str, np.ndarray]:
@@ -189,33 +237,51 @@ def parity_features(face: FaceModelFit, n_random: int = 500, seed: int = 0) -> n
     return np.vstack([x, np.abs(rand)])
 
 
-def check_parity(face: FaceModelFit, folder: str | os.PathLike, onnx_tol: float = ONNX_TOL
+def check_parity(face: FaceModelFit, folder: str | os.PathLike, onnx_tol: float | None = None
                  ) -> dict[str, float]:
-    """Compare scikit-learn with the numpy runtime (files as written) and with onnxruntime.
+    """Compare scikit-learn with the numpy runtime (files as written) and both ONNX graphs.
+
+    Parameters
+    ----------
+    face : FaceModelFit
+        The scikit-learn models.
+    folder : path-like
+        The written model folder (``svr.npz``, ``face.onnx``, ``face_f64.onnx``).
+    onnx_tol : float, optional
+        Bound for the float64 graph against scikit-learn (default :data:`ONNX_TOL`).
 
     Returns
     -------
     dict
-        ``runtime_max_abs_diff`` and ``onnx_max_abs_diff``.
+        ``runtime_max_abs_diff`` (runtime - scikit-learn), ``onnx_max_abs_diff`` (float64 graph -
+        scikit-learn), ``onnx_f32_vs_runtime_max_abs_diff`` (float32 ``face.onnx`` - runtime),
+        ``n_rows``.
 
     Raises
     ------
     ExportError
-        If the runtime differs by more than 1e-9 or the ONNX graph by more than ``onnx_tol``.
+        If the runtime differs by more than 1e-9, the float64 graph by more than ``onnx_tol`` or
+        the float32 graph by more than :data:`ONNX_FAIL_FLOAT32` (above :data:`ONNX_TOL_FLOAT32`
+        the export goes on with a note, see :func:`export_model`).
     """
     folder = Path(folder)
     x = parity_features(face)
     ref = face.predict_norm(x)
     runtime = read_bundle(folder).face_model().predict(x)
-    via_onnx = run_onnx(folder / FACE_ONNX, x)
     diffs = {"runtime_max_abs_diff": float(np.max(np.abs(runtime - ref))),
-             "onnx_max_abs_diff": float(np.max(np.abs(via_onnx - ref))), "n_rows": int(len(x))}
-    if diffs["runtime_max_abs_diff"] > RUNTIME_TOL:
-        raise ExportError(f"{folder / 'svr.npz'}: expected runtime predictions within {RUNTIME_TOL:g} "
-                          f"of scikit-learn, found {diffs['runtime_max_abs_diff']:.3g}")
-    if diffs["onnx_max_abs_diff"] > onnx_tol:
-        raise ExportError(f"{folder / FACE_ONNX}: expected ONNX predictions within {onnx_tol:g} of "
-                          f"scikit-learn, found {diffs['onnx_max_abs_diff']:.3g}")
+             "onnx_max_abs_diff": float(np.max(np.abs(run_onnx(folder / FACE_F64_ONNX, x) - ref))),
+             "onnx_f32_vs_runtime_max_abs_diff":
+                 float(np.max(np.abs(run_onnx(folder / FACE_ONNX, x) - runtime))),
+             "n_rows": int(len(x))}
+    checks = ((folder / "svr.npz", "runtime_max_abs_diff", RUNTIME_TOL, "runtime", "scikit-learn"),
+              (folder / FACE_F64_ONNX, "onnx_max_abs_diff", ONNX_TOL if onnx_tol is None else onnx_tol,
+               "ONNX", "scikit-learn"),
+              (folder / FACE_ONNX, "onnx_f32_vs_runtime_max_abs_diff", ONNX_FAIL_FLOAT32, "float32 ONNX",
+               "the numpy runtime"))
+    for path, key, tol, what, against in checks:
+        if not diffs[key] <= tol:
+            raise ExportError(f"{path}: expected {what} predictions within {tol:g} of {against}, "
+                              f"found {diffs[key]:.3g}")
     return diffs
 
 
@@ -223,9 +289,10 @@ def check_parity(face: FaceModelFit, folder: str | os.PathLike, onnx_tol: float 
 
 
 def export_model(bundle: ModelBundle, face: FaceModelFit, out_dir: str | os.PathLike, *,
-                 force: bool = False, card: str | None = None, onnx_dtype: str = "float64",
+                 force: bool = False, card: str | None = None,
                  inputs: Sequence[str | os.PathLike] = ()) -> Path:
-    """Write the model folder: bundle, ``face.onnx``, parity check, ``MODEL_CARD.md``.
+    """Write the model folder: bundle, ``face.onnx`` (float32), ``face_f64.onnx``, parity check,
+    ``MODEL_CARD.md``.
 
     Parameters
     ----------
@@ -239,8 +306,6 @@ def export_model(bundle: ModelBundle, face: FaceModelFit, out_dir: str | os.Path
         Replace an existing target folder.
     card : str, optional
         Model card text; :func:`model_card` of the bundle by default.
-    onnx_dtype : {"float64", "float32"}
-        Tensor type of ``face.onnx`` (float32 is checked at 1e-4 instead of 1e-5).
     inputs : sequence of path-like
         What the model was trained from: the folder must lie apart from them
         (:func:`check_model_target`).
@@ -265,9 +330,13 @@ def export_model(bundle: ModelBundle, face: FaceModelFit, out_dir: str | os.Path
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
     try:
         write_bundle(bundle, tmp)
-        onnx.save(face_onnx(bundle, onnx_dtype), str(tmp / FACE_ONNX))
-        tol = ONNX_TOL_FLOAT32 if onnx_dtype == "float32" else ONNX_TOL
-        bundle.metrics["export_parity"] = {**check_parity(face, tmp, tol), "onnx_dtype": onnx_dtype}
+        onnx.save(face_onnx(bundle, "float64"), str(tmp / FACE_F64_ONNX))
+        onnx.save(face_onnx(bundle, "float32"), str(tmp / FACE_ONNX))
+        parity = check_parity(face, tmp)
+        bundle.metrics["export_parity"] = {**parity, "onnx_dtype": "float32", "onnx_opset": ONNX_OPSET,
+                                           "float32_within_1e-4": parity["onnx_f32_vs_runtime_max_abs_diff"]
+                                           <= ONNX_TOL_FLOAT32}
+        _stamp_parity(tmp / FACE_ONNX, parity)
         write_bundle(bundle, tmp, overwrite=True)  # again, now with the parity figures
         (tmp / MODEL_CARD).write_text(card or model_card(bundle), encoding="utf-8")
         tmp.chmod(0o777 & ~_umask())  # mkdtemp's 0700 was for the build; the model is an ordinary folder
@@ -275,6 +344,15 @@ def export_model(bundle: ModelBundle, face: FaceModelFit, out_dir: str | os.Path
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return out
+
+
+def _stamp_parity(path: Path, parity: Mapping[str, float]) -> None:
+    """Add the measured parity to an ONNX file's metadata (the graph itself is unchanged)."""
+    model = onnx.load(str(path))
+    props = {p.key: p.value for p in model.metadata_props}
+    props["effortface.parity_max_abs_diff_vs_runtime"] = f"{parity['onnx_f32_vs_runtime_max_abs_diff']:.3g}"
+    onnx.helper.set_model_props(model, props)
+    onnx.save(model, str(path))
 
 
 def check_model_target(out_dir: str | os.PathLike, *, force: bool = False,
@@ -429,9 +507,19 @@ def model_card(bundle: ModelBundle) -> str:
         "- Predictions outside the training ranges of work and power are extrapolations.",
         "- Hyper-parameters were chosen by the same cross-validation that gives the held-out scores "
         "(not nested), so those scores are slightly optimistic.",
-        *hr_warnings(met.get("hr", {})), "",
+        *hr_warnings(met.get("hr", {})), *float32_warnings(met.get("export_parity", {})), "",
     ]
     return "\n".join(lines)
+
+
+def float32_warnings(parity: Mapping[str, Any]) -> list[str]:
+    """A limitation line when the float32 ``face.onnx`` misses the 1e-4 parity target."""
+    diff = parity.get("onnx_f32_vs_runtime_max_abs_diff")
+    if diff is None or diff <= ONNX_TOL_FLOAT32:
+        return []
+    return [f"- The float32 face.onnx differs from the numpy runtime by up to {diff:.2g} in a weight (target "
+            f"{ONNX_TOL_FLOAT32:g}; float32 sums of many support vectors): invisible on a face, but use "
+            "face_f64.onnx or the runtime where exact values matter."]
 
 
 def hr_warnings(hr: Mapping[str, Mapping[str, float]]) -> list[str]:

@@ -234,16 +234,28 @@ def motion_from_positions(
     return Motion(names, par, pos, None, float(fps), source)
 
 
+#: motion file suffixes :func:`read_motion` reads
+MOTION_SUFFIXES = (".bvh", ".npz", ".c3d", ".csv")
+
+
 def read_motion(path: str | Path, *, unit_m: float | None = None) -> Motion:
-    """Read a motion file, choosing the reader by suffix (``.bvh``, ``.npz``, joint-positions ``.csv``
-    or ``.c3d`` through :mod:`effortface.train.motion_c3d`).
+    """Read a motion file, choosing the reader by suffix (:data:`MOTION_SUFFIXES`).
+
+    ``.bvh`` (:func:`read_bvh`), ``.npz`` (:func:`read_npz_motion`), ``.csv`` joint positions in
+    either dialect (``<joint>_x_m`` columns with a ``.skeleton.json`` beside the clip:
+    :func:`effortface.train.motion_csv.read_positions_csv`; or ``<joint>_x`` columns with an
+    optional ``# parents:`` comment: :func:`read_positions_csv`) and ``.c3d`` (the Plug-in Gait
+    marker set: :func:`effortface.train.interop.c3d_motion.read_c3d`; other labelled points as
+    joints: :func:`effortface.train.motion_c3d.read_c3d`). The C3D readers import the ``c3d``
+    package only when called, so the runtime stays numpy and scipy only.
 
     Parameters
     ----------
     path : str or Path
         The motion file.
     unit_m : float, optional
-        BVH length unit in metres (see :func:`read_bvh`); ignored for ``.npz`` (already metres).
+        BVH length unit in metres (see :func:`read_bvh`); ignored for the others (in metres, or
+        in the units a C3D file declares).
 
     Returns
     -------
@@ -263,13 +275,25 @@ def read_motion(path: str | Path, *, unit_m: float | None = None) -> Motion:
     if suffix == ".npz":
         return read_npz_motion(path)
     if suffix == ".csv":
-        return read_positions_csv(path)
-    if suffix == ".c3d":
-        from effortface.train.motion_c3d import read_c3d  # optional package, never loaded by the runtime
+        from effortface.train.motion_csv import is_positions_csv
+        from effortface.train.motion_csv import read_positions_csv as read_skeleton_csv  # imports this module
 
-        return read_c3d(path)
-    raise MotionFormatError(f"{path}: expected a motion file ending in .bvh, .npz, .csv or .c3d, "
+        return read_skeleton_csv(path) if is_positions_csv(path) else read_positions_csv(path)
+    if suffix == ".c3d":
+        return _read_c3d(path)
+    raise MotionFormatError(f"{path}: expected a motion file ending in {', '.join(MOTION_SUFFIXES)}, "
                             f"got suffix {suffix!r}")
+
+
+def _read_c3d(path: Path) -> Motion:
+    """A C3D clip: Plug-in Gait markers become joint centres (a file with most of the set is read as
+    Plug-in Gait, so a missing marker is named), other labelled points are joints."""
+    from effortface.train.interop.c3d_motion import PLUG_IN_GAIT, read_c3d, read_c3d_markers
+    from effortface.train.motion_c3d import read_c3d as read_c3d_points
+
+    markers, _ = read_c3d_markers(path)
+    plug_in_gait = len(set(PLUG_IN_GAIT) & set(markers)) >= len(PLUG_IN_GAIT) // 2
+    return read_c3d(path) if plug_in_gait else read_c3d_points(path)
 
 
 #: the first column of a joint-positions CSV

@@ -30,20 +30,24 @@ from effortface.core.jobs import JobResult, Jobs
 from effortface.train.curves_io import CURVE_FORMATS, write_curves
 from effortface.train.energy import EnergyCurves, looped, work_and_power
 from effortface.train.motion import Motion, read_motion
+from effortface.train.motion_csv import is_positions_csv
 from effortface.train.runtime import Character, FaceModel, load_model
 from effortface.core.events import Emitter
 
 EXPORT_FORMATS = CURVE_FORMATS
-MOTION_SUFFIXES = (".bvh", ".npz")
+MOTION_SUFFIXES = (".bvh", ".npz", ".c3d", ".csv")
 MAX_LOOPS = 200
 
 
 def find_clips(folder: str | os.PathLike, limit: int = 200) -> list[Path]:
-    """Motion clips (``.bvh``, ``.npz``) in ``folder`` and below, sorted, at most ``limit``."""
+    """Motion clips (``.bvh``, ``.npz``, ``.c3d``, joint-positions ``.csv``) in ``folder`` and below,
+    sorted, at most ``limit``; a ``.csv`` counts only with a joint-positions header (so a session's
+    ``heart_rate.csv`` is not offered)."""
     root = Path(folder)
     if not root.is_dir():
         return []
-    found = sorted(p for ext in MOTION_SUFFIXES for p in root.rglob(f"*{ext}") if p.is_file())
+    found = sorted(p for ext in MOTION_SUFFIXES for p in root.rglob(f"*{ext}")
+                   if p.is_file() and (p.suffix != ".csv" or is_positions_csv(p)))
     return found[:limit]
 
 

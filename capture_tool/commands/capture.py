@@ -58,6 +58,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="stop after S seconds (default: the end of --plan, else Ctrl-C)")
     parser.add_argument("--out", required=True, metavar="DIR",
                         help=f"lab folder: receives the session folder; holds {REGISTRY_TSV}")
+    parser.add_argument("--lsl", action="store_true",
+                        help="also publish the strap (LSL type HeartRate) and the events (Markers) on the "
+                             "Lab Streaming Layer, for LabRecorder")
 
 
 def _participant(args: argparse.Namespace) -> tuple[Participant, bool]:
@@ -89,13 +92,17 @@ def run(args: argparse.Namespace) -> int:
     _check_out(args.out)
     participant, new = _participant(args)
     phases = read_plan(args.plan) if args.plan else []
-    recorder = Recorder(args.out, participant, args.port, args.protocol, _video_source(args), label=args.label)
+    recorder = Recorder(args.out, participant, args.port, args.protocol, _video_source(args), label=args.label,
+                        lsl=args.lsl)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     if hasattr(signal, "SIGXFSZ"):  # a file-size limit then fails the write (EFBIG): a fault, not a kill
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
     path = _start(recorder, args.out)
     print(path, flush=True)
+    if recorder.lsl is not None:
+        print(f"LSL: publishing HeartRate and Markers streams, source id {recorder.lsl.source_id}",
+              file=sys.stderr, flush=True)
     if new:
         register(Path(args.out) / REGISTRY_TSV, participant)
     plan = PlanRunner(phases, recorder.mark, lambda line: print(line, flush=True)) if phases else None

@@ -83,6 +83,9 @@ class QtCaptureStage(QtWidgets.QWidget):
     def _build(self, settings: QtCore.QSettings) -> None:
         self.preflight = QtPreflight(settings)
         self.form = QtParticipantForm()
+        self.lsl_box = QtWidgets.QCheckBox("Publish to LSL (HeartRate and Markers streams, for LabRecorder)")
+        self.lsl_box.setChecked(bool(settings.value("capture/lsl", False, type=bool)))
+        self.lsl_box.toggled.connect(lambda on: settings.setValue("capture/lsl", on))
         self.record_button = QtWidgets.QPushButton()
         self.record_button.setMinimumHeight(52)
         font = self.record_button.font()
@@ -102,7 +105,7 @@ class QtCaptureStage(QtWidgets.QWidget):
         self.flash.setAttribute(QtCore.Qt.WidgetAttribute.WA_StyledBackground, True)
         self.flash.hide()
         left = QtWidgets.QVBoxLayout()
-        for widget in (self.preflight, self.form, self.record_button, self.session_label):
+        for widget in (self.preflight, self.form, self.lsl_box, self.record_button, self.session_label):
             left.addWidget(widget)
         left.addStretch(1)
         left_box = QtWidgets.QWidget()
@@ -174,7 +177,7 @@ class QtCaptureStage(QtWidgets.QWidget):
             return False
         participant, label = self.form.participant(), self.form.session_label()
         self.preflight.remember()
-        self.session.start_in_background(participant, choice, label)
+        self.session.start_in_background(participant, choice, label, self.lsl_box.isChecked())
         return True
 
     def _confirm_devices(self, choice: DeviceChoice) -> DeviceChoice | None:

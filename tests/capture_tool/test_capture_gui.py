@@ -443,3 +443,35 @@ def test_capture_session_refuses_marks_without_recording(tmp_path) -> None:
         session.stop()
     assert session.incomplete_sessions() == []
     assert not any(tmp_path.iterdir())
+
+
+def test_publish_to_lsl_toggle_streams_the_strap(qtbot, window, settings) -> None:
+    """The Capture stage's LSL box: a real pylsl inlet receives the strap while it records."""
+    import json
+
+    import pylsl
+
+    from effortface.capture_tool.lsl import hr_source_id
+
+    stage = window.stages["capture"]
+    replay = PtyReplay([TimedChunk(2.0 + 0.1 * i, f"HR:{70 + i}\n".encode()) for i in range(10)])
+    _fill_form(stage, "P09")
+    stage.preflight.set_choice(port=replay.path, protocol="lines")
+    stage.preflight.camera.setCurrentText("No video")
+    qtbot.waitUntil(stage.settled, timeout=10_000)
+    stage.preflight.state["camera"] = "ready"
+    stage.lsl_box.setChecked(True)
+    assert settings.value("capture/lsl", type=bool) is True
+    path = _record(qtbot, stage)
+    found = pylsl.resolve_byprop("source_id", hr_source_id("lines", replay.path), 1, 10.0)
+    assert found and found[0].type() == "HeartRate"
+    inlet = pylsl.StreamInlet(found[0], recover=False)
+    inlet.open_stream(10)
+    start_replay_thread(replay)
+    got: list[float] = []
+    qtbot.waitUntil(lambda: got.extend(s[0] for s in inlet.pull_chunk(timeout=0.0)[0]) or len(got) >= 10,
+                    timeout=15_000)
+    _stop(qtbot, stage)
+    replay.close()
+    assert got == [70.0 + i for i in range(10)]
+    assert "clock_offset_s" in json.loads((path / "session.json").read_text())["lsl"]

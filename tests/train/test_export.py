@@ -1,4 +1,5 @@
-"""Export: runtime == scikit-learn (1e-9), ONNX == scikit-learn (1e-5), standard ops, no pickles,
+"""Export: runtime == scikit-learn (1e-9), float64 ONNX == scikit-learn (1e-5), float32 face.onnx ==
+runtime (1e-4, opset <= 15, metadata), standard ops, no pickles,
 no silent overwrite, a failed check leaves nothing behind."""
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from effortface.core.errors import UserError
 from effortface.train import export
 from effortface.train.bundle import read_bundle
 from effortface.train.dataset import hr_series, prepare, synthetic_table
-from effortface.train.export import (FACE_ONNX, MODEL_CARD, STANDARD_OPS, ExportError, build_bundle, export_model,
+from effortface.train.export import (FACE_F64_ONNX, FACE_ONNX, MODEL_CARD, STANDARD_OPS, ExportError, build_bundle, export_model,
                           parity_features, run_onnx)
 from effortface.train.face_fit import FaceFitConfig, fit_face_models
 from effortface.train.hr_fit import fit_hr_model
@@ -53,24 +54,41 @@ def test_runtime_equals_scikit_learn(fitted, model_dir):
 def test_onnx_equals_scikit_learn(fitted, model_dir):
     face = fitted[0]
     x = parity_features(face, seed=2)
-    np.testing.assert_allclose(run_onnx(model_dir / FACE_ONNX, x), face.predict_norm(x), rtol=0, atol=1e-5)
+    np.testing.assert_allclose(run_onnx(model_dir / FACE_F64_ONNX, x), face.predict_norm(x), rtol=0, atol=1e-5)
 
 
-def test_onnx_uses_standard_operators_only(model_dir):
-    model = onnx.load(str(model_dir / FACE_ONNX))
+@pytest.mark.parametrize("name", [FACE_ONNX, FACE_F64_ONNX])
+def test_onnx_uses_standard_operators_only(model_dir, name):
+    model = onnx.load(str(model_dir / name))
     onnx.checker.check_model(model)
     assert {op.domain for op in model.opset_import} == {""}
+    assert max(op.version for op in model.opset_import) <= 15
     ops = {n.op_type for n in model.graph.node}
     assert ops <= STANDARD_OPS and not any("SVM" in op for op in ops)
     assert [o.name for o in model.graph.output] == ["normalised_weights"]
 
 
-def test_float32_graph_for_engines(fitted, tmp_path):
-    face = fitted[0]
-    out = export_model(_bundle(fitted), face, tmp_path / "m32", onnx_dtype="float32")
-    x = parity_features(face, seed=3)
-    np.testing.assert_allclose(run_onnx(out / FACE_ONNX, x), face.predict_norm(x), atol=1e-4)
-    assert json.loads((out / "model.json").read_text())["metrics"]["export_parity"]["onnx_dtype"] == "float32"
+def test_face_onnx_is_float32_for_engines_and_matches_the_runtime(fitted, model_dir):
+    import onnxruntime as ort
+
+    sess = ort.InferenceSession(str(model_dir / FACE_ONNX), providers=["CPUExecutionProvider"])
+    assert sess.get_inputs()[0].type == "tensor(float)" and sess.get_outputs()[0].type == "tensor(float)"
+    x = parity_features(fitted[0], seed=3)
+    out = sess.run(None, {"features": x.astype(np.float32)})[0]
+    assert out.dtype == np.float32
+    np.testing.assert_allclose(out, load_model(model_dir).face.predict(x), rtol=0, atol=1e-4)
+    parity = json.loads((model_dir / "model.json").read_text())["metrics"]["export_parity"]
+    assert parity["onnx_dtype"] == "float32" and parity["onnx_opset"] <= 15
+    assert 0 < parity["onnx_f32_vs_runtime_max_abs_diff"] <= 1e-4
+
+
+def test_face_onnx_metadata_names_blendshapes_features_and_units(model_dir):
+    props = {p.key: p.value for p in onnx.load(str(model_dir / FACE_ONNX)).metadata_props}
+    assert json.loads(props["effortface.blendshapes"]) == list(DEFAULT_SET.names)
+    assert json.loads(props["effortface.feature_names"]) == ["w_per_kg", "p_per_kg", "nhr", "epoc_norm"]
+    assert json.loads(props["effortface.feature_units"])[:2] == ["W/kg", "W/kg"]
+    assert props["effortface.dtype"] == "float32"
+    assert float(props["effortface.parity_max_abs_diff_vs_runtime"]) <= 1e-4
 
 
 def test_no_file_is_a_pickle(model_dir):
@@ -82,7 +100,7 @@ def test_no_file_is_a_pickle(model_dir):
             assert npz[k].dtype != object
     with zipfile.ZipFile(model_dir / "svr.npz") as z:
         assert all(n.endswith(".npy") for n in z.namelist())
-    assert sorted(p.name for p in model_dir.iterdir()) == sorted(["model.json", "svr.npz", FACE_ONNX, MODEL_CARD])
+    assert sorted(p.name for p in model_dir.iterdir()) == sorted(["model.json", "svr.npz", FACE_ONNX, FACE_F64_ONNX, MODEL_CARD])
 
 
 def test_model_json_has_gamma_numbers_and_parity(model_dir):
@@ -114,7 +132,7 @@ def test_force_replaces(fitted, tmp_path):
 
 def test_failed_parity_leaves_nothing(fitted, tmp_path, monkeypatch):
     monkeypatch.setattr(export, "ONNX_TOL", -1.0)
-    with pytest.raises(ExportError, match=r"face.onnx: expected ONNX predictions within -1 of scikit-learn"):
+    with pytest.raises(ExportError, match=r"face_f64.onnx: expected ONNX predictions within -1 of scikit-learn"):
         export_model(_bundle(fitted), fitted[0], tmp_path / "m")
     assert list(tmp_path.iterdir()) == []
 
@@ -170,3 +188,15 @@ def test_export_refuses_a_folder_among_its_inputs(fitted, tmp_path):
                                         r"found input \S+lab around it"):
         export_model(_bundle(fitted), fitted[0], lab / "m", inputs=[str(lab)])
     assert sorted(p.name for p in lab.iterdir()) == []
+
+
+def test_float32_parity_over_target_is_reported_not_fatal(fitted, tmp_path, monkeypatch):
+    monkeypatch.setattr(export, "ONNX_TOL_FLOAT32", 1e-12)       # a model that misses the 1e-4 target
+    out = export_model(_bundle(fitted), fitted[0], tmp_path / "m")
+    parity = json.loads((out / "model.json").read_text())["metrics"]["export_parity"]
+    assert parity["float32_within_1e-4"] is False
+    assert "The float32 face.onnx differs from the numpy runtime by up to" in (out / MODEL_CARD).read_text()
+    monkeypatch.setattr(export, "ONNX_FAIL_FLOAT32", 1e-12)
+    with pytest.raises(ExportError, match=r"face\.onnx: expected float32 ONNX predictions within 1e-12 of the numpy runtime"):
+        export_model(_bundle(fitted), fitted[0], tmp_path / "m2")
+    assert not (tmp_path / "m2").exists()

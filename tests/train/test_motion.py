@@ -123,7 +123,7 @@ def test_truncated_frame_line_is_named(shared_data: Path, tmp_path: Path) -> Non
 
 
 BAD_OTHER = {
-    r"clip\.fbx: expected a motion file ending in \.bvh, \.npz, \.csv or \.c3d, got suffix '\.fbx'": "clip.fbx",
+    r"clip\.fbx: expected a motion file ending in \.bvh, \.npz, \.c3d, \.csv, got suffix '\.fbx'": "clip.fbx",
     r"missing\.bvh: expected a readable BVH file": "missing.bvh",
     r"empty\.npz: expected a readable \.npz": "empty.npz",
 }

@@ -170,7 +170,7 @@ BAD_CLI = {
         lambda d, t: [str(d / JJ), "--load-back", "-1"],
     r"--filter-tau-s: filter_tau_s: expected time constants of 0 s or more, found -0.5":
         lambda d, t: [str(d / JJ), "--filter-tau-s", "-0.5"],
-    r"clip\.txt: expected a motion file ending in \.bvh, \.npz, \.csv or \.c3d":
+    r"clip\.txt: expected a motion file ending in \.bvh, \.npz, \.c3d, \.csv":
         lambda d, t: [str(t / "clip.txt")],
 }
 

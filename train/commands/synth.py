@@ -19,9 +19,10 @@ from effortface.core import bounds
 from effortface.core.docs import DESIGN, SCIENCE
 from effortface.core.errors import UserError
 from effortface.core.fileio import check_apart
+from effortface.train.character_options import add_character_arguments, character_from_args
 from effortface.train.curves_io import CURVE_FORMATS, check_output, units_path, write_curves
 from effortface.train.motion import read_motion
-from effortface.train.runtime import Character, FaceModel, load_model
+from effortface.train.runtime import load_model
 
 
 #: the shipped documents ``--help`` cites (effortface.core.docs)
@@ -31,22 +32,12 @@ HELP_DOCS = (DESIGN, SCIENCE)
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of DESIGN.md's synth line."""
     parser.add_argument("model_dir", metavar="MODEL_DIR", help="model bundle folder, or 'default'")
-    parser.add_argument("motion", metavar="MOTION", help="motion clip (.bvh, .npz, joint-positions .csv or .c3d)")
+    parser.add_argument("motion", metavar="MOTION", help="motion clip (.bvh, .npz, .c3d or joint-positions .csv)")
     parser.add_argument("--out", required=True, metavar="CSV", help="output CSV file")
     parser.add_argument("--format", choices=CURVE_FORMATS, default="csv",
                         help="per-frame curves (default) or a Live Link Face CSV")
     parser.add_argument("--force", action="store_true", help="replace an existing --out file")
-    parser.add_argument("--age", type=float, default=30.0, help="years (default 30)")
-    parser.add_argument("--sex", default="male", help="male or female (default male)")
-    parser.add_argument("--height", type=float, default=1.78, metavar="M", help="metres (default 1.78)")
-    parser.add_argument("--mass", type=float, default=75.0, metavar="KG", help="kilograms (default 75)")
-    parser.add_argument("--training-level", type=float, default=5.0, metavar="TL",
-                        help="0-10 (default 5)")
-    parser.add_argument("--expressiveness", default=None, metavar="A,B,C,D",
-                        help="one factor per blendshape (default all 1)")
-    parser.add_argument("--load-left", type=float, default=0.0, metavar="KG", help="left hand")
-    parser.add_argument("--load-right", type=float, default=0.0, metavar="KG", help="right hand")
-    parser.add_argument("--load-back", type=float, default=0.0, metavar="KG", help="on the back")
+    add_character_arguments(parser)
     parser.add_argument("--mapping", default=None, metavar="JSON",
                         help="joint-to-segment mapping file (default: built-in conventions)")
     parser.add_argument("--filter-tau-s", type=float, default=None, metavar="S",
@@ -57,29 +48,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "CMU cgspeed 0.05644)")
 
 
-def _expressiveness(text: str | None, n: int) -> tuple[float, ...]:
-    if text is None:
-        return (1.0,) * n
-    try:
-        return tuple(float(v) for v in text.split(","))
-    except ValueError:
-        raise UserError(f"--expressiveness: expected {n} comma-separated numbers, found {text!r}") from None
-
-
-def _character(args: argparse.Namespace, model: FaceModel) -> Character:
-    n_blendshapes = len(model.blendshapes)
-    try:
-        character = Character(age=args.age, sex=args.sex, height_m=args.height, mass_kg=args.mass,
-                         training_level=args.training_level,
-                         expressiveness=_expressiveness(args.expressiveness, n_blendshapes),
-                         load_left_kg=args.load_left, load_right_kg=args.load_right,
-                         load_back_kg=args.load_back)
-        model.expressiveness(character)
-    except UserError as exc:
-        raise UserError(f"character options: {exc}") from None
-    return character
-
-
 def run(args: argparse.Namespace) -> int:
     """Synthesize and write the curves; return 0."""
     out = Path(args.out)
@@ -87,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
     check_apart("--out", out, [model_dir, args.motion, args.mapping])
     check_output(out, args.force, args.format)  # fail before the work
     model = load_model(args.model_dir)
-    character = _character(args, model)
+    character = character_from_args(args, model)
     if args.unit_m is not None and not (math.isfinite(args.unit_m) and args.unit_m > 0):
         raise UserError(f"--unit-m: expected a length in metres above 0, found {args.unit_m:g}")
     if args.unit_m is not None:

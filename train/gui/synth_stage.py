@@ -369,7 +369,7 @@ class QtSynthStage(QtWidgets.QWidget):
 
     # ---- layout
     def _build(self) -> None:
-        self.status = caption("Open a motion clip (.bvh or .npz) to start.")
+        self.status = caption("Open a motion clip (.bvh, .npz, .c3d or joint-positions .csv) to start.")
         self.skeleton = QtSkeletonView()
         self.face = QtFacePreview()
         self.character = QtCharacterPanel(self.session, self.show_status)
@@ -503,7 +503,7 @@ class QtSynthStage(QtWidgets.QWidget):
 
     def _ask_clip(self) -> None:
         path, _ = QtWidgets.QFileDialog.getOpenFileName(self, "Open motion clip", str(self.motion_dir),
-                                                        "Motion (*.bvh *.npz)")
+                                                        "Motion (*.bvh *.npz *.c3d *.csv)")
         if path:
             self.load_clip(path)
 
