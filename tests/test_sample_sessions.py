@@ -1,5 +1,7 @@
-"""The shipped sample lab (sample_sessions/): variety, every stage's reader, the serial path end to
-end, raters against the ground truth, the reliability round, size and deterministic regeneration.
+"""The shipped sample lab (sample_sessions/): variety, every stage's reader, only what a capture
+records (the exercise log, no work.csv, no ground truth in events.csv), work derived as
+``effortface work`` does, the serial path end to end, raters against the ground truth, the
+reliability round, size and deterministic regeneration.
 """
 
 from __future__ import annotations
@@ -75,43 +77,84 @@ def test_the_lab_has_the_papers_variety() -> None:
 def test_session_validates_and_opens_in_every_reader(session: Path) -> None:
     assert validate_session(session) == []
     s = read_session(session)
-    assert 180 <= s.frame_times_s[-1] <= 360  # 3 to 6 minutes
+    assert 600 <= s.frame_times_s[-1] <= 720  # 10 to 12 minutes (issue 18: 10-20)
     assert read_hr_csv(session / "heart_rate.csv") == s.heart_rate
     for rater in RATERS:
         ann = read_annotations(session / "annotations" / f"{rater}.json")
         assert ann.session_id == session.name and all(len(t) > 10 for t in ann.tracks.values())
-    work = np.genfromtxt(session / "work.csv", delimiter=",", names=True)
-    assert work.dtype.names == ("t_s", "w_per_kg", "p_per_kg") and np.all(np.diff(work["t_s"]) > 0)
+    assert not (session / "work.csv").exists()  # a capture records none: effortface work derives it
     phases = [e for e in s.events if e.kind == "phase_start"]
-    assert len(phases) >= 5 and {e.label for e in phases} & {"rest"}  # bouts with recovery
+    assert len(phases) >= 7 and {e.label for e in phases} & {"rest"}  # bouts with recovery
     log = read_serlog(s.serlog_paths()[0])
     assert log.header["protocol"] == s.devices["heart_rate"]["protocol"]
 
 
-def test_motion_clip_opens_in_the_motion_reader_and_agrees_with_work_csv() -> None:
-    """The assembled squats clip sits in its squat set, and effortface.train.energy's w of it (with the
-    participant's mass and back load) agrees with work.csv over that set within 25 %."""
-    from effortface.train.energy import work_and_power
+#: the exercise log's kinds (DESIGN.md "Exercise log") and the link events a capture logs
+LOG_KINDS = {"phase_start", "phase_end", "speed", "grade", "load", "reps"}
+CAPTURE_KINDS = {"sync", "link", "device_gap", "reconnect"}
+
+
+@pytest.mark.parametrize("session", SESSIONS, ids=_ids(SESSIONS))
+def test_events_are_an_exercise_log_without_ground_truth(session: Path) -> None:
+    """events.csv holds what an operator and the recorder log: catalog ids with no value on phases,
+    treadmill speed / grade, back loads, repetition counts; never a true work rate (the old lab wrote
+    the true W/kg on every phase_start)."""
+    from effortface.train.catalog import default_catalog
+
+    s = read_session(session)
+    catalog = default_catalog()
+    assert {e.kind for e in s.events} <= LOG_KINDS | CAPTURE_KINDS
+    phases = [e for e in s.events if e.kind in ("phase_start", "phase_end")]
+    assert all(e.label in catalog and e.value == "" for e in phases)
+    truth = json.loads((TRUTH / session.name / "session_truth.json").read_text())["phases"]
+    true_w = {f"{p[k]:.2f}" for p in truth for k in ("true_w_per_kg", "demand_w_per_kg")} - {"0.10"}
+    logged = [e for e in s.events if e.kind in LOG_KINDS]
+    assert not [e for e in logged if e.value and f"{float(e.value):.2f}" in true_w and e.kind != "reps"]
+    assert all(e.label == "treadmill" for e in logged if e.kind in ("speed", "grade"))
+    assert all(e.label == "back_kg" for e in logged if e.kind == "load")
+
+
+@pytest.mark.parametrize("session", SESSIONS, ids=_ids(SESSIONS))
+def test_effortface_work_derives_every_second_and_follows_the_true_work(session: Path) -> None:
+    """derive_work (``effortface work``) covers every second from the log (or the clip) and its
+    per-phase w is within 20 % of the simulator's true w: the catalog was calibrated on clips, not
+    on the simulator, and reads the pace from the logged repetitions, so a phase's mean differs from
+    the truth (measured: treadmill -3.1 to +1.4 %, squats -11.8 to +4.2 % (the clip's set), jumping
+    jacks +0.5 %)."""
+    from effortface.train.work import derive_work
+
+    table = derive_work(session)
+    assert all(src.startswith(("log:", "motion:")) for src in table.source)
+    truth = json.loads((TRUTH / session.name / "session_truth.json").read_text())["phases"]
+    for ph in truth:
+        inside = (table.t_s >= ph["start_s"] + 1) & (table.t_s < ph["end_s"] - 1)
+        assert np.nanmean(table.w_per_kg[inside]) == pytest.approx(ph["true_w_per_kg"], rel=0.2, abs=0.05), ph
+
+
+def test_motion_clip_opens_in_the_motion_reader_and_drives_the_derived_work() -> None:
+    """The assembled squats clip sits in its squat set; derive_work takes that set's seconds from the
+    clip (with the participant's mass and the log's back load), and its w agrees with the true w of
+    the set within 25 %."""
     from effortface.train.motion import read_motion
-    from effortface.train.segments import Loads, build_body
+    from effortface.train.work import derive_work
 
     with_motion = [s for s in SESSIONS if (s / "motion").is_dir()]
     assert with_motion, "expected one strength session with motion/"
     for session in with_motion:
         s = read_session(session)
         meta = json.loads((session / "motion" / "motion.json").read_text())
+        truth = json.loads((TRUTH / session.name / "session_truth.json").read_text())["phases"]
+        table = derive_work(s)
         for item in meta["files"]:
             motion = read_motion(session / "motion" / item["path"])
             starts = {e.t_s: e.label for e in s.events if e.kind == "phase_start"}
             assert starts[item["offset_s"]] == "squats"
             duration_s = motion.n_frames / motion.fps
-            assert duration_s == pytest.approx(35, abs=1)
-            body = build_body(motion.joint_names, motion.parents, s.participant.mass_kg, s.participant.sex,
-                              loads=Loads(back_kg=item["load_back_kg"]), reference_positions_m=motion.positions_m)
-            w_clip = work_and_power(motion, body).w_per_kg.mean()
-            work = np.genfromtxt(session / "work.csv", delimiter=",", names=True)
-            inside = (work["t_s"] >= item["offset_s"] + 3) & (work["t_s"] < item["offset_s"] + duration_s)
-            assert w_clip == pytest.approx(work["w_per_kg"][inside].mean(), rel=0.25)
+            assert duration_s == pytest.approx(35, abs=1) == item["duration_s"]
+            inside = (table.t_s >= item["offset_s"] + 3) & (table.t_s < item["offset_s"] + duration_s - 1)
+            assert {table.source[i] for i in np.flatnonzero(inside)} == {f"motion:{item['path']}"}
+            true_w = next(p["true_w_per_kg"] for p in truth if p["start_s"] == item["offset_s"])
+            assert np.mean(table.w_per_kg[inside]) == pytest.approx(true_w, rel=0.25)
 
 
 # ------------------------------------------------------------------------- the serial path
