@@ -282,7 +282,7 @@ def synth_step(model_dir: Path, lab: Path, out: Path) -> Path:
     else:
         if (sessions[0] / WORK_CSV).is_file():
             work = pd.read_csv(sessions[0] / WORK_CSV)
-            t_s, w, p_ = work["t_s"], work["w_per_kg"], work["p_per_kg"]
+            t_s, w, p_ = (work[c].to_numpy(float) for c in ("t_s", "w_per_kg", "p_per_kg"))
         else:
             table = derive_work(sessions[0])
             t_s, w, p_ = table.t_s, table.w_per_kg, table.p_per_kg
