@@ -5,9 +5,12 @@
    (two real processes, real serial I/O), into ``DIR/captured/``;
 2. **decode** (:func:`decode_step`): ``effortface decode`` turns the captured raw bytes back into a
    heart-rate CSV;
-3. **train**: :func:`effortface.train.pipeline.run_training`, the one training run;
-4. **evaluate**: :func:`effortface.train.evaluation.evaluate_bundle`, the one evaluation;
-5. **synthesize** (:func:`synth_step`): a clip's face curves with the trained bundle, written by
+3. **work** (:func:`work_step`): the lab's sessions are copied into ``DIR/lab/`` and
+   ``effortface work`` derives each one's ``work.csv`` from its exercise log and motion clips, as in
+   a real lab (the sample lab records no work: :func:`effortface.train.work.derive_work`);
+4. **train**: :func:`effortface.train.pipeline.run_training`, the one training run, on ``DIR/lab/``;
+5. **evaluate**: :func:`effortface.train.evaluation.evaluate_bundle`, the one evaluation;
+6. **synthesize** (:func:`synth_step`): a clip's face curves with the trained bundle, written by
    :func:`effortface.train.curves_io.write_curves`.
 
 The output folder's rules are :func:`demo_out_dir`'s and :func:`replace_out`'s.
@@ -193,15 +196,63 @@ def decode_step(captured: Path, out: Path) -> tuple[int, int]:
     return decoded, len(s.heart_rate)
 
 
+#: the folder of the demo output that holds the copied sessions and their derived work.csv
+LAB_COPY = "lab"
+
+
+def work_step(lab: Path, out: Path) -> tuple[Path, list[str]]:
+    """Copy the lab's sessions into ``out/lab`` and run ``effortface work`` on them (a real process).
+
+    Parameters
+    ----------
+    lab : Path
+        The lab (its session folders are copied; it is never written to).
+    out : Path
+        The demo folder.
+
+    Returns
+    -------
+    copy : Path
+        ``out/lab``, whose sessions now hold a ``work.csv`` each.
+    lines : list of str
+        ``effortface work``'s summary line per session it derived (sessions of ``lab`` that
+        already hold a work.csv keep theirs and are not derived).
+
+    Raises
+    ------
+    UserError
+        If ``effortface work`` fails (with its error line).
+    """
+    from effortface.capture_tool.session import list_sessions
+
+    from effortface.train.work import WORK_CSV
+
+    copy = out / LAB_COPY
+    copy.mkdir()
+    missing = []
+    for session in list_sessions(lab):
+        shutil.copytree(session, copy / session.name)
+        if not (session / WORK_CSV).is_file():  # a work.csv of the --lab's own (maybe hand-made) is kept
+            missing.append(str(copy / session.name))
+    if not missing:
+        return copy, []
+    done = subprocess.run(_cli("work", *missing), capture_output=True, text=True, timeout=600)
+    if done.returncode != 0:
+        raise UserError(f"effortface work {copy}: expected exit 0, found {done.returncode}: "
+                        f"{done.stderr.strip().splitlines()[-1] if done.stderr.strip() else ''}")
+    return copy, done.stdout.strip().splitlines()
+
+
 def synth_step(model_dir: Path, lab: Path, out: Path) -> Path:
-    """Face curves for a motion clip of the lab (or a session's work.csv) with the trained bundle.
+    """Face curves for a motion clip of the lab (or a session's work) with the trained bundle.
 
     Parameters
     ----------
     model_dir : Path
         The trained bundle.
     lab : Path
-        The lab: its first clip, else its first session's ``work.csv``; its first participant.
+        The lab: its first clip, else its first session's work (``work.csv``, else derived as
+        ``effortface work`` does); its first participant.
     out : Path
         The demo folder: the curves go to ``out/synth.csv`` (:data:`SYNTH_DIGITS` digits).
 
@@ -213,6 +264,7 @@ def synth_step(model_dir: Path, lab: Path, out: Path) -> Path:
     from effortface.capture_tool.session import list_sessions, read_session
     from effortface.train.curves_io import write_curves
     from effortface.train.runtime import Character, load_model
+    from effortface.train.work import WORK_CSV, derive_work
 
     model = load_model(model_dir)
     sessions = list_sessions(lab)
@@ -228,8 +280,13 @@ def synth_step(model_dir: Path, lab: Path, out: Path) -> Path:
     if clips:
         curves = model.synthesize(clips[0], character)
     else:
-        work = pd.read_csv(sessions[0] / "work.csv")
-        curves = model.curves_from_work(work["t_s"], work["w_per_kg"], work["p_per_kg"], 1.0, character)
+        if (sessions[0] / WORK_CSV).is_file():
+            work = pd.read_csv(sessions[0] / WORK_CSV)
+            t_s, w, p_ = (work[c].to_numpy(float) for c in ("t_s", "w_per_kg", "p_per_kg"))
+        else:
+            table = derive_work(sessions[0])
+            t_s, w, p_ = table.t_s, table.w_per_kg, table.p_per_kg
+        curves = model.curves_from_work(t_s, w, p_, 1.0, character)
     return write_curves(out / "synth.csv", curves, model, digits=SYNTH_DIGITS)
 
 

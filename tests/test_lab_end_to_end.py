@@ -24,7 +24,7 @@ from .capture_tool.capture_helpers import effortface, start_replay
 SAMPLES = Path(__file__).resolve().parents[1] / "sample_sessions"
 #: three participants of distinct training levels, three strap protocols' worth of bytes
 SOURCES = ("P01_20260112-093000_cardio", "P02_20260112-113700_strength", "P03_20260120-142200_strength")
-REPLAY_SPEED = 4.0  # the 200-s strap logs in about 50 s of capture
+REPLAY_SPEED = 12.0  # the 10-12-minute strap logs in about 1 minute of capture
 
 
 def _plan(source: Path, out: Path) -> Path:
@@ -37,7 +37,7 @@ def _plan(source: Path, out: Path) -> Path:
     rows = ["start_s,end_s,exercise,speed_m_s,back_kg"]
     for phase in log.phases:
         gait = phase.exercise.startswith("treadmill")
-        (_, _, state), *_ = log.states(phase, ("treadmill",) if gait else ())
+        *_, (_, _, state) = log.states(phase, ("treadmill",) if gait else ())  # as set during the phase
         exercise = "treadmill" if gait else phase.exercise
         speed = "" if state.speed_m_s is None else f"{state.speed_m_s:g}"
         rows.append(f"{phase.start_s / REPLAY_SPEED:.2f},{phase.end_s / REPLAY_SPEED:.2f},{exercise},{speed},"

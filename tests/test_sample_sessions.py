@@ -1,5 +1,7 @@
-"""The shipped sample lab (sample_sessions/): variety, every stage's reader, the serial path end to
-end, raters against the ground truth, the reliability round, size and deterministic regeneration.
+"""The shipped sample lab (sample_sessions/): variety, every stage's reader, only what a capture
+records (the exercise log, no work.csv, no ground truth in events.csv), work derived as
+``effortface work`` does, the serial path end to end, raters against the ground truth, the
+reliability round, size and deterministic regeneration.
 """
 
 from __future__ import annotations
@@ -75,43 +77,84 @@ def test_the_lab_has_the_papers_variety() -> None:
 def test_session_validates_and_opens_in_every_reader(session: Path) -> None:
     assert validate_session(session) == []
     s = read_session(session)
-    assert 180 <= s.frame_times_s[-1] <= 360  # 3 to 6 minutes
+    assert 600 <= s.frame_times_s[-1] <= 720  # 10 to 12 minutes (issue 18: 10-20)
     assert read_hr_csv(session / "heart_rate.csv") == s.heart_rate
     for rater in RATERS:
         ann = read_annotations(session / "annotations" / f"{rater}.json")
         assert ann.session_id == session.name and all(len(t) > 10 for t in ann.tracks.values())
-    work = np.genfromtxt(session / "work.csv", delimiter=",", names=True)
-    assert work.dtype.names == ("t_s", "w_per_kg", "p_per_kg") and np.all(np.diff(work["t_s"]) > 0)
+    assert not (session / "work.csv").exists()  # a capture records none: effortface work derives it
     phases = [e for e in s.events if e.kind == "phase_start"]
-    assert len(phases) >= 5 and {e.label for e in phases} & {"rest"}  # bouts with recovery
+    assert len(phases) >= 7 and {e.label for e in phases} & {"rest"}  # bouts with recovery
     log = read_serlog(s.serlog_paths()[0])
     assert log.header["protocol"] == s.devices["heart_rate"]["protocol"]
 
 
-def test_motion_clip_opens_in_the_motion_reader_and_agrees_with_work_csv() -> None:
-    """The assembled squats clip sits in its squat set, and effortface.train.energy's w of it (with the
-    participant's mass and back load) agrees with work.csv over that set within 25 %."""
-    from effortface.train.energy import work_and_power
+#: the exercise log's kinds (DESIGN.md "Exercise log") and the link events a capture logs
+LOG_KINDS = {"phase_start", "phase_end", "speed", "grade", "load", "reps"}
+CAPTURE_KINDS = {"sync", "link", "device_gap", "reconnect"}
+
+
+@pytest.mark.parametrize("session", SESSIONS, ids=_ids(SESSIONS))
+def test_events_are_an_exercise_log_without_ground_truth(session: Path) -> None:
+    """events.csv holds what an operator and the recorder log: catalog ids with no value on phases,
+    treadmill speed / grade, back loads, repetition counts; never a true work rate (the old lab wrote
+    the true W/kg on every phase_start)."""
+    from effortface.train.catalog import default_catalog
+
+    s = read_session(session)
+    catalog = default_catalog()
+    assert {e.kind for e in s.events} <= LOG_KINDS | CAPTURE_KINDS
+    phases = [e for e in s.events if e.kind in ("phase_start", "phase_end")]
+    assert all(e.label in catalog and e.value == "" for e in phases)
+    truth = json.loads((TRUTH / session.name / "session_truth.json").read_text())["phases"]
+    true_w = {f"{p[k]:.2f}" for p in truth for k in ("true_w_per_kg", "demand_w_per_kg")} - {"0.10"}
+    logged = [e for e in s.events if e.kind in LOG_KINDS]
+    assert not [e for e in logged if e.value and f"{float(e.value):.2f}" in true_w and e.kind != "reps"]
+    assert all(e.label == "treadmill" for e in logged if e.kind in ("speed", "grade"))
+    assert all(e.label == "back_kg" for e in logged if e.kind == "load")
+
+
+@pytest.mark.parametrize("session", SESSIONS, ids=_ids(SESSIONS))
+def test_effortface_work_derives_every_second_and_follows_the_true_work(session: Path) -> None:
+    """derive_work (``effortface work``) covers every second from the log (or the clip) and its
+    per-phase w is within 20 % of the simulator's true w: the catalog was calibrated on clips, not
+    on the simulator, and reads the pace from the logged repetitions, so a phase's mean differs from
+    the truth (measured: treadmill -3.1 to +1.4 %, squats -11.8 to +4.2 % (the clip's set), jumping
+    jacks +0.5 %)."""
+    from effortface.train.work import derive_work
+
+    table = derive_work(session)
+    assert all(src.startswith(("log:", "motion:")) for src in table.source)
+    truth = json.loads((TRUTH / session.name / "session_truth.json").read_text())["phases"]
+    for ph in truth:
+        inside = (table.t_s >= ph["start_s"] + 1) & (table.t_s < ph["end_s"] - 1)
+        assert np.nanmean(table.w_per_kg[inside]) == pytest.approx(ph["true_w_per_kg"], rel=0.2, abs=0.05), ph
+
+
+def test_motion_clip_opens_in_the_motion_reader_and_drives_the_derived_work() -> None:
+    """The assembled squats clip sits in its squat set; derive_work takes that set's seconds from the
+    clip (with the participant's mass and the log's back load), and its w agrees with the true w of
+    the set within 25 %."""
     from effortface.train.motion import read_motion
-    from effortface.train.segments import Loads, build_body
+    from effortface.train.work import derive_work
 
     with_motion = [s for s in SESSIONS if (s / "motion").is_dir()]
     assert with_motion, "expected one strength session with motion/"
     for session in with_motion:
         s = read_session(session)
         meta = json.loads((session / "motion" / "motion.json").read_text())
+        truth = json.loads((TRUTH / session.name / "session_truth.json").read_text())["phases"]
+        table = derive_work(s)
         for item in meta["files"]:
             motion = read_motion(session / "motion" / item["path"])
             starts = {e.t_s: e.label for e in s.events if e.kind == "phase_start"}
             assert starts[item["offset_s"]] == "squats"
             duration_s = motion.n_frames / motion.fps
-            assert duration_s == pytest.approx(35, abs=1)
-            body = build_body(motion.joint_names, motion.parents, s.participant.mass_kg, s.participant.sex,
-                              loads=Loads(back_kg=item["load_back_kg"]), reference_positions_m=motion.positions_m)
-            w_clip = work_and_power(motion, body).w_per_kg.mean()
-            work = np.genfromtxt(session / "work.csv", delimiter=",", names=True)
-            inside = (work["t_s"] >= item["offset_s"] + 3) & (work["t_s"] < item["offset_s"] + duration_s)
-            assert w_clip == pytest.approx(work["w_per_kg"][inside].mean(), rel=0.25)
+            assert duration_s == pytest.approx(35, abs=1) == item["duration_s"]
+            inside = (table.t_s >= item["offset_s"] + 3) & (table.t_s < item["offset_s"] + duration_s - 1)
+            assert {table.source[i] for i in np.flatnonzero(inside)} == {f"motion:{item['path']}"}
+            true_w = next(p["true_w_per_kg"] for p in truth if p["start_s"] == item["offset_s"])
+            assert np.mean(table.w_per_kg[inside]) == pytest.approx(true_w, rel=0.25)
 
 
 # ------------------------------------------------------------------------- the serial path
@@ -216,9 +259,62 @@ def test_raters_match_the_truth_within_the_designed_error() -> None:
             assert np.all(mae[seen] >= 0.005), "a rater is not the truth"
             inside = (truth > 0.15) & (truth < 0.85)  # away from the clipping at 0 and 1
             signed[rater].append(np.where(inside, w - truth, np.nan))
+    # the mean signed error is the bias plus the drift at the mean frame time (about 5.5 minutes in)
+    mean_10min = np.mean(np.concatenate([read_session(s).frame_times_s for s in SESSIONS])) / 600
     for rater in RATERS:
         bias = np.nanmean(np.vstack(signed[rater]), axis=0)
-        np.testing.assert_allclose(bias, design[rater]["bias"], atol=0.02)
+        expected = np.array(design[rater]["bias"]) + np.array(design[rater]["drift_per_10min"]) * mean_10min
+        np.testing.assert_allclose(bias, expected, atol=0.02)
+
+
+def test_raters_drift_through_a_session_as_designed() -> None:
+    """Each rater's bias drifts by ``drift_per_10min`` (issue 18 item 8): the signed error of the last
+    third of the sessions minus the first third follows the designed drift (pooled over sessions,
+    within 0.015: the lag, the noise of the keys and the clipping at 0 leave about 0.01; measured
+    worst: R1 mouth_open, 0.001 for 0.015)."""
+    design = _lab_truth()["raters"]
+    for rater in RATERS:
+        early: list[np.ndarray] = []
+        late: list[np.ndarray] = []
+        for session in SESSIONS:
+            frames, truth = _true_weights(session)
+            w = read_annotations(session / "annotations" / f"{rater}.json").weights(frames)
+            inside = (truth > 0.15) & (truth < 0.85)
+            third = len(frames) // 3
+            early.append(np.where(inside, w - truth, np.nan)[:third])
+            late.append(np.where(inside, w - truth, np.nan)[-third:])
+        span_10min = 2 / 3 * np.mean([read_session(s).frame_times_s[-1] for s in SESSIONS]) / 600
+        change = np.nanmean(np.vstack(late), axis=0) - np.nanmean(np.vstack(early), axis=0)
+        expected = np.array(design[rater]["drift_per_10min"]) * span_10min
+        print(rater, np.round(change, 3), np.round(expected, 3))
+        np.testing.assert_allclose(change, expected, atol=0.015)
+        drifting = np.abs(expected) >= 0.02  # a rater without drift would fail here
+        assert np.all(np.sign(change[drifting]) == np.sign(expected[drifting]))
+        assert np.all(np.abs(change[drifting]) > 0.01)
+
+
+def test_the_face_truth_is_not_a_copy_of_the_trainers_features() -> None:
+    """Issue 18 item 8: the old lab's exertion was w through a lag (r 0.955) and its fatigue a copy of
+    EPOC (r 0.986). Now exertion follows the relative intensity, repetition strain and a latent of
+    its own, fatigue an anaerobic reserve: measured pooled r 0.79 with w and 0.76 with the trainer's
+    EPOC feature."""
+    import pandas as pd
+
+    from effortface.train.dataset import prepare, sessions_table
+
+    table = prepare(sessions_table([LAB]))
+    exertion, fatigue = [], []
+    for sid, rows in table.groupby("session"):
+        phys = pd.read_csv(TRUTH / sid / "physiology.csv")
+        exertion.append(np.interp(rows["t_s"], phys["t_s"], phys["exertion"]))
+        fatigue.append(np.interp(rows["t_s"], phys["t_s"], phys["fatigue"]))
+    order = table.groupby("session", sort=True)
+    w = np.concatenate([rows["w_per_kg"].to_numpy() for _, rows in order])
+    epoc = np.concatenate([rows["epoc_norm"].to_numpy() for _, rows in order])
+    r_exertion = np.corrcoef(np.concatenate(exertion), w)[0, 1]
+    r_fatigue = np.corrcoef(np.concatenate(fatigue), epoc)[0, 1]
+    print(f"exertion ~ w r {r_exertion:.3f}; fatigue ~ EPOC r {r_fatigue:.3f}")
+    assert 0.5 < r_exertion < 0.9 and 0.5 < r_fatigue < 0.9  # related, as physiology is, not copies
 
 
 def test_reliability_round_disagreement_is_near_the_papers() -> None:

@@ -4,9 +4,11 @@
    pseudo-terminal by ``effortface replay`` and recorded by ``effortface capture`` (two real
    processes, real serial I/O), into ``DIR/captured/``;
 2. **decode**: ``effortface decode`` turns the captured raw bytes back into a heart-rate CSV;
-3. **train**: the heart-rate and face models on every sample session (``DIR/model/``, with its report);
-4. **evaluate**: the exported bundle re-scored through the runtime (``DIR/evaluation.md``);
-5. **synthesize**: a clip's face curves with the trained bundle (``DIR/synth.csv``).
+3. **work**: the sessions are copied into ``DIR/lab/`` and ``effortface work`` derives their
+   ``work.csv`` from the exercise log and motion clips (the sample lab, like a real one, records none);
+4. **train**: the heart-rate and face models on those sessions (``DIR/model/``, with its report);
+5. **evaluate**: the exported bundle re-scored through the runtime (``DIR/evaluation.md``);
+6. **synthesize**: a clip's face curves with the trained bundle (``DIR/synth.csv``).
 
 It ends by printing where the report is. An existing ``--out`` is refused unless ``--force``, which
 replaces only a previous demo output (it holds a ``.effortface-demo`` file) or an empty folder; by
@@ -23,7 +25,7 @@ from pathlib import Path
 
 from effortface.core.errors import UserError
 from effortface.demo import (CAPTURE_S, REPLAY_SPEED, capture_step, decode_step, demo_out_dir, held_out_summary,
-                             replace_out, synth_step)
+                             replace_out, synth_step, work_step)
 from effortface.samplelab import sample_lab
 from effortface.train.face_fit import MIN_ROWS_PER_PARTICIPANT
 
@@ -74,17 +76,20 @@ def run(args: argparse.Namespace) -> int:
     captured = capture_step(sessions[0], out, args.capture_seconds)
     decoded, recorded = decode_step(captured, out)
     _say("decode", f"{captured.name}: {recorded} samples recorded live, {decoded} decoded from the raw bytes")
-    table, sources = training_table([lab], None, DEFAULT_SET)
+    lab_copy, lines = work_step(lab, out)
+    _say("work", f"effortface work: {len(lines)} sessions' work.csv derived from their exercise logs and "
+                 f"motion clips into {lab_copy}")
+    table, sources = training_table([lab_copy], None, DEFAULT_SET)
     _say("train", f"{table['participant'].nunique()} participants, {table['session'].nunique()} sessions, "
                   f"{len(table)} participant-seconds")
     result = run_training(table, DEFAULT_SET, out / "model",
                           settings=TrainSettings(max_rows_per_participant=args.max_rows), sources=sources)
-    ev = evaluate_bundle(out / "model", table, str(lab))
-    write_evaluation(ev, out / "evaluation.md", out / "model", str(lab))
+    ev = evaluate_bundle(out / "model", table, str(lab_copy))
+    write_evaluation(ev, out / "evaluation.md", out / "model", str(lab_copy))
     _say("evaluate", f"in-sample (the model re-scored on the lab it was trained on): heart rate r "
                      f"{ev.hr['r'].mean():.2f}; face r {ev.face['r'].mean():.2f} ({out / 'evaluation.md'})")
     _say("evaluate", held_out_summary(result.metrics))
-    _say("synth", f"face curves: {synth_step(out / 'model', lab, out)}")
+    _say("synth", f"face curves: {synth_step(out / 'model', lab_copy, out)}")
     _say("done", f"in {time.monotonic() - t0:.0f} s")
     print(f"report: {result.report}")
     return 0

@@ -8,9 +8,11 @@ run does. Writes, under ``--out``:
 
 - one session folder per plan of :mod:`simlab.lab` (session format v1, see DESIGN.md): ``session.json``,
   ``serial/<protocol>.serlog`` (real protocol bytes), ``heart_rate.csv`` (decoded from that serlog
-  by the project's own decoders), ``events.csv``, ``work.csv``, ``video.avi`` +
-  ``video_frames.csv``, ``annotations/R1.json`` ... ``R3.json``, and for one strength session
-  ``motion/`` (the real CMU squats clip, assembled to the set's length);
+  by the project's own decoders), ``events.csv`` (the exercise log in the catalog's vocabulary,
+  as an operator records it: no work value), ``video.avi`` + ``video_frames.csv``,
+  ``annotations/R1.json`` ... ``R3.json``, and for one strength session ``motion/`` (the real CMU
+  squats clip, assembled to the set's length, with ``motion.json`` as ``effortface motion attach``
+  writes it). No ``work.csv``: ``effortface work`` derives it, as in a real lab;
 - ``reliability/poses.csv`` + ``ratings.csv``: 18 poses rated blind by the three raters;
 - ``_ground_truth/``: what the stages must recover (true curves, heart parameters, rater errors).
 
@@ -39,7 +41,7 @@ from effortface.capture_tool.session import (
 from effortface.core.blendshapes import DEFAULT_SET
 from effortface.core.version import __version__
 from effortface.samplelab.simlab import expression, heart, raters, streams, video
-from effortface.samplelab.simlab.lab import PEOPLE, Person, SessionPlan, build_plans, work_at
+from effortface.samplelab.simlab.lab import PEOPLE, Person, SessionPlan, build_plans, phase_at, work_at
 
 #: the real CMU squats clip, shipped with the package (``data/README.md``): the lab builds anywhere
 PACKAGED_MOTION = Path(__file__).resolve().parent / "data"
@@ -47,7 +49,6 @@ PACKAGED_MOTION = Path(__file__).resolve().parent / "data"
 DEFAULT_SEED = 2015
 GROUND_TRUTH = "_ground_truth"
 RELIABILITY = "reliability"
-WORK_CSV = "work.csv"
 #: the session whose first loaded squat set also ships as motion capture
 MOTION_SESSION_INDEX = 1
 #: the session whose USB cable is pulled for 3 s (text lines, a USB PulseSensor)
@@ -99,7 +100,7 @@ def _serial_header(plan: SessionPlan) -> dict:
 def _speed_at(plan: SessionPlan) -> Callable[[float], float]:
     """Treadmill speed (m/s) at a time, for the HxM speed field."""
     def speed(t: float) -> float:
-        ph = next((p for p in plan.phases if p.start_s <= t < p.end_s), None)
+        ph = phase_at(plan, t)
         return float(ph.speed_m_s or 0.0) if ph else 0.0
     return speed
 
@@ -160,17 +161,31 @@ def write_heart_rate(folder: Path, serlog: Path) -> int:
 
 
 def phase_events(plan: SessionPlan) -> list[Event]:
-    """The exercise log: phase start / end, treadmill speed, loads and repetitions."""
+    """The exercise log as an operator records it (DESIGN.md "Exercise log"): catalog ids on
+    ``phase_start`` / ``phase_end`` with no value, the treadmill's speed and grade when set, the back
+    load before a set (and back to 0 after it), a ``reps`` row per repetition (the hotkey counter)
+    for squats, and the count at the end of a jumping-jacks set. No true work anywhere."""
     out = [Event(0.0, "sync", "session_start", "")]
+    load_kg, speed, grade = 0.0, None, 0.0
     for ph in plan.phases:
-        out.append(Event(ph.start_s, "phase_start", ph.label, f"{ph.w_per_kg:.2f}"))
-        if ph.speed_m_s is not None:
-            out.append(Event(ph.start_s, "speed", "treadmill_m_s", f"{ph.speed_m_s:.1f}"))
-        if plan.kind == "strength":
-            out.append(Event(ph.start_s, "load", "back_kg", f"{ph.load_kg:g}"))
-        if ph.reps:
-            out.append(Event(ph.end_s - 0.5, "reps", ph.label, str(ph.reps)))
-        out.append(Event(ph.end_s - 0.01, "phase_end", ph.label, ""))
+        out.append(Event(ph.start_s, "phase_start", ph.exercise, ""))
+        if ph.exercise == "treadmill":
+            if ph.speed_m_s != speed:
+                out.append(Event(ph.start_s + 0.5, "speed", "treadmill", f"{ph.speed_m_s:.1f}"))
+            if ph.grade_pct != grade:
+                out.append(Event(ph.start_s + 0.5, "grade", "treadmill", f"{ph.grade_pct:g}"))
+            speed, grade = ph.speed_m_s, ph.grade_pct
+        if ph.exercise == "squats" and ph.load_kg != load_kg:
+            out.append(Event(ph.start_s - 5.0, "load", "back_kg", f"{ph.load_kg:g}"))
+            load_kg = ph.load_kg
+        if ph.exercise == "squats":
+            out += [Event(t, "reps", ph.exercise, str(k + 1)) for k, t in enumerate(ph.rep_times_s)]
+        elif ph.rep_times_s:
+            out.append(Event(ph.rep_times_s[-1], "reps", ph.exercise, str(ph.reps)))
+        out.append(Event(ph.end_s - 0.01, "phase_end", ph.exercise, ""))
+        if ph.exercise == "squats" and load_kg:
+            out.append(Event(ph.end_s + 3.0, "load", "back_kg", "0"))
+            load_kg = 0.0
     return out
 
 
@@ -180,18 +195,6 @@ def write_events(folder: Path, events: list[Event]) -> None:
     for ev in sorted(events, key=lambda e: e.t_s):
         writer.write(ev)
     writer.close()
-
-
-def write_work(folder: Path, plan: SessionPlan, rng: np.random.Generator) -> np.ndarray:
-    """``work.csv`` at 1 Hz from the exercise log: w with a 2 s pace lag and 3 % noise, p about w
-    with the scatter of the stride / repetition cycle. Returns the 1 Hz w."""
-    t = np.arange(0.0, plan.duration_s, 1.0)
-    w = heart.first_order_lag(work_at(plan, np.arange(0.0, plan.duration_s, heart.DT_S)), 2.0)[::10]
-    w = np.maximum(0.0, w * (1.0 + rng.normal(0.0, 0.03, t.size)))
-    p = np.maximum(0.0, w * (1.0 + rng.normal(0.0, 0.2, t.size)))
-    lines = ["t_s,w_per_kg,p_per_kg"] + [f"{a:.1f},{b:.3f},{c:.3f}" for a, b, c in zip(t, w, p)]
-    (folder / WORK_CSV).write_text("\n".join(lines) + "\n", encoding="utf-8")
-    return w
 
 
 def write_frames_and_video(folder: Path, plan: SessionPlan, grid_t: np.ndarray, curves: np.ndarray,
@@ -223,7 +226,7 @@ def write_motion(folder: Path, plan: SessionPlan, shared_motion: Path) -> dict |
     and looped forwards then backwards (no jump at the seams) to the set's length;
     ``motion/motion.json`` holds its offset to session time."""
     src = shared_motion / SQUATS_CLIP
-    phase = next((p for p in plan.phases if p.label == "squats" and p.load_kg > 0), None)
+    phase = next((p for p in plan.phases if p.exercise == "squats" and p.load_kg > 0), None)
     if phase is None or not src.is_file():
         return None
     lines = src.read_text(encoding="utf-8").splitlines()
@@ -238,7 +241,7 @@ def write_motion(folder: Path, plan: SessionPlan, shared_motion: Path) -> dict |
     header = lines[:at - 1] + [f"Frames: {n}", f"Frame Time: {dt_s:.7f}"]
     (out / "squats_set2.bvh").write_text("\n".join(header + body) + "\n", encoding="utf-8")
     meta = {"files": [{"path": "squats_set2.bvh", "offset_s": phase.start_s, "format": "bvh",
-                       "load_back_kg": phase.load_kg,
+                       "aligned": "offset", "duration_s": round(n * dt_s, 3),
                        "source": f"../shared/data/motion/{SQUATS_CLIP} (CMU Graphics Lab Motion "
                                  "Capture Database, subject 13 trial 29), every "
                                  f"{MOTION_DECIMATE}th frame, looped forwards and backwards"}]}
@@ -265,9 +268,10 @@ def _session_info(plan: SessionPlan, seed: int) -> SessionInfo:
 
 def generate_session(out: Path, plan: SessionPlan, seed: int, shared_motion: Path) -> dict:
     """Write one session folder and its ground truth; return what the pose set needs."""
-    r_heart, r_faults, r_bytes, r_video, r_raters, r_face = _rngs(seed, plan.index)
+    r_heart, r_faults, r_bytes, r_video, r_raters, r_face, r_day = _rngs(seed, plan.index, 7)
     hp = participant_heart(plan.person, seed)
-    grid_t, drive, hr = heart.simulate_hr(plan, hp)
+    day = heart.day_state(r_day)
+    grid_t, drive, hr = heart.simulate_hr(plan, hp, day)
     beats = heart.beat_times(grid_t, hr, hp, r_heart)
     faults = _faults(plan, r_faults)
     info = _session_info(plan, seed)
@@ -275,9 +279,8 @@ def generate_session(out: Path, plan: SessionPlan, seed: int, shared_motion: Pat
     serlog, corrupted, unplugs = write_serial(folder, plan, beats, faults, r_bytes)
     n_hr = write_heart_rate(folder, serlog)
     write_events(folder, phase_events(plan) + link_events(serlog))
-    write_work(folder, plan, r_heart)
     nhr = heart.normalised(hr, hp)
-    d = expression.drivers(drive, nhr, plan.person.training_level)
+    d = expression.drivers(plan, grid_t, drive, nhr, hp, day, r_face)
     curves = expression.true_curves(d, plan.person.expressiveness, r_face)
     times, truth = write_frames_and_video(folder, plan, grid_t, curves, r_video)
     write_annotations(folder, plan, times, truth, r_raters)
@@ -285,9 +288,15 @@ def generate_session(out: Path, plan: SessionPlan, seed: int, shared_motion: Pat
     info.complete = True
     info.extra["stats"] = {"heart_rate_rows": n_hr, "video_frames": int(times.size)}
     info.save(folder, overwrite=True)
-    truth_meta = {"heart": hp.__dict__, "faults": {"contact_loss_s": faults.contact_loss,
+    truth_meta = {"heart": hp.__dict__, "day": day.__dict__, "phases": [
+                      {"start_s": ph.start_s, "end_s": ph.end_s, "exercise": ph.exercise,
+                       "true_w_per_kg": round(ph.w_per_kg, 3), "demand_w_per_kg": round(ph.drive_w_per_kg, 3),
+                       "speed_m_s": ph.speed_m_s, "grade_pct": ph.grade_pct, "load_back_kg": ph.load_kg,
+                       "rep_times_s": list(ph.rep_times_s)} for ph in plan.phases],
+                  "faults": {"contact_loss_s": faults.contact_loss,
                   "dropouts_s": faults.dropouts, "corrupted_bytes": corrupted, "unplugs_s": unplugs},
                   "beats": int(beats.size), "motion": motion}
+    d["work"] = work_at(plan, grid_t)
     _write_truth(out / GROUND_TRUTH / plan.session_id, grid_t, drive, hr, nhr, d, times, truth, truth_meta)
     return {"index": plan.index, "times": times, "truth": truth,
             "nhr_frames": np.interp(times, grid_t, nhr)}
@@ -301,8 +310,9 @@ def _write_truth(folder: Path, grid_t: np.ndarray, drive: np.ndarray, hr: np.nda
     rows = [f"{i},{t:.4f}," + ",".join(f"{v:.4f}" for v in w) for i, (t, w) in enumerate(zip(times, truth))]
     (folder / "blendshapes.csv").write_text(f"frame,t_s,{names}\n" + "\n".join(rows) + "\n", encoding="utf-8")
     step = int(round(1.0 / heart.DT_S))
-    phys = ["t_s,drive_w_per_kg,hr_bpm,nhr,exertion,fatigue"] + [
-        f"{grid_t[k]:.1f},{drive[k]:.3f},{hr[k]:.2f},{nhr[k]:.4f},{d['exertion'][k]:.4f},{d['fatigue'][k]:.4f}"
+    phys = ["t_s,w_per_kg,drive_w_per_kg,hr_bpm,nhr,relative_intensity,exertion,fatigue,ventilation,strain"] + [
+        f"{grid_t[k]:.1f},{d['work'][k]:.3f},{drive[k]:.3f},{hr[k]:.2f},{nhr[k]:.4f}," + ",".join(
+            f"{d[name][k]:.4f}" for name in ("relative_intensity", "exertion", "fatigue", "ventilation", "strain"))
         for k in range(0, grid_t.size, step)]
     (folder / "physiology.csv").write_text("\n".join(phys) + "\n", encoding="utf-8")
     write_json_atomic(folder / "session_truth.json", meta)
@@ -388,7 +398,7 @@ def build_lab(out: Path, plans: Sequence[SessionPlan] | None = None, seed: int =
         Receives one progress line per session (``print`` by default).
     """
     whole = plans is None
-    plans = build_plans() if plans is None else plans
+    plans = build_plans(seed) if plans is None else plans
     made = {}
     for plan in plans:
         made[plan.session_id] = generate_session(out, plan, seed, shared_motion)
@@ -411,7 +421,7 @@ def main(argv: Sequence[str] | None = None, default_out: Path | None = None) -> 
         without it ``--out`` is required.
     """
     args = _parser(default_out).parse_args(argv)
-    plans = build_plans()
+    plans = build_plans(args.seed)
     if args.only is not None:
         plans = tuple(p for p in plans if p.session_id == args.only)
         if not plans:

@@ -195,7 +195,11 @@ def test_the_video_shows_the_exact_frame_and_playback_advances(qtbot, stage: QtA
     end = _view_point(tl, hr_box.mapViewToScene(QtCore.QPointF(120.0, y_mid)))
     _drag(tl, hr_box.mapViewToScene(QtCore.QPointF(m.t_s, y_mid)), hr_box.mapViewToScene(QtCore.QPointF(120.0, y_mid)))
     t_end = hr_box.mapSceneToView(tl.mapToScene(end)).x()
-    assert m.frame == m.times.frame_at(t_end) and abs(m.t_s - 120.0) < 0.5
+    # the line moves by the mouse's displacement from the press pixel, so the press's and the
+    # release's rounding add up to at most one pixel (about 1 s over the sample lab's 10-minute sessions)
+    s_per_px = hr_box.mapSceneToView(tl.mapToScene(end + QtCore.QPoint(1, 0))).x() - t_end
+    assert m.times.frame_at(t_end - s_per_px) <= m.frame <= m.times.frame_at(t_end + s_per_px)
+    assert abs(m.t_s - 120.0) < 0.5 + s_per_px
     editor.speed.setCurrentIndex(4)  # 4x
     _press(editor.video_view, Key.Key_Space)
     start = m.frame

@@ -45,6 +45,14 @@ def test_demo_runs_the_whole_pipeline(lab, tmp_path, capsys, monkeypatch):
     assert {"mouth_stretch", "mouth_open", "eye_squint", "brow_lower", "nhr"} <= set(synth.columns)
     assert synth[["mouth_stretch", "eye_squint"]].max().max() > 0
     assert "| mouth_open |" in (out / "evaluation.md").read_text()
+    # like a real lab, the sample lab records no work: effortface work derived it in the demo's copy
+    assert not list(lab.glob("*/work.csv"))
+    copies = sorted((out / "lab").glob("*/session.json"))
+    assert len(copies) == len(list(lab.glob("*/session.json")))
+    sources = {src.split(":")[0] for c in copies
+               for src in pd.read_csv(c.parent / "work.csv", keep_default_na=False)["source"]}
+    assert sources == {"log", "motion"}
+    assert any(line.startswith("[work] effortface work: 12 sessions' work.csv derived") for line in printed)
 
 
 def test_demo_refuses_an_existing_out(lab, tmp_path, capsys):

@@ -41,16 +41,41 @@ def test_phases_parameters_and_loads_over_time(tmp_path: Path) -> None:
     assert later.speed_m_s == 3.0  # the treadmill keeps its speed across phases
 
 
-def test_sessions_of_earlier_releases_stay_readable() -> None:
-    """The sample lab's logs: 'walk 1.5 m/s' labels, 'treadmill_m_s' speeds, 'jumping jacks'."""
-    cardio = read_exercise_log(SAMPLES / "P01_20260112-093000_cardio")
-    assert [p.exercise for p in cardio.phases] == ["treadmill_walk", "treadmill_run", "treadmill_walk",
-                                                   "treadmill_run", "rest"]
-    (_, _, state), = cardio.states(cardio.phases[1], ("treadmill",))
+#: rows of the sample lab of earlier releases, before it was regenerated in the catalog's vocabulary:
+#: P01's cardio session verbatim (less two link rows), then a jumping-jacks set as its strength session
+#: logged one (there at 130-175 s)
+EARLIER_LAB_ROWS = [
+    "0.0000,sync,session_start,", "0.0000,phase_start,walk 1.5 m/s,4.20", "0.0000,speed,treadmill_m_s,1.5",
+    "0.2414,link,tracking,ant", "24.9900,phase_end,walk 1.5 m/s,", "25.0000,phase_start,run 2.5 m/s,15.00",
+    "25.0000,speed,treadmill_m_s,2.5", "69.9900,phase_end,run 2.5 m/s,", "70.0000,phase_start,walk 1.2 m/s,3.36",
+    "70.0000,speed,treadmill_m_s,1.2", "104.9900,phase_end,walk 1.2 m/s,", "105.0000,phase_start,run 3.4 m/s,20.40",
+    "105.0000,speed,treadmill_m_s,3.4", "149.9900,phase_end,run 3.4 m/s,", "150.0000,phase_start,rest,0.10",
+    "199.9900,phase_end,rest,", "200.0000,phase_start,jumping jacks,8.60", "244.5000,reps,jumping jacks,50",
+    "244.9900,phase_end,jumping jacks,",
+]
+
+
+def test_sessions_of_earlier_releases_stay_readable(tmp_path: Path) -> None:
+    """The earlier sample lab's logs: 'walk 1.5 m/s' labels, 'treadmill_m_s' speeds, 'jumping jacks'."""
+    log = read_exercise_log(_events(tmp_path, EARLIER_LAB_ROWS))
+    assert [p.exercise for p in log.phases] == ["treadmill_walk", "treadmill_run", "treadmill_walk",
+                                                "treadmill_run", "rest", "jumping_jacks"]
+    (_, _, state), = log.states(log.phases[1], ("treadmill",))
     assert state.speed_m_s == 2.5
-    strength = read_exercise_log(SAMPLES / "P01_20260119-140000_strength")
-    assert "jumping_jacks" in [p.exercise for p in strength.phases]
     assert exercise_id("Jumping Jacks") == exercise_id("jumping-jacks") == "jumping_jacks"
+
+
+def test_the_sample_lab_logs_in_the_catalog_vocabulary() -> None:
+    """The regenerated sample lab: catalog ids, treadmill speed / grade rows, back loads, reps."""
+    cardio = read_exercise_log(SAMPLES / "P01_20260112-093000_cardio")
+    assert {p.exercise for p in cardio.phases} == {"rest", "treadmill"}
+    speeds = [cardio.states(p)[-1][2].speed_m_s for p in cardio.phases if p.exercise == "treadmill"]
+    assert speeds[:2] == [1.5, 2.5]
+    strength = read_exercise_log(SAMPLES / "P02_20260112-113700_strength")
+    assert {p.exercise for p in strength.phases} == {"rest", "jumping_jacks", "squats"}
+    squats = [p for p in strength.phases if p.exercise == "squats"]
+    loaded = strength.states(squats[0])[-1][2]
+    assert loaded.load_kg("back_kg") == 20 and 18 < loaded.reps_per_min < 24
 
 
 def test_the_capture_stage_values_of_earlier_releases(tmp_path: Path) -> None:

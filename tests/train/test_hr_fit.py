@@ -165,7 +165,14 @@ def test_tl_model_beats_pooled_on_held_out_sample_lab_participants():
     """The paper's finding on the sample lab (whose heart is NOT the paper's recursion): every
     participant did a cardio and a strength session, so their fitted thresholds follow their
     fitness, not the exercise; on held-out participants the training-level model beats the pooled
-    one by a clear margin (measured: 6.6 % vs 10.3 % RMSE) and the threshold rises with TL."""
+    one by a clear margin (measured: 9.2 % vs 13.0 % RMSE, r 0.92 vs 0.89).
+
+    Where fitness shows: in the regenerated lab (10-minute sessions of work derived from the exercise
+    log, as ``effortface work`` does) every bout above standing raises everyone's heart rate at first,
+    so each participant's threshold lands just above standing (measured 0.11-0.16 W/kg, no trend with
+    TL: slope -0.0007, r -0.09); fitness shows in the rates instead, as the generator made it
+    (capacity and recovery grow with TL): fitter -> slower rise (c_inc slope < 0, measured r -0.87;
+    paper: -0.00043 per TL) and faster recovery (c_dec slope > 0, measured +0.11 per TL)."""
     from pathlib import Path
 
     from effortface.train.dataset import hr_series, prepare, sessions_table
@@ -181,6 +188,8 @@ def test_tl_model_beats_pooled_on_held_out_sample_lab_participants():
     print({k: (round(v["r"], 3), round(v["rmse_pct"], 1)) for k, v in summary.items()})
     assert summary["tl_regression"]["rmse_pct"] < 0.8 * summary["pooled_threshold"]["rmse_pct"]
     assert summary["tl_regression"]["r"] > summary["pooled_threshold"]["r"]
-    assert ev.fit.tl_regression.t_root.slope > 0  # fitter -> higher threshold (paper: +0.42 W/kg per TL)
-    assert ev.fit.tl_regression.c_inc.slope < 0  # fitter -> slower rise (paper: -0.00043)
+    roots = [c.t_root_w_per_kg for c in ev.fit.per_participant.values()]
+    assert all(0.1 <= r < 1.0 for r in roots)  # above standing (0.1 W/kg), below any exercise bout
+    assert ev.fit.tl_regression.c_inc.slope < 0 and ev.fit.tl_regression.c_inc.r < -0.8  # fitter -> slower rise
+    assert ev.fit.tl_regression.c_dec.slope > 0  # fitter -> faster recovery
     assert summary["per_participant"]["r"] > 0.85

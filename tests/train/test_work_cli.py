@@ -18,23 +18,26 @@ CARDIO = "P01_20260112-093000_cardio"
 STRENGTH = "P02_20260112-113700_strength"  # has motion/ (a real CMU squats clip) for one set
 
 
-def _copy(tmp_path: Path, name: str, *, keep_work: bool = False) -> Path:
-    ignore = shutil.ignore_patterns("video.avi", "serial", *(() if keep_work else ("work.csv",)))
-    return Path(shutil.copytree(SAMPLES / name, tmp_path / name, ignore=ignore))
+def _copy(tmp_path: Path, name: str) -> Path:
+    """A sample session without its video and serial log (the sample lab records no work.csv)."""
+    return Path(shutil.copytree(SAMPLES / name, tmp_path / name, ignore=shutil.ignore_patterns("video.avi", "serial")))
 
 
 def test_work_from_the_log_and_from_motion(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     cardio, strength = _copy(tmp_path, CARDIO), _copy(tmp_path, STRENGTH)
     assert main(["work", str(cardio), str(strength)]) == 0
     out = capsys.readouterr().out.splitlines()
-    assert out[0] == f"{cardio / 'work.csv'}: 200 s: motion 0 s, log 200 s, none 0 s; mean w 9.18 W/kg"
+    # the regenerated lab (10-minute sessions): measured mean w of P01's treadmill session
+    assert out[0] == f"{cardio / 'work.csv'}: 640 s: motion 0 s, log 640 s, none 0 s; mean w 7.46 W/kg"
     assert "motion 35 s" in out[1]
     work = pd.read_csv(cardio / "work.csv", keep_default_na=False)
     assert list(work.columns) == ["t_s", "w_per_kg", "p_per_kg", "source"]
-    np.testing.assert_array_equal(work["t_s"], np.arange(200))
-    truth = pd.read_csv(SAMPLES / CARDIO / "work.csv")  # the simulated lab's own values
-    run = (work["source"] == "log:treadmill_run").to_numpy()
-    assert work["w_per_kg"][run].mean() == pytest.approx(truth["w_per_kg"][run].mean(), rel=0.10)
+    np.testing.assert_array_equal(work["t_s"], np.arange(640))
+    truth = pd.read_csv(SAMPLES / "_ground_truth" / CARDIO / "physiology.csv")  # the simulator's own w
+    true_w = np.interp(work["t_s"], truth["t_s"], truth["w_per_kg"])
+    run = (work["source"] == "log:treadmill").to_numpy() & (true_w > 12)  # the runs (walks: below 5)
+    assert run.sum() > 150
+    assert work["w_per_kg"][run].mean() == pytest.approx(true_w[run].mean(), rel=0.10)
     motion = pd.read_csv(strength / "work.csv", keep_default_na=False)
     assert set(motion["source"]) == {"log:rest", "log:squats", "log:jumping_jacks", "motion:squats_set2.bvh"}
 
@@ -55,7 +58,8 @@ def _one_error_line(capsys: pytest.CaptureFixture) -> str:
 
 
 def test_a_hand_made_work_csv_is_kept_unless_force(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    folder = _copy(tmp_path, CARDIO, keep_work=True)
+    folder = _copy(tmp_path, CARDIO)
+    (folder / "work.csv").write_text("t_s,w_per_kg,p_per_kg\n0,0.1,0.1\n1,4.2,4.0\n", encoding="utf-8")
     before = (folder / "work.csv").read_bytes()
     assert main(["work", str(folder)]) == 2
     assert _one_error_line(capsys) == (f"effortface work: error: {folder / 'work.csv'}: expected no work.csv "

@@ -17,6 +17,12 @@ and recovery is faster for fitter people (``tau_off`` 80 - 7 TL s). So a partici
 threshold reflects their fitness whichever kind of exercise they did, and the training-level model
 can beat a pooled one, as in the paper.
 
+**Day to day** (:class:`DayState`, drawn per session): the resting rate shifts (+-3 bpm, sd), the
+capacity by about 6 % (sleep, hydration, the previous day's training), the time constants by +-15 %,
+and while exercising the rate drifts upwards (cardiovascular drift, 0.3-1.0 bpm per minute above
+30 % of the reserve, relaxing over 5 minutes at rest). The trainer sees one participant's two
+sessions as one heart.
+
 Beats follow the instantaneous rate with beat-to-beat variability: respiratory sinus arrhythmia
 (amplitude falling with effort, at the breathing rate) and AR(1) noise. Fitting the paper's model
 on these data is therefore a real test, not a round trip.
@@ -65,25 +71,51 @@ def heart_params(person: Person, rng: np.random.Generator) -> HeartParams:
         tau_on_s=round(22.0 + rng.uniform(-4, 6), 1),
         tau_off_s=round(TAU_OFF_S - TAU_OFF_PER_TL * tl + rng.uniform(-6, 6), 1),
         slow_amp=round(0.10 - 0.008 * tl + rng.uniform(0, 0.03), 3),
-        tau_slow_s=round(150.0 + rng.uniform(-30, 30), 1),
+        tau_slow_s=round(200.0 + rng.uniform(-40, 40), 1),
         rsa_frac=round(0.03 + rng.uniform(0, 0.02), 3),
         ar_sd_frac=round(0.012 + rng.uniform(0, 0.006), 4),
     )
 
 
-def simulate_hr(plan: SessionPlan, hp: HeartParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+@dataclasses.dataclass(frozen=True)
+class DayState:
+    """How a participant's heart differs on the day of one session (recorded in the ground truth)."""
+
+    hr_rest_shift_bpm: float
+    capacity_scale: float
+    tau_scale: float
+    drift_bpm_per_min: float
+
+
+def day_state(rng: np.random.Generator) -> DayState:
+    """Draw one session's day-to-day variation (see the module docstring)."""
+    return DayState(hr_rest_shift_bpm=round(float(rng.normal(0.0, 3.0)), 1),
+                    capacity_scale=round(float(np.exp(rng.normal(0.0, 0.06))), 3),
+                    tau_scale=round(float(rng.uniform(0.85, 1.15)), 3),
+                    drift_bpm_per_min=round(float(rng.uniform(0.3, 1.0)), 2))
+
+
+#: cardiovascular drift relaxes with this time constant at rest (s)
+DRIFT_RELAX_S = 300.0
+
+
+def simulate_hr(plan: SessionPlan, hp: HeartParams, day: DayState | None = None,
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """True HR on a ``DT_S`` grid: returns ``(t_s, drive_w_per_kg, hr_bpm)`` (drive: see lab.Phase)."""
+    day = day or DayState(0.0, 1.0, 1.0, 0.0)
     t = np.arange(0.0, plan.duration_s + 5.0, DT_S)
     w = first_order_lag(work_at(plan, t, drive=True), 2.0)
-    hrr = hp.hr_max_bpm - hp.hr_rest_bpm
-    frac = 1.0 - np.exp(-w / hp.w_scale_w_per_kg)
-    target = hp.hr_rest_bpm + 0.95 * hrr * frac
+    rest = hp.hr_rest_bpm + day.hr_rest_shift_bpm
+    hrr = hp.hr_max_bpm - rest
+    frac = 1.0 - np.exp(-w / (hp.w_scale_w_per_kg * day.capacity_scale))
+    target = rest + 0.95 * hrr * frac
     hr = np.empty_like(t)
-    hr[0], slow = hp.hr_rest_bpm + 3.0, 0.0
+    hr[0], slow, drift = rest + 3.0, 0.0, 0.0
     for k in range(1, t.size):
         slow += DT_S * (hp.slow_amp * hrr * max(0.0, frac[k] - 0.5) - slow) / hp.tau_slow_s
-        goal = min(target[k] + slow, hp.hr_max_bpm)
-        tau = hp.tau_on_s if goal > hr[k - 1] else hp.tau_off_s
+        drift += DT_S * (day.drift_bpm_per_min / 60.0 if frac[k] > 0.3 else -drift / DRIFT_RELAX_S)
+        goal = min(target[k] + slow + drift, hp.hr_max_bpm)
+        tau = (hp.tau_on_s if goal > hr[k - 1] else hp.tau_off_s) * day.tau_scale
         hr[k] = hr[k - 1] + DT_S * (goal - hr[k - 1]) / tau
     return t, w, hr
 

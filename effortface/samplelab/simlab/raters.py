@@ -1,10 +1,11 @@
 """Three simulated annotators: key-frames that approximate the truth with designed errors, and
 blind ratings of the shared pose set.
 
-Each rater has a per-blendshape bias, a noise level, a typical key spacing, a reaction lag and a
+Each rater has a per-blendshape bias, a drift of that bias through a session (tiredness, a shifting
+internal scale: ``drift_per_10min`` added per 10 minutes of session time), a noise level, a typical key spacing, a reaction lag and a
 favourite interpolation, as people do. Keys sit at roughly regular spacing plus the truth's turning
 points (annotators key the extremes they see); a key's weight is the truth ``lag_s`` earlier, plus
-bias and noise, rounded to the slider's 0.01 and clipped to [0, 1].
+bias, drift and noise, rounded to the slider's 0.01 and clipped to [0, 1].
 """
 
 from __future__ import annotations
@@ -18,6 +19,10 @@ from effortface.annotate.keyframes import KeyframeTrack, RaterAnnotations
 from effortface.annotate.reliability import Pose, Rating
 
 
+#: the longest session of the lab (s), for the designed error bound
+MAX_SESSION_S = 720.0
+
+
 @dataclasses.dataclass(frozen=True)
 class RaterDesign:
     """One annotator's designed errors (recorded in the ground truth)."""
@@ -29,21 +34,24 @@ class RaterDesign:
     lag_s: float
     interp: str
     pose_noise_sd: float
+    drift_per_10min: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
 
-    def designed_mae(self) -> tuple[float, ...]:
+    def designed_mae(self, duration_s: float = MAX_SESSION_S) -> tuple[float, ...]:
         """Per blendshape, the largest mean absolute error of a track against the truth.
 
-        ``|bias| + 0.8 noise_sd`` (a key's own error; E|N(0, s)| = 0.8 s) ``+ 0.03`` for what
-        interpolation between keys cannot follow (breathing, expirations) (choice, checked on the
-        generated lab by tests/test_sample_sessions.py).
+        ``|bias| + |drift| duration / 10 min`` (the bias at the session's end) ``+ 0.8 noise_sd``
+        (a key's own error; E|N(0, s)| = 0.8 s) ``+ 0.04`` for what interpolation between keys
+        cannot follow (breathing, expirations, repetition strain) (choice, checked on the generated
+        lab by tests/test_sample_sessions.py).
         """
-        return tuple(round(abs(b) + 0.8 * self.noise_sd + 0.03, 4) for b in self.bias)
+        return tuple(round(abs(b) + abs(d) * duration_s / 600.0 + 0.8 * self.noise_sd + 0.04, 4)
+                     for b, d in zip(self.bias, self.drift_per_10min))
 
 
 RATERS = (
-    RaterDesign("R1", (0.03, 0.02, 0.04, 0.03), 0.035, 2.5, 0.25, "smooth", 0.09),
-    RaterDesign("R2", (-0.04, -0.03, -0.02, -0.04), 0.045, 4.0, 0.6, "linear", 0.10),
-    RaterDesign("R3", (0.01, 0.04, -0.03, 0.0), 0.05, 5.0, 0.4, "linear", 0.105),
+    RaterDesign("R1", (0.03, 0.02, 0.04, 0.03), 0.035, 2.5, 0.25, "smooth", 0.09, (0.04, 0.02, 0.04, 0.03)),
+    RaterDesign("R2", (-0.04, -0.03, -0.02, -0.04), 0.045, 4.0, 0.6, "linear", 0.10, (-0.03, 0.04, -0.04, 0.0)),
+    RaterDesign("R3", (0.01, 0.04, -0.03, 0.0), 0.05, 5.0, 0.4, "linear", 0.105, (0.0, -0.04, 0.03, 0.04)),
 )
 
 
@@ -79,7 +87,8 @@ def annotate(session_id: str, frame_t_s: np.ndarray, truth: np.ndarray, design: 
     for j, name in enumerate(DEFAULT_SET.names):
         frames = key_frames(frame_t_s, truth[:, j], design, rng)
         seen = np.interp(frame_t_s[frames] - design.lag_s, frame_t_s, truth[:, j])
-        weights = np.clip(np.round(seen + design.bias[j] + rng.normal(0, design.noise_sd, len(frames)), 2), 0, 1)
+        bias = design.bias[j] + design.drift_per_10min[j] * frame_t_s[frames] / 600.0
+        weights = np.clip(np.round(seen + bias + rng.normal(0, design.noise_sd, len(frames)), 2), 0, 1)
         track = KeyframeTrack()
         for f, w in zip(frames, weights):
             interp = "hold" if design.interp == "linear" and w == 0.0 else design.interp

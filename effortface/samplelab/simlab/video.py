@@ -15,9 +15,9 @@ import numpy as np
 from effortface.annotate.face import render_face
 from effortface.samplelab.simlab.avi import write_mjpg_avi
 
-WIDTH, HEIGHT, FPS = 160, 120, 5.0
+WIDTH, HEIGHT, FPS = 160, 120, 1.5
 #: with optimised Huffman tables: about 1.6 kB a frame, so the whole lab fits in 25 MB
-JPEG_QUALITY = 40
+JPEG_QUALITY = 30
 
 
 def frame_times(duration_s: float, rng: np.random.Generator, fps: float = FPS) -> np.ndarray:
