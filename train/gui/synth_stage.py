@@ -83,6 +83,13 @@ def weight_pen(index: int) -> QtGui.QPen:
     return pen
 
 
+def _application() -> QtCore.QCoreApplication:
+    """The running application (a stage exists only inside one)."""
+    app = QtWidgets.QApplication.instance()
+    assert app is not None
+    return app
+
+
 def _weights_text(names: tuple[str, ...], weights: np.ndarray, per_line: int = 2) -> str:
     """``name weight`` pairs, ``per_line`` to a line (the face preview's width, whatever the model)."""
     pairs = [f"{n.replace('_', ' ')} {w:.2f}" for n, w in zip(names, weights)]
@@ -481,7 +488,7 @@ class QtSynthStage(QtWidgets.QWidget):
             shortcut.setEnabled(False)
             shortcut.activated.connect(action)
             self.shortcuts.append(shortcut)
-        self._player_keys = {QtGui.QKeySequence(key)[0].toCombined() for key, _ in PLAYER_KEYS}
+        self._player_keys = {QtGui.QKeySequence(key).toString() for key, _ in PLAYER_KEYS}
         self.play_button.setToolTip("Play / pause (Space, from anywhere in the window)")
         self.loops.setToolTip("Repeat the clip end to end (heart rate and fatigue build up over "
                               "minutes); a new clip starts at 1")
@@ -496,7 +503,7 @@ class QtSynthStage(QtWidgets.QWidget):
         if (event.type() == QtCore.QEvent.Type.ShortcutOverride and self.isVisible()
                 and isinstance(watched, QtWidgets.QWidget) and watched.window() is self.window()
                 and isinstance(event, QtGui.QKeyEvent)
-                and event.keyCombination().toCombined() in self._player_keys):
+                and QtGui.QKeySequence(event.keyCombination()).toString() in self._player_keys):
             return True      # not accepted: the application-wide shortcut gets the key
         return super().eventFilter(watched, event)
 
@@ -744,14 +751,14 @@ class QtSynthStage(QtWidgets.QWidget):
         """Enable the player's application-wide keys."""
         for shortcut in self.shortcuts:
             shortcut.setEnabled(True)
-        QtWidgets.QApplication.instance().installEventFilter(self)
+        _application().installEventFilter(self)
         super().showEvent(event)
 
     def hideEvent(self, event: QtGui.QHideEvent) -> None:
         """Pause playback and release the player's keys when the stage is hidden."""
         for shortcut in self.shortcuts:
             shortcut.setEnabled(False)
-        QtWidgets.QApplication.instance().removeEventFilter(self)
+        _application().removeEventFilter(self)
         if self.session.playing:
             self.session.play(False)
         super().hideEvent(event)
@@ -760,7 +767,7 @@ class QtSynthStage(QtWidgets.QWidget):
         """Stop playback and the background recomputes (the main window calls this on exit)."""
         self.timer.stop()
         self.poll_timer.stop()
-        QtWidgets.QApplication.instance().removeEventFilter(self)
+        _application().removeEventFilter(self)
         self.session.playing = False
         self.session.shutdown()
 
