@@ -67,8 +67,9 @@ def _rmse(y: np.ndarray, pred: np.ndarray) -> float:
 def fold_scores(outcome: TrainingOutcome) -> pd.DataFrame:
     """Per CV fold of the face fit and blendshape: held-out r and RMSE of the chosen SVR.
 
-    Columns ``fold``, ``held out`` (participants, or row count for random-frame folds), then
-    ``<blendshape> r`` and ``<blendshape> RMSE`` (weights 0-1).
+    Long format, one row per fold and blendshape: ``fold``, ``held out`` (participants, or a row
+    count for random-frame folds), ``blendshape``, ``r`` (within the fold's rows) and ``RMSE``
+    (weights 0-1).
     """
     face, d = outcome.face, outcome.face.data
     c = face.config
@@ -76,11 +77,9 @@ def fold_scores(outcome: TrainingOutcome) -> pd.DataFrame:
     rows = []
     for f, (_, test) in enumerate(cv_folds(d, c.cv, c.n_splits, c.seed, c.max_folds), 1):
         who = ", ".join(sorted(set(d.groups[test]))) if c.cv == "lopo" else f"{len(test)} random rows"
-        row: dict[str, Any] = {"fold": f, "held out": who}
         for b, name in enumerate(face.blendshapes):
-            row[f"{name} r"] = _r(y[test, b], pred[test, b])
-            row[f"{name} RMSE"] = _rmse(y[test, b], pred[test, b])
-        rows.append(row)
+            rows.append({"fold": f, "held out": who, "blendshape": name,
+                         "r": _r(y[test, b], pred[test, b]), "RMSE": _rmse(y[test, b], pred[test, b])})
     return pd.DataFrame(rows)
 
 

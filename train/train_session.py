@@ -480,10 +480,10 @@ class TrainSession:
     def _trained(self, result: JobResult) -> None:
         if self._ended(result):
             self.outcome, self.fold_table, self.grid_results = result.value
-            for row in self.fold_table.itertuples(index=False):
-                rs = [v for k, v in zip(self.fold_table.columns, row) if k.endswith(" r")]
-                self.log(f"face CV fold {row[0]} (held out {row[1]}): mean r {np.nanmean(rs):.2f}"
-                         if np.isfinite(rs).any() else f"face CV fold {row[0]} (held out {row[1]}): r undefined")
+            for (fold, who), rows in self.fold_table.groupby(["fold", "held out"], sort=True):
+                r = rows["r"].to_numpy(float)
+                mean_r = f"mean r {np.nanmean(r):.2f}" if np.isfinite(r).any() else "r undefined"
+                self.log(f"face CV fold {fold} (held out {who}): {mean_r}, mean RMSE {rows['RMSE'].mean():.3f}")
             chosen = self.grid_results[self.grid_results["chosen"] == "yes"]
             for r in chosen.itertuples(index=False):
                 self.log(f"grid: {r.blendshape} chose C {r.C:g}, gamma {r.gamma:g}, epsilon {r.epsilon:g}")

@@ -332,8 +332,8 @@ def test_a_run_shows_no_stale_error_a_legend_a_log_and_labelled_axes(qtbot, stag
     assert "face CV fold 6 of 6" in log and "train: done in" in log
     assert log.count("held out P0") == 6 and "chose C" in log
     names = stage.session.blendshapes.names
-    assert stage.run_log.folds.rowCount() == 6                # one row per held-out participant
-    assert stage.run_log.folds.columnCount() == 2 + 2 * len(names)
+    assert stage.run_log.folds.rowCount() == 6 * len(names)   # per held-out participant and blendshape
+    assert stage.run_log.folds.columnCount() == 5
     grid = stage.session.grid_results
     assert len(grid) == len(names) * 4 and (grid["chosen"] == "yes").sum() == len(names)
     assert stage.run_log.grid.rowCount() == len(grid)

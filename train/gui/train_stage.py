@@ -150,8 +150,16 @@ class QtDataPicker(QtWidgets.QGroupBox):
                                    ", ".join(e.raters) or "none", "yes" if e.complete else "NO"), 1):
                 self.table.setItem(r, c, QtWidgets.QTableWidgetItem(v))
         self.table.resizeColumnsToContents()
+        self._fit_table_width()
         self.table.blockSignals(False)
         self.description.setText(f"Next training uses: {self.session.describe_data()}")
+
+    def _fit_table_width(self) -> None:
+        """As wide as its columns (no column clipped), up to 640 pixels (then it scrolls)."""
+        header = self.table.horizontalHeader()
+        needed = (header.length() + self.table.verticalScrollBar().sizeHint().width()
+                  + 2 * self.table.frameWidth())
+        self.table.setMinimumWidth(min(needed, 640))
 
     def _on_item_changed(self, item: QtWidgets.QTableWidgetItem) -> None:
         if item.column() == 0:
@@ -399,10 +407,12 @@ class QtRunLog(QtWidgets.QWidget):
         self.text = QtWidgets.QPlainTextEdit(readOnly=True)
         self.text.setPlaceholderText("Train to see the run's steps, folds and timings here.")
         self.folds, self.grid = QtFrameTable(), QtFrameTable()
-        self.scatter = self._plot("Held-out predicted vs key-framed weight", "key-framed weight", "predicted")
-        self.residuals = self._plot("Residuals (predicted - key-framed)", "predicted weight", "residual")
+        self.scatter = self._plot("Held out: predicted vs key-framed", "key-framed weight", "predicted weight")
+        self.residuals = self._plot("Residuals", "predicted weight", "predicted - key-framed")
         tables = QtWidgets.QTabWidget()
         tables.addTab(self.folds, "Scores per CV fold")
+        tables.setTabToolTip(0, "The chosen SVR on each fold's held-out rows: r within the fold (one "
+                                "participant's rows under leave one participant out) and RMSE in weight")
         tables.addTab(self.grid, "Grid search (CV MSE)")
         left = QtWidgets.QSplitter(QtCore.Qt.Orientation.Vertical)
         left.addWidget(self.text)
@@ -413,7 +423,7 @@ class QtRunLog(QtWidgets.QWidget):
         split = QtWidgets.QSplitter()
         split.addWidget(left)
         split.addWidget(right)
-        split.setSizes([500, 400])
+        split.setSizes([450, 450])
         layout = QtWidgets.QVBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
         layout.addWidget(split)
@@ -427,6 +437,8 @@ class QtRunLog(QtWidgets.QWidget):
         w.setLabel("bottom", x_label)
         w.setLabel("left", y_label)
         w.setMenuEnabled(False)
+        for axis in ("left", "bottom"):
+            w.getAxis(axis).enableAutoSIPrefix(False)   # weights read as weights, not x0.001
         return w
 
     def _on_line(self, line: str) -> None:
@@ -444,7 +456,7 @@ class QtRunLog(QtWidgets.QWidget):
         pairs = held_out_pairs(o)
         for w in (self.scatter, self.residuals):
             w.clear()
-            w.addLegend(offset=(8, 8))
+            w.addLegend(offset=(8, 8), brush=pg.mkBrush(255, 255, 255, 200))
         self.scatter.plot([0, 1], [0, 1], pen=pg.mkPen("#808080", style=QtCore.Qt.PenStyle.DashLine))
         for b, name in enumerate(o.face.blendshapes):
             y, pred = pairs["measured"][:, b], pairs["predicted"][:, b]
