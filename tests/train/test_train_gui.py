@@ -391,3 +391,14 @@ def test_compare_shows_cv_schemes(qtbot, stage: QtTrainStage, two_bundles: tuple
     qtbot.waitUntil(lambda: stage.session.comparison["session"] != first and not stage.session.busy,
                     timeout=TIMEOUT_MS)
     assert stage.session.comparison["session"] == stage.comparison.choice.itemText(other)
+
+
+@pytest.mark.qt_log_ignore("This plugin does not support propagateSizeHints")
+@pytest.mark.parametrize("size", [(1280, 800), (1400, 900)])
+def test_no_session_column_is_clipped(qtbot, stage: QtTrainStage, size: tuple[int, int]) -> None:
+    stage.resize(*size)
+    stage.show()
+    qtbot.waitExposed(stage)
+    table = stage.picker.table
+    assert table.horizontalScrollBar().maximum() == 0       # every column in view
+    assert table.viewport().width() >= table.horizontalHeader().length()

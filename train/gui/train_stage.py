@@ -85,7 +85,8 @@ class QtDataPicker(QtWidgets.QGroupBox):
         self.table.setHorizontalHeaderLabels(list(_SESSION_COLUMNS))
         self.table.verticalHeader().setVisible(False)
         self.table.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
-        self.table.horizontalHeader().setStretchLastSection(True)
+        self.table.horizontalHeader().setSectionResizeMode(   # the last column takes the room left
+            len(_SESSION_COLUMNS) - 1, QtWidgets.QHeaderView.ResizeMode.Stretch)
         self.table.itemChanged.connect(self._on_item_changed)
         self.description = QtWidgets.QLabel(wordWrap=True)
         self._layout()
@@ -157,8 +158,9 @@ class QtDataPicker(QtWidgets.QGroupBox):
     def _fit_table_width(self) -> None:
         """As wide as its columns (no column clipped), up to 640 pixels (then it scrolls)."""
         header = self.table.horizontalHeader()
-        needed = (header.length() + self.table.verticalScrollBar().sizeHint().width()
-                  + 2 * self.table.frameWidth())
+        columns = sum(max(self.table.sizeHintForColumn(c), header.sectionSizeHint(c))
+                      for c in range(self.table.columnCount()))
+        needed = columns + self.table.verticalScrollBar().sizeHint().width() + 2 * self.table.frameWidth() + 2
         self.table.setMinimumWidth(min(needed, 640))
 
     def _on_item_changed(self, item: QtWidgets.QTableWidgetItem) -> None:
