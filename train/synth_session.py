@@ -132,15 +132,23 @@ class SynthSession:
         self.status_changed.emit(f"model: {self.model.name}", False)
 
     def load_motion(self, path: str | os.PathLike | Motion) -> None:
-        """Read a clip (``.bvh`` / ``.npz``) or take a Motion; the play head goes to 0."""
+        """Read a clip (``.bvh`` / ``.npz``) or take a Motion; the play head goes to 0.
+
+        The repeat count goes back to 1: a count chosen for one clip would silently stretch the
+        next (40 repeats of a 38 s clip are 1,520 s); the status line says so when it was above 1.
+        """
         motion = path if isinstance(path, Motion) else read_motion(Path(path))
+        old_loops = self.loops
         self.motion = motion
         self.motion_path = None if isinstance(path, Motion) else Path(path)
         self.position_s = 0.0
+        self.loops = 1
         self.motion_changed.emit()
         self._recompute()
+        reset = f"; repeat reset from {old_loops} x to 1 x" if old_loops != 1 else ""
         self.status_changed.emit(f"clip: {self.motion_path or 'motion'}: {motion.n_frames} frames "
-                                 f"at {motion.fps:g} Hz", False)
+                                 f"at {motion.fps:g} Hz ({motion.n_frames / motion.fps:.1f} s){reset}",
+                                 False)
 
     def set_character(self, **changes: Any) -> None:
         """Change character fields (validated: a bad value raises UserError, nothing changes)."""
@@ -278,6 +286,18 @@ class SynthSession:
         return self.motion.positions_m[i % self.motion.n_frames]
 
     # ---- export
+    def default_export_path(self, fmt: str = "csv") -> Path:
+        """A file name for :meth:`export`: ``<clip>_<model>_curves.csv`` (``_livelink.csv``).
+
+        In the clip's folder (the working folder for a clip given in memory); the model part is the
+        bundle folder's name or ``rule`` for the built-in model.
+        """
+        clip = self.motion_path.stem if self.motion_path is not None else "motion"
+        model = Path(self.model.name).name if Path(self.model.name).is_dir() else "rule"
+        folder = self.motion_path.parent if self.motion_path is not None else Path.cwd()
+        suffix = "livelink" if fmt == "livelink" else "curves"
+        return folder / f"{clip}_{model or 'model'}_{suffix}.csv"
+
     def export(self, path: str | os.PathLike, fmt: str = "csv", *, overwrite: bool = False) -> Path:
         """Write the curves as the per-frame CSV or a Live Link Face CSV (:func:`write_curves`, as synth).
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -29,6 +30,7 @@ from effortface.capture_tool.session import list_sessions, parse_session_id, rea
 from effortface.train.dataset import ANNOTATIONS_DIR, prepare, read_table, sessions_table
 from effortface.train.pipeline import (TrainingOutcome, TrainSettings, export_outcome,
                                        train_models, training_table)
+from effortface.train.run_log import bundle_settings, fold_scores, grid_table, timing_text
 
 ANY = "any"
 #: the background jobs that :meth:`TrainSession.cancel` can stop (an export always finishes)
@@ -103,6 +105,7 @@ class BundleSummary:
     hr: pd.DataFrame          # model, r, RMSE %, HR RMSE bpm (from model.json)
     face: pd.DataFrame        # blendshape, model, r, RMSE % (held out, from model.json)
     curves: dict[str, np.ndarray]   # predicted nhr and weights on the comparison session
+    settings: dict[str, Any] = dataclasses.field(default_factory=dict)  # run_log.bundle_settings
 
 
 def compare_bundle(path: str | os.PathLike, session_rows: pd.DataFrame) -> BundleSummary:
@@ -116,7 +119,8 @@ def compare_bundle(path: str | os.PathLike, session_rows: pd.DataFrame) -> Bundl
     from effortface.train.runtime import Character, load_model
 
     model = load_model(path)
-    met = read_bundle(Path(path)).metrics
+    stored = read_bundle(Path(path))
+    met = stored.metrics
     first = session_rows.iloc[0]
     names = list(model.blendshapes.names)
     e = expressiveness(session_rows, names).iloc[0].to_numpy(float) \
@@ -129,7 +133,7 @@ def compare_bundle(path: str | os.PathLike, session_rows: pd.DataFrame) -> Bundl
     hr = pd.DataFrame([{"model": k, "r": v["r"], "RMSE %": v["rmse_pct"], "HR RMSE bpm": v["hr_rmse_bpm"]}
                        for k, v in met.get("hr", {}).items()])
     face = pd.DataFrame(met.get("face_held_out", []))
-    return BundleSummary(Path(path), hr, face, curves)
+    return BundleSummary(Path(path), hr, face, curves, bundle_settings(stored.provenance, met))
 
 
 def measured_curves(prepared_rows: pd.DataFrame, names: Sequence[str]) -> dict[str, np.ndarray]:
@@ -156,7 +160,9 @@ class TrainSession:
     -----
     Emitters: ``sessions_changed()``, ``selection_changed()``, ``progress_changed(fraction, text)``,
     ``results_changed()``, ``status_changed(text, is_error)``, ``busy_changed(busy)``,
-    ``export_changed(path)`` (a bundle was exported), ``comparison_changed()``.
+    ``export_changed(path)`` (a bundle was exported), ``comparison_changed()``,
+    ``log_changed(line)`` (a line added to :attr:`run_log`; ``""`` when it was cleared).
+    Progress texts end with the elapsed time and, from the first step, an estimate of the time left.
     """
 
     def __init__(self, sessions_dir: str | os.PathLike, blendshapes: BlendshapeSet = DEFAULT_SET) -> None:
@@ -168,11 +174,16 @@ class TrainSession:
         self.settings = TrainSettings()
         self.outcome: TrainingOutcome | None = None
         self.comparison: dict[str, Any] | None = None
+        self.run_log: list[str] = []
+        self.fold_table = pd.DataFrame()      # run_log.fold_scores of the last training
+        self.grid_results = pd.DataFrame()    # run_log.grid_table of the last training
+        self._started_s = time.monotonic()
         self.jobs = Jobs(workers=1, name="train")
         self.sessions_changed, self.selection_changed = Emitter(), Emitter()
         self.progress_changed, self.results_changed = Emitter(), Emitter()
         self.status_changed, self.busy_changed = Emitter(), Emitter()
         self.export_changed, self.comparison_changed = Emitter(), Emitter()
+        self.log_changed = Emitter()
         self.refresh()
 
     # ---- data choice
@@ -234,6 +245,11 @@ class TrainSession:
         else:
             self.status_changed.emit(
                 f"raters: training uses {'the mean of the raters' if name == 'mean' else name}", False)
+
+    @property
+    def can_train(self) -> bool:
+        """True when there is something to train on (ticked sessions or a loaded table)."""
+        return self.table_path is not None or bool(self.selected)
 
     def describe_data(self) -> str:
         """One line: what the next training run will use."""
@@ -316,16 +332,31 @@ class TrainSession:
         return running[0] if running else ""
 
     def start_training(self) -> None:
-        """Train on the current choice in the background; results arrive through :meth:`poll`."""
-        settings, blendshapes = self.settings, self.blendshapes
+        """Train on the current choice in the background; results arrive through :meth:`poll`.
 
-        def train(job: Job) -> TrainingOutcome:
+        Clears the run log and replaces the status line (an old error does not stay up).
+        """
+        settings, blendshapes = self.settings, self.blendshapes
+        if not self.can_train:
+            raise UserError("sessions: expected at least one selected session or a loaded table, "
+                            "found none")
+
+        def train(job: Job) -> tuple[TrainingOutcome, pd.DataFrame, pd.DataFrame]:
             table, sources = self.table()
             job.report(0.02, "data read")
-            return train_models(table, blendshapes, settings, sources, job.report,
-                                lambda: job.cancel_requested)
+            outcome = train_models(table, blendshapes, settings, sources, job.report,
+                                   lambda: job.cancel_requested)
+            return outcome, fold_scores(outcome), grid_table(outcome)
 
         self._start("train", train, self._trained)
+        self.status_changed.emit(f"training on {self.describe_data()}...", False)
+        self.log(f"settings: raters {settings.rater_policy}, grid {settings.grid}, cv {settings.cv}, "
+                 f"{settings.max_rows_per_participant} face rows per participant")
+
+    def log(self, line: str) -> None:
+        """Add a line to the run log (prefixed with the seconds since the job started)."""
+        self.run_log.append(f"[{time.monotonic() - self._started_s:6.1f} s] {line}")
+        self.log_changed.emit(self.run_log[-1])
 
     @property
     def cancellable(self) -> bool:
@@ -407,9 +438,20 @@ class TrainSession:
         """Run ``fn(job)`` in the background, one job at a time; ``done`` gets its result."""
         if self.busy:
             raise UserError(f"{key}: expected no other job running, found {self.running_job!r} still running")
-        self.jobs.submit(key, fn, takes_job=True, progress=self.progress_changed.emit, done=done)
+        self._started_s = time.monotonic()
+        if key == "train":
+            self.run_log = []
+            self.log_changed.emit("")
+        self.jobs.submit(key, fn, takes_job=True, progress=self._progress, done=done)
         self.busy_changed.emit(True)
         self.progress_changed.emit(0.0, f"{key}: started")
+        self.log(f"{key}: started")
+
+    def _progress(self, fraction: float, text: str) -> None:
+        """A job's progress (GUI thread): with elapsed time and time left, and into the run log."""
+        elapsed_s = time.monotonic() - self._started_s
+        self.progress_changed.emit(fraction, f"{text} - {timing_text(fraction, elapsed_s)}")
+        self.log(f"{text} ({fraction:.0%})")
 
     def poll(self) -> None:
         """Deliver the jobs' progress and results to the emitters (GUI thread, e.g. a QTimer)."""
@@ -418,9 +460,13 @@ class TrainSession:
     def _ended(self, result: JobResult) -> bool:
         """Report the end of a job; True if it succeeded (an unexpected error is re-raised after)."""
         self.busy_changed.emit(False)
+        elapsed = f"{time.monotonic() - self._started_s:.1f} s"
         if result.error is None:
-            self.progress_changed.emit(1.0, f"{result.key}: done")
+            self.progress_changed.emit(1.0, f"{result.key}: done in {elapsed}")
+            self.log(f"{result.key}: done in {elapsed}")
             return True
+        self.log(f"{result.key}: {'cancelled' if result.cancelled else 'failed'} after {elapsed}: "
+                 f"{result.error}")
         if result.cancelled:
             self.progress_changed.emit(0.0, "cancelled")
             self.status_changed.emit(f"{result.key} cancelled; previous results kept", False)
@@ -433,9 +479,16 @@ class TrainSession:
 
     def _trained(self, result: JobResult) -> None:
         if self._ended(result):
-            self.outcome = result.value
+            self.outcome, self.fold_table, self.grid_results = result.value
+            for (fold, who), rows in self.fold_table.groupby(["fold", "held out"], sort=True):
+                r = rows["r"].to_numpy(float)
+                mean_r = f"mean r {np.nanmean(r):.2f}" if np.isfinite(r).any() else "r undefined"
+                self.log(f"face CV fold {fold} (held out {who}): {mean_r}, mean RMSE {rows['RMSE'].mean():.3f}")
+            chosen = self.grid_results[self.grid_results["chosen"] == "yes"]
+            for r in chosen.itertuples(index=False):
+                self.log(f"grid: {r.blendshape} chose C {r.C:g}, gamma {r.gamma:g}, epsilon {r.epsilon:g}")
             self.results_changed.emit()
-            self.status_changed.emit(f"trained on {len(result.value.series)} sessions", False)
+            self.status_changed.emit(f"trained on {len(self.outcome.series)} sessions", False)
 
     def _exported(self, result: JobResult) -> None:
         if self._ended(result):

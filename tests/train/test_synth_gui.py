@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from PySide6 import QtCore
+from PySide6 import QtCore, QtWidgets
 
 from effortface.train.curves_io import LIVELINK_BLENDSHAPES
 from effortface.train.gui.synth_stage import QtSynthStage
@@ -258,3 +258,102 @@ def test_hiding_the_stage_pauses_playback(qtbot, stage: QtSynthStage) -> None:
     assert not stage.session.playing and not stage.timer.isActive()
     assert stage.play_button.text() == "Play" and not stage.play_button.isChecked()
     stage.setParent(None)                                    # the fixture, not the host, ends it
+
+
+# --------------------------------------------------------------------------- issue 16 item 12
+
+
+def _press(qtbot, widget, key: QtCore.Qt.Key, modifier=QtCore.Qt.KeyboardModifier.NoModifier) -> None:
+    """A real key press on the focused widget, through the window system (shortcuts included)."""
+    widget.setFocus()
+    qtbot.waitUntil(widget.hasFocus, timeout=2_000)
+    qtbot.keyClick(widget, key, modifier)
+
+
+def test_space_plays_and_keys_seek_from_any_focus(qtbot, stage: QtSynthStage) -> None:
+    """Space, arrows and Home/End drive the player whether the focus is in a spin box, the
+    clip list or the plots."""
+    stage.activateWindow()
+    tl = stage.character.fields["training_level"]
+    tl_before = tl.value()
+    _press(qtbot, tl, QtCore.Qt.Key.Key_Space)
+    assert stage.session.playing and tl.value() == tl_before
+    _press(qtbot, stage.clip_combo, QtCore.Qt.Key.Key_Space)
+    assert not stage.session.playing
+    _press(qtbot, stage.loops, QtCore.Qt.Key.Key_End)
+    assert stage.session.frame == stage.session.n_frames - 1
+    _press(qtbot, stage.character.expressiveness[0], QtCore.Qt.Key.Key_Home)
+    assert stage.session.frame == 0
+    _press(qtbot, tl, QtCore.Qt.Key.Key_Right)
+    assert stage.session.frame == 1
+    _press(qtbot, stage.plots, QtCore.Qt.Key.Key_Right, QtCore.Qt.KeyboardModifier.ShiftModifier)
+    assert stage.session.frame == 1 + round(stage.session.motion.fps)
+    assert stage.session.character.training_level == tl_before      # the spin boxes kept their values
+
+
+def test_keys_are_released_when_the_stage_is_hidden(qtbot, stage: QtSynthStage) -> None:
+    other = QtWidgets.QLineEdit()
+    qtbot.addWidget(other)
+    stage.hide()
+    other.show()
+    _press(qtbot, other, QtCore.Qt.Key.Key_Space)
+    assert other.text() == " " and not stage.session.playing
+
+
+def test_a_new_clip_starts_at_one_repeat(qtbot, stage: QtSynthStage, shared_data: Path) -> None:
+    one_pass_s = stage.session.duration_s
+    stage.loops.setValue(40)
+    stage.session.wait(30)
+    assert stage.session.duration_s > 39 * one_pass_s
+    assert stage.load_clip(shared_data / CLIP)
+    stage.session.wait(30)
+    assert stage.session.loops == 1 and stage.loops.value() == 1
+    assert stage.session.duration_s == pytest.approx(one_pass_s)
+    assert "repeat reset from 40 x to 1 x" in stage.status.text()
+
+
+def test_export_suggests_a_file_name(stage: QtSynthStage, bundle: Path, shared_data: Path) -> None:
+    clip = shared_data / CLIP
+    assert stage.session.default_export_path("csv") == clip.parent / f"{clip.stem}_rule_curves.csv"
+    assert stage.load_model(bundle)
+    assert stage.session.default_export_path("livelink").name == f"{clip.stem}_{bundle.name}_livelink.csv"
+
+
+def test_epoc_axis_and_aligned_time_axes(stage: QtSynthStage) -> None:
+    from effortface.train.gui.synth_stage import EPOC_MIN_TOP_ML_PER_KG, epoc_axis_top
+
+    assert epoc_axis_top(np.full(10, 0.0007)) == EPOC_MIN_TOP_ML_PER_KG   # not 0-0.0008
+    assert epoc_axis_top(np.array([0.0, 20.0])) == pytest.approx(21.0)
+    top = stage.plots.plots["epoc"].vb.viewRange()[1][1]
+    assert top >= EPOC_MIN_TOP_ML_PER_KG
+    QtWidgets.QApplication.processEvents()
+    boxes = [p.vb.sceneBoundingRect() for p in stage.plots.plots.values()]
+    lefts = {round(b.left()) - round(min(x.left() for x in boxes[i % 2::2])) for i, b in enumerate(boxes)}
+    assert lefts == {0} and len({round(b.width()) for b in boxes}) == 1   # same x geometry
+    ranges = {tuple(np.round(p.vb.viewRange()[0], 6)) for p in stage.plots.plots.values()}
+    assert len(ranges) == 1                                                 # one time axis
+
+
+def test_no_weight_curve_hides_under_another(stage: QtSynthStage) -> None:
+    names = stage.session.model.blendshapes.names
+    pens = [stage.plots.curves[n].opts["pen"] for n in names]
+    widths = [p.widthF() for p in pens]
+    assert widths == sorted(widths, reverse=True) and len(set(widths)) == len(widths)
+    assert all(p.color().alpha() < 255 for p in pens)
+    z = [stage.plots.curves[n].zValue() for n in names]
+    assert z == sorted(z)                       # the thinnest drawn last, on top
+
+
+def test_face_preview_grows_with_the_window(qtbot, stage: QtSynthStage) -> None:
+    stage.resize(1280, 800)
+    qtbot.waitUntil(lambda: stage.face.pixmap().width() >= 320, timeout=2_000)
+    small = stage.face.pixmap().width()
+    stage.resize(1920, 1080)
+    qtbot.waitUntil(lambda: stage.face.pixmap().width() > small, timeout=2_000)
+
+
+def test_character_panel_fits_at_1280x800(qtbot, stage: QtSynthStage) -> None:
+    stage.resize(1280, 800)
+    QtWidgets.QApplication.processEvents()
+    bar = stage.character_scroll.verticalScrollBar()
+    assert bar.maximum() == 0           # nothing of the character panel scrolled out

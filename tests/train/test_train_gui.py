@@ -102,7 +102,8 @@ def test_cancel_keeps_previous_state(qtbot, stage: QtTrainStage) -> None:
 
 def test_training_without_data_shows_the_error(qtbot, stage: QtTrainStage) -> None:
     stage.picker.clear_button.click()
-    _train(qtbot, stage)
+    assert not stage.train_button.isEnabled()                # nothing to train on: no Train
+    stage.train()                                            # a script or shortcut still says why
     assert "expected at least one selected session" in stage.status.text()
     assert "b00020" in stage.status.styleSheet()             # shown as an error, in the stage
     assert stage.session.outcome is None
@@ -294,3 +295,110 @@ def test_compare_without_ticks_uses_the_models_sessions(qtbot, stage: QtTrainSta
     stage.picker.table.item(1, 0).setCheckState(QtCore.Qt.CheckState.Checked)   # ticked ones win
     assert "1 ticked session (P01)" in cmp.data_label.text()
     assert [cmp.choice.itemText(i) for i in range(cmp.choice.count())] == [SESSIONS[1]]
+
+
+# --------------------------------------------------------------------------- issue 16 items 10-11
+
+
+def test_train_is_enabled_only_with_something_selected(stage: QtTrainStage, tmp_path: Path) -> None:
+    from effortface.train.dataset import sessions_table, write_table
+
+    assert not stage.session.selected and not stage.train_button.isEnabled()
+    assert "Tick sessions" in stage.train_button.toolTip()
+    stage.picker.table.item(0, 0).setCheckState(QtCore.Qt.CheckState.Checked)
+    assert stage.train_button.isEnabled()
+    stage.picker.clear_button.click()
+    assert not stage.train_button.isEnabled()
+    assert stage.picker.load_table(write_table(sessions_table([SAMPLE / CARDIO[0]]), tmp_path / "t.csv"))
+    assert stage.train_button.isEnabled()
+
+
+def test_a_run_shows_no_stale_error_a_legend_a_log_and_labelled_axes(qtbot, stage: QtTrainStage) -> None:
+    """Before training no legend; a new run clears an old error; after it the run log holds the
+    per-fold scores, the grid search, the timings and the held-out plots; Fig. 3 has y labels."""
+    assert not stage.hr_results.legend.isVisible()           # no legend for curves not drawn yet
+    stage.show_status("train failed: an old error", True)
+    _pick_cardio_small(stage)
+    progress_texts: list[str] = []
+    stage.session.progress_changed.connect(lambda f, t: progress_texts.append(t))
+    qtbot.mouseClick(stage.train_button, LEFT)
+    assert "b00020" not in stage.status.styleSheet() and "old error" not in stage.status.text()
+    assert stage.status.text().startswith("training on 6 sessions")
+    qtbot.waitUntil(lambda: not stage.session.busy and stage.train_button.isEnabled(), timeout=TIMEOUT_MS)
+    assert stage.session.outcome is not None
+    assert stage.hr_results.legend.isVisible() and len(stage.hr_results.legend.items) == 3
+    assert any("s elapsed, about" in t and "s left" in t for t in progress_texts)   # an ETA shown
+    log = stage.run_log.text.toPlainText()
+    assert "face CV fold 6 of 6" in log and "train: done in" in log
+    assert log.count("held out P0") == 6 and "chose C" in log
+    names = stage.session.blendshapes.names
+    assert stage.run_log.folds.rowCount() == 6 * len(names)   # per held-out participant and blendshape
+    assert stage.run_log.folds.columnCount() == 5
+    grid = stage.session.grid_results
+    assert len(grid) == len(names) * 4 and (grid["chosen"] == "yes").sum() == len(names)
+    assert stage.run_log.grid.rowCount() == len(grid)
+    scatter = [i for i in stage.run_log.scatter.getPlotItem().listDataItems() if i.opts["symbol"]]
+    assert len(scatter) == len(names) and len(scatter[0].getData()[0]) > 100
+    assert all(ax.getAxis("left").labelText == "weight" for ax in stage.face_results.axes)
+    assert "gamma 0.1, 0.5" in stage.settings_panel.grid.toolTip()
+
+
+@pytest.fixture(scope="module")
+def kfold_bundle(tmp_path_factory) -> Path:
+    """A bundle of the cardio sessions scored by random-frame K-fold (small settings)."""
+    out = tmp_path_factory.mktemp("kfold") / "kfold"
+    s = TrainSession(SAMPLE)
+    s.set_selected([e.session_id for e in filter_entries(s.entries, exercise="cardio")])
+    s.set_settings(max_rows_per_participant=60, cv="kfold")
+    s.start_training()
+    s.wait(120)
+    s.export(out)
+    s.wait(120)
+    assert (out / "model.json").is_file()
+    return out
+
+
+def test_compare_shows_cv_schemes(qtbot, stage: QtTrainStage, two_bundles: tuple[Path, Path],
+                                  kfold_bundle: Path) -> None:
+    """A leave-one-participant-out model beside a K-fold one: each scheme named, settings and
+    chosen hyper-parameters shown, a difference column, and a new session recomputes."""
+    stage.picker.exercise.setCurrentIndex(stage.picker.exercise.findData("cardio"))
+    stage.picker.select_shown_button.click()
+    for edit, path in zip(stage.comparison.paths, (two_bundles[0], kfold_bundle)):
+        edit.setText(str(path))
+    qtbot.mouseClick(stage.comparison.compare_button, LEFT)
+    qtbot.waitUntil(lambda: stage.session.comparison is not None, timeout=TIMEOUT_MS)
+    table = stage.comparison.table
+    headers = [table.horizontalHeaderItem(i).text() for i in range(table.columnCount())]
+    assert headers == ["metric", "model A", "model B", "B - A"]
+    rows = {table.item(r, 0).text(): [table.item(r, c).text() for c in (1, 2, 3)]
+            for r in range(table.rowCount())}
+    assert rows["CV scheme"] == ["leave one participant out", "random-frame K-fold (inflated)", "differs"]
+    assert rows["raters"] == ["mean", "mean", "same"] and rows["grid"] == ["small", "small", "same"]
+    for name in stage.session.blendshapes.names:
+        assert len(rows[f"{name} C / gamma / epsilon"][0].split(" / ")) == 3
+    r_a, r_b, diff = rows["HR tl_regression r"]
+    assert float(diff) == pytest.approx(float(r_b) - float(r_a), abs=2e-3)
+    caption_text = stage.comparison.scores_caption.text()
+    assert "model A by leave one participant out" in caption_text
+    assert "model B by random-frame K-fold" in caption_text and "held-out participants" not in caption_text
+
+    first = stage.session.comparison["session"]
+    other = next(i for i in range(stage.comparison.choice.count())
+                 if stage.comparison.choice.itemText(i) != first)
+    stage.comparison.choice.setCurrentIndex(other)
+    stage.comparison.choice.activated.emit(other)            # what a pick in the list sends
+    qtbot.waitUntil(lambda: stage.session.comparison["session"] != first and not stage.session.busy,
+                    timeout=TIMEOUT_MS)
+    assert stage.session.comparison["session"] == stage.comparison.choice.itemText(other)
+
+
+@pytest.mark.qt_log_ignore("This plugin does not support propagateSizeHints")
+@pytest.mark.parametrize("size", [(1280, 800), (1400, 900)])
+def test_no_session_column_is_clipped(qtbot, stage: QtTrainStage, size: tuple[int, int]) -> None:
+    stage.resize(*size)
+    stage.show()
+    qtbot.waitExposed(stage)
+    table = stage.picker.table
+    assert table.horizontalScrollBar().maximum() == 0       # every column in view
+    assert table.viewport().width() >= table.horizontalHeader().length()

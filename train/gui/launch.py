@@ -5,6 +5,8 @@
     python -m effortface.train.gui.launch synth --clip CLIP.bvh [--model DIR] [--loops N] [--seconds S] [--screenshot PNG]
     python -m effortface.train.gui.launch train [--sessions DIR] [--train] [--tab N] [--screenshot PNG]
 
+``--size WxH`` sets the window's size (default 1400x900).
+
 ``--screenshot`` renders offscreen and exits; ``--train`` trains on every annotated session first
 (with the small grid); ``--seconds`` plays the clip that long before the picture.
 """
@@ -41,7 +43,17 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--compare", nargs=2, metavar="MODEL_DIR")
     p.add_argument("--tab", type=int, default=0)
     p.add_argument("--screenshot", metavar="PNG")
+    p.add_argument("--size", type=_size, default=SIZE, metavar="WxH")
     return p
+
+
+def _size(text: str) -> tuple[int, int]:
+    """``"1280x800"`` as (1280, 800)."""
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 1280x800, found {text!r}") from None
+    return w, h
 
 
 def _wait(app: QtCore.QCoreApplication, seconds: float) -> None:
@@ -103,7 +115,7 @@ def main(argv: list[str] | None = None) -> int:
     except UserError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    stage.resize(*SIZE)  # type: ignore[attr-defined]  # a stage, typed object
+    stage.resize(*args.size)  # type: ignore[attr-defined]  # a stage, typed object
     stage.show()  # type: ignore[attr-defined]  # a stage, typed object
     if args.stage == "synth" and args.seconds > 0:
         stage.session.play()  # type: ignore[attr-defined]  # a stage, typed object

@@ -36,9 +36,23 @@ __all__ = ["QtSynthStage", "SynthSession"]
 
 FRAME_MS = 15          # play timer period: about 66 Hz, above the 60 fps target
 POLL_MS = 30           # how often finished background recomputes are applied
-FACE_SIZE = (320, 240)
+FACE_SIZE = (320, 240)  # the face preview's smallest size; it grows with the window (4:3)
 VIEWS = ("front", "side")
 _WEIGHT_PENS = ("#d62728", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#17becf")
+#: weights curves are drawn in order, each thinner and dashed differently, half transparent, so a
+#: curve lying on another (two blendshapes at 0) still shows along its edges
+_WEIGHT_WIDTHS = (4.5, 3.0, 2.0, 1.2)
+_WEIGHT_STYLES = (QtCore.Qt.PenStyle.SolidLine, QtCore.Qt.PenStyle.SolidLine,
+                  QtCore.Qt.PenStyle.DashLine, QtCore.Qt.PenStyle.DotLine)
+_WEIGHT_ALPHA = 170
+#: smallest EPOC axis (ml/kg): a clip too short or light for EPOC to build shows a flat line at 0,
+#: not noise magnified to fill an axis of 0-0.0008
+EPOC_MIN_TOP_ML_PER_KG = 1.0
+#: widths of the plots' left and right axes, equal on all four so that their time axes line up
+_AXIS_WIDTH_PX = (58, 48)
+#: the play head's keys, active application-wide while the stage is shown (key, what it does)
+PLAYER_KEYS = (("Space", "play / pause"), ("Left", "one frame back"), ("Right", "one frame on"),
+               ("Shift+Left", "1 s back"), ("Shift+Right", "1 s on"), ("Home", "start"), ("End", "end"))
 _CURSOR_PEN = pg.mkPen("#202020", width=1, style=QtCore.Qt.PenStyle.DashLine)
 
 
@@ -52,6 +66,28 @@ def _show_error(label: QtWidgets.QLabel, text: str, is_error: bool) -> None:
     """Status line: errors in red, news in grey."""
     label.setStyleSheet("color:#b00020;" if is_error else "color:#404040;")
     label.setText(text)
+
+
+def epoc_axis_top(epoc_ml_per_kg: np.ndarray) -> float:
+    """Top of the EPOC axis (ml/kg): 5 % above the curve, never below :data:`EPOC_MIN_TOP_ML_PER_KG`."""
+    peak = float(np.nanmax(epoc_ml_per_kg)) if len(epoc_ml_per_kg) else 0.0
+    return max(1.05 * peak, EPOC_MIN_TOP_ML_PER_KG)
+
+
+def weight_pen(index: int) -> QtGui.QPen:
+    """The pen of the ``index``-th weights curve (colour, width and dash by draw order, see above)."""
+    color = QtGui.QColor(_WEIGHT_PENS[index % len(_WEIGHT_PENS)])
+    color.setAlpha(_WEIGHT_ALPHA)
+    pen = pg.mkPen(color, width=_WEIGHT_WIDTHS[min(index, len(_WEIGHT_WIDTHS) - 1)])
+    pen.setStyle(_WEIGHT_STYLES[index % len(_WEIGHT_STYLES)])
+    return pen
+
+
+def _application() -> QtCore.QCoreApplication:
+    """The running application (a stage exists only inside one)."""
+    app = QtWidgets.QApplication.instance()
+    assert app is not None
+    return app
 
 
 def _weights_text(names: tuple[str, ...], weights: np.ndarray, per_line: int = 2) -> str:
@@ -233,21 +269,34 @@ class QtSkeletonView(pg.PlotWidget):
 
 
 class QtFacePreview(QtWidgets.QLabel):
-    """The parametric face for a weight vector, with the weights written under it."""
+    """The parametric face for a weight vector, as large as the label allows (4:3, at least FACE_SIZE)."""
 
     def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
         self.setMinimumSize(*FACE_SIZE)
+        self.setSizePolicy(QtWidgets.QSizePolicy.Policy.Expanding, QtWidgets.QSizePolicy.Policy.Expanding)
         self.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
-        self.show_weights(np.zeros(4))  # the rest face until a clip plays
+        self._weights = np.zeros(4)
+        self.show_weights(self._weights)  # the rest face until a clip plays
+
+    def face_size(self) -> tuple[int, int]:
+        """The rendered face's (width, height): the largest 4:3 box in the label, at least FACE_SIZE."""
+        w = max(FACE_SIZE[0], min(self.width(), self.height() * 4 // 3))
+        return w - w % 4, (w - w % 4) * 3 // 4
 
     def show_weights(self, weights: np.ndarray) -> None:
-        """Render the face (BGR) and show it."""
-        bgr = render_face(weights, FACE_SIZE)
-        rgb = np.ascontiguousarray(bgr[:, :, ::-1])
-        image = QtGui.QImage(rgb.data, FACE_SIZE[0], FACE_SIZE[1], 3 * FACE_SIZE[0],
-                             QtGui.QImage.Format.Format_RGB888).copy()
+        """Render the face (BGR) at :meth:`face_size` and show it."""
+        self._weights = np.asarray(weights, float)
+        w, h = self.face_size()
+        rgb = np.ascontiguousarray(render_face(self._weights, (w, h))[:, :, ::-1])
+        image = QtGui.QImage(rgb.data, w, h, 3 * w, QtGui.QImage.Format.Format_RGB888).copy()
         self.setPixmap(QtGui.QPixmap.fromImage(image))
+
+    def resizeEvent(self, event: QtGui.QResizeEvent) -> None:
+        """Render again at the new size."""
+        super().resizeEvent(event)
+        if self.pixmap().size().toTuple() != self.face_size():
+            self.show_weights(self._weights)
 
 
 class QtSynthPlots(pg.GraphicsLayoutWidget):
@@ -256,30 +305,47 @@ class QtSynthPlots(pg.GraphicsLayoutWidget):
     def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
         self.setBackground("w")
-        self.plots = {key: self.addPlot(row=i // 2, col=i % 2, title=title)
-                      for i, (key, title) in enumerate((
-                          ("work", "work <span style='color:#1f77b4'>w</span> and power "
-                                   "<span style='color:#888888'>p</span> (W/kg)"),
-                          ("nhr", "<span style='color:#1f77b4'>NHR</span> (left), "
-                                  "as HR in bpm (right)"),
-                          ("epoc", "EPOC (ml/kg)"), ("weights", "blendshape weights")))}
+        titles = ("work <span style='color:#1f77b4'>w</span> and power "
+                  "<span style='color:#888888'>p</span> (W/kg)",
+                  "<span style='color:#1f77b4'>NHR</span> (left), as HR in bpm (right)",
+                  "EPOC (ml/kg)", "blendshape weights")
+        self.plots = {key: self.addPlot(row=i // 2, col=i % 2)
+                      for i, key in enumerate(("work", "nhr", "epoc", "weights"))}
         self.cursors = {}
-        for key, plot in self.plots.items():
+        for (key, plot), title in zip(self.plots.items(), titles):
+            plot.setTitle(title)
             plot.setClipToView(True)
             plot.setDownsampling(auto=True, mode="peak")
             plot.showGrid(x=True, y=True, alpha=0.2)
-            plot.setLabel("bottom", "time (s)")
+            if key in ("epoc", "weights"):        # the bottom row names the shared time axis
+                plot.setLabel("bottom", "time (s)")
             self.cursors[key] = plot.addLine(x=0, pen=_CURSOR_PEN, movable=False)
             plot.setRange(xRange=(0, 10), yRange=(0, 1), padding=0.02)
+            plot.showAxis("right")
+            plot.getAxis("left").setWidth(_AXIS_WIDTH_PX[0])
+            plot.getAxis("right").setWidth(_AXIS_WIDTH_PX[1])
+            if key != "nhr":
+                plot.getAxis("right").setStyle(showValues=False)
             _cache_axes(plot)
+        for key in ("work", "nhr", "epoc"):
+            self.plots[key].setXLink(self.plots["weights"])  # one time axis: zoom or pan one, all follow
         self.curves: dict[str, pg.PlotDataItem] = {}
         self._hr_view = self._add_hr_axis(self.plots["nhr"])
         self._hr_view.setYRange(60, 190, padding=0)
 
+    def resizeEvent(self, event: QtGui.QResizeEvent | None) -> None:
+        """Two columns of equal width whatever the titles' lengths: the four time axes line up."""
+        super().resizeEvent(event)
+        if not hasattr(self, "ci"):      # pyqtgraph resizes once while it builds
+            return
+        left, _, right, _ = self.ci.layout.getContentsMargins()
+        half = max((self.width() - left - right - self.ci.layout.horizontalSpacing()) / 2 - 2, 50)
+        for col in (0, 1):
+            self.ci.layout.setColumnFixedWidth(col, half)
+
     def _add_hr_axis(self, plot: pg.PlotItem) -> pg.ViewBox:
         """A right-hand HR axis on its own view box, kept aligned with the NHR plot."""
         view = pg.ViewBox()
-        plot.showAxis("right")
         plot.scene().addItem(view)
         plot.getAxis("right").linkToView(view)
         plot.getAxis("right").setLabel("HR (bpm)")
@@ -312,16 +378,19 @@ class QtSynthPlots(pg.GraphicsLayoutWidget):
         rest, top = hr_range_bpm
         self._hr_view.setYRange(rest - 0.02 * (top - rest), top + 0.02 * (top - rest), padding=0)
         self._curve("epoc", "epoc", pg.mkPen("#2ca02c", width=2)).setData(t, curves["epoc"])
-        self.plots["epoc"].setYRange(0, max(1.05 * float(np.max(curves["epoc"])), 1e-3), padding=0)
+        self.plots["epoc"].setYRange(0, epoc_axis_top(curves["epoc"]), padding=0)
         for i, name in enumerate(names):
-            pen = pg.mkPen(_WEIGHT_PENS[i % len(_WEIGHT_PENS)], width=1.5)
-            self._curve("weights", name, pen, label=name.replace("_", " ")).setData(t, curves[name])
+            curve = self._curve("weights", name, weight_pen(i), label=name.replace("_", " "))
+            curve.setPen(weight_pen(i))
+            curve.setZValue(i)                       # drawn in order: the thinner ones on top
+            curve.setData(t, curves[name])
         self.plots["weights"].setYRange(0, 1, padding=0.02)
-        self.plots["weights"].setTitle("weights: " + "  ".join(
-            f"<span style='color:{_WEIGHT_PENS[i % len(_WEIGHT_PENS)]}'>{n.replace('_', ' ')}</span>"
-            for i, n in enumerate(names)))
-        for plot in self.plots.values():
-            plot.setXRange(0, float(t[-1]) if len(t) else 1, padding=0.01)
+        spans = [f"<span style='color:{_WEIGHT_PENS[i % len(_WEIGHT_PENS)]}'>{n.replace('_', ' ')}</span>"
+                 for i, n in enumerate(names)]
+        # two names a line: a one-line title would widen its column and misalign the time axes
+        self.plots["weights"].setTitle("weights: " + "<br>".join(
+            "  ".join(spans[i:i + 2]) for i in range(0, len(spans), 2)), size="8pt")
+        self.plots["weights"].setXRange(0, float(t[-1]) if len(t) else 1, padding=0.01)  # linked
 
     def move_cursor(self, t_s: float) -> None:
         """Move the time cursor of every plot."""
@@ -375,22 +444,84 @@ class QtSynthStage(QtWidgets.QWidget):
         self.character = QtCharacterPanel(self.session, self.show_status)
         self.plots = QtSynthPlots()
         self.weights_label = QtWidgets.QLabel(alignment=QtCore.Qt.AlignmentFlag.AlignCenter)
-        face_box = QtWidgets.QVBoxLayout()
+        face_widget = QtWidgets.QWidget()
+        face_box = QtWidgets.QVBoxLayout(face_widget)
+        face_box.setContentsMargins(0, 0, 0, 0)
         face_box.addWidget(self.face, 1)
         face_box.addWidget(self.weights_label)
-        top = QtWidgets.QHBoxLayout()
-        top.addWidget(self.skeleton, 3)
-        top.addLayout(face_box, 2)
-        scroll = QtWidgets.QScrollArea(widgetResizable=True)
-        scroll.setWidget(self.character)
-        scroll.setMinimumWidth(330)
-        top.addWidget(scroll, 0)
+        views = QtWidgets.QSplitter(QtCore.Qt.Orientation.Horizontal)
+        views.addWidget(self.skeleton)
+        views.addWidget(face_widget)
+        views.setSizes([500, 400])
+        self.view_split = QtWidgets.QSplitter(QtCore.Qt.Orientation.Vertical)  # the views above the plots
+        self.view_split.addWidget(views)
+        self.view_split.addWidget(self.plots)
+        self.view_split.setSizes([380, 420])
+        self.character_scroll = QtWidgets.QScrollArea(widgetResizable=True)
+        self.character_scroll.setWidget(self.character)
+        self.character_scroll.setMinimumWidth(330)   # the character spans the stage's height
+        body = QtWidgets.QHBoxLayout()
+        body.addWidget(self.view_split, 1)
+        body.addWidget(self.character_scroll, 0)
         layout = QtWidgets.QVBoxLayout(self)
         layout.addLayout(self._file_bar())
         layout.addLayout(self._player_bar())
-        layout.addLayout(top, 4)
-        layout.addWidget(self.plots, 3)
+        layout.addLayout(body, 1)
         layout.addWidget(self.status)
+        self._build_shortcuts()
+
+    def _build_shortcuts(self) -> None:
+        """The player's keys (:data:`PLAYER_KEYS`), application-wide: they work whatever has focus.
+
+        Enabled only while the stage is shown (:meth:`showEvent`, :meth:`hideEvent`), so Space
+        types a space in another stage's fields.
+        """
+        actions = (self.toggle_play, lambda: self.step_frames(-1), lambda: self.step_frames(1),
+                   lambda: self.step_seconds(-1.0), lambda: self.step_seconds(1.0),
+                   lambda: self._guard(lambda: self.session.seek(0.0)),
+                   lambda: self._guard(lambda: self.session.seek(self.session.duration_s)))
+        self.shortcuts: list[QtGui.QShortcut] = []
+        for (key, what), action in zip(PLAYER_KEYS, actions):
+            shortcut = QtGui.QShortcut(QtGui.QKeySequence(key), self)
+            shortcut.setContext(QtCore.Qt.ShortcutContext.ApplicationShortcut)
+            shortcut.setWhatsThis(what)
+            shortcut.setEnabled(False)
+            shortcut.activated.connect(action)
+            self.shortcuts.append(shortcut)
+        self._player_keys = {QtGui.QKeySequence(key).toString() for key, _ in PLAYER_KEYS}
+        self.play_button.setToolTip("Play / pause (Space, from anywhere in the window)")
+        self.loops.setToolTip("Repeat the clip end to end (heart rate and fatigue build up over "
+                              "minutes); a new clip starts at 1")
+        self.slider.setToolTip("Play head: Left/Right one frame, Shift+Left/Right 1 s, Home/End")
+
+    def eventFilter(self, watched: QtCore.QObject, event: QtCore.QEvent) -> bool:
+        """Keep the player's keys from the spin boxes' text fields while the stage is shown.
+
+        A focused line edit claims Space, arrows and Home/End before any shortcut (a
+        ShortcutOverride); the stage has no free-text field, so its window's widgets give them up.
+        """
+        if (event.type() == QtCore.QEvent.Type.ShortcutOverride and self.isVisible()
+                and isinstance(watched, QtWidgets.QWidget) and watched.window() is self.window()
+                and isinstance(event, QtGui.QKeyEvent)
+                and QtGui.QKeySequence(event.keyCombination()).toString() in self._player_keys):
+            return True      # not accepted: the application-wide shortcut gets the key
+        return super().eventFilter(watched, event)
+
+    def toggle_play(self) -> None:
+        """Play or pause (Space)."""
+        self._guard(lambda: self.session.play(not self.session.playing))
+
+    def step_frames(self, frames: int) -> None:
+        """Pause and move the play head by ``frames`` frames (Left/Right)."""
+        m = self.session.motion
+        if m is not None:
+            self.session.play(False)
+            self.session.seek((self.session.frame + frames) / m.fps)
+
+    def step_seconds(self, seconds: float) -> None:
+        """Move the play head by ``seconds`` (Shift+Left/Right); playback goes on."""
+        if self.session.motion is not None:
+            self.session.seek(self.session.position_s + seconds)
 
     def _file_bar(self) -> QtWidgets.QHBoxLayout:
         self.open_clip_button = QtWidgets.QPushButton("Open clip...")
@@ -518,7 +649,8 @@ class QtSynthStage(QtWidgets.QWidget):
             self.load_model(path)
 
     def _ask_export(self, fmt: str) -> None:
-        path, _ = QtWidgets.QFileDialog.getSaveFileName(self, "Export curves", "", "CSV (*.csv)")
+        suggested = str(self.session.default_export_path(fmt))
+        path, _ = QtWidgets.QFileDialog.getSaveFileName(self, "Export curves", suggested, "CSV (*.csv)")
         if path:
             self.export(path, fmt)
 
@@ -557,6 +689,9 @@ class QtSynthStage(QtWidgets.QWidget):
                                    f"{m.n_frames} frames at {m.fps:g} Hz")
         self._show_clip_in_combo(self.session.motion_path)
         self.skeleton.set_skeleton(m)
+        self.loops.blockSignals(True)
+        self.loops.setValue(self.session.loops)     # a new clip starts at 1 repeat
+        self.loops.blockSignals(False)
 
     def _show_clip_in_combo(self, path: Path | None) -> None:
         """The combo shows the loaded clip, or its neutral first entry if the clip is not listed."""
@@ -612,8 +747,18 @@ class QtSynthStage(QtWidgets.QWidget):
         self.frames_drawn += 1
 
     # ---- hosting
+    def showEvent(self, event: QtGui.QShowEvent) -> None:
+        """Enable the player's application-wide keys."""
+        for shortcut in self.shortcuts:
+            shortcut.setEnabled(True)
+        _application().installEventFilter(self)
+        super().showEvent(event)
+
     def hideEvent(self, event: QtGui.QHideEvent) -> None:
-        """Pause playback when the stage is hidden (another stage shown, window minimised)."""
+        """Pause playback and release the player's keys when the stage is hidden."""
+        for shortcut in self.shortcuts:
+            shortcut.setEnabled(False)
+        _application().removeEventFilter(self)
         if self.session.playing:
             self.session.play(False)
         super().hideEvent(event)
@@ -622,6 +767,7 @@ class QtSynthStage(QtWidgets.QWidget):
         """Stop playback and the background recomputes (the main window calls this on exit)."""
         self.timer.stop()
         self.poll_timer.stop()
+        _application().removeEventFilter(self)
         self.session.playing = False
         self.session.shutdown()
 

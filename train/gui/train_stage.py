@@ -21,12 +21,14 @@ from effortface.core.gui.qt_compat import guard_none_refcount
 from effortface.core.errors import UserError
 from effortface.core.gui.widgets import caption
 from effortface.train.face_fit import CV_CHOICES, GRIDS, PROTOCOLS
+from effortface.train.run_log import CV_LABELS, cv_caption, grid_tooltip, held_out_pairs
 from effortface.train.train_session import ANY, TrainSession, filter_entries
 
 __all__ = ["QtTrainStage", "TrainSession"]
 
 POLL_MS = 50
 _REAL, _OWN, _PRED, _B = "#1f77b4", "#ff7f0e", "#d62728", "#2ca02c"
+_FACE_COLORS = ("#d62728", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#17becf")
 _SESSION_COLUMNS = ("use", "session", "participant", "TL", "exercise", "raters", "complete")
 _ANNOTATION_CHOICES = {"any annotation status": None, "annotated": True, "not annotated": False}
 
@@ -83,7 +85,8 @@ class QtDataPicker(QtWidgets.QGroupBox):
         self.table.setHorizontalHeaderLabels(list(_SESSION_COLUMNS))
         self.table.verticalHeader().setVisible(False)
         self.table.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
-        self.table.horizontalHeader().setStretchLastSection(True)
+        self.table.horizontalHeader().setSectionResizeMode(   # the last column takes the room left
+            len(_SESSION_COLUMNS) - 1, QtWidgets.QHeaderView.ResizeMode.Stretch)
         self.table.itemChanged.connect(self._on_item_changed)
         self.description = QtWidgets.QLabel(wordWrap=True)
         self._layout()
@@ -148,8 +151,17 @@ class QtDataPicker(QtWidgets.QGroupBox):
                                    ", ".join(e.raters) or "none", "yes" if e.complete else "NO"), 1):
                 self.table.setItem(r, c, QtWidgets.QTableWidgetItem(v))
         self.table.resizeColumnsToContents()
+        self._fit_table_width()
         self.table.blockSignals(False)
         self.description.setText(f"Next training uses: {self.session.describe_data()}")
+
+    def _fit_table_width(self) -> None:
+        """As wide as its columns (no column clipped), up to 640 pixels (then it scrolls)."""
+        header = self.table.horizontalHeader()
+        columns = sum(max(self.table.sizeHintForColumn(c), header.sectionSizeHint(c))
+                      for c in range(self.table.columnCount()))
+        needed = columns + self.table.verticalScrollBar().sizeHint().width() + 2 * self.table.frameWidth() + 2
+        self.table.setMinimumWidth(min(needed, 640))
 
     def _on_item_changed(self, item: QtWidgets.QTableWidgetItem) -> None:
         if item.column() == 0:
@@ -185,12 +197,22 @@ class QtSettingsPanel(QtWidgets.QGroupBox):
         self.rater = QtWidgets.QComboBox(editable=True)
         self.rater.setInsertPolicy(QtWidgets.QComboBox.InsertPolicy.NoInsert)
         self.grid = QtWidgets.QComboBox()
-        self.grid.addItems(list(GRIDS))
+        for i, name in enumerate(GRIDS):
+            self.grid.addItem(name)
+            self.grid.setItemData(i, grid_tooltip(name), QtCore.Qt.ItemDataRole.ToolTipRole)
         self.cv = QtWidgets.QComboBox()
-        for key, text in zip(CV_CHOICES, ("leave one participant out", "random-frame K-fold (inflated)")):
-            self.cv.addItem(text, key)
+        for key in CV_CHOICES:
+            self.cv.addItem(CV_LABELS[key], key)
+        self.cv.setToolTip("How the face SVR's grid search and scores hold data out:\n"
+                           "leave one participant out: every score is on a person the model never saw "
+                           "(the paper's honest protocol);\nrandom-frame K-fold: frames of the same "
+                           "person on both sides, scores inflated (for comparison only).")
         self.max_rows = QtWidgets.QSpinBox(minimum=20, maximum=100000, singleStep=50)
         self.max_rows.setKeyboardTracking(False)
+        self.max_rows.setToolTip("Face training rows per participant (1 Hz, evenly spaced): fewer "
+                                 "train faster, more use more of the key-framed data.")
+        self.rater.setToolTip("'mean' averages the raters of each session; a rater's name trains on "
+                              "that rater's key-frames only.")
         form = QtWidgets.QFormLayout(self)
         form.addRow("Raters", self.rater)
         form.addRow("SVR grid", self.grid)
@@ -203,6 +225,7 @@ class QtSettingsPanel(QtWidgets.QGroupBox):
         self.rater.lineEdit().editingFinished.connect(self.commit_rater)  # type: ignore[union-attr]  # see above
         self.rater.activated.connect(self.commit_rater)                    # a pick from the list
         self.grid.currentTextChanged.connect(lambda v: self._write(grid=v))
+        self.grid.currentTextChanged.connect(lambda v: self.grid.setToolTip(grid_tooltip(v)))
         self.cv.currentIndexChanged.connect(lambda i: self._write(cv=self.cv.itemData(i)))
         self.max_rows.valueChanged.connect(lambda v: self._write(max_rows_per_participant=int(v)))
 
@@ -244,6 +267,7 @@ class QtSettingsPanel(QtWidgets.QGroupBox):
             w.blockSignals(True)
         self.rater.setCurrentText(s.rater_policy)
         self.grid.setCurrentText(s.grid)
+        self.grid.setToolTip(grid_tooltip(s.grid))
         self.cv.setCurrentIndex(CV_CHOICES.index(s.cv))
         self.max_rows.setValue(s.max_rows_per_participant)
         for w in (self.rater, self.grid, self.cv, self.max_rows):
@@ -262,7 +286,8 @@ class QtHeartRateResults(QtWidgets.QWidget):
         self.choice = QtWidgets.QComboBox()
         self.choice.currentTextChanged.connect(self.show_session)
         self.plot = _plot("Train to see measured and simulated NHR", "NHR")
-        self.plot.addLegend(offset=(8, 8))
+        self.legend = self.plot.addLegend(offset=(8, 8))
+        self.legend.setVisible(False)      # no legend for curves that do not exist yet
         self.curves = {key: self.plot.plot([], [], pen=pg.mkPen(color, width=w, style=style), name=name)
                        for key, color, w, style, name in (
                            ("measured", _REAL, 2, QtCore.Qt.PenStyle.SolidLine, "measured"),
@@ -291,6 +316,7 @@ class QtHeartRateResults(QtWidgets.QWidget):
         self.choice.addItems(o.sessions)
         self.choice.blockSignals(False)
         self.table.show_frame(o.hr_table())
+        self.legend.setVisible(True)
         self.show_session(o.sessions[0])
 
     def show_session(self, session_id: str) -> None:
@@ -340,6 +366,7 @@ class QtFaceResults(QtWidgets.QWidget):
             ax = self.plots.addPlot(row=i // 2, col=i % 2, title=name.replace("_", " "))
             ax.setYRange(0, 1, padding=0.03)
             ax.setLabel("bottom", "time (min)")
+            ax.setLabel("left", "weight")
             ax.showGrid(x=True, y=True, alpha=0.2)
             self.axes.append(ax)
             self.curves.append((ax.plot([], [], pen=pg.mkPen(_REAL, width=2)),
@@ -368,6 +395,83 @@ class QtFaceResults(QtWidgets.QWidget):
             pred.setData(fig["t_min"], fig["predicted"][:, b], connect="finite")
 
 
+class QtRunLog(QtWidgets.QWidget):
+    """The run log: timed progress lines, per-fold scores, the grid search, held-out residuals.
+
+    Left: the log (elapsed time on each line, the time left in the progress bar) above the
+    per-fold and grid-search tables; right: held-out predicted vs key-framed weights and the
+    residuals, one colour per blendshape.
+    """
+
+    def __init__(self, session: TrainSession, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.session = session
+        self.text = QtWidgets.QPlainTextEdit(readOnly=True)
+        self.text.setPlaceholderText("Train to see the run's steps, folds and timings here.")
+        self.folds, self.grid = QtFrameTable(), QtFrameTable()
+        self.scatter = self._plot("Held out: predicted vs key-framed", "key-framed weight", "predicted weight")
+        self.residuals = self._plot("Residuals", "predicted weight", "predicted - key-framed")
+        tables = QtWidgets.QTabWidget()
+        tables.addTab(self.folds, "Scores per CV fold")
+        tables.setTabToolTip(0, "The chosen SVR on each fold's held-out rows: r within the fold (one "
+                                "participant's rows under leave one participant out) and RMSE in weight")
+        tables.addTab(self.grid, "Grid search (CV MSE)")
+        left = QtWidgets.QSplitter(QtCore.Qt.Orientation.Vertical)
+        left.addWidget(self.text)
+        left.addWidget(tables)
+        right = QtWidgets.QSplitter(QtCore.Qt.Orientation.Vertical)
+        right.addWidget(self.scatter)
+        right.addWidget(self.residuals)
+        split = QtWidgets.QSplitter()
+        split.addWidget(left)
+        split.addWidget(right)
+        split.setSizes([450, 450])
+        layout = QtWidgets.QVBoxLayout(self)
+        layout.setContentsMargins(0, 0, 0, 0)
+        layout.addWidget(split)
+        session.log_changed.connect(self._on_line)
+        session.results_changed.connect(self.show_results)
+
+    @staticmethod
+    def _plot(title: str, x_label: str, y_label: str) -> pg.PlotWidget:
+        w = pg.PlotWidget(background="w", title=title)
+        w.showGrid(x=True, y=True, alpha=0.2)
+        w.setLabel("bottom", x_label)
+        w.setLabel("left", y_label)
+        w.setMenuEnabled(False)
+        for axis in ("left", "bottom"):
+            w.getAxis(axis).enableAutoSIPrefix(False)   # weights read as weights, not x0.001
+        return w
+
+    def _on_line(self, line: str) -> None:
+        if not line:
+            self.text.clear()
+        else:
+            self.text.appendPlainText(line)
+
+    def show_results(self) -> None:
+        """The tables and plots of the last training."""
+        o = self.session.outcome
+        assert o is not None
+        self.folds.show_frame(self.session.fold_table)
+        self.grid.show_frame(self.session.grid_results)
+        pairs = held_out_pairs(o)
+        for w in (self.scatter, self.residuals):
+            w.clear()
+            w.addLegend(offset=(8, 8), brush=pg.mkBrush(255, 255, 255, 200))
+        self.scatter.plot([0, 1], [0, 1], pen=pg.mkPen("#808080", style=QtCore.Qt.PenStyle.DashLine))
+        for b, name in enumerate(o.face.blendshapes):
+            y, pred = pairs["measured"][:, b], pairs["predicted"][:, b]
+            ok = np.isfinite(y) & np.isfinite(pred)
+            brush = pg.mkBrush(_FACE_COLORS[b % len(_FACE_COLORS)] + "80")
+            label = name.replace("_", " ")
+            self.scatter.plot(y[ok], pred[ok], pen=None, symbol="o", symbolSize=4, symbolPen=None,
+                              symbolBrush=brush, name=label)
+            self.residuals.plot(pred[ok], pred[ok] - y[ok], pen=None, symbol="o", symbolSize=4,
+                                symbolPen=None, symbolBrush=brush, name=label)
+        self.residuals.addLine(y=0, pen=pg.mkPen("#808080", style=QtCore.Qt.PenStyle.DashLine))
+
+
 class QtCompare(QtWidgets.QWidget):
     """Two bundles side by side: their stored metrics and their predictions over one session."""
 
@@ -388,8 +492,9 @@ class QtCompare(QtWidgets.QWidget):
         layout = QtWidgets.QVBoxLayout(self)
         layout.addLayout(self._path_rows())
         layout.addWidget(self.data_label)
-        layout.addWidget(caption("Metrics stored in each model.json (held-out participants "
-                                 "of its own training data):"))
+        self.scores_caption = caption("How each model was trained and the scores stored in its "
+                                      "model.json (each by its own CV scheme, named per model):")
+        layout.addWidget(self.scores_caption)
         layout.addWidget(self.table, 2)
         layout.addWidget(caption("<span style='color:#1f77b4'>measured</span>, "
                                  "<span style='color:#d62728'>model A</span>, "
@@ -401,7 +506,14 @@ class QtCompare(QtWidgets.QWidget):
             signal.connect(self.show_data)
         for edit in self.paths:
             edit.textChanged.connect(self.show_data)
+        self.choice.activated.connect(self._on_session_picked)
         self.show_data()
+
+    def _on_session_picked(self, _index: int) -> None:
+        """A session picked after a comparison: compare again on it (the table and plots follow)."""
+        c = self.session.comparison
+        if c is not None and self.choice.currentText() != c["session"] and not self.session.busy:
+            self.compare()
 
     def _path_rows(self) -> QtWidgets.QGridLayout:
         grid = QtWidgets.QGridLayout()
@@ -471,6 +583,9 @@ class QtCompare(QtWidgets.QWidget):
             edit.setText(str(summary.path))
         self._offer_sessions(c["sessions"], c["session"])
         self.data_label.setText(f"Compared on {c['data']}.")
+        cv_a, cv_b = (s.settings.get("CV scheme", "not recorded") for s in (c["a"], c["b"]))
+        self.scores_caption.setText(cv_caption(cv_a, cv_b))
+        self.scores_caption.setStyleSheet("" if cv_a == cv_b else "color:#b00020;")
         self.table.show_frame(_side_by_side(c["a"], c["b"]))
         self._draw(c)
 
@@ -493,8 +608,11 @@ class QtCompare(QtWidgets.QWidget):
 
 
 def _side_by_side(a: Any, b: Any) -> pd.DataFrame:
-    """One row per metric, a column per bundle."""
+    """How each bundle was trained, then one row per metric; a column per bundle and B - A."""
     rows = []
+    for key in dict.fromkeys([*a.settings, *b.settings]):
+        rows.append({"metric": key, "A": a.settings.get(key, "not recorded"),
+                     "B": b.settings.get(key, "not recorded")})
     for label, s in (("A", a), ("B", b)):
         for _, r in s.hr.iterrows():
             rows.append({"metric": f"HR {r['model']} r", label: r["r"]})
@@ -506,7 +624,17 @@ def _side_by_side(a: Any, b: Any) -> pd.DataFrame:
     out = frame.groupby("metric", sort=False).first().reset_index()
     out.insert(1, "model A", out.pop("A") if "A" in out else np.nan)
     out.insert(2, "model B", out.pop("B") if "B" in out else np.nan)
+    out["B - A"] = [_difference(x, y) for x, y in zip(out["model A"], out["model B"])]
     return out
+
+
+def _difference(a: Any, b: Any) -> Any:
+    """B - A of two scores; for settings, ``same`` or ``differs`` (blank if either is missing)."""
+    if isinstance(a, (float, int, np.floating)) and isinstance(b, (float, int, np.floating)):
+        return float(b) - float(a)
+    if isinstance(a, str) and isinstance(b, str):
+        return "same" if a == b else "differs"
+    return ""
 
 
 # --------------------------------------------------------------------------- the stage
@@ -533,10 +661,12 @@ class QtTrainStage(QtWidgets.QWidget):
         self.hr_results = QtHeartRateResults(session)
         self.face_results = QtFaceResults(session)
         self.comparison = QtCompare(session, self.show_status)
+        self.run_log = QtRunLog(session)
         self.tabs = QtWidgets.QTabWidget()
         self.tabs.addTab(self.hr_results, "Heart rate (Fig. 2)")
         self.tabs.addTab(self.face_results, "Face (Fig. 3)")
         self.tabs.addTab(self.comparison, "Compare models")
+        self.tabs.addTab(self.run_log, "Run log")
         self._build()
         self._connect_session()
         self.timer = QtCore.QTimer(self, interval=POLL_MS)
@@ -580,6 +710,16 @@ class QtTrainStage(QtWidgets.QWidget):
         s.busy_changed.connect(self._on_busy)
         s.results_changed.connect(lambda: self.export_button.setEnabled(True))
         s.export_changed.connect(self._on_exported)
+        for signal in (s.selection_changed, s.sessions_changed):
+            signal.connect(self._update_train_button)
+        self._update_train_button()
+
+    def _update_train_button(self, busy: bool | None = None) -> None:
+        """Train only with something to train on, and not while a job runs."""
+        busy = self.session.busy if busy is None else busy
+        self.train_button.setEnabled(self.session.can_train and not busy)
+        self.train_button.setToolTip("" if self.session.can_train else
+                                     "Tick sessions (or load a table) to train")
 
     def show_status(self, text: str, is_error: bool = False) -> None:
         """Show a message under the buttons (errors in red)."""
@@ -627,8 +767,9 @@ class QtTrainStage(QtWidgets.QWidget):
         self.progress.setFormat(f"{text} ({fraction:.0%})")
 
     def _on_busy(self, busy: bool) -> None:
-        for w in (self.train_button, self.picker, self.settings_panel, self.comparison.compare_button):
+        for w in (self.picker, self.settings_panel, self.comparison.compare_button):
             w.setEnabled(not busy)
+        self._update_train_button(busy)
         self.export_button.setEnabled(not busy and self.session.outcome is not None)
         self.cancel_button.setEnabled(busy and self.session.cancellable)   # an export always finishes
 
