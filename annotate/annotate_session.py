@@ -482,7 +482,7 @@ class BlindRound:
         """Whether the rater has rated every pose (the report is shown only then: blind round)."""
         return all(self.is_done(p.pose_id) for p in self.poses)
 
-    def set_rating(self, pose_id: str, name: str, weight: float) -> None:
+    def set_rating(self, pose_id: str, name: str, weight: float | None) -> None:
         """Rate one blendshape of one pose and save.
 
         Raises
@@ -496,6 +496,8 @@ class BlindRound:
         if pose_id not in {p.pose_id for p in self.poses}:
             raise UserError(f"pose: expected one of the pose set, found {pose_id!r}")
         self.blendshapes.index(name)
+        if weight is None or isinstance(weight, bool):
+            raise UserError(f"{pose_id} {name}: unrated is not a rating: type a weight in [0, 1]")
         if not 0.0 <= float(weight) <= 1.0:
             raise UserError(f"weight: expected a number in [0, 1], found {weight!r}")
         if (pose_id, name) in self.locked:
