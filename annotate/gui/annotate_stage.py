@@ -92,9 +92,9 @@ class QtKeyframeEditor(QtWidgets.QWidget):
 
     # ---------------------------------------------------------------------------------- layout
     def _build(self) -> None:
-        self.video_view = QtImageView("video", (320, 240))
+        self.video_view = QtImageView("video", (240, 180))
         self.video_view.setFocusPolicy(QtCore.Qt.FocusPolicy.StrongFocus)
-        self.face_view = QtImageView("face preview", (240, 180))
+        self.face_view = QtImageView("face preview", (160, 120))
         self.face_view.setToolTip("The parametric face drawn from the four current weights: match it to the participant")
         self.protocol = QtProtocolPanel(self.session)
         self.timeline = QtTimeline(self.session)
@@ -102,7 +102,13 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         pictures = QtWidgets.QHBoxLayout()
         pictures.addLayout(self._captioned(self.video_view, "Video"), 4)
         pictures.addLayout(self._captioned(self.face_view, "Face from the current weights"), 3)
-        pictures.addWidget(self.protocol, 0)
+        protocol_scroll = QtWidgets.QScrollArea()  # a short top pane scrolls the panel, never clips it
+        protocol_scroll.setWidget(self.protocol)
+        protocol_scroll.setWidgetResizable(True)
+        protocol_scroll.setFrameShape(QtWidgets.QFrame.Shape.NoFrame)
+        protocol_scroll.setHorizontalScrollBarPolicy(QtCore.Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+        protocol_scroll.setFixedWidth(self.protocol.sizeHint().width() + 16)
+        pictures.addWidget(protocol_scroll, 0)
         top = QtWidgets.QWidget()
         top_layout = QtWidgets.QVBoxLayout(top)
         top_layout.setContentsMargins(0, 0, 0, 0)

@@ -53,7 +53,7 @@ def _table(headers: list[str], fit: bool = False) -> QtWidgets.QTableWidget:
     if fit:
         table.horizontalHeader().setSectionResizeMode(0, mode.ResizeToContents)
         table.horizontalHeader().setMinimumSectionSize(40)
-    table.horizontalHeader().setStretchLastSection(True)
+    table.horizontalHeader().setStretchLastSection(not fit)  # fit: the last column shares like the others
     return table
 
 

@@ -17,6 +17,7 @@ import pandas as pd
 import pyqtgraph as pg
 from PySide6 import QtCore, QtWidgets
 
+from effortface.annotate.completeness import RULE_TEXT as COMPLETENESS_RULE
 from effortface.core.gui.qt_compat import guard_none_refcount
 from effortface.core.errors import UserError
 from effortface.core.gui.widgets import caption
@@ -27,7 +28,8 @@ __all__ = ["QtTrainStage", "TrainSession"]
 
 POLL_MS = 50
 _REAL, _OWN, _PRED, _B = "#1f77b4", "#ff7f0e", "#d62728", "#2ca02c"
-_SESSION_COLUMNS = ("use", "session", "participant", "TL", "exercise", "raters", "complete")
+_SESSION_COLUMNS = ("use", "session", "participant", "TL", "exercise", "raters", "complete",
+                    "complete tracks")
 _ANNOTATION_CHOICES = {"any annotation status": None, "annotated": True, "not annotated": False}
 
 
@@ -145,8 +147,11 @@ class QtDataPicker(QtWidgets.QGroupBox):
             use.setData(QtCore.Qt.ItemDataRole.UserRole, e.session_id)
             self.table.setItem(r, 0, use)
             for c, v in enumerate((e.session_id, e.participant, f"{e.training_level:g}", e.exercise,
-                                   ", ".join(e.raters) or "none", "yes" if e.complete else "NO"), 1):
+                                   ", ".join(e.raters) or "none", "yes" if e.complete else "NO",
+                                   e.tracks or "none"), 1):
                 self.table.setItem(r, c, QtWidgets.QTableWidgetItem(v))
+            self.table.item(r, len(_SESSION_COLUMNS) - 1).setToolTip(
+                "each rater's complete tracks / tracks: " + COMPLETENESS_RULE)
         self.table.resizeColumnsToContents()
         self.table.blockSignals(False)
         self.description.setText(f"Next training uses: {self.session.describe_data()}")
