@@ -118,7 +118,7 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         self.splitter.setChildrenCollapsible(False)
         self.splitter.addWidget(top)
         self.splitter.addWidget(self._build_curves_pane())
-        self.splitter.setStretchFactor(0, 5)
+        self.splitter.setStretchFactor(0, 6)
         self.splitter.setStretchFactor(1, 4)
         help_label = QtWidgets.QLabel(HELP_TEXT, wordWrap=True)
         help_label.setStyleSheet("color:#505050;")
@@ -530,7 +530,10 @@ class QtAnnotateStage(QtWidgets.QWidget):
         buttons.addWidget(self.open_button, 1)
         buttons.addWidget(self.rescan_button)
         left = QtWidgets.QVBoxLayout()
-        left.addWidget(QtWidgets.QLabel("<b>Sessions</b>"))
+        sessions_title = QtWidgets.QLabel("<b>Sessions</b> (each rater's complete tracks)", wordWrap=True)
+        sessions_title.setToolTip("R1 4/4: rater R1 has 4 complete tracks of 4 (keys over the whole video with no "
+                                  "gap over 30 s, pass finished); only complete tracks are used for training")
+        left.addWidget(sessions_title)
         left.addWidget(self.sessions, 1)
         left.addWidget(QtWidgets.QLabel("<b>Rater</b> (you see only your own keys)", wordWrap=True))
         left.addWidget(self.rater)
@@ -695,10 +698,10 @@ class QtAnnotateStage(QtWidgets.QWidget):
             status = session_status(folder, read_video_frames(folder / VIDEO_FRAMES_CSV))
         except (UserError, OSError) as exc:
             return f"{folder.name}\n   {who}\n   annotations: unreadable", str(exc)
-        raters = ", ".join(f"{r} {summary(st)}" for r, st in status.items()) or "no rater yet"
+        raters = "  ".join(f"{r} {summary(st)}" for r, st in status.items()) or "not annotated yet"
         details = "\n".join(f"{r}: " + "; ".join(f"{n} " + ("complete" if s.complete else s.reason)
                                                 for n, s in st.items()) for r, st in status.items())
-        return (f"{folder.name}\n   {who}\n   complete tracks: {raters}",
+        return (f"{folder.name}\n   {who}\n   {raters}",
                 f"{folder}\n{details or 'not annotated yet'}\n(complete: keys over the whole video with no gap "
                 "over 30 s, pass finished; only complete tracks are used for training)")
 

@@ -41,19 +41,17 @@ UNRATED = -0.01
 
 
 def _table(headers: list[str], fit: bool = False) -> QtWidgets.QTableWidget:
-    """A read-only table; ``fit``: columns share the width (none hidden off the right edge)."""
+    """A read-only table; ``fit``: columns as wide as their content, the last one takes the rest."""
     table = QtWidgets.QTableWidget(0, len(headers))
     table.setHorizontalHeaderLabels(headers)
     table.verticalHeader().setVisible(False)
     table.verticalHeader().setDefaultSectionSize(22)
     table.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
     table.setSelectionBehavior(QtWidgets.QAbstractItemView.SelectionBehavior.SelectRows)
-    mode = QtWidgets.QHeaderView.ResizeMode
-    table.horizontalHeader().setSectionResizeMode(mode.Stretch if fit else mode.ResizeToContents)
+    table.horizontalHeader().setSectionResizeMode(QtWidgets.QHeaderView.ResizeMode.ResizeToContents)
+    table.horizontalHeader().setStretchLastSection(True)
     if fit:
-        table.horizontalHeader().setSectionResizeMode(0, mode.ResizeToContents)
-        table.horizontalHeader().setMinimumSectionSize(40)
-    table.horizontalHeader().setStretchLastSection(not fit)  # fit: the last column shares like the others
+        table.horizontalHeader().setMinimumSectionSize(36)
     return table
 
 
@@ -96,6 +94,8 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         self.poses.currentCellChanged.connect(lambda row, *_: self._show_pose(row))
         self.image = QtImageView("pose frame", (150, 112))
         self.face = QtImageView("face from your weights", (150, 112))
+        for view in (self.image, self.face):  # as tall as their width allows (4:3), no empty band
+            view.setSizePolicy(QtWidgets.QSizePolicy.Policy.Expanding, QtWidgets.QSizePolicy.Policy.Fixed)
         self.face.setToolTip("The face drawn from the weights you typed (unrated: 0): match it to the frame")
         self.spins: dict[str, QtWidgets.QDoubleSpinBox] = {}
         form = QtWidgets.QFormLayout()
@@ -115,12 +115,12 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         left = QtWidgets.QVBoxLayout()
         left.setContentsMargins(0, 0, 0, 0)
         left.addWidget(self.propose_button)
-        left.addWidget(self.poses, 2)
-        left.addWidget(rate_box, 3)
+        left.addWidget(self.poses, 1)
+        left.addWidget(rate_box, 0)
         left_widget = QtWidgets.QWidget()
         left_widget.setLayout(left)
-        left_widget.setMinimumWidth(300)
-        left_widget.setMaximumWidth(420)
+        left_widget.setMinimumWidth(330)
+        left_widget.setMaximumWidth(460)
         row = QtWidgets.QHBoxLayout()
         row.addWidget(left_widget, 2)
         row.addWidget(self._build_report(), 5)
@@ -137,6 +137,7 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         self.per_pose = _table(["pose", "|diff| %", "review"], fit=True)  # sorted worst first
         self.per_shape = _table(["blendshape", "n", "diff %", "ICC(A,1)", "95 % CI", "ICC(C,1)", "95 % CI",
                                  "alpha"], fit=True)
+        self.per_shape.setMinimumHeight(6 * 22 + 8)  # the four blendshapes and "overall", no scrolling
         self.per_shape.setToolTip("n: rated items; diff %: mean |difference| between raters in % of the weight "
                                   "range; ICC(A,1) absolute agreement, ICC(C,1) consistency; alpha: Krippendorff")
         self.pairs = _table(["pair", "n", "bias", "lower limit", "upper limit"], fit=True)
@@ -214,6 +215,14 @@ class QtReliabilityPanel(QtWidgets.QWidget):
             self._form.addRow(name, spin)
         self.save_button.setEnabled(bool(names))
 
+    def resizeEvent(self, event: QtGui.QResizeEvent) -> None:  # noqa: N802 - Qt override
+        """Keep the pose frame and the face 4:3 at the width they get."""
+        super().resizeEvent(event)
+        height = max(112, min(int(self.image.width() * 0.75), 260))
+        for view in (self.image, self.face):
+            if view.height() != height:
+                view.setFixedHeight(height)
+
     def eventFilter(self, watched: QtCore.QObject, event: QtCore.QEvent) -> bool:  # noqa: N802 - Qt override
         """Enter in a rating box: the next blendshape's box, and after the last one, save the pose."""
         if (isinstance(event, QtGui.QKeyEvent) and event.type() == QtCore.QEvent.Type.KeyPress
@@ -280,7 +289,7 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         self._show_face()
         self.save_button.setEnabled(not locked)
         self.save_button.setText("Rated in the lab's ratings.csv" if in_lab_file
-                                 else "Round done: ratings locked" if locked else "Save my rating of this pose")
+                                 else "Round done: ratings locked" if locked else "Save my rating of this pose (Ctrl+Enter)")
         self.save_button.setToolTip("You have seen the agreement report: your ratings can no longer change"
                                     if locked and not in_lab_file else "")
 
