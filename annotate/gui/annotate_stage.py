@@ -133,7 +133,8 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         toggles.addWidget(QtWidgets.QLabel("Curves:"))
         self.curve_toggles: dict[str, QtWidgets.QCheckBox] = {}
         for name in self.session.blendshape_names:
-            box = QtWidgets.QCheckBox(name, checked=True)
+            box = QtWidgets.QCheckBox(name)
+            box.setChecked(True)
             box.setStyleSheet(f"QCheckBox {{ color:{self.timeline.colour(name)}; font-weight:bold; }}")
             box.setFocusPolicy(QtCore.Qt.FocusPolicy.NoFocus)
             box.setToolTip(f"Show {name}'s curve behind the current one (the current one is always shown)")

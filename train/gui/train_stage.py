@@ -149,9 +149,10 @@ class QtDataPicker(QtWidgets.QGroupBox):
             for c, v in enumerate((e.session_id, e.participant, f"{e.training_level:g}", e.exercise,
                                    ", ".join(e.raters) or "none", "yes" if e.complete else "NO",
                                    e.tracks or "none"), 1):
-                self.table.setItem(r, c, QtWidgets.QTableWidgetItem(v))
-            self.table.item(r, len(_SESSION_COLUMNS) - 1).setToolTip(
-                "each rater's complete tracks / tracks: " + COMPLETENESS_RULE)
+                cell = QtWidgets.QTableWidgetItem(v)
+                if c == len(_SESSION_COLUMNS) - 1:
+                    cell.setToolTip("each rater's complete tracks / tracks: " + COMPLETENESS_RULE)
+                self.table.setItem(r, c, cell)
         self.table.resizeColumnsToContents()
         self.table.blockSignals(False)
         self.description.setText(f"Next training uses: {self.session.describe_data()}")
