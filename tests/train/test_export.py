@@ -139,3 +139,17 @@ def test_model_card_warns_when_tl_model_generalises_worse():
     assert len(worse) == 1 and "23.0 % RMSE" in worse[0] and "9.0 %" in worse[0]
     assert hr_warnings({"tl_regression": {"rmse_pct": 8.0}, "pooled": {"rmse_pct": 9.0}}) == []
     assert hr_warnings({"tl_regression": {"rmse_pct": 23.0}, "pooled_threshold": {"rmse_pct": 9.0}})
+
+
+def test_the_model_card_states_which_annotation_tracks_were_used(fitted):
+    """Issue 16 item 7: the completeness rule is written in the model card (and in model.json)."""
+    from effortface.train.pipeline import FaceFitConfig as Config, training_provenance
+
+    face, hr = fitted
+    prepared = prepare(synthetic_table(n_participants=2, seconds=60, seed=1))
+    from_sessions = training_provenance(prepared, face, ["lab/P01_x"], "mean", Config())
+    from_table = training_provenance(prepared, face, ["table.csv"], "mean", Config())
+    assert "no gap over 30 s" in from_sessions["annotation_rule"] and "pass" in from_sessions["annotation_rule"]
+    assert from_table["annotation_rule"].startswith("n/a")
+    card = export.model_card(build_bundle(face, hr, DEFAULT_SET, {}, from_sessions))
+    assert "- annotation tracks used: a track is complete when its keys cover the video" in card
