@@ -3,19 +3,24 @@
 It holds what the Annotate stage's widgets show and edit: the current frame, the current blendshape
 (the paper's protocol: one blendshape at a time, always in the set's order, the next one offered
 after a pass over the video), the rater's own key-frame tracks (never another rater's: a rater keys
-blind), the clipboard and an undo/redo history of whole-annotation snapshots. Every edit is saved at
+blind), the clipboard and an undo/redo history of whole-annotation snapshots, each named ("set
+mouth_open key at frame 120 to 0.40") with the blendshape and frame it changed: undo and redo go
+to that blendshape and frame and say what they did. Every edit is saved at
 once with an atomic write (:meth:`RaterAnnotations.save`: temp file + rename), so a crash or a
 ``kill -9`` loses no key that was set.
 
 :class:`AnnotateSession` follows the stage-model convention of :mod:`effortface.core`: one
 :class:`~effortface.core.events.Emitter` per thing that changes (``frame_changed``,
 ``blendshape_changed``, ``keys_changed``, ``file_changed`` when the file is saved, ``passes_changed``
-when a pass over the video is done); widgets connect to them in ``__init__`` and write back only
+when a pass over the video is done, ``history_changed`` when the undo or redo list changes (a menu
+binds its Undo/Redo items to :attr:`can_undo`, :attr:`undo_text`... there), ``status_changed(text,
+is_error)`` for what an edit, undo or redo did); widgets connect to them in ``__init__`` and write back only
 through the methods (STYLE.md L3).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import re
 from collections.abc import Callable
@@ -23,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
+from effortface.annotate.completeness import TrackStatus, rater_status
 from effortface.annotate.keyframes import INTERPOLATIONS, Keyframe, KeyframeTrack, RaterAnnotations, read_annotations
 from effortface.annotate.video_index import FrameTimes
 from effortface.core.errors import UserError
@@ -34,6 +40,16 @@ ANNOTATIONS_DIR = "annotations"
 _RATER_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,31}")
 #: snapshots kept for undo
 UNDO_LIMIT = 500
+
+
+@dataclasses.dataclass(frozen=True)
+class UndoStep:
+    """One entry of the undo (or redo) list: the annotations before the edit and what the edit did."""
+
+    before: RaterAnnotations
+    label: str
+    blendshape: str
+    frame: int
 
 
 def check_rater(rater: str) -> str:
@@ -108,7 +124,8 @@ class AnnotateSession:
     Notes
     -----
     Emitters: ``frame_changed(frame)``, ``blendshape_changed(name)``, ``keys_changed(name)``,
-    ``file_changed(path)`` (saved), ``passes_changed(name)`` (a pass over the video is done).
+    ``file_changed(path)`` (saved), ``passes_changed(name)`` (a pass over the video is done),
+    ``history_changed()`` (undo/redo lists), ``status_changed(text, is_error)``.
     """
 
     def __init__(self, session_folder: str | os.PathLike, rater: str, *,
@@ -132,18 +149,27 @@ class AnnotateSession:
         self.frame = 0
         self.blendshape = self.annotations.blendshapes.names[0]
         self.interp = "linear"
-        self.passes_done: set[str] = set()
-        self._undo: list[RaterAnnotations] = []
-        self._redo: list[RaterAnnotations] = []
+        if self.annotations.passes_done is None:  # a file from before passes were recorded:
+            self.annotations.passes_done = {  # a track its rule judged complete keeps counting
+                n for n, st in rater_status(self.annotations, self.session.frame_times_s).items() if st.complete}
+        self._undo: list[UndoStep] = []
+        self._redo: list[UndoStep] = []
         self._clipboard: list[tuple[int, float, str]] = []
         self.frame_changed, self.blendshape_changed = Emitter(), Emitter()
         self.keys_changed, self.file_changed, self.passes_changed = Emitter(), Emitter(), Emitter()
+        self.history_changed, self.status_changed = Emitter(), Emitter()
 
     def disconnect_all(self) -> None:
         """Forget every connected function (a view that goes away)."""
         for emitter in (self.frame_changed, self.blendshape_changed, self.keys_changed,
-                        self.file_changed, self.passes_changed):
+                        self.file_changed, self.passes_changed, self.history_changed, self.status_changed):
             emitter.disconnect_all()
+
+    @property
+    def passes_done(self) -> set[str]:
+        """Blendshapes whose pass over the video is finished (saved in the file)."""
+        assert self.annotations.passes_done is not None  # set in __init__, kept by undo/redo
+        return self.annotations.passes_done
 
     # ------------------------------------------------------------------------------ navigation
     @property
@@ -170,6 +196,8 @@ class AnnotateSession:
         self.frame_changed.emit(frame)
         if frame == self.n_frames - 1 and len(self.track) and self.blendshape not in self.passes_done:
             self.passes_done.add(self.blendshape)
+            if self.autosave and self._file_is_ours:
+                self.save()  # the pass is part of the file (completeness); a new file waits for a key
             self.passes_changed.emit(self.blendshape)
 
     def step(self, n_frames: int) -> None:
@@ -227,10 +255,11 @@ class AnnotateSession:
         return self.track.get(self.frame if frame is None else frame)
 
     # ------------------------------------------------------------------------------- editing
-    def _edit(self, change: Callable[[], Any]) -> Any:
+    def _edit(self, change: Callable[[], Any], label: str, frame: int | None = None) -> Any:
         """Snapshot for undo, apply ``change``, save, notify; restore the snapshot if either raises.
 
         So the keys shown are always the keys on disk: an edit that cannot be saved is undone.
+        ``label`` says what the edit does (the undo list shows it); ``frame`` is where it happened.
         """
         before = self.annotations.copy()
         try:
@@ -240,17 +269,26 @@ class AnnotateSession:
         except BaseException:
             self.annotations = before
             raise
-        self._undo.append(before)
+        self._undo.append(UndoStep(before, label, self.blendshape, self.frame if frame is None else int(frame)))
         del self._undo[:-UNDO_LIMIT]
         self._redo.clear()
         self.keys_changed.emit(self.blendshape)
+        self.history_changed.emit()
+        self.status_changed.emit(label, False)
         return result
 
-    def _swap(self, source: list[RaterAnnotations], target: list[RaterAnnotations]) -> bool:
-        """Undo / redo: move the current state to ``target`` and restore the top of ``source``."""
+    def _swap(self, source: list[UndoStep], target: list[UndoStep], verb: str) -> str | None:
+        """Undo / redo: restore the top of ``source``, push the current state on ``target``.
+
+        Goes to the step's blendshape and frame first (so the change is on screen) and says what it
+        did through ``status_changed``; returns that text, None if ``source`` was empty.
+        """
         if not source:
-            return False
-        current, self.annotations = self.annotations, source[-1]
+            self.status_changed.emit(f"nothing to {verb}", True)
+            return None
+        step = source[-1]
+        current, self.annotations = self.annotations, step.before
+        self.annotations.passes_done = current.passes_done  # passes are not edits: undo keeps them
         try:
             if self.autosave:
                 self.save()
@@ -258,9 +296,14 @@ class AnnotateSession:
             self.annotations = current
             raise
         source.pop()
-        target.append(current)
+        target.append(UndoStep(current, step.label, step.blendshape, step.frame))
+        self.set_blendshape(step.blendshape)
+        self.set_frame(step.frame)
+        text = f"{verb}: {step.label}"
         self.keys_changed.emit(self.blendshape)
-        return True
+        self.history_changed.emit()
+        self.status_changed.emit(text, False)
+        return text
 
     def set_key(self, weight: float, frame: int | None = None, interp: str | None = None) -> Keyframe:
         """Key the current blendshape at ``frame`` (default current) with ``weight`` in [0, 1].
@@ -271,14 +314,19 @@ class AnnotateSession:
         frame = self.times.check(self.frame if frame is None else frame)
         old = self.track.get(frame)
         interp = interp or (old.interp if old else self.interp)
-        return self._edit(lambda: self.track.add(frame, round(float(weight), 4), interp))
+        w = round(float(weight), 4)
+        label = (f"set {self.blendshape} key at frame {frame} to {w:.2f}" if old is None
+                 else f"change {self.blendshape} key at frame {frame} from {old.weight:.2f} to {w:.2f}")
+        return self._edit(lambda: self.track.add(frame, w, interp), label, frame)
 
     def delete_key(self, frame: int | None = None) -> Keyframe | None:
         """Remove the current track's key on ``frame`` (default current); None if there was none."""
         frame = self.frame if frame is None else int(frame)
-        if self.track.get(frame) is None:
+        old = self.track.get(frame)
+        if old is None:
             return None
-        return self._edit(lambda: self.track.delete(frame))
+        return self._edit(lambda: self.track.delete(frame),
+                          f"delete {self.blendshape} key at frame {frame} ({old.weight:.2f})", frame)
 
     def move_key(self, frame: int, new_frame: int, weight: float | None = None) -> Keyframe:
         """Move the current track's key on ``frame`` to ``new_frame`` (clamped), optionally re-weighted.
@@ -288,7 +336,8 @@ class AnnotateSession:
         new_frame = self.times.clamp(new_frame)
         if weight is not None:
             weight = round(min(max(float(weight), 0.0), 1.0), 4)
-        return self._edit(lambda: self.track.move(frame, new_frame, weight))
+        return self._edit(lambda: self.track.move(frame, new_frame, weight),
+                          f"move {self.blendshape} key from frame {frame} to {new_frame}", new_frame)
 
     def set_interp(self, interp: str, frame: int | None = None) -> None:
         """Set the default interpolation, and that of the key on ``frame`` (default current) if any."""
@@ -297,7 +346,8 @@ class AnnotateSession:
         self.interp = interp
         key = self.key_at(frame)
         if key is not None and key.interp != interp:
-            self._edit(lambda: self.track.add(key.frame, key.weight, interp))
+            self._edit(lambda: self.track.add(key.frame, key.weight, interp),
+                       f"set {self.blendshape} key at frame {key.frame} to {interp}", key.frame)
 
     # ----------------------------------------------------------------------- copy and paste
     def copy(self, first: int | None = None, last: int | None = None) -> int:
@@ -313,7 +363,8 @@ class AnnotateSession:
         at = self.frame if frame is None else int(frame)
         keys = [(at + off, w, i) for off, w, i in self._clipboard if 0 <= at + off < self.n_frames]
         if keys:
-            self._edit(lambda: [self.track.add(f, w, i) for f, w, i in keys])
+            self._edit(lambda: [self.track.add(f, w, i) for f, w, i in keys],
+                       f"paste {len(keys)} {self.blendshape} key{'s' * (len(keys) != 1)} at frame {at}", at)
         return len(keys)
 
     # ---------------------------------------------------------------------------------- undo
@@ -327,13 +378,82 @@ class AnnotateSession:
         """Whether there is an undone edit to redo."""
         return bool(self._redo)
 
-    def undo(self) -> bool:
-        """Undo the last edit (and save); False if there was none."""
-        return self._swap(self._undo, self._redo)
+    @property
+    def undo_text(self) -> str:
+        """What Undo would undo (``""`` when nothing)."""
+        return self._undo[-1].label if self._undo else ""
 
-    def redo(self) -> bool:
-        """Redo the last undone edit (and save); False if there was none."""
-        return self._swap(self._redo, self._undo)
+    @property
+    def redo_text(self) -> str:
+        """What Redo would redo (``""`` when nothing)."""
+        return self._redo[-1].label if self._redo else ""
+
+    @property
+    def history(self) -> tuple[list[str], list[str]]:
+        """The undo list (oldest first) and the redo list (next redo first), as labels."""
+        return [s.label for s in self._undo], [s.label for s in reversed(self._redo)]
+
+    def undo(self) -> str | None:
+        """Undo the last edit (and save), going to its blendshape and frame; return what was undone.
+
+        None (and a ``status_changed`` error) when there was nothing to undo.
+        """
+        return self._swap(self._undo, self._redo, "undid")
+
+    def redo(self) -> str | None:
+        """Redo the last undone edit (and save), going to its blendshape and frame; None if none."""
+        return self._swap(self._redo, self._undo, "redid")
+
+    def undo_to(self, n_steps: int) -> int:
+        """Undo (``n_steps`` > 0) or redo (< 0) that many steps (the history view's click); return how many."""
+        step, count = (self.undo, n_steps) if n_steps > 0 else (self.redo, -n_steps)
+        return sum(step() is not None for _ in range(count))
+
+    # ------------------------------------------------------------------------------- selections
+    def shift_keys(self, frames: list[int], d_frames: int = 0, d_weight: float = 0.0,
+                   scale: float = 1.0) -> list[int]:
+        """Move several keys of the current track at once (one undo step); return their new frames.
+
+        Each key goes ``d_frames`` frames on (clamped to the video), and its weight becomes
+        ``pivot + scale * (weight - pivot) + d_weight`` clipped to [0, 1], where ``pivot`` is the
+        keys' mean weight (so ``scale`` stretches or flattens the selection about its middle).
+
+        Raises
+        ------
+        KeyError
+            If a frame has no key.
+        UserError
+            If a key would land on a keyed frame outside the selection, or two on one frame.
+        """
+        keys = [self.track.get(f) for f in frames]
+        if any(k is None for k in keys):
+            raise KeyError(f"no {self.blendshape} key on frame {frames[[k is None for k in keys].index(True)]}")
+        chosen = [k for k in keys if k is not None]
+        if not chosen:
+            return []
+        pivot = sum(k.weight for k in chosen) / len(chosen)
+        moved = [(self.times.clamp(k.frame + int(d_frames)),
+                  round(min(max(pivot + scale * (k.weight - pivot) + d_weight, 0.0), 1.0), 4), k.interp)
+                 for k in chosen]
+        targets = [f for f, _, _ in moved]
+        others = {k.frame for k in self.track.keys} - {k.frame for k in chosen}
+        if len(set(targets)) < len(targets) or others & set(targets):
+            raise UserError(f"move keys: expected free frames, found a {self.blendshape} key in the way")
+
+        def change() -> None:
+            for k in chosen:
+                self.track.delete(k.frame)
+            for f, w, i in moved:
+                self.track.add(f, w, i)
+        self._edit(change, f"move {len(chosen)} {self.blendshape} key{'s' * (len(chosen) != 1)}"
+                   + (f" by {d_frames:+d} frames" if d_frames else "")
+                   + (f" by {d_weight:+.2f}" if d_weight else "")
+                   + (f", weights x{scale:g}" if scale != 1.0 else ""), targets[0])
+        return targets
+
+    def completeness(self) -> dict[str, TrackStatus]:
+        """This rater's completeness per blendshape (:mod:`effortface.annotate.completeness`)."""
+        return rater_status(self.annotations, self.session.frame_times_s)
 
     # ---------------------------------------------------------------------------------- files
     def close(self) -> None:
@@ -428,7 +548,7 @@ class BlindRound:
         """Whether the rater has rated every pose (the report is shown only then: blind round)."""
         return all(self.is_done(p.pose_id) for p in self.poses)
 
-    def set_rating(self, pose_id: str, name: str, weight: float) -> None:
+    def set_rating(self, pose_id: str, name: str, weight: float | None) -> None:
         """Rate one blendshape of one pose and save.
 
         Raises
@@ -442,6 +562,8 @@ class BlindRound:
         if pose_id not in {p.pose_id for p in self.poses}:
             raise UserError(f"pose: expected one of the pose set, found {pose_id!r}")
         self.blendshapes.index(name)
+        if weight is None or isinstance(weight, bool):
+            raise UserError(f"{pose_id} {name}: unrated is not a rating: type a weight in [0, 1]")
         if not 0.0 <= float(weight) <= 1.0:
             raise UserError(f"weight: expected a number in [0, 1], found {weight!r}")
         if (pose_id, name) in self.locked:

@@ -7,8 +7,12 @@ One file per rater and session::
       "rater": "R1",
       "session_id": "P01_20260105-101500_cardio",
       "blendshapes": [{"name": "mouth_stretch", "drives": "...", "arkit": [...]}, ...],
-      "tracks": {"mouth_stretch": [{"frame": 0, "weight": 0.0, "interp": "linear"}, ...], ...}
+      "tracks": {"mouth_stretch": [{"frame": 0, "weight": 0.0, "interp": "linear"}, ...], ...},
+      "passes_done": ["mouth_stretch"]
     }
+
+``passes_done`` (optional; files from before it lack it) lists the blendshapes over which the rater
+finished a pass of the video (see :mod:`effortface.annotate.completeness`).
 
 ``frame`` is a video frame index (a row of ``video_frames.csv``, never time x nominal rate);
 ``weight`` is in [0, 1]; ``interp`` says how the curve goes from this key to the next one:
@@ -195,12 +199,15 @@ class RaterAnnotations:
         The set annotated, in annotation order.
     tracks : dict of str to KeyframeTrack
         One track per blendshape name (created empty when missing).
+    passes_done : set of str or None
+        Blendshapes whose pass over the video the rater finished; None when the file does not say.
     """
 
     rater: str
     session_id: str
     blendshapes: BlendshapeSet = DEFAULT_SET
     tracks: dict[str, KeyframeTrack] = dataclasses.field(default_factory=dict)
+    passes_done: set[str] | None = dataclasses.field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         for name in self.tracks:
@@ -211,7 +218,8 @@ class RaterAnnotations:
     def copy(self) -> RaterAnnotations:
         """An independent copy (for undo snapshots)."""
         return RaterAnnotations(self.rater, self.session_id, self.blendshapes,
-                                {n: t.copy() for n, t in self.tracks.items()})
+                                {n: t.copy() for n, t in self.tracks.items()},
+                                None if self.passes_done is None else set(self.passes_done))
 
     def weights(self, frames: Iterable[float] | np.ndarray) -> np.ndarray:
         """Per-frame weights, shape ``(len(frames), n_blendshapes)``, NaN where not annotated."""
@@ -220,13 +228,16 @@ class RaterAnnotations:
 
     def to_dict(self) -> dict:
         """The JSON document (see the module docstring)."""
-        return {
+        doc = {
             "schema_version": SCHEMA_VERSION,
             "rater": self.rater,
             "session_id": self.session_id,
             "blendshapes": self.blendshapes.to_dict(),
             "tracks": {n: self.tracks[n].to_list() for n in self.blendshapes.names},
         }
+        if self.passes_done is not None:
+            doc["passes_done"] = [n for n in self.blendshapes.names if n in self.passes_done]
+        return doc
 
     def save(self, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
         """Write the file atomically (temp file in the same folder, fsync, ``os.replace``).
@@ -307,7 +318,11 @@ def _from_dict(doc: object) -> RaterAnnotations:
     if not isinstance(tracks_doc, Mapping):
         raise UserError(f"tracks: expected an object of blendshape -> keys, found {tracks_doc!r}")
     tracks = {name: _read_track(name, keys) for name, keys in tracks_doc.items()}
-    return RaterAnnotations(doc["rater"], doc["session_id"], shapes, tracks)
+    done = doc.get("passes_done")
+    if done is not None and (not isinstance(done, list) or not set(done) <= set(shapes.names)):
+        raise UserError(f"passes_done: expected a list of blendshapes of the set, found {done!r}")
+    return RaterAnnotations(doc["rater"], doc["session_id"], shapes, tracks,
+                            None if done is None else set(done))
 
 
 def _read_blendshapes(items: object) -> BlendshapeSet:

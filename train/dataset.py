@@ -17,7 +17,9 @@ From a session folder (:func:`session_table`), each second ``t_s = 0, 1, 2, ...`
   ``MAX_HR_GAP_S`` (choice);
 - blendshape weights from each rater's key-frames evaluated at the video frame nearest that second;
   the rater policy is ``"mean"`` (mean over the raters who annotated that blendshape) or one rater's
-  name.
+  name. Under either policy only **complete** tracks count (:mod:`effortface.annotate.completeness`:
+  keys cover the video with no gap over 30 s and the rater finished the pass); a half-finished track
+  is left out, never averaged in as a constant.
 
 :func:`prepare` then adds ``hr_rest_bpm``, ``hr_max_bpm``, ``nhr`` and ``epoc_norm`` (EPOC from the
 measured NHR through :mod:`effortface.train.physiology`'s recursion), the inputs of both models.
@@ -35,6 +37,7 @@ import numpy as np
 import pandas as pd
 
 from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
+from effortface.annotate.completeness import RULE_TEXT, rater_status
 from effortface.annotate.keyframes import read_annotations
 from effortface.core.errors import UserError
 from effortface.core import bounds
@@ -401,12 +404,13 @@ def _weights(s: Session, t: np.ndarray, blendshapes: BlendshapeSet, rater_policy
                            f"and video_frames.csv, found {len(files)} annotation files and "
                            f"{len(s.frame_times_s)} frames")
     frames = _nearest_frames(np.asarray(s.frame_times_s), t)
-    stack = np.stack([_rater_weights(f, frames, blendshapes, s.info.session_id) for f in files])
+    stack = np.stack([_rater_weights(f, frames, blendshapes, s.info.session_id, s.frame_times_s) for f in files])
     with np.errstate(all="ignore"):
         counts = np.isfinite(stack).sum(axis=0)
         mean = np.where(counts > 0, np.nansum(stack, axis=0) / np.maximum(counts, 1), np.nan)
     if not np.isfinite(mean).any():
-        raise DatasetError(f"{s.path / ANNOTATIONS_DIR}: expected key-frames, found empty tracks only")
+        raise DatasetError(f"{s.path / ANNOTATIONS_DIR}: expected complete key-frame tracks "
+                           f"({RULE_TEXT}), found none")
     return mean
 
 
@@ -416,11 +420,13 @@ def _nearest_frames(frame_t: np.ndarray, t: np.ndarray) -> np.ndarray:
     return np.where(np.abs(frame_t[i - 1] - t) <= np.abs(frame_t[i] - t), i - 1, i)
 
 
-def _rater_weights(path: Path, frames: np.ndarray, blendshapes: BlendshapeSet, session_id: str) -> np.ndarray:
-    """One rater's weights for our blendshape set (NaN for tracks the file lacks or left empty)."""
+def _rater_weights(path: Path, frames: np.ndarray, blendshapes: BlendshapeSet, session_id: str,
+                   frame_times_s: Sequence[float]) -> np.ndarray:
+    """One rater's weights for our blendshape set (NaN for tracks the file lacks or that are incomplete)."""
     ann = read_annotations(path, session_id=session_id, rater=path.stem)
-    cols = [ann.tracks[n].evaluate(frames) if n in ann.tracks else np.full(len(frames), np.nan)
-            for n in blendshapes.names]
+    status = rater_status(ann, frame_times_s)
+    cols = [ann.tracks[n].evaluate(frames) if n in ann.tracks and status[n].complete
+            else np.full(len(frames), np.nan) for n in blendshapes.names]
     return np.column_stack(cols).astype(float)
 
 

@@ -468,7 +468,8 @@ def model_card(bundle: ModelBundle) -> str:
         f"training levels {prov.get('training_levels', '?')}",
         f"- sessions: {prov.get('n_sessions', '?')}; participant-seconds: {prov.get('n_seconds', '?')}; "
         f"face training rows after subsampling: {prov.get('n_face_rows', '?')}",
-        f"- rater policy: {prov.get('rater_policy', 'n/a')}", "",
+        f"- rater policy: {prov.get('rater_policy', 'n/a')}",
+        f"- annotation tracks used: {prov.get('annotation_rule', 'all (model trained before the completeness rule)')}", "",
         "## Model",
         f"- heart rate: t_root = {reg.t_root[0]:.3g} {reg.t_root[1]:+.3g} TL W/kg, "
         f"c_inc = {reg.c_inc[0]:.3g} {reg.c_inc[1]:+.3g} TL, c_dec = {reg.c_dec[0]:.3g} {reg.c_dec[1]:+.3g} TL",

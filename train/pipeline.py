@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from effortface.annotate.completeness import RULE_TEXT as ANNOTATION_RULE
 from effortface.core.jobs import Cancelled  # noqa: F401  (re-exported: the one cancel exception)
 from effortface.core.blendshapes import BlendshapeSet
 from effortface.core.errors import UserError
@@ -464,7 +465,9 @@ def training_provenance(prepared: pd.DataFrame, face: Any, sources: Sequence[str
         "participants": sorted(map(str, tls.index)), "n_participants": int(len(tls)),
         "training_levels": [float(v) for v in tls.to_numpy()],
         "n_sessions": int(prepared["session"].nunique()), "n_seconds": int(len(prepared)),
-        "n_face_rows": int(len(face.data.x)), "rater_policy": rater_policy, "cv": config.cv,
+        "n_face_rows": int(len(face.data.x)), "rater_policy": rater_policy,
+        "annotation_rule": ("n/a (trained from a long table)" if any(str(p).endswith(".csv") for p in sources)
+                            else ANNOTATION_RULE), "cv": config.cv,
         "grid": config.grid, "max_rows_per_participant": config.max_rows_per_participant,
     }
 

@@ -26,7 +26,9 @@ from effortface.core.events import Emitter
 from effortface.core.errors import UserError
 from effortface.core.fileio import refuse_overwrite
 from effortface.core.jobs import Cancelled, Job, JobResult, Jobs
-from effortface.capture_tool.session import list_sessions, parse_session_id, read_session_info
+from effortface.annotate.completeness import session_status, summary
+from effortface.capture_tool.session import (VIDEO_FRAMES_CSV, list_sessions, parse_session_id, read_session_info,
+                                             read_video_frames)
 from effortface.train.dataset import ANNOTATIONS_DIR, prepare, read_table, sessions_table
 from effortface.train.pipeline import (TrainingOutcome, TrainSettings, export_outcome,
                                        train_models, training_table)
@@ -53,6 +55,9 @@ class SessionEntry:
     training_level: float
     raters: tuple[str, ...]
     complete: bool
+    #: each rater's complete tracks over tracks, e.g. ``"R1 4/4, R2 2/4"``
+    #: (:mod:`effortface.annotate.completeness`: only complete tracks are trained on)
+    tracks: str = ""
 
     @property
     def annotated(self) -> bool:
@@ -72,8 +77,21 @@ def scan_sessions(folder: str | os.PathLike) -> list[SessionEntry]:
         raters = tuple(sorted(p.stem for p in (path / ANNOTATIONS_DIR).glob("*.json")))
         tl = info.participant.training_level
         out.append(SessionEntry(path, info.session_id, info.participant.code, label,
-                                float("nan") if tl is None else float(tl), raters, info.complete))
+                                float("nan") if tl is None else float(tl), raters, info.complete,
+                                _tracks_summary(path)))
     return out
+
+
+def _tracks_summary(path: Path) -> str:
+    """``"R1 4/4, R2 2/4"``: each rater's complete tracks; ``"unreadable"`` if a file is malformed."""
+    frames = path / VIDEO_FRAMES_CSV
+    if not frames.is_file():
+        return ""
+    try:
+        status = session_status(path, read_video_frames(frames))
+    except (UserError, OSError):
+        return "unreadable"
+    return ", ".join(f"{r} {summary(st)}" for r, st in status.items())
 
 
 def _people(entries: Sequence[SessionEntry]) -> str:

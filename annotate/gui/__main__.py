@@ -1,4 +1,4 @@
-"""``python -m effortface.annotate.gui [DIR] [--session NAME] [--rater R] [--screenshot PNG [--tab key|reliability]]``.
+"""``python -m effortface.annotate.gui [DIR] [--session NAME] [--rater R] [--size WxH] [--screenshot PNG [--tab key|reliability]]``.
 
 The Annotate stage on its own window (the main application hosts the same widget). With
 ``--screenshot`` it renders offscreen-friendly, saves a PNG (never over an existing file) and exits.
@@ -25,7 +25,16 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--frame", type=int, default=0, help="go to this frame after opening")
     p.add_argument("--screenshot", metavar="PNG", help="save a screenshot and exit")
     p.add_argument("--tab", choices=("key", "reliability"), default="key", help="tab for the screenshot")
+    p.add_argument("--size", type=_size, default=SIZE, metavar="WxH", help="window size (default 1400x900)")
     return p
+
+
+def _size(text: str) -> tuple[int, int]:
+    """``1280x800`` -> (1280, 800); argparse turns a ValueError into a one-line usage error."""
+    w, h = (int(v) for v in text.lower().split("x"))
+    if not (320 <= w <= 8000 and 240 <= h <= 8000):
+        raise ValueError(text)
+    return w, h
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -34,7 +43,7 @@ def main(argv: list[str] | None = None) -> int:
     app = QtWidgets.QApplication.instance() or QtWidgets.QApplication(sys.argv[:1])
     stage = QtAnnotateStage(Path(args.dir))
     stage.rater.setText(args.rater)
-    stage.resize(*SIZE)
+    stage.resize(*args.size)
     stage.setWindowTitle("effortface - Annotate")
     if args.session:
         editor = stage.open_session(Path(args.dir) / args.session, args.rater)
@@ -42,6 +51,8 @@ def main(argv: list[str] | None = None) -> int:
             editor.session.set_frame(args.frame)
     if args.tab == "reliability":
         stage.tabs.setCurrentIndex(1)
+        if stage.reliability is not None:
+            stage.reliability.poses.setFocus()
     stage.show()
     if args.screenshot:
         if Path(args.screenshot).exists():

@@ -6,8 +6,12 @@ reliability round. :class:`QtKeyframeEditor` views one
 :class:`~effortface.annotate.annotate_session.AnnotateSession` (Qt-free: frame, blendshape, the rater's tracks,
 undo history, autosave) and a :class:`~effortface.annotate.video_index.VideoIndex` (frame-exact decode cache
 with prefetch): video and face preview side by side, the protocol panel, transport controls, heart
-rate and the curve editor on the session's time axis. Keyboard first: see
-:data:`~effortface.annotate.gui.protocol_panel.HELP_TEXT`. Every edit is saved at once (atomic write), so
+rate and the curve editor on the session's time axis (a splitter between the pictures and the
+curves lets the curve editor grow), the undo history beside the curves (click a step to go back to
+it), a timecode on the video, coloured curves that can be switched off, several keys selected and
+moved or scaled together, keyboard zoom and a loop over a selection. Keyboard first: see
+:data:`~effortface.annotate.gui.protocol_panel.HELP_TEXT`. The session list shows each rater's
+complete tracks (:mod:`effortface.annotate.completeness`), e.g. ``R1 4/4``. Every edit is saved at once (atomic write), so
 closing never asks and a crash loses nothing. Editing the rater code hides the open session and the
 reliability round at once, until the new code is confirmed (blind raters never see another's keys
 or ratings). The session list is read again each time the stage is shown (and on F5 / Rescan), and
@@ -26,6 +30,7 @@ from typing import Any
 
 from PySide6 import QtCore, QtGui, QtWidgets
 
+from effortface.annotate.completeness import session_status, summary
 from effortface.annotate.export import write_keyframes_json, write_weights_csv
 from effortface.annotate.face import render_face
 from effortface.annotate.gui.image_view import QtImageView
@@ -37,13 +42,16 @@ from effortface.annotate.annotate_session import AnnotateSession, check_rater
 from effortface.annotate.video_index import VideoIndex
 from effortface.core.errors import UserError
 from effortface.core.gui.widgets import QtElidedLabel
-from effortface.capture_tool.session import list_sessions, read_session_info
+from effortface.capture_tool.session import VIDEO_FRAMES_CSV, list_sessions, read_session_info, read_video_frames
 
 SPEEDS = (0.25, 0.5, 1.0, 2.0, 4.0)
 #: the side panel (sessions, rater) is this wide, and may shrink to SIDE_MIN_WIDTH on a small screen
 SIDE_WIDTH, SIDE_MIN_WIDTH = 250, 170
 PLAY_TICK_MS = 15
 WEIGHT_NUDGE = 0.05
+#: a selection of keys is scaled by this factor (]) or its inverse ([) about its mean weight
+SCALE_STEP = 1.25
+ZOOM_STEP = 1.5
 _ERROR_STYLE = "color:#842029;"
 _INFO_STYLE = "color:#305030;"
 
@@ -71,36 +79,124 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         self._play_timer = QtCore.QTimer(self, interval=PLAY_TICK_MS, timerType=QtCore.Qt.TimerType.PreciseTimer)
         self._play_timer.timeout.connect(self._play_tick)
         self._play_from: tuple[float, float] = (0.0, 0.0)
+        self.loop: tuple[int, int] | None = None  # frames played over and over (L)
         self._build()
         self._add_shortcuts()
         session.frame_changed.connect(self._show_frame)
         session.keys_changed.connect(lambda *_: self._show_face())
         session.file_changed.connect(self._show_saved)
-        session.passes_changed.connect(lambda name: self.report(
-            f"pass on {name} done: press N for {session.next_blendshape}" if session.next_blendshape
-            else f"pass on {name} done: every blendshape keyed", False))
+        session.history_changed.connect(self._show_history)
+        session.status_changed.connect(self._on_status)
+        session.passes_changed.connect(lambda name: self.report(self._pass_note(name), False))
         self._show_frame(session.frame)
 
     # ---------------------------------------------------------------------------------- layout
     def _build(self) -> None:
-        self.video_view = QtImageView("video", (320, 240))
+        self.video_view = QtImageView("video", (240, 180))
         self.video_view.setFocusPolicy(QtCore.Qt.FocusPolicy.StrongFocus)
-        self.face_view = QtImageView("face preview", (240, 180))
+        self.face_view = QtImageView("face preview", (160, 120))
         self.face_view.setToolTip("The parametric face drawn from the four current weights: match it to the participant")
         self.protocol = QtProtocolPanel(self.session)
         self.timeline = QtTimeline(self.session)
+        self.timeline.setMinimumHeight(150)
         pictures = QtWidgets.QHBoxLayout()
         pictures.addLayout(self._captioned(self.video_view, "Video"), 4)
         pictures.addLayout(self._captioned(self.face_view, "Face from the current weights"), 3)
-        pictures.addWidget(self.protocol, 0)
+        protocol_scroll = QtWidgets.QScrollArea()  # a short top pane scrolls the panel, never clips it
+        protocol_scroll.setWidget(self.protocol)
+        protocol_scroll.setWidgetResizable(True)
+        protocol_scroll.setFrameShape(QtWidgets.QFrame.Shape.NoFrame)
+        protocol_scroll.setHorizontalScrollBarPolicy(QtCore.Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+        protocol_scroll.setFixedWidth(self.protocol.sizeHint().width() + 16)
+        pictures.addWidget(protocol_scroll, 0)
+        top = QtWidgets.QWidget()
+        top_layout = QtWidgets.QVBoxLayout(top)
+        top_layout.setContentsMargins(0, 0, 0, 0)
+        top_layout.addLayout(pictures, 1)
+        top_layout.addLayout(self._build_transport())
+        self.splitter = QtWidgets.QSplitter(QtCore.Qt.Orientation.Vertical)
+        self.splitter.setChildrenCollapsible(False)
+        self.splitter.addWidget(top)
+        self.splitter.addWidget(self._build_curves_pane())
+        self.splitter.setStretchFactor(0, 6)
+        self.splitter.setStretchFactor(1, 4)
         help_label = QtWidgets.QLabel(HELP_TEXT, wordWrap=True)
         help_label.setStyleSheet("color:#505050;")
         layout = QtWidgets.QVBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
-        layout.addLayout(pictures, 5)
-        layout.addLayout(self._build_transport())
-        layout.addWidget(self.timeline, 5)
+        layout.addWidget(self.splitter, 1)
         layout.addWidget(help_label)
+
+    def _build_curves_pane(self) -> QtWidgets.QWidget:
+        """The curve toggles over the timeline, the undo history beside it."""
+        toggles = QtWidgets.QHBoxLayout()
+        toggles.addWidget(QtWidgets.QLabel("Curves:"))
+        self.curve_toggles: dict[str, QtWidgets.QCheckBox] = {}
+        for name in self.session.blendshape_names:
+            box = QtWidgets.QCheckBox(name)
+            box.setChecked(True)
+            box.setStyleSheet(f"QCheckBox {{ color:{self.timeline.colour(name)}; font-weight:bold; }}")
+            box.setFocusPolicy(QtCore.Qt.FocusPolicy.NoFocus)
+            box.setToolTip(f"Show {name}'s curve behind the current one (the current one is always shown)")
+            box.toggled.connect(functools.partial(self.timeline.set_shown, name))
+            self.curve_toggles[name] = box
+            toggles.addWidget(box)
+        toggles.addStretch(1)
+        self.loop_label = QtWidgets.QLabel("")
+        toggles.addWidget(self.loop_label)
+        self.history_view = QtWidgets.QListWidget()
+        self.history_view.setFocusPolicy(QtCore.Qt.FocusPolicy.NoFocus)
+        self.history_view.setToolTip("Your edits, oldest first; greyed: undone (redo with Ctrl+Y). "
+                                     "Click a step to undo or redo back to it.")
+        self.history_view.itemClicked.connect(self._on_history_click)
+        history = QtWidgets.QVBoxLayout()
+        history.setContentsMargins(0, 0, 0, 0)
+        history.addWidget(QtWidgets.QLabel("<b>Undo history</b>"))
+        history.addWidget(self.history_view, 1)
+        history_box = QtWidgets.QWidget()
+        history_box.setLayout(history)
+        history_box.setFixedWidth(230)
+        row = QtWidgets.QHBoxLayout()
+        row.setContentsMargins(0, 0, 0, 0)
+        row.addWidget(self.timeline, 1)
+        row.addWidget(history_box)
+        pane = QtWidgets.QWidget()
+        column = QtWidgets.QVBoxLayout(pane)
+        column.setContentsMargins(0, 0, 0, 0)
+        column.addLayout(toggles)
+        column.addLayout(row, 1)
+        self._show_history()
+        return pane
+
+    def _pass_note(self, name: str) -> str:
+        nxt = self.session.next_blendshape
+        return f"pass on {name} done: press N for {nxt}" if nxt else f"pass on {name} done: every blendshape keyed"
+
+    def _on_status(self, text: str, is_error: bool) -> None:
+        """What the model did; while the current pass is done, the hint to go on stays in the line."""
+        name = self.session.blendshape
+        self.report(f"{text} \u00b7 {self._pass_note(name)}" if name in self.session.passes_done and not is_error
+                    else text, is_error)
+
+    def _show_history(self) -> None:
+        """List the undo steps (the last one current) and the undone ones (grey)."""
+        done, undone = self.session.history
+        self.history_view.clear()
+        self.history_view.addItem("(opened)")
+        for label in done:
+            self.history_view.addItem(label)
+        current = self.history_view.count() - 1
+        for label in undone:
+            item = QtWidgets.QListWidgetItem(label)
+            item.setForeground(QtGui.QColor("#a0a0a0"))
+            self.history_view.addItem(item)
+        self.history_view.setCurrentRow(current)
+        self.history_view.scrollToItem(self.history_view.item(current))
+
+    def _on_history_click(self, item: QtWidgets.QListWidgetItem) -> None:
+        """Undo or redo until the clicked step is the last one done."""
+        current = len(self.session.history[0])
+        self._guarded(lambda: self.session.undo_to(current - self.history_view.row(item)))
 
     @staticmethod
     def _captioned(widget: QtWidgets.QWidget, caption: str) -> QtWidgets.QVBoxLayout:
@@ -180,6 +276,16 @@ class QtKeyframeEditor(QtWidgets.QWidget):
             (QtGui.QKeySequence.StandardKey.Undo, m.undo), ("Ctrl+Shift+Z", m.redo), ("Ctrl+Y", m.redo),
             (QtGui.QKeySequence.StandardKey.Copy, self.copy_key), (QtGui.QKeySequence.StandardKey.Paste, self.paste),
             ("Ctrl+G", self._select_frame_box),
+            ("Ctrl+A", self.timeline.select_all), (Key.Key_Escape, self._escape),
+            ("Alt+Right", lambda: self.shift_selection(1)), ("Alt+Left", lambda: self.shift_selection(-1)),
+            ("Alt+Shift+Right", lambda: self.shift_selection(10)), ("Alt+Shift+Left", lambda: self.shift_selection(-10)),
+            ("Alt+Up", lambda: self.shift_selection(0, WEIGHT_NUDGE)),
+            ("Alt+Down", lambda: self.shift_selection(0, -WEIGHT_NUDGE)),
+            (Key.Key_BracketRight, lambda: self.shift_selection(0, 0.0, SCALE_STEP)),
+            (Key.Key_BracketLeft, lambda: self.shift_selection(0, 0.0, 1 / SCALE_STEP)),
+            (Key.Key_Plus, lambda: self.timeline.zoom(ZOOM_STEP)), (Key.Key_Equal, lambda: self.timeline.zoom(ZOOM_STEP)),
+            (Key.Key_Minus, lambda: self.timeline.zoom(1 / ZOOM_STEP)), (Key.Key_F, self.timeline.frame_all),
+            (Key.Key_L, self.toggle_loop),
         ]
         bindings += [(getattr(Key, f"Key_{d}"), functools.partial(m.set_key, d / 10)) for d in range(10)]
         for seq, slot in bindings:
@@ -215,6 +321,13 @@ class QtKeyframeEditor(QtWidgets.QWidget):
             return True
         return super().eventFilter(watched, event)
 
+    def _escape(self) -> None:
+        """Esc: cancel a go-to being typed, else clear the key selection."""
+        if self.frame_box.hasFocus() or self.time_box.hasFocus():
+            self.cancel_go_to()
+        else:
+            self.timeline.select_key(None)
+
     def cancel_go_to(self) -> None:
         """Put the current frame and time back in their boxes and focus the video view."""
         for box, value in ((self.frame_box, self.session.frame), (self.time_box, self.session.t_s)):
@@ -235,9 +348,38 @@ class QtKeyframeEditor(QtWidgets.QWidget):
             self.report(f"no {self.session.blendshape} key on frame {frame} to delete", True)
 
     def copy_key(self) -> None:
-        """Copy the current blendshape's key on the current frame (where a selected key always is)."""
-        n = self.session.copy(self.session.frame)
-        self.report(f"copied {n} key{'s' * (n != 1)} of {self.session.blendshape}", n == 0)
+        """Copy the selected range of keys (several selected: first to last), else the current frame's key."""
+        chosen = self.timeline.selection
+        first, last = (chosen[0], chosen[-1]) if len(chosen) > 1 else (self.session.frame, self.session.frame)
+        n = self.session.copy(first, last)
+        where = f"frames {first}-{last}" if last > first else f"frame {first}"
+        self.report(f"copied {n} key{'s' * (n != 1)} of {self.session.blendshape} ({where})", n == 0)
+
+    def shift_selection(self, d_frames: int, d_weight: float = 0.0, scale: float = 1.0) -> None:
+        """Move (frames, weight) or scale the selected keys together: one undo step."""
+        chosen = self.timeline.selection or ([self.session.frame] if self.session.key_at() else [])
+        if not chosen:
+            self.report("select keys first (click, Shift+click, Ctrl+A)", True)
+            return
+        moved = self.session.shift_keys(chosen, d_frames, d_weight, scale)
+        self.timeline.set_selection(moved)
+
+    def toggle_loop(self) -> None:
+        """L: loop playback over the selected keys' span (two or more), else the visible time; L again: off."""
+        if self.loop is not None:
+            self.loop = None
+            self.loop_label.setText("")
+            self.report("loop off", False)
+            return
+        chosen = self.timeline.selection
+        if len(chosen) > 1:
+            self.loop = (chosen[0], chosen[-1])
+        else:
+            lo, hi = self.timeline.curve_plot.viewRange()[0]
+            self.loop = (self.session.times.frame_at(max(lo, 0.0)), self.session.times.frame_at(hi))
+        a, b = self.loop
+        self.loop_label.setText(f"⟲ loop {self.session.times.t_at(a):.1f}-{self.session.times.t_at(b):.1f} s (L: off)")
+        self.report(f"looping frames {a}-{b}: Space plays them over and over", False)
 
     def paste(self) -> None:
         """Paste the copied keys at the current frame."""
@@ -252,7 +394,9 @@ class QtKeyframeEditor(QtWidgets.QWidget):
 
     def set_playing(self, on: bool) -> None:
         """Start or stop playback at the chosen speed (real session time, frames from the timestamps)."""
-        if on and self.session.frame >= self.session.n_frames - 1:
+        if on and self.loop is not None and not self.loop[0] <= self.session.frame < self.loop[1]:
+            self.session.set_frame(self.loop[0])
+        elif on and self.session.frame >= self.session.n_frames - 1:
             self.session.set_frame(0)
         if on:
             self._restart_clock()
@@ -275,7 +419,10 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         t0_s, wall0 = self._play_from
         speed = SPEEDS[self.speed.currentIndex()]
         self.session.go_to_time(t0_s + speed * (time.perf_counter() - wall0))
-        if self.session.frame >= self.session.n_frames - 1:
+        if self.loop is not None and self.session.frame >= self.loop[1]:
+            self.session.set_frame(self.loop[0])
+            self._restart_clock()
+        elif self.session.frame >= self.session.n_frames - 1:
             self.set_playing(False)
 
     # ------------------------------------------------------------------------------- display
@@ -284,6 +431,7 @@ class QtKeyframeEditor(QtWidgets.QWidget):
             self.video_view.set_image(self.video.get(frame))
         except UserError as exc:
             self.video_view.setText(str(exc))
+        self.video_view.set_overlay(f"{timecode(self.session.t_s)}  frame {frame}")
         for box, value in ((self.frame_box, frame), (self.time_box, self.session.t_s)):
             if not box.hasFocus():
                 box.blockSignals(True)
@@ -308,6 +456,12 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         self.session.disconnect_all()
         self.session.close()
         self.video.close()
+
+
+def timecode(t_s: float) -> str:
+    """``h:mm:ss.mmm`` of a session time."""
+    ms = int(round(max(t_s, 0.0) * 1000))
+    return f"{ms // 3_600_000}:{ms // 60_000 % 60:02d}:{ms // 1000 % 60:02d}.{ms % 1000:03d}"
 
 
 def _centred_note() -> QtWidgets.QLabel:
@@ -378,7 +532,10 @@ class QtAnnotateStage(QtWidgets.QWidget):
         buttons.addWidget(self.open_button, 1)
         buttons.addWidget(self.rescan_button)
         left = QtWidgets.QVBoxLayout()
-        left.addWidget(QtWidgets.QLabel("<b>Sessions</b>"))
+        sessions_title = QtWidgets.QLabel("<b>Sessions</b> (each rater's complete tracks)", wordWrap=True)
+        sessions_title.setToolTip("R1 4/4: rater R1 has 4 complete tracks of 4 (keys over the whole video with no "
+                                  "gap over 30 s, pass finished); only complete tracks are used for training")
+        left.addWidget(sessions_title)
         left.addWidget(self.sessions, 1)
         left.addWidget(QtWidgets.QLabel("<b>Rater</b> (you see only your own keys)", wordWrap=True))
         left.addWidget(self.rater)
@@ -406,6 +563,7 @@ class QtAnnotateStage(QtWidgets.QWidget):
         bar.setToolButtonStyle(QtCore.Qt.ToolButtonStyle.ToolButtonTextOnly)
         self.undo_action = bar.addAction("Undo", lambda: self._on_editor(lambda e: e.session.undo()))
         self.redo_action = bar.addAction("Redo", lambda: self._on_editor(lambda e: e.session.redo()))
+        self._refresh_undo()
         export = QtWidgets.QMenu("Export", self)
         self.export_weights_action = export.addAction("Per-frame weights CSV\u2026", lambda: self.export_weights())
         self.export_keys_action = export.addAction("Key-frames JSON\u2026", lambda: self.export_keyframes())
@@ -422,6 +580,15 @@ class QtAnnotateStage(QtWidgets.QWidget):
             self.show_message("open a session first", True)
         else:
             fn(editor)
+
+    def _refresh_undo(self) -> None:
+        """Undo/Redo enabled only when there is something to undo/redo, their tooltips say what."""
+        editor = self.shown_editor()
+        m = editor.session if editor is not None else None
+        self.undo_action.setEnabled(bool(m and m.can_undo))
+        self.redo_action.setEnabled(bool(m and m.can_redo))
+        self.undo_action.setToolTip(f"Undo {m.undo_text} (Ctrl+Z)" if m and m.can_undo else "Nothing to undo")
+        self.redo_action.setToolTip(f"Redo {m.redo_text} (Ctrl+Y)" if m and m.can_redo else "Nothing to redo")
 
     def shown_editor(self) -> QtKeyframeEditor | None:
         """The open session's editor if it is shown (its rater is the confirmed rater code), else None."""
@@ -450,14 +617,20 @@ class QtAnnotateStage(QtWidgets.QWidget):
         if hidden:
             self.show_message("rater code changed: press Enter to confirm it")
         self._show_notes()
+        self._refresh_undo()
 
     def _on_rater_confirmed(self) -> None:
         """The typed code is confirmed: show that rater's open session or reliability round."""
         rater = self.rater.text().strip()
         if self.editor is not None and self.editor.session.rater == rater:
             self.editor_host.setCurrentWidget(self.editor)
+            self.show_message(f"rater {rater}: {self.editor.session.session.info.session_id} shown again")
+        elif "press Enter" in self.status.text():
+            self.show_message(f"rater {rater or '(none)'} confirmed: open a session" if self.tabs.currentIndex() == 0
+                              else f"rater {rater or '(none)'} confirmed")
         if self.tabs.currentIndex() == 1:
             self.open_reliability()
+        self._refresh_undo()
 
     def _show_notes(self) -> None:
         rater = self.rater.text().strip() or "your code"
@@ -492,9 +665,10 @@ class QtAnnotateStage(QtWidgets.QWidget):
         for folder in folders:
             if not (folder / "video_frames.csv").is_file():
                 continue
-            item = QtWidgets.QListWidgetItem(self._describe(folder))
+            text, tip = self._describe(folder)
+            item = QtWidgets.QListWidgetItem(text)
             item.setData(QtCore.Qt.ItemDataRole.UserRole, str(folder))
-            item.setToolTip(str(folder))
+            item.setToolTip(tip)
             self.sessions.addItem(item)
         if self.sessions.count():
             self.sessions.setCurrentRow(0)
@@ -519,14 +693,24 @@ class QtAnnotateStage(QtWidgets.QWidget):
             self.sessions.setFocus()
 
     @staticmethod
-    def _describe(folder: Path) -> str:
+    def _describe(folder: Path) -> tuple[str, str]:
+        """The list text (name, participant, each rater's complete tracks) and its tooltip (details)."""
         try:
             info = read_session_info(folder)
             p = info.participant
             who = f"{p.sex or '?'}, {p.age:g} y" if p.age else (p.sex or "")
         except UserError:
             who = "unreadable session.json"
-        return f"{folder.name}\n   {who}"
+        try:
+            status = session_status(folder, read_video_frames(folder / VIDEO_FRAMES_CSV))
+        except (UserError, OSError) as exc:
+            return f"{folder.name}\n   {who}\n   annotations: unreadable", str(exc)
+        raters = "  ".join(f"{r} {summary(st)}" for r, st in status.items()) or "not annotated yet"
+        details = "\n".join(f"{r}: " + "; ".join(f"{n} " + ("complete" if s.complete else s.reason)
+                                                for n, s in st.items()) for r, st in status.items())
+        return (f"{folder.name}\n   {who}\n   {raters}",
+                f"{folder}\n{details or 'not annotated yet'}\n(complete: keys over the whole video with no gap "
+                "over 30 s, pass finished; only complete tracks are used for training)")
 
     def open_selected(self) -> None:
         """Open the selected session for the typed rater."""
@@ -552,6 +736,10 @@ class QtAnnotateStage(QtWidgets.QWidget):
         self.editor = QtKeyframeEditor(session, video, self.show_message)
         self.editor_host.addWidget(self.editor)
         self.editor_host.setCurrentWidget(self.editor)
+        session.history_changed.connect(self._refresh_undo)
+        session.passes_changed.connect(lambda *_: self._describe_open())
+        session.file_changed.connect(lambda *_: self._describe_open())
+        self._refresh_undo()
         self.tabs.setCurrentIndex(0)
         self.editor.video_view.setFocus()
         if self.settings is not None:
@@ -560,6 +748,18 @@ class QtAnnotateStage(QtWidgets.QWidget):
         self.show_message(f"{session.session.info.session_id}: rater {rater}, {keys} keys "
                           f"({'file ' + session.path.name if session.path.exists() else 'new file on first key'})")
         return self.editor
+
+    def _describe_open(self) -> None:
+        """Update the open session's line in the list (its completeness changes as the rater keys)."""
+        if self.editor is None:
+            return
+        folder = self.editor.session.session.path
+        for row in range(self.sessions.count()):
+            item = self.sessions.item(row)
+            if Path(item.data(QtCore.Qt.ItemDataRole.UserRole)) == folder:
+                text, tip = self._describe(folder)
+                item.setText(text)
+                item.setToolTip(tip)
 
     def _select_listed(self, folder: Path) -> None:
         """Highlight ``folder`` in the session list (when it is listed)."""
@@ -575,6 +775,7 @@ class QtAnnotateStage(QtWidgets.QWidget):
             self.editor.deleteLater()
             self.editor = None
             self._show_notes()
+            self._refresh_undo()
 
     def open_reliability(self) -> QtReliabilityPanel | None:
         """Show the reliability round for the typed rater."""

@@ -32,6 +32,29 @@ class QtImageView(QtWidgets.QLabel):
         self.setSizePolicy(QtWidgets.QSizePolicy.Policy.Expanding, QtWidgets.QSizePolicy.Policy.Expanding)
         self.setStyleSheet("background:#202020; color:#d0d0d0;")
         self._image: QtGui.QImage | None = None
+        self.overlay = ""
+
+    def set_overlay(self, text: str) -> None:
+        """Text drawn over the image's bottom-left corner (the video's timecode)."""
+        if text != self.overlay:
+            self.overlay = text
+            self.update()
+
+    def paintEvent(self, event: QtGui.QPaintEvent) -> None:  # noqa: N802 - Qt override
+        super().paintEvent(event)
+        if not self.overlay:
+            return
+        painter = QtGui.QPainter(self)
+        font = painter.font()
+        font.setFamily("monospace")
+        font.setPointSize(max(font.pointSize(), 10))
+        painter.setFont(font)
+        box = painter.fontMetrics().boundingRect(self.overlay).adjusted(-6, -3, 6, 3)
+        box.moveBottomLeft(self.contentsRect().bottomLeft() + QtCore.QPoint(6, -6))
+        painter.fillRect(box, QtGui.QColor(0, 0, 0, 170))
+        painter.setPen(QtGui.QColor("#ffffff"))
+        painter.drawText(box, QtCore.Qt.AlignmentFlag.AlignCenter, self.overlay)
+        painter.end()
 
     def set_image(self, image: np.ndarray) -> None:
         """Show a BGR array."""

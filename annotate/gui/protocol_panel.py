@@ -18,7 +18,8 @@ from effortface.annotate.annotate_session import AnnotateSession
 HELP_TEXT = ("\u2190/\u2192 one frame (Shift: ten) \u00b7 Home/End \u00b7 0-9 key at weight 0.0-0.9, "
              "M at 1.0 \u00b7 \u2191/\u2193 weight \u00b10.05 \u00b7 K key at the box's weight \u00b7 "
              "Del delete key \u00b7 Space play/pause \u00b7 N next blendshape \u00b7 Ctrl+Z/Ctrl+Y undo/redo "
-             "\u00b7 Ctrl+C/Ctrl+V copy/paste key \u00b7 Ctrl+G go to frame")
+             "\u00b7 Ctrl+C/Ctrl+V copy/paste \u00b7 Ctrl+G go to frame \u00b7 Ctrl+A / Shift+click select keys, "
+             "Alt+arrows move them, [ ] scale \u00b7 +/- zoom, F frame all \u00b7 L loop")
 _TICK = "  \u2713 pass done"
 _NEXT_READY = "QPushButton { background:#ffd870; font-weight:bold; }"
 

@@ -7,6 +7,12 @@ ICC(C,1) each with its 95 % confidence interval, Krippendorff's alpha), flagged 
 Bland-Altman plot of every rater pair. The report appears only once this rater has rated every pose, so nobody sees the others'
 ratings before giving their own. A lab without a pose set can propose one from HR and phase
 extremes (written to ``reliability/poses.csv``, never over an existing one).
+
+Each blendshape of a pose starts **unrated** (the spin box shows "unrated", one step below 0): an
+untouched shape is never saved as a rating, Save stores only the rated ones and says which are still
+unrated. The face drawn from the typed weights sits beside the pose's frame, so the rater matches
+one to the other; keyboard entry: type a weight, Enter goes to the next blendshape and saves the
+pose after the last one, Ctrl+Enter saves at once.
 """
 
 from __future__ import annotations
@@ -20,6 +26,7 @@ from PySide6 import QtCore, QtGui, QtWidgets
 
 from effortface.annotate.agreement import (FLAG_PCT, N_POSES, AgreementReport, agreement_report, format_ci,
                                            gather_ratings, propose_poses)
+from effortface.annotate.face import render_face
 from effortface.annotate.gui.image_view import QtImageView
 from effortface.annotate.reliability import Pose, write_poses
 from effortface.annotate.annotate_session import BlindRound
@@ -29,16 +36,22 @@ from effortface.capture_tool.session import list_sessions, read_session
 
 _PAIR_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#8c564b", "#e377c2")
 _FLAG_BRUSH = QtGui.QBrush(QtGui.QColor("#f8d7da"))
+#: the spin box value that means "not rated yet" (shown as "unrated"; never saved)
+UNRATED = -0.01
 
 
-def _table(headers: list[str]) -> QtWidgets.QTableWidget:
+def _table(headers: list[str], fit: bool = False) -> QtWidgets.QTableWidget:
+    """A read-only table; ``fit``: columns as wide as their content, the last one takes the rest."""
     table = QtWidgets.QTableWidget(0, len(headers))
     table.setHorizontalHeaderLabels(headers)
     table.verticalHeader().setVisible(False)
+    table.verticalHeader().setDefaultSectionSize(22)
     table.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
     table.setSelectionBehavior(QtWidgets.QAbstractItemView.SelectionBehavior.SelectRows)
     table.horizontalHeader().setSectionResizeMode(QtWidgets.QHeaderView.ResizeMode.ResizeToContents)
     table.horizontalHeader().setStretchLastSection(True)
+    if fit:
+        table.horizontalHeader().setMinimumSectionSize(36)
     return table
 
 
@@ -79,28 +92,38 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         self.propose_button.clicked.connect(self.propose)
         self.poses = _table(["pose", "session", "frame", "rated"])
         self.poses.currentCellChanged.connect(lambda row, *_: self._show_pose(row))
-        self.image = QtImageView("pose frame", (200, 150))
-        self.image.setMaximumHeight(180)
+        self.image = QtImageView("pose frame", (150, 112))
+        self.face = QtImageView("face from your weights", (150, 112))
+        for view in (self.image, self.face):  # as tall as their width allows (4:3), no empty band
+            view.setSizePolicy(QtWidgets.QSizePolicy.Policy.Expanding, QtWidgets.QSizePolicy.Policy.Fixed)
+        self.face.setToolTip("The face drawn from the weights you typed (unrated: 0): match it to the frame")
         self.spins: dict[str, QtWidgets.QDoubleSpinBox] = {}
         form = QtWidgets.QFormLayout()
-        self.save_button = QtWidgets.QPushButton("Save my rating of this pose")
+        self.save_button = QtWidgets.QPushButton("Save my rating of this pose (Ctrl+Enter)")
         self.save_button.clicked.connect(self.save_pose)
         rate_box = QtWidgets.QGroupBox("Rate the selected pose (blind)")
+        pictures = QtWidgets.QHBoxLayout()
+        pictures.addWidget(self.image, 1)
+        pictures.addWidget(self.face, 1)
         rate_layout = QtWidgets.QVBoxLayout(rate_box)
-        rate_layout.addWidget(self.image)
+        rate_layout.addLayout(pictures, 1)
         rate_layout.addLayout(form)
         rate_layout.addWidget(self.save_button)
         self._form = form
+        save = QtGui.QShortcut(QtGui.QKeySequence("Ctrl+Return"), self, self.save_pose)
+        save.setContext(QtCore.Qt.ShortcutContext.WidgetWithChildrenShortcut)
         left = QtWidgets.QVBoxLayout()
+        left.setContentsMargins(0, 0, 0, 0)
         left.addWidget(self.propose_button)
         left.addWidget(self.poses, 1)
-        left.addWidget(rate_box)
+        left.addWidget(rate_box, 0)
         left_widget = QtWidgets.QWidget()
         left_widget.setLayout(left)
-        left_widget.setFixedWidth(300)
+        left_widget.setMinimumWidth(330)
+        left_widget.setMaximumWidth(460)
         row = QtWidgets.QHBoxLayout()
-        row.addWidget(left_widget)
-        row.addWidget(self._build_report(), 1)
+        row.addWidget(left_widget, 2)
+        row.addWidget(self._build_report(), 5)
         layout = QtWidgets.QVBoxLayout(self)
         layout.addWidget(self.status)
         layout.addLayout(row, 1)
@@ -111,31 +134,41 @@ class QtReliabilityPanel(QtWidgets.QWidget):
                                                   decimals=1, singleStep=1.0)
         self.threshold.valueChanged.connect(lambda *_: self.refresh_report())
         self.report_note = QtWidgets.QLabel(wordWrap=True)
-        self.per_pose = _table(["pose", "mean |diff| %", "review"])  # sorted worst first
-        self.per_shape = _table(["blendshape", "items", "diff %", "ICC(A,1)", "95 % CI", "ICC(C,1)", "95 % CI",
-                                 "alpha"])
-        self.pairs = QtWidgets.QLabel(wordWrap=True)
+        self.per_pose = _table(["pose", "|diff| %", "review"], fit=True)  # sorted worst first
+        self.per_shape = _table(["blendshape", "n", "diff %", "ICC(A,1)", "95 % CI", "ICC(C,1)", "95 % CI",
+                                 "alpha"], fit=True)
+        self.per_shape.setMinimumHeight(6 * 22 + 8)  # the four blendshapes and "overall", no scrolling
+        self.per_shape.setToolTip("n: rated items; diff %: mean |difference| between raters in % of the weight "
+                                  "range; ICC(A,1) absolute agreement, ICC(C,1) consistency; alpha: Krippendorff")
+        self.pairs = _table(["pair", "n", "bias", "lower limit", "upper limit"], fit=True)
+        self.pairs.setToolTip("Bland-Altman: bias = mean of rater a - rater b; limits of agreement = bias \u00b1 1.96 SD")
         self.ba_plot = pg.PlotWidget(background="w", title="Bland-Altman: rater a - rater b")
         self.ba_plot.setLabel("bottom", "mean weight of the pair")
         self.ba_plot.setLabel("left", "difference")
-        self.ba_plot.addLegend(offset=(-5, 5))
-        self.ba_plot.setMinimumHeight(200)
+        legend = self.ba_plot.addLegend(offset=(-5, 5), brush=pg.mkBrush(255, 255, 255, 235),
+                                        pen=pg.mkPen("#909090"))
+        legend.setZValue(1000)  # drawn over the bias and limit lines, never struck through
+        self.ba_plot.setMinimumHeight(160)
         for axis in ("left", "bottom"):
             self.ba_plot.getAxis(axis).enableAutoSIPrefix(False)
         threshold_row = QtWidgets.QHBoxLayout()
         threshold_row.addWidget(QtWidgets.QLabel("Flag poses over"))
         threshold_row.addWidget(self.threshold)
         threshold_row.addStretch(1)
-        tables = QtWidgets.QHBoxLayout()
-        self.per_pose.setMinimumWidth(200)
-        tables.addWidget(self.per_pose, 3)
-        tables.addWidget(self.per_shape, 5)
-        results = QtWidgets.QWidget()
-        inner = QtWidgets.QVBoxLayout(results)
-        inner.setContentsMargins(0, 0, 0, 0)
-        inner.addLayout(tables, 2)
-        inner.addWidget(self.pairs)
-        inner.addWidget(self.ba_plot, 3)
+        lower = QtWidgets.QHBoxLayout()
+        lower.setContentsMargins(0, 0, 0, 0)
+        lower.addWidget(self.per_pose, 2)
+        lower.addWidget(self.pairs, 3)
+        lower_widget = QtWidgets.QWidget()
+        lower_widget.setLayout(lower)
+        results = QtWidgets.QSplitter(QtCore.Qt.Orientation.Vertical)
+        results.setChildrenCollapsible(False)
+        results.addWidget(self.per_shape)
+        results.addWidget(lower_widget)
+        results.addWidget(self.ba_plot)
+        results.setStretchFactor(0, 2)
+        results.setStretchFactor(1, 2)
+        results.setStretchFactor(2, 3)
         self.hidden_note = QtWidgets.QLabel(alignment=QtCore.Qt.AlignmentFlag.AlignCenter, wordWrap=True)
         self.hidden_note.setStyleSheet("color:#505050; font-size:14px;")
         self.results = QtWidgets.QStackedWidget()
@@ -171,10 +204,55 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         self.spins = {}
         names = self.round.blendshapes.names if self.round else ()
         for name in names:
-            spin = QtWidgets.QDoubleSpinBox(minimum=0.0, maximum=1.0, singleStep=0.05, decimals=2)
+            spin = QtWidgets.QDoubleSpinBox(minimum=UNRATED, maximum=1.0, singleStep=0.05, decimals=2)
+            spin.setSpecialValueText("unrated")  # the minimum: never saved as a rating
+            spin.setValue(UNRATED)
+            spin.setToolTip("Type a weight 0-1 and press Enter (next blendshape; after the last: save). "
+                            "Below 0: unrated")
+            spin.valueChanged.connect(lambda *_: self._show_face())
+            spin.installEventFilter(self)
             self.spins[name] = spin
             self._form.addRow(name, spin)
         self.save_button.setEnabled(bool(names))
+
+    def resizeEvent(self, event: QtGui.QResizeEvent) -> None:  # noqa: N802 - Qt override
+        """Keep the pose frame and the face 4:3 at the width they get."""
+        super().resizeEvent(event)
+        height = max(112, min(int(self.image.width() * 0.75), 260))
+        for view in (self.image, self.face):
+            if view.height() != height:
+                view.setFixedHeight(height)
+
+    def eventFilter(self, watched: QtCore.QObject, event: QtCore.QEvent) -> bool:  # noqa: N802 - Qt override
+        """Enter in a rating box: the next blendshape's box, and after the last one, save the pose."""
+        if (isinstance(event, QtGui.QKeyEvent) and event.type() == QtCore.QEvent.Type.KeyPress
+                and event.key() in (QtCore.Qt.Key.Key_Return, QtCore.Qt.Key.Key_Enter)
+                and not event.modifiers() & QtCore.Qt.KeyboardModifier.ControlModifier
+                and watched in self.spins.values()):
+            spin = watched
+            assert isinstance(spin, QtWidgets.QDoubleSpinBox)
+            spin.interpretText()
+            boxes = list(self.spins.values())
+            i = boxes.index(spin)
+            if i + 1 < len(boxes):
+                boxes[i + 1].setFocus()
+                boxes[i + 1].selectAll()
+            else:
+                self.save_pose()
+                if boxes and boxes[0].isEnabled():
+                    boxes[0].setFocus()
+                    boxes[0].selectAll()
+            return True
+        return super().eventFilter(watched, event)
+
+    def typed(self) -> dict[str, float | None]:
+        """The weights in the boxes, None where unrated."""
+        return {n: (None if s.value() <= UNRATED + 1e-9 else round(s.value(), 4)) for n, s in self.spins.items()}
+
+    def _show_face(self) -> None:
+        weights = [0.0 if w is None else w for w in self.typed().values()]
+        if weights:
+            self.face.set_image(render_face(weights, (320, 240)))
 
     def _fill_poses(self) -> None:
         if self.round is None:
@@ -204,11 +282,14 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         locked = in_lab_file or self.round.complete
         for name, spin in self.spins.items():
             value = self.round.rating(pose.pose_id, name)
-            spin.setValue(0.0 if value is None else value)
+            spin.blockSignals(True)
+            spin.setValue(UNRATED if value is None else value)
+            spin.blockSignals(False)
             spin.setEnabled(not locked)
+        self._show_face()
         self.save_button.setEnabled(not locked)
         self.save_button.setText("Rated in the lab's ratings.csv" if in_lab_file
-                                 else "Round done: ratings locked" if locked else "Save my rating of this pose")
+                                 else "Round done: ratings locked" if locked else "Save my rating of this pose (Ctrl+Enter)")
         self.save_button.setToolTip("You have seen the agreement report: your ratings can no longer change"
                                     if locked and not in_lab_file else "")
 
@@ -218,13 +299,24 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         if self.round is None or row < 0:
             return
         pose = self.round.poses[row]
+        typed = self.typed()
+        rated = {n: w for n, w in typed.items() if w is not None}
+        unrated = [n for n, w in typed.items() if w is None]
+        if not rated:
+            self.status.setText(f"{pose.pose_id}: every blendshape is unrated: type a weight (0-1) first; "
+                                "an unrated shape is never saved as a rating")
+            return
         try:
-            for name, spin in self.spins.items():
-                self.round.set_rating(pose.pose_id, name, spin.value())
+            for name, weight in rated.items():
+                self.round.set_rating(pose.pose_id, name, weight)
         except UserError as exc:
             self.status.setText(str(exc))
             return
         self._fill_poses()
+        if unrated:  # stay on the pose: the rest is still to rate
+            self.status.setText(f"{pose.pose_id}: saved {len(rated)} rating{'s' * (len(rated) != 1)}; "
+                                f"still unrated (not saved): {', '.join(unrated)}")
+            return
         self.poses.setCurrentCell(min(row + 1, len(self.round.poses) - 1), 0)
         self.refresh_report()
 
@@ -278,7 +370,7 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         if rep is None:
             _fill(self.per_pose, [])
             _fill(self.per_shape, [])
-            self.pairs.setText("")
+            _fill(self.pairs, [])
             self.ba_plot.clear()
             return
         poses = sorted(rep.per_pose_pct.items(), key=lambda pv: -pv[1])  # worst first: flagged on top
@@ -287,8 +379,8 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         _fill(self.per_shape, [[s.name, str(s.n_items), f"{s.disagreement_pct:.1f}", f"{s.icc_a1:.3f}",
                                 format_ci(s.icc_a1_ci), f"{s.icc_c1:.3f}", format_ci(s.icc_c1_ci),
                                 f"{s.alpha:.3f}"] for s in [*rep.per_blendshape, rep.overall]])
-        self.pairs.setText("   ".join(f"{p.rater_a}-{p.rater_b}: bias {p.bias:+.3f}, limits "
-                                      f"{p.loa_low:+.3f} .. {p.loa_high:+.3f}" for p in rep.pairs))
+        _fill(self.pairs, [[f"{p.rater_a}-{p.rater_b}", str(p.n), f"{p.bias:+.3f}", f"{p.loa_low:+.3f}",
+                            f"{p.loa_high:+.3f}"] for p in rep.pairs])
         self._plot_bland_altman(rep)
 
     def _plot_bland_altman(self, rep: AgreementReport) -> None:

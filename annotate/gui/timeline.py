@@ -5,10 +5,13 @@
 - top plot: heart rate (valid samples; gaps where the strap lost contact) with the exercise
   phases shaded and named;
 - bottom plot, the curve editor: the rater's own curve of the current blendshape (their other
-  blendshapes faint), its key-frames as points. Click a key to select it (and go to its frame),
-  drag it to move it in time and weight (one undo step, snapped to a recorded frame), click empty
-  space to go to that time, double-click to add a key there; Delete removes the selected key;
-  moving to another frame clears the selection;
+  blendshapes thinner, each in its own colour, each shown or hidden with :meth:`QtTimeline.set_shown`),
+  its key-frames as points. Click a key to select it (and go to its frame), Shift+click to add keys
+  to a selection (moved and scaled together by the editor's keys, one undo step), drag a key to
+  move it in time and weight (one undo step, snapped to a recorded frame), click empty space to go
+  to that time, double-click to add a key there; Delete removes the selected key; moving to another
+  frame clears a one-key selection;
+- zoom: :meth:`QtTimeline.zoom` (the editor binds + and -) about the cursor, :meth:`frame_all` (F);
 - a cursor line at the current frame's time in both plots; dragging it scrubs the video.
 
 Everything is written back through the model's methods (STYLE.md L3); the widget keeps only the
@@ -25,8 +28,8 @@ from PySide6 import QtCore, QtWidgets
 
 from effortface.annotate.annotate_session import AnnotateSession
 
-_CURRENT_PEN = pg.mkPen("#1f5fbf", width=2)
-_OTHER_PEN = pg.mkPen((120, 120, 120, 110), width=1)
+#: one colour per blendshape, in the set's order (the current one is drawn thick, the others thin)
+CURVE_COLOURS = ("#1f5fbf", "#d0601a", "#2a9d3a", "#9a3fb5", "#8c564b", "#c0306a")
 _KEY_BRUSH = pg.mkBrush("#1f5fbf")
 _SELECTED_BRUSH = pg.mkBrush("#e07000")
 _PHASE_BRUSHES = (pg.mkBrush(90, 140, 220, 40), pg.mkBrush(230, 150, 60, 40))
@@ -57,7 +60,7 @@ class _KeyPoints(pg.ScatterPlotItem):
     def __init__(self) -> None:
         super().__init__(size=11, pen=pg.mkPen("w", width=1.5), brush=_KEY_BRUSH, hoverable=True,
                          hoverSize=14)
-        self.on_select: Callable[[int], None] | None = None
+        self.on_select: Callable[[int, bool], None] | None = None
         self.on_drop: Callable[[int, float, float], None] | None = None
         self.dragging: int | None = None
 
@@ -68,7 +71,8 @@ class _KeyPoints(pg.ScatterPlotItem):
             return
         ev.accept()
         if self.on_select is not None:
-            self.on_select(int(points[0].data()))
+            shift = bool(ev.modifiers() & QtCore.Qt.KeyboardModifier.ShiftModifier)
+            self.on_select(int(points[0].data()), shift)
 
     def mouseDragEvent(self, ev) -> None:  # noqa: N802 - pyqtgraph override
         if ev.button() != QtCore.Qt.MouseButton.LeftButton:
@@ -116,6 +120,8 @@ class QtTimeline(pg.GraphicsLayoutWidget):
         self.setBackground("w")
         self.session = session
         self.selected: int | None = None
+        self.extra: set[int] = set()  # keys added to the selection with Shift+click
+        self.hidden: set[str] = set()  # blendshapes whose curve the rater switched off
         self.t_s = session.times.t_s
         self.hr_plot = self.addPlot(row=0, col=0)
         self._curve_box = _ClickViewBox()
@@ -171,8 +177,8 @@ class QtTimeline(pg.GraphicsLayoutWidget):
         plot.setYRange(-0.05, 1.05, padding=0)
         plot.setXLink(self.hr_plot)
         self.hr_plot.getAxis("bottom").setStyle(showValues=False)
-        self.others = {n: plot.plot(pen=_OTHER_PEN) for n in self.session.blendshape_names}
-        self.current_curve = plot.plot(pen=_CURRENT_PEN)
+        self.others = {n: plot.plot(pen=pg.mkPen(self.colour(n), width=1.2)) for n in self.session.blendshape_names}
+        self.current_curve = plot.plot(pen=pg.mkPen(self.colour(self.session.blendshape), width=2.5))
         self.keys = _KeyPoints()
         plot.addItem(self.keys)
         self.keys.on_select = self.select_key
@@ -181,6 +187,50 @@ class QtTimeline(pg.GraphicsLayoutWidget):
         self._curve_box.on_double_click = self._on_double_click
         self.title = pg.TextItem(color="#1f5fbf", anchor=(0, 0))
         plot.addItem(self.title, ignoreBounds=True)
+
+    def colour(self, name: str) -> str:
+        """The colour of a blendshape's curve."""
+        return CURVE_COLOURS[self.session.blendshape_names.index(name) % len(CURVE_COLOURS)]
+
+    def set_shown(self, name: str, shown: bool) -> None:
+        """Show or hide the (non-current) curve of blendshape ``name``."""
+        self.hidden.discard(name) if shown else self.hidden.add(name)
+        self.refresh_curves()
+
+    # ---------------------------------------------------------------------------------- zoom
+    def zoom(self, factor: float) -> None:
+        """Zoom the time axis by ``factor`` (> 1: in) about the cursor."""
+        lo, hi = self.curve_plot.viewRange()[0]
+        t = float(self.t_s[self.session.frame])
+        span = max((hi - lo) / factor, 0.5)
+        span = min(span, float(self.t_s[-1] - self.t_s[0]) * 1.02)
+        self.curve_plot.setXRange(t - span / 2, t + span / 2, padding=0)
+
+    def frame_all(self) -> None:
+        """Show the whole session (F)."""
+        self.curve_plot.setXRange(float(self.t_s[0]), float(self.t_s[-1]), padding=0.01)
+
+    def visible_span_s(self) -> float:
+        """Seconds of session time shown."""
+        lo, hi = self.curve_plot.viewRange()[0]
+        return float(hi - lo)
+
+    # ---------------------------------------------------------------------------- selection
+    @property
+    def selection(self) -> list[int]:
+        """Selected key frames, sorted (the clicked key and those added with Shift+click)."""
+        return sorted(self.extra | ({self.selected} if self.selected is not None else set()))
+
+    def set_selection(self, frames: list[int]) -> None:
+        """Select these keys of the current track (no frame change)."""
+        frames = sorted(frames)
+        self.selected = frames[0] if frames else None
+        self.extra = set(frames[1:])
+        self.refresh_curves()
+
+    def select_all(self) -> None:
+        """Select every key of the current track."""
+        self.set_selection([k.frame for k in self.session.track.keys])
 
     def _cursor(self, plot: pg.PlotItem, movable: bool) -> pg.InfiniteLine:
         line = pg.InfiniteLine(angle=90, movable=movable, pen=pg.mkPen("#00a040", width=2),
@@ -195,18 +245,24 @@ class QtTimeline(pg.GraphicsLayoutWidget):
         for name, item in self.others.items():
             values = self.session.annotations.tracks[name].evaluate(frames)
             item.setData(self.t_s, values, connect="finite")
-            item.setVisible(name != self.session.blendshape)
+            item.setVisible(name != self.session.blendshape and name not in self.hidden)
+        self.current_curve.setPen(pg.mkPen(self.colour(self.session.blendshape), width=2.5))
         self.current_curve.setData(self.t_s, self.session.track.evaluate(frames), connect="finite")
         kf, kw, _ = self.session.track.arrays()
-        if self.selected is not None and self.selected not in set(kf.tolist()):
+        keyed = set(kf.tolist())
+        if self.selected is not None and self.selected not in keyed:
             self.selected = None
-        brushes = [_SELECTED_BRUSH if f == self.selected else _KEY_BRUSH for f in kf]
+        self.extra &= keyed
+        chosen = set(self.selection)
+        brushes = [_SELECTED_BRUSH if f in chosen else pg.mkBrush(self.colour(self.session.blendshape)) for f in kf]
         self.keys.setData(x=self.t_s[kf], y=kw, data=kf, brush=brushes)
-        self.title.setText(f"{self.session.blendshape} ({self.session.rater}): {len(kf)} keys")
+        picked = f", {len(chosen)} selected" if len(chosen) > 1 else ""
+        self.title.setColor(self.colour(self.session.blendshape))
+        self.title.setText(f"{self.session.blendshape} ({self.session.rater}): {len(kf)} keys{picked}")
         self.title.setPos(self.t_s[0], 1.05)
 
     def _on_frame(self, frame: int) -> None:
-        if self.selected is not None and self.selected != frame:
+        if self.selected is not None and self.selected != frame and not self.extra:
             self.select_key(None)  # Del and Ctrl+C act on the current frame once it moves away
         t = float(self.t_s[frame])
         for line in self.cursors:
@@ -217,11 +273,21 @@ class QtTimeline(pg.GraphicsLayoutWidget):
 
     def _on_blendshape(self, _name: str) -> None:
         self.selected = None
+        self.extra = set()
         self.refresh_curves()
 
-    def select_key(self, frame: int | None) -> None:
-        """Select the current track's key on ``frame`` (None: clear) and go to its frame."""
-        self.selected = frame
+    def select_key(self, frame: int | None, extend: bool = False) -> None:
+        """Select the current track's key on ``frame`` (None: clear) and go to its frame.
+
+        ``extend`` (Shift+click) toggles the key in the selection instead, without moving.
+        """
+        if extend and frame is not None:
+            if frame in self.selection:
+                self.set_selection([f for f in self.selection if f != frame])
+            else:
+                self.set_selection([*self.selection, frame])
+            return
+        self.selected, self.extra = frame, set()
         if frame is not None:
             self.session.set_frame(frame)
         self.refresh_curves()

@@ -368,7 +368,7 @@ def test_typing_another_rater_code_hides_the_previous_raters_report(qtbot, stage
     _press(stage.rater, Key.Key_Return)  # confirmed: R12's own, blind round
     assert panel.isVisible() and panel.rater == "R12" and panel.report is None
     assert panel.per_pose.rowCount() == 0 and not panel.results.currentIndex()
-    assert all(s.value() == 0.0 and s.isEnabled() for s in panel.spins.values())
+    assert all(s.text() == "unrated" and s.isEnabled() for s in panel.spins.values())  # never a silent 0
 
 
 def test_typing_another_rater_code_hides_the_open_session(qtbot, stage: QtAnnotateStage, tmp_path: Path) -> None:

@@ -158,3 +158,60 @@ def test_a_finished_round_is_locked(tmp_path: Path) -> None:
         BlindRound(tmp_path, "R4").set_rating("pose02", "eye_squint", 0.1)  # also after reopening
     assert (tmp_path / "reliability" / "ratings_R4.csv").read_bytes() == before
     assert r4.rating("pose01", "mouth_open") == 0.25
+
+
+def test_undo_names_the_step_and_goes_to_its_blendshape_and_frame(session: Path) -> None:
+    """Issue 16 item 6: after N, Ctrl+Z must not silently revert an off-screen blendshape."""
+    m = AnnotateSession(session, "R9")
+    said: list[tuple[str, bool]] = []
+    history: list[int] = []
+    m.status_changed.connect(lambda text, is_error: said.append((text, is_error)))
+    m.history_changed.connect(lambda: history.append(len(m.history[0])))
+    assert not m.can_undo and m.undo_text == "" and m.undo() is None and said[-1][1]  # "nothing to undo"
+    m.set_frame(40)
+    m.set_key(0.6)  # mouth_stretch at frame 40
+    m.start_next_pass()  # N: now on mouth_open, frame 0
+    assert (m.blendshape, m.frame) == ("mouth_open", 0)
+    assert m.undo_text == "set mouth_stretch key at frame 40 to 0.60"
+    text = m.undo()
+    assert text == "undid: set mouth_stretch key at frame 40 to 0.60" and said[-1] == (text, False)
+    assert (m.blendshape, m.frame) == ("mouth_stretch", 40) and m.key_at() is None  # shown where it happened
+    assert m.redo_text and m.history == ([], ["set mouth_stretch key at frame 40 to 0.60"])
+    m.set_blendshape("eye_squint")
+    assert m.redo() == "redid: set mouth_stretch key at frame 40 to 0.60"
+    assert m.blendshape == "mouth_stretch" and m.key_at(40).weight == 0.6
+    assert history == [1, 0, 1]
+
+
+def test_history_jump_and_multi_key_moves_are_single_steps(session: Path) -> None:
+    m = AnnotateSession(session, "R9", autosave=False)
+    for f, w in ((10, 0.2), (20, 0.4), (30, 0.6)):
+        m.set_key(w, f)
+    assert m.shift_keys([10, 20, 30], d_frames=5, d_weight=0.1) == [15, 25, 35]
+    assert [(k.frame, k.weight) for k in m.track.keys] == [(15, 0.3), (25, 0.5), (35, 0.7)]
+    m.shift_keys([15, 25, 35], scale=2.0)  # about the mean 0.5
+    assert [k.weight for k in m.track.keys] == pytest.approx([0.1, 0.5, 0.9])
+    with pytest.raises(UserError, match="key in the way"):
+        m.shift_keys([15], d_frames=10)  # onto the key at 25
+    assert len(m.history[0]) == 5
+    assert m.undo_to(2) == 2 and [k.frame for k in m.track.keys] == [10, 20, 30]
+    assert m.undo_to(-1) == 1 and [k.frame for k in m.track.keys] == [15, 25, 35]
+
+
+def test_a_pass_is_saved_in_the_file_and_survives_undo(session: Path) -> None:
+    m = AnnotateSession(session, "R9")
+    m.set_key(0.3)
+    m.set_frame(m.n_frames - 1)
+    assert read_annotations(m.path).passes_done == {"mouth_stretch"}
+    m.undo()  # the key goes, the finished pass stays recorded
+    assert m.passes_done == {"mouth_stretch"}
+    assert AnnotateSession(session, "R9").passes_done == {"mouth_stretch"}
+
+
+def test_blind_round_refuses_unrated_as_a_rating(tmp_path: Path) -> None:
+    shutil.copytree(SAMPLES / "reliability", tmp_path / "reliability")
+    blind = BlindRound(tmp_path, "R9")
+    pose = blind.poses[0].pose_id
+    with pytest.raises(UserError, match="unrated is not a rating"):
+        blind.set_rating(pose, "mouth_open", None)
+    assert blind.rating(pose, "mouth_open") is None and not blind.path.exists()

@@ -251,3 +251,46 @@ def test_an_impossible_valid_sample_is_refused_before_interpolation(lab):
     with pytest.raises(DatasetError, match=r"heart_rate.csv: line 6: expected hr_bpm from 25 to 250 on a valid "
                                            r"row, found -70"):
         sessions_table([lab])
+
+
+def _half_finished(folder: Path, rater: str, name: str, passes_done: set[str] | None = None) -> None:
+    """Replace one track of a rater's file by two keys at the start (the rater stopped there)."""
+    from effortface.annotate.keyframes import read_annotations
+
+    path = folder / "annotations" / f"{rater}.json"
+    ann = read_annotations(path)
+    ann.tracks[name] = KeyframeTrack()
+    ann.tracks[name].add(0, 0.9)
+    ann.tracks[name].add(20, 0.9)
+    ann.passes_done = passes_done
+    ann.save(path, overwrite=True)
+
+
+def test_incomplete_tracks_are_left_out_of_every_rater_policy(lab):
+    """Issue 16 item 7: 2 keys on one blendshape are not averaged in as a constant."""
+    folder = sorted(p for p in lab.iterdir() if (p / "session.json").is_file())[0]
+    before = session_table(folder)
+    r1 = session_table(folder, rater_policy="R1")
+    _half_finished(folder, "R2", "eye_squint")
+    after = session_table(folder)
+    np.testing.assert_allclose(after["eye_squint"], r1["eye_squint"])  # R1 alone: R2's stub is out
+    assert not np.allclose(before["eye_squint"], after["eye_squint"])
+    np.testing.assert_allclose(after["mouth_open"], before["mouth_open"])  # R2's complete tracks still count
+    assert session_table(folder, rater_policy="R2")["eye_squint"].isna().all()
+
+
+def test_a_track_without_its_finished_pass_is_left_out(lab):
+    folder = sorted(p for p in lab.iterdir() if (p / "session.json").is_file())[0]
+    from effortface.annotate.keyframes import read_annotations
+
+    for rater in ("R1", "R2"):
+        path = folder / "annotations" / f"{rater}.json"
+        ann = read_annotations(path)
+        ann.passes_done = {"mouth_stretch"}  # recorded passes: only mouth_stretch finished
+        ann.save(path, overwrite=True)
+    got = session_table(folder)
+    assert got["mouth_stretch"].notna().all() and got[["mouth_open", "eye_squint", "brow_lower"]].isna().all().all()
+    for rater in ("R1", "R2"):
+        _half_finished(folder, rater, "mouth_stretch", set())
+    with pytest.raises(DatasetError, match="expected complete key-frame tracks .*no gap over 30 s.*found none"):
+        session_table(folder)

@@ -200,3 +200,17 @@ def test_float32_parity_over_target_is_reported_not_fatal(fitted, tmp_path, monk
     with pytest.raises(ExportError, match=r"face\.onnx: expected float32 ONNX predictions within 1e-12 of the numpy runtime"):
         export_model(_bundle(fitted), fitted[0], tmp_path / "m2")
     assert not (tmp_path / "m2").exists()
+
+
+def test_the_model_card_states_which_annotation_tracks_were_used(fitted):
+    """Issue 16 item 7: the completeness rule is written in the model card (and in model.json)."""
+    from effortface.train.pipeline import FaceFitConfig as Config, training_provenance
+
+    face, hr = fitted
+    prepared = prepare(synthetic_table(n_participants=2, seconds=60, seed=1))
+    from_sessions = training_provenance(prepared, face, ["lab/P01_x"], "mean", Config())
+    from_table = training_provenance(prepared, face, ["table.csv"], "mean", Config())
+    assert "no gap over 30 s" in from_sessions["annotation_rule"] and "pass" in from_sessions["annotation_rule"]
+    assert from_table["annotation_rule"].startswith("n/a")
+    card = export.model_card(build_bundle(face, hr, DEFAULT_SET, {}, from_sessions))
+    assert "- annotation tracks used: a track is complete when its keys cover the video" in card

@@ -25,7 +25,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("inputs", nargs="*", metavar="SESSION|DIR", help="sessions, or folders of sessions")
     parser.add_argument("--table", metavar="CSV", help="long table instead of sessions")
     parser.add_argument("--rater-policy", default="mean", metavar="mean|RATER",
-                        help="mean of raters (default) or one rater's key-frames")
+                        help="mean of raters (default) or one rater's key-frames; complete tracks only "
+                             "(keys over the whole video, no gap over 30 s, pass finished)")
 
 
 def check_model_dir(model: str) -> Path:

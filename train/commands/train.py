@@ -31,7 +31,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, metavar="MODEL_DIR", help="model folder to write")
     parser.add_argument("--force", action="store_true", help="replace an existing MODEL_DIR")
     parser.add_argument("--rater-policy", default="mean", metavar="mean|RATER",
-                        help="mean of raters (default) or one rater's key-frames")
+                        help="mean of raters (default) or one rater's key-frames; complete tracks only "
+                             "(keys over the whole video, no gap over 30 s, pass finished)")
     parser.add_argument("--cv", choices=("lopo", "kfold"), default="lopo",
                         help="leave-one-participant-out (default) or random-frame K-fold (inflated)")
     parser.add_argument("--grid", choices=tuple(GRIDS), default="small", help="hyper-parameter grid")

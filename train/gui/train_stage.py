@@ -17,6 +17,7 @@ import pandas as pd
 import pyqtgraph as pg
 from PySide6 import QtCore, QtWidgets
 
+from effortface.annotate.completeness import RULE_TEXT as COMPLETENESS_RULE
 from effortface.core.gui.qt_compat import guard_none_refcount
 from effortface.core.errors import UserError
 from effortface.core.gui.widgets import caption
@@ -29,7 +30,8 @@ __all__ = ["QtTrainStage", "TrainSession"]
 POLL_MS = 50
 _REAL, _OWN, _PRED, _B = "#1f77b4", "#ff7f0e", "#d62728", "#2ca02c"
 _FACE_COLORS = ("#d62728", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#17becf")
-_SESSION_COLUMNS = ("use", "session", "participant", "TL", "exercise", "raters", "complete")
+_SESSION_COLUMNS = ("use", "session", "participant", "TL", "exercise", "raters", "complete",
+                    "complete tracks")
 _ANNOTATION_CHOICES = {"any annotation status": None, "annotated": True, "not annotated": False}
 
 
@@ -148,8 +150,12 @@ class QtDataPicker(QtWidgets.QGroupBox):
             use.setData(QtCore.Qt.ItemDataRole.UserRole, e.session_id)
             self.table.setItem(r, 0, use)
             for c, v in enumerate((e.session_id, e.participant, f"{e.training_level:g}", e.exercise,
-                                   ", ".join(e.raters) or "none", "yes" if e.complete else "NO"), 1):
-                self.table.setItem(r, c, QtWidgets.QTableWidgetItem(v))
+                                   ", ".join(e.raters) or "none", "yes" if e.complete else "NO",
+                                   e.tracks or "none"), 1):
+                cell = QtWidgets.QTableWidgetItem(v)
+                if c == len(_SESSION_COLUMNS) - 1:
+                    cell.setToolTip("each rater's complete tracks / tracks: " + COMPLETENESS_RULE)
+                self.table.setItem(r, c, cell)
         self.table.resizeColumnsToContents()
         self._fit_table_width()
         self.table.blockSignals(False)
