@@ -205,6 +205,7 @@ def test_a_pass_is_saved_in_the_file_and_survives_undo(session: Path) -> None:
     assert read_annotations(m.path).passes_done == {"mouth_stretch"}
     m.undo()  # the key goes, the finished pass stays recorded
     assert m.passes_done == {"mouth_stretch"}
+    m.close()  # one Annotate per session and rater at a time (the rater file's lock)
     assert AnnotateSession(session, "R9").passes_done == {"mouth_stretch"}
 
 

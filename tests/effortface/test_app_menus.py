@@ -107,7 +107,8 @@ def test_geometry_and_splitters_restored_from_settings(qtbot, lab, settings_path
     window.resize(1200, 760)
     qtbot.waitUntil(lambda: window.size() == QtCore.QSize(1200, 760))
     window.show_stage("train")
-    splitter = window.stages["train"].findChild(QtWidgets.QSplitter)
+    # the Train stage's second splitter (plots beside the run log): the first is held by its panes' minima
+    splitter = window.stages["train"].findChildren(QtWidgets.QSplitter)[1]
     assert splitter is not None
     total = sum(splitter.sizes())
     splitter.setSizes([total // 5, total - total // 5])
@@ -119,12 +120,12 @@ def test_geometry_and_splitters_restored_from_settings(qtbot, lab, settings_path
     again.resize(1200, 760)  # as wide as when saved, so the splitter gets the same room
     qtbot.waitUntil(lambda: again.size() == QtCore.QSize(1200, 760))
     again.show_stage("train")
-    assert again.stages["train"].findChild(QtWidgets.QSplitter).sizes() == saved
+    assert again.stages["train"].findChildren(QtWidgets.QSplitter)[1].sizes() == saved
     fresh = _window(qtbot, lab, settings_path.with_name("fresh.ini"))
     fresh.resize(1200, 760)
     qtbot.waitUntil(lambda: fresh.size() == QtCore.QSize(1200, 760))
     fresh.show_stage("train")
-    assert fresh.stages["train"].findChild(QtWidgets.QSplitter).sizes() != saved
+    assert fresh.stages["train"].findChildren(QtWidgets.QSplitter)[1].sizes() != saved
     again.shutdown()
     fresh.shutdown()
 

@@ -27,6 +27,7 @@ from effortface.core.errors import SessionFormatError, UserError
 from effortface.train import npzio
 from effortface.train.bundle import BundleFormatError, read_bundle, write_bundle
 from effortface.train.dataset import DatasetError, session_table
+from effortface.train.work import write_work
 from effortface.train.work import WorkError, read_motion_index
 from effortface.train.physiology import PhysiologyParams
 from effortface.train.runtime import Character
@@ -155,13 +156,14 @@ def _foreign_annotation(s: Path) -> None:
 
 
 def _unsorted_work(s: Path) -> None:
+    write_work(s)  # the lab keeps no work.csv (as a capture): `effortface work` makes one, then it is shuffled
     work = pd.read_csv(s / "work.csv")
     work.iloc[::-1].to_csv(s / "work.csv", index=False)
 
 
 CORRUPT_SESSIONS = {
     r"video_frames.csv: t_s decreases 1 times": _swap_frame_times,
-    r"video_frames.csv: expected one row per frame of video.avi \(1019 frames\), found 1018 rows": _drop_last_frame,
+    r"video_frames.csv: expected one row per frame of video.avi \(\d+ frames\), found \d+ rows": _drop_last_frame,
     r"annotations/R1.json: session_id: expected 'P03_20260113-094400_cardio'": _foreign_annotation,
     r"annotations/R2.json: rater: expected 'R2' \(this file's name\), found 'R1'":
         lambda s: shutil.copy(s / "annotations" / "R1.json", s / "annotations" / "R2.json"),

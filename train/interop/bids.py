@@ -114,8 +114,8 @@ def export_session(folder: Path, out: Path, sub: str) -> Path:
     grid, hr = hr_grid(folder)
     _write_physio(Path(f"{stem}_recording-heartrate"), {"hr_bpm": "bpm"}, grid, hr[:, None], HR_RATE_HZ,
                   "heart rate from the chest strap, linearly interpolated from its valid samples")
-    if (folder / WORK_CSV).is_file():
-        work = np.loadtxt(folder / WORK_CSV, delimiter=",", skiprows=1, ndmin=2)
+    work = _work_rows(folder)
+    if work is not None:
         rate = 1.0 / float(np.median(np.diff(work[:, 0]))) if len(work) > 1 else 1.0
         _write_physio(Path(f"{stem}_recording-work"), {"w_per_kg": "W/kg", "p_per_kg": "W/kg"}, work[:, 0],
                       work[:, 1:3], rate, "mechanical work over the last 1 s (w) and 0.25 s (p), per kg")
@@ -173,3 +173,18 @@ def _write_top(out: Path, participants: dict[str, object], name: str) -> None:
         "training_level": {"Description": "training level, 0 (sedentary) to 10"}})
     atomic_write_text(out / "README", "Exported by effortface: heart rate, mechanical work and events of "
                       "exercise sessions (see the effortface README).\n")
+
+
+def _work_rows(folder: Path) -> np.ndarray | None:
+    """``t_s, w_per_kg, p_per_kg`` rows: work.csv, else derived as ``effortface work`` does (None if
+    the session has neither motion nor an exercise log to derive it from)."""
+    if (folder / WORK_CSV).is_file():
+        return np.loadtxt(folder / WORK_CSV, delimiter=",", skiprows=1, ndmin=2)
+    from effortface.train.work import derive_work
+
+    try:
+        table = derive_work(folder)
+    except UserError:
+        return None
+    rows = np.column_stack([table.t_s, table.w_per_kg, table.p_per_kg])
+    return rows[np.isfinite(rows).all(axis=1)]

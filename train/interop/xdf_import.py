@@ -32,6 +32,7 @@ from effortface.capture_tool.session import (EVENTS_CSV, HEART_RATE_CSV, VIDEO_A
                                              EventWriter, FrameTimeWriter, HrWriter, Participant, SessionInfo,
                                              create_session, make_session_id, utc_now_iso)
 from effortface.core.errors import UserError
+from effortface.core.opencv import import_cv2
 from effortface.core.fileio import atomic_write_text
 from effortface.core.version import __version__
 
@@ -176,7 +177,7 @@ def _write_mocap(path: Path, folder: Path, stream: XdfStream, t0: float) -> None
 def _frame_times(path: Path, streams: Sequence[XdfStream], video: Path, video_stream: str | None,
                  video_offset_s: float | None) -> np.ndarray:
     """LSL times of the video's frames: from a stream (one sample per frame) or an offset + fps."""
-    import cv2  # lazy: only with a video
+    cv2 = import_cv2()  # lazy: only with a video (OpenCV log silenced)
 
     cap = cv2.VideoCapture(str(video))
     n_frames, fps = int(cap.get(cv2.CAP_PROP_FRAME_COUNT)), float(cap.get(cv2.CAP_PROP_FPS))
@@ -281,7 +282,7 @@ def _copy_video(src: Path, dst: Path) -> None:
     if src.suffix.lower() == ".avi":
         shutil.copyfile(src, dst)
         return
-    import cv2
+    cv2 = import_cv2()
 
     cap = cv2.VideoCapture(str(src))
     fps = cap.get(cv2.CAP_PROP_FPS) or 30.0

@@ -16,6 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from effortface.train.work import derive_work, write_work
+
 from effortface.annotate.keyframes import read_annotations
 
 from effortface.capture_tool.session import read_session
@@ -48,7 +50,9 @@ def session_streams(folder: Path) -> list[XdfStream]:
             hr_stamps.append(LSL_T0 + float(r["t_s"]))
             hr_values.append([hr, float(rr)])
     events = _rows(folder / "events.csv")
-    work = _rows(folder / "work.csv")
+    # the lab's work as `effortface work` derives it (the sample lab keeps no work.csv, as a capture)
+    work = [{"t_s": t, "w_per_kg": w, "p_per_kg": p} for t, w, p in
+            zip(*(lambda d: (d.t_s, d.w_per_kg, d.p_per_kg))(derive_work(folder))) if np.isfinite(w)]
     frames = _rows(folder / "video_frames.csv")
     return [
         XdfStream("Polar H10 P06", "HeartRate", [("hr_bpm", "bpm"), ("rr_ms", "ms")], hr_stamps, hr_values),
@@ -72,6 +76,7 @@ def imported(tmp_path_factory) -> tuple[Path, Path]:
     shutil.copytree(SAMPLE, lab, ignore=shutil.ignore_patterns("_ground_truth", "reliability", "simlab", "*.py",
                                                                "*.md", "serial"))
     original = lab / SESSION
+    write_work(original)  # the original's work.csv, made by the product, to compare the import with
     xdf = write_xdf(tmp / "rec.xdf", session_streams(original))
     shutil.move(str(original), tmp / SESSION)
     info = read_session(tmp / SESSION).participant
