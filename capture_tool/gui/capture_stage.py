@@ -34,8 +34,8 @@ __all__ = ["CaptureSession", "QtCaptureStage"]
 POLL_MS = 100
 FLASH_MS = 250
 DEFAULT_REST_BPM = 60.0
-#: seconds between two skin-contact marks on the plot (a contact that flickers is marked once)
-CONTACT_MARK_S = 5.0
+#: seconds between two skin-contact marks on the plot (a contact that flickers is not marked each time)
+CONTACT_MARK_S = 1.0
 #: event kinds drawn as lines on the HR plot: (text, colour)
 _PLOTTED = {"phase_start": ("{title}", "#303030"), "marker": ("\u2691 {label}", "#6a3d9a"),
             "device_gap": ("strap lost", "#b00020"), "reconnect": ("strap back", "#1b7f3b"),
