@@ -200,6 +200,7 @@ class CaptureSession:
         self.notes = ""
         self.monitor: StrapMonitor | None = None
         self.reps = 0
+        self.phase_start_s: float | None = None
         self._corrected: dict[float, str] = {}
         self._runner: PlanRunner | None = None
 
@@ -416,7 +417,7 @@ class CaptureSession:
             raise UserError(f"phase {exercise}: expected a recording running, found none (press Record first)")
         self.end_phase()
         t_s = self.mark("phase_start", exercise)
-        self.phase, self.reps = exercise, 0
+        self.phase, self.reps, self.phase_start_s = exercise, 0, t_s
         for kind, label, value in parameter_events(exercise, parameters):
             self.mark(kind, label, value)
         self.phase_changed.emit(exercise)
@@ -472,8 +473,8 @@ class CaptureSession:
         """The running phase's exercise, as corrected (:meth:`correct_phase`)."""
         if self.phase is None:
             return None
-        start = next((e.t_s for e in reversed(self.events) if e.kind == "phase_start"), None)
-        return self._corrected.get(start, self.phase) if start is not None else self.phase
+        return next((label for t_s, label in self._corrected.items()
+                     if self.phase_start_s is not None and abs(t_s - self.phase_start_s) < 2e-4), self.phase)
 
     def correct_phase(self, phase_start: Event, exercise: str) -> float:
         """Say that the phase started by ``phase_start`` was in fact ``exercise`` (a ``correction`` row).
@@ -521,8 +522,8 @@ class CaptureSession:
         """The plan's rows go through the session so that the running phase is known."""
         if kind == "phase_start":
             self.end_phase()
-            self.phase, self.reps = label, 0
             t_s = self.mark(kind, label, value)
+            self.phase, self.reps, self.phase_start_s = label, 0, t_s
             self.phase_changed.emit(label)
             return t_s
         if kind == "phase_end":

@@ -100,6 +100,7 @@ class QtCaptureStage(QtWidgets.QWidget):
         self._contact_ok = True
         self._pending_note = ""  # a marker note logged at Stop, said in the summary
         self._contact_marked_s = -CONTACT_MARK_S
+        self._last_row_s: float | None = None
         self._build(settings)
         self._connect()
         self._timer = QtCore.QTimer(self, interval=POLL_MS)
@@ -334,7 +335,7 @@ class QtCaptureStage(QtWidgets.QWidget):
 
     def _show_phase(self, exercise: str | None) -> None:
         current = self.session.current_exercise
-        start = next((e.t_s for e in reversed(self.session.events) if e.kind == "phase_start"), None)
+        start = self.session.phase_start_s
         since = format_elapsed(start) if start is not None and exercise is not None else ""
         self.phases.set_current(current if exercise is not None else None, since)
 
@@ -383,10 +384,15 @@ class QtCaptureStage(QtWidgets.QWidget):
         live = status.link_state == "connected"  # never show a stale HR while the strap is gone
         self.live.set_current(status.hr_bpm if live and self._contact_ok else None,
                               status.rr_ms if live and self._contact_ok else None)
+        if update.hr_rows:
+            self._last_row_s = update.hr_rows[-1].t_s
+        since = status.elapsed_s - self._last_row_s if self._last_row_s is not None else None
         self.live.set_counters({
             "elapsed": format_elapsed(status.elapsed_s), "link": status.link_state,
+            "rate": f"{status.samples / status.elapsed_s:.2f} Hz (mean)" if status.elapsed_s > 1 else "-",
+            "last": "no sample yet" if since is None else f"{max(0.0, since):.1f} s ago",
             "samples": status.samples, "contact_loss": self._contact_lost,
-            "contact": "yes" if self._contact_ok else "NO",
+            "contact": "-" if not live else ("yes" if self._contact_ok else "NO"),
             "bad": f"{update.frames_bad} / {status.bad_bytes} B", "frames": status.frames,
             "dropped": status.dropped_frames, "size": format_bytes(status.bytes_on_disk)})
         self._update_banner(status.link_state, update.camera_ended, self._contact_ok, status.fault)
@@ -446,6 +452,7 @@ class QtCaptureStage(QtWidgets.QWidget):
             if event.kind not in _LISTED or event.label in ("session_start", "session_stop"):
                 continue
             item = QtWidgets.QListWidgetItem(self._event_text(event))
+            item.setToolTip(item.text())
             item.setData(QtCore.Qt.ItemDataRole.UserRole, event)
             self.event_list.addItem(item)
             self.event_list.scrollToBottom()
@@ -505,6 +512,7 @@ class QtCaptureStage(QtWidgets.QWidget):
             self._contact_lost = 0
             self._contact_ok = True
             self._contact_marked_s = -CONTACT_MARK_S
+            self._last_row_s = None
             self.live.clear()
             self.event_list.clear()
             self.clear_banner()
@@ -543,6 +551,9 @@ class QtCaptureStage(QtWidgets.QWidget):
         self.record_button.setEnabled(state not in BUSY_STATES)
         self.preflight.setEnabled(state == "idle")
         self.form.setEnabled(state == "idle")
+        # while recording, devices and participant are fixed: their room goes to the events and notes
+        self.preflight.setVisible(state not in ("recording", "stopping"))
+        self.form.setVisible(state not in ("recording", "stopping"))
         self.phases.set_recording(recording)
         self.correct_button.setEnabled(recording)
         self.recovery_bar.set_actions_enabled(state == "idle")

@@ -14,8 +14,10 @@ from PySide6 import QtCore, QtGui, QtWidgets
 
 #: heights (fraction of the plot) of successive marker labels: six rows so close lines do not crowd
 _LABEL_POSITIONS = (0.96, 0.88, 0.80, 0.72, 0.64, 0.56)
-#: markers closer than this fraction of the visible time span share a label row with no other
-_CROWD_FRACTION = 0.08
+#: approximate width of one label character, pixels (a label's extent on the time axis)
+_CHAR_PX = 7.5
+#: height of a label row, pixels
+_ROW_PX = 17.0
 #: seconds of HR shown on the plot
 WINDOW_S = 300.0
 #: (name, low, high) as fractions of the heart-rate reserve (Karvonen), with their colours
@@ -167,14 +169,19 @@ class QtLiveView(QtWidgets.QWidget):
     def add_marker(self, t_s: float, label: str, colour: str = "#404040") -> None:
         """Draw a phase or marker line at ``t_s`` with its label.
 
-        A label goes on the highest row not used by a marker closer than :data:`_CROWD_FRACTION` of
-        the visible span, so close markers step down instead of overlapping.
+        A label goes on the highest row where no earlier label's text (its width at the current
+        zoom) reaches ``t_s``, so close markers step down instead of overlapping.
         """
-        span = max(60.0, float(np.diff(self.plot.viewRange()[0])[0]))
-        near = {m.label_row for m in self._markers if abs(m.value() - t_s) < _CROWD_FRACTION * span}
+        span_s = max(60.0, float(np.diff(self.plot.viewRange()[0])[0]))
+        s_per_px = span_s / max(200.0, float(self.plot.getViewBox().width()))
+        near = {m.label_row for m in self._markers
+                if m.value() - 1.0 * s_per_px * _CHAR_PX <= t_s <= m.value() + len(m.label.format) * _CHAR_PX * s_per_px}
         row = next((i for i in range(len(_LABEL_POSITIONS)) if i not in near), len(self._markers) % 6)
+        # rows a text line apart whatever the plot's height
+        step = max(0.08, _ROW_PX / max(100.0, float(self.plot.getViewBox().height())))
+        position = max(0.05, _LABEL_POSITIONS[0] - row * step)
         line = pg.InfiniteLine(t_s, angle=90, pen=pg.mkPen(colour, style=QtCore.Qt.PenStyle.DashLine),
-                               label=label, labelOpts={"position": _LABEL_POSITIONS[row], "color": colour,
+                               label=label, labelOpts={"position": position, "color": colour,
                                                        "anchors": [(0, 0.5), (0, 0.5)], "fill": "#ffffffc0"})
         line.label_row = row
         self.plot.addItem(line)

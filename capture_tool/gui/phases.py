@@ -90,19 +90,16 @@ class QtPhasePanel(QtWidgets.QGroupBox):
         row.addWidget(QtWidgets.QLabel("Exercise"))
         row.addWidget(self.exercise, 1)
         grid.addLayout(row, 0, 0, 1, 4)
-        params = QtWidgets.QGridLayout()
-        params.setHorizontalSpacing(6)
-        for i, (column, (text, unit, lo, hi, step, decimals)) in enumerate(PARAMETERS.items()):
+        self._params = QtWidgets.QGridLayout()
+        self._params.setHorizontalSpacing(6)
+        for column, (text, unit, lo, hi, step, decimals) in PARAMETERS.items():
             spin = QtWidgets.QDoubleSpinBox(minimum=lo - step, maximum=hi, singleStep=step, decimals=decimals,
                                             suffix=f" {unit}")
             spin.setSpecialValueText("-")
             spin.setValue(spin.minimum())
             spin.setToolTip(f"{text} ({unit}); '-' = not logged")
-            label = QtWidgets.QLabel(text)
-            params.addWidget(label, i // 3, 2 * (i % 3))
-            params.addWidget(spin, i // 3, 2 * (i % 3) + 1)
-            self.spins[column], self._labels[column] = spin, label
-        grid.addLayout(params, 1, 0, 1, 4)
+            self.spins[column], self._labels[column] = spin, QtWidgets.QLabel(text)
+        grid.addLayout(self._params, 1, 0, 1, 4)
         buttons = (
             (f"Rest  [{PHASE_KEYS[REST]}]", PHASE_KEYS[REST], lambda: self.request_phase(REST)),
             (f"Start exercise  [{EXERCISE_KEY}]", EXERCISE_KEY, self.request_exercise),
@@ -152,8 +149,13 @@ class QtPhasePanel(QtWidgets.QGroupBox):
         """Show only the parameters the picked exercise's work estimate reads."""
         shown = MODEL_PARAMETERS.get(self.models.get(self.exercise.currentText(), ""), tuple(PARAMETERS))
         for column, spin in self.spins.items():
+            self._params.removeWidget(spin)
+            self._params.removeWidget(self._labels[column])
             spin.setVisible(column in shown)
             self._labels[column].setVisible(column in shown)
+        for i, column in enumerate(shown):  # packed three to a row, in the catalog model's order
+            self._params.addWidget(self._labels[column], i // 3, 2 * (i % 3))
+            self._params.addWidget(self.spins[column], i // 3, 2 * (i % 3) + 1)
 
     # ---------------------------------------------------------------------------- values
     def parameters(self) -> Parameters:
