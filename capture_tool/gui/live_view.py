@@ -80,7 +80,8 @@ class QtLiveView(QtWidgets.QWidget):
         self.rr_label = _BigLabel("--", "last R-R interval (ms)", 22)
         self.counters = _Counters()
         self.plot = self._make_plot()
-        self.follow_box = QtWidgets.QCheckBox("follow live (wheel/drag the plot to zoom)", checked=True)
+        self.follow_box = QtWidgets.QCheckBox("follow live (wheel/drag the plot to zoom)")
+        self.follow_box.setChecked(True)
         self.follow_box.toggled.connect(self.set_follow)
         self.preview_caption = QtWidgets.QLabel("")
         self.preview_caption.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
@@ -183,7 +184,7 @@ class QtLiveView(QtWidgets.QWidget):
         line = pg.InfiniteLine(t_s, angle=90, pen=pg.mkPen(colour, style=QtCore.Qt.PenStyle.DashLine),
                                label=label, labelOpts={"position": position, "color": colour,
                                                        "anchors": [(0, 0.5), (0, 0.5)], "fill": "#ffffffc0"})
-        line.label_row = row
+        line.label_row = row  # the row, for the next labels' layout
         self.plot.addItem(line)
         self._markers.append(line)
 

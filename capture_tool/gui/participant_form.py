@@ -101,9 +101,9 @@ class QtParticipantForm(QtWidgets.QGroupBox):
         self.registry.currentTextChanged.connect(self._on_registry_pick)
         self.code.textChanged.connect(self._on_code_changed)
         self.label.textChanged.connect(self._on_changed)
-        for field, widget in self.fields.items():
-            signal = widget.currentIndexChanged if isinstance(widget, QtWidgets.QComboBox) else widget.valueChanged
-            signal.connect(self._on_changed)
+        self.sex.currentIndexChanged.connect(self._on_changed)
+        for spin in (self.age, self.height_m, self.mass, self.training_level, self.hr_rest, self.hr_max):
+            spin.valueChanged.connect(self._on_changed)
 
     # ---------------------------------------------------------------------------- registry
     def set_known(self, known: dict[str, Participant]) -> None:
