@@ -148,6 +148,7 @@ class QtCaptureStage(QtWidgets.QWidget):
         self.live = QtLiveView()
         self.phases = QtPhasePanel()
         self.addActions(self.phases.hotkeys)
+        self._hotkey_filter = _HotkeyFilter(self.phases.hotkeys, self.window)
         self.flash = QtWidgets.QWidget(self)
         self.flash.setStyleSheet("background: white;")
         self.flash.setAttribute(QtCore.Qt.WidgetAttribute.WA_StyledBackground, True)
@@ -322,6 +323,9 @@ class QtCaptureStage(QtWidgets.QWidget):
 
     def shutdown(self) -> None:
         """Stop timers and background pools (the window is closing)."""
+        app = QtWidgets.QApplication.instance()
+        if app is not None:
+            app.removeEventFilter(self._hotkey_filter)
         self._timer.stop()
         self.preflight.shutdown()
         self.session.shutdown()
@@ -555,6 +559,11 @@ class QtCaptureStage(QtWidgets.QWidget):
         self.preflight.setVisible(state not in ("recording", "stopping"))
         self.form.setVisible(state not in ("recording", "stopping"))
         self.phases.set_recording(recording)
+        app = QtWidgets.QApplication.instance()
+        if app is not None:
+            app.removeEventFilter(self._hotkey_filter)
+            if recording:
+                app.installEventFilter(self._hotkey_filter)
         self.correct_button.setEnabled(recording)
         self.recovery_bar.set_actions_enabled(state == "idle")
         if state == "idle":
@@ -573,6 +582,32 @@ class QtCaptureStage(QtWidgets.QWidget):
         """Keep the flash overlay covering the stage."""
         super().resizeEvent(event)
         self.flash.setGeometry(self.rect())
+
+
+class _HotkeyFilter(QtCore.QObject):
+    """While recording, an F-key that a focused widget keeps for itself (an item view takes F2 to edit
+    an item) still triggers the Capture hotkey: its key press is caught application-wide.
+
+    Keys the shortcut system already delivered never arrive here as key presses, so nothing fires twice.
+    """
+
+    def __init__(self, actions: list[QtGui.QAction], window: Callable[[], QtWidgets.QWidget]) -> None:
+        super().__init__()
+        self._actions = actions
+        self._window = window
+
+    def eventFilter(self, watched: QtCore.QObject, event: QtCore.QEvent) -> bool:  # noqa: N802 - Qt override
+        """Trigger the enabled hotkey a key press in the main window matches; swallow that press."""
+        if event.type() != QtCore.QEvent.Type.KeyPress or not isinstance(watched, QtWidgets.QWidget):
+            return False
+        if watched.window() is not self._window():
+            return False
+        key = QtGui.QKeySequence(event.keyCombination())  # type: ignore[attr-defined]  # a QKeyEvent
+        for action in self._actions:
+            if action.isEnabled() and action.shortcut().matches(key) == QtGui.QKeySequence.SequenceMatch.ExactMatch:
+                action.trigger()
+                return True
+        return False
 
 
 class _RecoveryBar(QtWidgets.QFrame):

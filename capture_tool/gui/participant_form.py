@@ -249,10 +249,11 @@ def _optional_spin(field: str) -> QtWidgets.QSpinBox:
 
 
 def _optional_dspin(field: str, step: float, decimals: int) -> QtWidgets.QDoubleSpinBox:
-    """A spin box over :data:`LIMITS` ``[field]`` with a lowest value one step below it that reads '-'."""
+    """A spin box over :data:`LIMITS` ``[field]`` whose lowest value, one unit of its last decimal below
+    the limit, reads '-' (not confirmed): every other value it can show is valid."""
     limit = LIMITS[field]
-    spin = QtWidgets.QDoubleSpinBox(minimum=limit.lo - step, maximum=limit.hi, singleStep=step,
-                                    suffix=_suffix(limit), decimals=decimals)
+    spin = QtWidgets.QDoubleSpinBox(minimum=round(limit.lo - 10.0 ** -decimals, decimals), maximum=limit.hi,
+                                    singleStep=step, suffix=_suffix(limit), decimals=decimals)
     spin.setSpecialValueText("-")
     spin.setValue(spin.minimum())
     spin.setToolTip(f"{limit.meaning} ({limit.lo:g}-{limit.hi:g}); '-' = not confirmed")

@@ -72,6 +72,7 @@ class QtPhasePanel(QtWidgets.QGroupBox):
         self.hotkeys: list[QtGui.QAction] = []
         self.spins: dict[str, QtWidgets.QDoubleSpinBox] = {}
         self._labels: dict[str, QtWidgets.QLabel] = {}
+        self.shown: tuple[str, ...] = ()  # the parameters of the exercise picked, in order
         self._build()
         self._show_parameters()
         self.set_current(None)
@@ -148,6 +149,7 @@ class QtPhasePanel(QtWidgets.QGroupBox):
     def _show_parameters(self) -> None:
         """Show only the parameters the picked exercise's work estimate reads."""
         shown = MODEL_PARAMETERS.get(self.models.get(self.exercise.currentText(), ""), tuple(PARAMETERS))
+        self.shown = shown
         for column, spin in self.spins.items():
             self._params.removeWidget(spin)
             self._params.removeWidget(self._labels[column])
@@ -160,8 +162,8 @@ class QtPhasePanel(QtWidgets.QGroupBox):
     # ---------------------------------------------------------------------------- values
     def parameters(self) -> Parameters:
         """The parameters shown and set (not '-') as ``(column, value)`` pairs."""
-        return tuple((column, round(spin.value(), spin.decimals())) for column, spin in self.spins.items()
-                     if spin.isVisibleTo(self) and spin.value() > spin.minimum())
+        return tuple((column, round(self.spins[column].value(), self.spins[column].decimals()))
+                     for column in self.shown if self.spins[column].value() > self.spins[column].minimum())
 
     def pick(self, exercise: str, **values: float) -> None:
         """Pick ``exercise`` and set some parameters (tests, scripts): ``pick('squats', back_kg=10)``."""
