@@ -293,9 +293,7 @@ class CaptureSession:
         recorder = self.recorder
         if recorder is None:
             raise UserError("Stop: expected a recording running, found none")
-        runner, self._runner = self._runner, None
-        if runner is not None:
-            runner.finish()
+        self._finish_plan()
         if self.phase is not None:
             recorder.mark("phase_end", self.phase)
         if self.notes.strip() and recorder.info is not None:
@@ -326,8 +324,15 @@ class CaptureSession:
 
     def stop_in_background(self) -> None:
         """Stop in a job; the session is closed, marked complete and summarised."""
+        self._finish_plan()  # here, on the GUI thread that steps it, never beside a step
         self._set_state("stopping")
         self.jobs.submit("stop", self._stop_and_summarise, done=self._stop_done)
+
+    def _finish_plan(self) -> None:
+        """Stop stepping the plan; a plan phase still open gets its ``phase_end`` now."""
+        runner, self._runner = self._runner, None
+        if runner is not None:
+            runner.finish()
 
     def _stop_and_summarise(self) -> tuple[Path, str, dict[str, Any] | None]:
         """Runs in the job thread: stop, then read the session back for the summary line and sync test."""

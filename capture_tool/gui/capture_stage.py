@@ -218,8 +218,11 @@ class QtCaptureStage(QtWidgets.QWidget):
             self.live.set_frame(frame, caption)
 
     def _watch_strap(self, port: str, protocol: str) -> None:
-        """The pre-flight found the strap's port: show its live heart rate (not while recording)."""
-        if not self.session.recording and not self._busy and not self.session.watching(port, protocol):
+        """The pre-flight found the strap's port: show its live heart rate (not while recording);
+        '' (no port, or it does not open): stop showing the previous one."""
+        if not port:
+            self.session.unwatch_strap()
+        elif not self.session.recording and not self._busy and not self.session.watching(port, protocol):
             self.session.watch_strap(port, protocol)
 
     def refresh_participants(self) -> None:

@@ -89,7 +89,7 @@ class QtPreflight(QtWidgets.QGroupBox):
 
     #: the first frame of the chosen camera, for a preview before recording
     camera_frame = QtCore.Signal(object)
-    #: the chosen strap port opens: (port, protocol), to watch its live heart rate
+    #: the chosen strap port opens: (port, protocol), to watch its live heart rate ('' : none opens)
     strap_ready = QtCore.Signal(str, str)
 
     def __init__(self, settings: QtCore.QSettings, parent: QtWidgets.QWidget | None = None,
@@ -209,6 +209,8 @@ class QtPreflight(QtWidgets.QGroupBox):
             self.strap_ready.emit(choice.port, choice.protocol)
         elif self._check_one("strap", choice.port, "no port chosen"):
             self.jobs.submit("strap", check_strap, choice.port, done=self._strap_checked)
+        else:
+            self.strap_ready.emit("", choice.protocol)  # no port: stop watching the previous one
         if self.camera.currentText() == NO_VIDEO:
             self._show("camera", OFF, "no video: chosen (heart rate and events only)")
             self.camera_frame.emit(None)
@@ -270,6 +272,8 @@ class QtPreflight(QtWidgets.QGroupBox):
         choice = self.choice()
         if result.error is None and result.value == f"{choice.port} opens":
             self.strap_ready.emit(choice.port, choice.protocol)
+        elif result.error is not None:
+            self.strap_ready.emit("", choice.protocol)
 
     def _camera_checked(self, result: JobResult) -> None:
         if result.error is not None:

@@ -151,6 +151,9 @@ def test_live_heart_rate_before_record(qtbot, window, tmp_path):
     assert "not recording" in stage.live.counters.labels["link"].text()
     assert stage.live.counters.labels["contact"].text().startswith("yes")
     assert not stage.session.recording and not (tmp_path / "sessions").exists()
+    stage.preflight.set_choice(port="")  # no strap chosen any more: the watch ends, no stale figure
+    qtbot.waitUntil(lambda: stage.session.monitor is None and stage.live.hr_label.value.text() == "--",
+                    timeout=10_000)
     _end(replay, thread)
 
 
