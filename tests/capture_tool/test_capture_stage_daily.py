@@ -143,8 +143,9 @@ def test_untouched_defaults_are_never_written_and_record_waits_for_confirmed_fie
 def test_live_heart_rate_before_record(qtbot, window, tmp_path):
     stage = window.stages["capture"]
     replay = _strap(60.0, hr_bpm=83)
-    thread = start_replay_thread(replay)
     _choose(qtbot, stage, replay.path)
+    qtbot.waitUntil(lambda: stage.session.watching(replay.path), timeout=10_000)
+    thread = start_replay_thread(replay)  # the strap starts sending once the monitor has its port
     qtbot.waitUntil(lambda: stage.live.hr_label.value.text() == "83", timeout=10_000)
     qtbot.waitUntil(lambda: "Hz" in stage.live.counters.labels["rate"].text(), timeout=10_000)
     assert "s ago" in stage.live.counters.labels["last"].text()
