@@ -15,6 +15,7 @@ import csv
 import dataclasses
 import os
 import statistics
+import threading
 from pathlib import Path
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -203,6 +204,9 @@ class CaptureSession:
         self.phase_start_s: float | None = None
         self._corrected: dict[float, str] = {}
         self._runner: PlanRunner | None = None
+        self._opened: list[StrapMonitor] = []
+        self._opened_lock = threading.Lock()
+        self._closing = False
 
     @property
     def recording(self) -> bool:
@@ -556,7 +560,11 @@ class CaptureSession:
 
     def _open_monitor(self, port: str, protocol: str) -> StrapMonitor:
         monitor = StrapMonitor(port, protocol)
-        monitor.start()
+        with self._opened_lock:
+            if self._closing:  # the window closed while the job waited: open nothing
+                raise UserError(f"{port}: not watched (the stage is closing)")
+            monitor.start()
+            self._opened.append(monitor)  # closed at shutdown even if its done callback never runs
         return monitor
 
     def _monitor_done(self, result: JobResult) -> None:
@@ -654,11 +662,14 @@ class CaptureSession:
         return sessions
 
     def shutdown(self) -> None:
-        """Stop the strap monitor and the background jobs (the window is closing)."""
-        monitor, self.monitor = self.monitor, None
-        if monitor is not None:
-            monitor.stop()
+        """Stop the strap monitors (also one a job opened but did not deliver) and the background jobs."""
+        self.monitor = None
         self.jobs.shutdown()
+        with self._opened_lock:
+            self._closing = True
+            opened, self._opened = self._opened, []
+        for monitor in opened:
+            monitor.stop()
 
 
 def _nothing() -> None:

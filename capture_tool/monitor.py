@@ -93,6 +93,8 @@ class StrapMonitor:
 
     def stop(self) -> None:
         """Close the port and delete the temporary log (idempotent)."""
+        if self._dir is None:
+            return
         self.link.stop(timeout_s=2.0)
         if self._dir is not None:
             self._dir.cleanup()
