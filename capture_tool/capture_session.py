@@ -15,12 +15,19 @@ import csv
 import dataclasses
 import os
 import statistics
+import threading
 from pathlib import Path
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from effortface.core.errors import UserError
 from effortface.core.events import Emitter
+from effortface.core.exercises import check_exercise_id
 from effortface.core.jobs import JobResult, Jobs
+from effortface.capture_tool.corrections import CORRECTION_KIND, correction_value
+from effortface.capture_tool.monitor import StrapMonitor
+from effortface.capture_tool.participants import REGISTRY_TSV, read_registry, register, resolve_participant
+from effortface.capture_tool.plan import PlannedPhase, PlanRunner, parameter_events, read_plan
 from effortface.capture_tool.sync import flash_offset_s, video_brightness
 from effortface.capture_tool.recorder import Recorder, RecorderStatus, recover_session
 from effortface.capture_tool.session import (
@@ -146,7 +153,15 @@ class CaptureSession:
     state : str
         One of :data:`STATES`.
     phase : str or None
-        The phase running now (``rest``, ``warmup``, ``exercise``, ``recovery``).
+        The exercise id of the phase running now, as logged (a catalog id: ``rest``, ``squats``...).
+    events : list of Event
+        The events of the running recording so far (read back from events.csv).
+    plan : list of PlannedPhase
+        The protocol plan the next recording steps through (empty: none).
+    notes : str
+        The experimenter's notes, saved as ``notes`` in session.json at Stop.
+    monitor : StrapMonitor or None
+        The strap watched before Record (live heart rate).
     last_session : Path or None
         The folder of the last recording stopped.
     recovery_failed : set of Path
@@ -159,7 +174,10 @@ class CaptureSession:
     Emitters: ``state_changed(state)``, ``recording_changed(path or None)`` (a recording started
     into ``path``, or stopped), ``live_changed(LiveUpdate)`` (from :meth:`poll`),
     ``status_changed(text, is_error)`` (what a start, stop or recovery did),
-    ``incomplete_changed(sessions)`` (from :meth:`check_incomplete`).
+    ``incomplete_changed(sessions)`` (from :meth:`check_incomplete`), ``phase_changed(exercise or
+    None)``, ``plan_changed(text)`` (the plan loaded, then its countdown lines),
+    ``monitor_changed(MonitorStats or None)`` (from :meth:`poll` before Record),
+    ``sync_changed(dict or None)`` (the sync test measured at Stop; None: none was done).
     """
 
     def __init__(self, out_dir: str | os.PathLike) -> None:
@@ -176,6 +194,19 @@ class CaptureSession:
         self.state_changed, self.recording_changed = Emitter(), Emitter()
         self.live_changed, self.status_changed = Emitter(), Emitter()
         self.incomplete_changed = Emitter()
+        self.phase_changed, self.plan_changed = Emitter(), Emitter()
+        self.monitor_changed, self.sync_changed = Emitter(), Emitter()
+        self.events: list[Event] = []
+        self.plan: list[PlannedPhase] = []
+        self.notes = ""
+        self.monitor: StrapMonitor | None = None
+        self.reps = 0
+        self.phase_start_s: float | None = None
+        self._corrected: dict[float, str] = {}
+        self._runner: PlanRunner | None = None
+        self._opened: list[StrapMonitor] = []
+        self._opened_lock = threading.Lock()
+        self._closing = False
 
     @property
     def recording(self) -> bool:
@@ -208,12 +239,51 @@ class CaptureSession:
             raise UserError("Record: expected no recording running, found one (stop it first)")
         if not choice.port:
             raise UserError("Strap port: expected a serial port or URL, found none chosen")
+        participant, new = self.resolve_participant(participant)
         recorder = Recorder(self.out_dir, participant, choice.port, choice.protocol,
                             video=choice.camera, label=label or None, lsl=lsl)
         path = recorder.start()
         self.recorder, self.phase, self._latest_frame = recorder, None, None
+        self.events, self.reps, self._corrected = [], 0, {}
         self._tails = (CsvTail(path / HEART_RATE_CSV), CsvTail(path / EVENTS_CSV))
+        if new:
+            register(self.registry_path, participant)
         return path
+
+    # ------------------------------------------------------------------------ participants
+    @property
+    def registry_path(self) -> Path:
+        """The lab's participant registry (``participants.tsv`` in :attr:`out_dir`)."""
+        return self.out_dir / REGISTRY_TSV
+
+    def known_participants(self) -> dict[str, Participant]:
+        """The registry's participants by code (empty when there is no registry yet).
+
+        Raises
+        ------
+        RegistryError
+            If participants.tsv cannot be read (the message names the file and line).
+        """
+        return read_registry(self.registry_path)
+
+    def resolve_participant(self, participant: Participant) -> tuple[Participant, bool]:
+        """Check that the form confirmed every required field and agrees with the registry.
+
+        Returns
+        -------
+        (Participant, bool)
+            The participant (measured HR completed from the registry) and True if the registry
+            does not know the code yet (it is registered when the recording starts).
+
+        Raises
+        ------
+        RegistryError
+            A required field (sex, age, height, mass, training level) not confirmed, or one that
+            contradicts the registry; the message names them.
+        """
+        options = {f: getattr(participant, f) for f in ("sex", "age", "height_m", "mass_kg", "training_level",
+                                                         "hr_rest_bpm", "hr_max_bpm")}
+        return resolve_participant(participant.code, options, self.registry_path)
 
     def stop(self) -> Path:
         """End the running phase, stop the recording (session complete) and measure the sync test.
@@ -228,8 +298,11 @@ class CaptureSession:
         recorder = self.recorder
         if recorder is None:
             raise UserError("Stop: expected a recording running, found none")
+        self._finish_plan()
         if self.phase is not None:
             recorder.mark("phase_end", self.phase)
+        if self.notes.strip() and recorder.info is not None:
+            recorder.info.extra["notes"] = self.notes.strip()
         path = recorder.stop()
         self.recorder, self.phase, self._tails, self.last_session = None, None, None, path
         store_sync_result(path)
@@ -245,17 +318,32 @@ class CaptureSession:
         """Start a recording in a job: ``state_changed('starting')``, then ``recording_changed(path)``
         or ``status_changed(error, True)`` from :meth:`poll`."""
         self._set_state("starting")
-        self.jobs.submit("start", self.start, participant, choice, label, lsl, done=self._start_done)
+        monitor, self.monitor = self.monitor, None  # the recorder opens the port: the monitor lets go
+        self.jobs.submit("start", self._start_after, monitor, participant, choice, label, lsl, done=self._start_done)
+
+    def _start_after(self, monitor: StrapMonitor | None, participant: Participant, choice: DeviceChoice,
+                     label: str, lsl: bool = False) -> Path:
+        """Runs in the job thread: stop the strap monitor, then :meth:`start`."""
+        if monitor is not None:
+            monitor.stop()
+        return self.start(participant, choice, label, lsl)
 
     def stop_in_background(self) -> None:
         """Stop in a job; the session is closed, marked complete and summarised."""
+        self._finish_plan()  # here, on the GUI thread that steps it, never beside a step
         self._set_state("stopping")
         self.jobs.submit("stop", self._stop_and_summarise, done=self._stop_done)
 
-    def _stop_and_summarise(self) -> tuple[Path, str]:
-        """Runs in the job thread: stop, then read the session back for the summary line."""
+    def _finish_plan(self) -> None:
+        """Stop stepping the plan; a plan phase still open gets its ``phase_end`` now."""
+        runner, self._runner = self._runner, None
+        if runner is not None:
+            runner.finish()
+
+    def _stop_and_summarise(self) -> tuple[Path, str, dict[str, Any] | None]:
+        """Runs in the job thread: stop, then read the session back for the summary line and sync test."""
         path = self.stop()
-        return path, session_summary(path)
+        return path, session_summary(path), read_session_info(path).extra.get("sync")
 
     def recover_in_background(self, folder: str | os.PathLike) -> bool:
         """Recover ``folder`` in a job (nothing happens while busy or recording); True if started."""
@@ -274,6 +362,8 @@ class CaptureSession:
                 raise result.error
             return
         self._set_state("recording")
+        if self.plan:
+            self._runner = PlanRunner(self.plan, self._plan_mark, self.plan_changed.emit)
         self.recording_changed.emit(Path(result.value))
 
     def _stop_done(self, result: JobResult) -> None:
@@ -281,8 +371,11 @@ class CaptureSession:
         if result.error is not None:
             self.status_changed.emit(f"Stop failed: {result.error}", True)
             raise result.error
-        _path, summary = result.value
+        _path, summary, sync = result.value
         self.recording_changed.emit(None)
+        self.sync_changed.emit(sync)
+        if sync is None:
+            summary += ". No sync test was measured: press F8 (the screen flashes) while the camera sees it"
         self.status_changed.emit(summary, False)
 
     def _recover_done(self, result: JobResult) -> None:
@@ -315,17 +408,201 @@ class CaptureSession:
             raise UserError(f"{kind}: expected a recording running, found none (press Record first)")
         return self.recorder.mark(kind, label, value)
 
-    def start_phase(self, phase: str, value: str = "") -> float:
-        """End the running phase (if any) and start ``phase``; return the start time."""
-        if self.phase is not None:
-            self.mark("phase_end", self.phase)
-        t_s = self.mark("phase_start", phase, value)
-        self.phase = phase
+    def start_phase(self, exercise: str, parameters: Sequence[tuple[str, float]] = ()) -> float:
+        """End the running phase (if any) and start ``exercise`` with its parameters; return the start time.
+
+        Parameters
+        ----------
+        exercise : str
+            An exercise id of the catalog (``rest``, ``treadmill_walk``, ``squats``...).
+        parameters : sequence of (column, value)
+            Plan columns (``speed_m_s``, ``back_kg``...) logged right after ``phase_start``.
+
+        Raises
+        ------
+        UserError
+            Nothing recording, or an exercise id not in the catalog (names the catalog).
+        """
+        check_exercise_id(exercise, "exercise")
+        if self.recorder is None:
+            raise UserError(f"phase {exercise}: expected a recording running, found none (press Record first)")
+        self.end_phase()
+        t_s = self.mark("phase_start", exercise)
+        self.phase, self.reps, self.phase_start_s = exercise, 0, t_s
+        for kind, label, value in parameter_events(exercise, parameters):
+            self.mark(kind, label, value)
+        self.phase_changed.emit(exercise)
         return t_s
 
-    def change_load(self, value: str) -> float:
-        """Record a load/speed change (``value`` like ``load_kg=5;speed_kmh=8``)."""
-        return self.mark("load", self.phase or "", value)
+    def end_phase(self) -> float | None:
+        """End the running phase (``phase_end``); return its time, None if no phase runs."""
+        if self.phase is None:
+            return None
+        t_s = self.mark("phase_end", self.phase)
+        self.phase = None
+        self.phase_changed.emit(None)
+        return t_s
+
+    def log_parameters(self, parameters: Sequence[tuple[str, float]]) -> float | None:
+        """Log a speed/grade/power/cadence/range/load change for the running exercise.
+
+        Returns the time, or None when ``parameters`` is empty.
+
+        Raises
+        ------
+        UserError
+            Nothing recording, or a speed/power/cadence/load given with no phase running (they are
+            labelled with the exercise).
+        """
+        if not parameters:
+            return None
+        needs_phase = [name for name, _ in parameters if not name.endswith("_kg")]
+        if needs_phase and self.phase is None:
+            raise UserError(f"{', '.join(needs_phase)}: expected a running exercise phase to label them with "
+                            "(start one: F2), found none")
+        t_s = None
+        for kind, label, value in parameter_events(self.phase or "", parameters):
+            t_s = self.mark(kind, label, value)
+        return t_s
+
+    def count_rep(self) -> int:
+        """Count one repetition of the running exercise (a ``reps`` row: the count so far); return it.
+
+        Raises
+        ------
+        UserError
+            If no phase runs.
+        """
+        if self.phase is None:
+            raise UserError("reps: expected a running exercise phase to count, found none (start one: F2)")
+        self.reps += 1
+        self.mark("reps", self.phase, str(self.reps))
+        return self.reps
+
+    @property
+    def current_exercise(self) -> str | None:
+        """The running phase's exercise, as corrected (:meth:`correct_phase`)."""
+        if self.phase is None:
+            return None
+        return next((label for t_s, label in self._corrected.items()
+                     if self.phase_start_s is not None and abs(t_s - self.phase_start_s) < 2e-4), self.phase)
+
+    def correct_phase(self, phase_start: Event, exercise: str) -> float:
+        """Say that the phase started by ``phase_start`` was in fact ``exercise`` (a ``correction`` row).
+
+        History is never rewritten: the correction is a new row that readers apply
+        (:func:`effortface.capture_tool.corrections.apply_corrections`).
+
+        Raises
+        ------
+        UserError
+            Nothing recording, an event that is not a phase start of this recording, or an
+            exercise id not in the catalog.
+        """
+        check_exercise_id(exercise, "correction")
+        if phase_start.kind != "phase_start" or phase_start not in self.events:
+            raise UserError(f"correction: expected a phase start of this recording, found {phase_start.kind} "
+                            f"{phase_start.label!r} at {phase_start.t_s:.1f} s")
+        t_s = self.mark(CORRECTION_KIND, exercise, correction_value(phase_start.t_s))
+        self._corrected[phase_start.t_s] = exercise
+        self.phase_changed.emit(self.phase)
+        return t_s
+
+    def corrected_label(self, phase_start: Event) -> str | None:
+        """The exercise a phase start was corrected to (None: not corrected)."""
+        return self._corrected.get(phase_start.t_s)
+
+    # ------------------------------------------------------------------------------ plan, notes
+    def load_plan(self, path: str | os.PathLike | None) -> list[PlannedPhase]:
+        """Read a protocol plan for the next recording (None or '' clears it); ``plan_changed``.
+
+        Raises
+        ------
+        PlanError
+            If the plan cannot be followed (names the file and line); the previous plan is kept.
+        """
+        if self.recording:
+            raise UserError("plan: expected no recording running to change the plan, found one")
+        self.plan = read_plan(path) if path else []
+        text = (f"plan {Path(path).name}: {len(self.plan)} phases, {format_elapsed(self.plan[-1].end_s)} "
+                f"(starts with Record)" if path and self.plan else "")
+        self.plan_changed.emit(text)
+        return self.plan
+
+    def _plan_mark(self, kind: str, label: str, value: str) -> float:
+        """The plan's rows go through the session so that the running phase is known."""
+        if kind == "phase_start":
+            self.end_phase()
+            t_s = self.mark(kind, label, value)
+            self.phase, self.reps, self.phase_start_s = label, 0, t_s
+            self.phase_changed.emit(label)
+            return t_s
+        if kind == "phase_end":
+            if self.phase == label:
+                return self.end_phase() or 0.0
+            return self.mark(kind, label, value)
+        return self.mark(kind, label, value)
+
+    def set_notes(self, text: str) -> None:
+        """The experimenter's notes (saved as ``notes`` in session.json at Stop)."""
+        self.notes = text
+
+    # ------------------------------------------------------------------------- strap monitor
+    def watch_strap(self, port: str, protocol: str) -> None:
+        """Show the strap's live heart rate before Record: open ``port`` in a job (replaces a watch).
+
+        Nothing happens while recording or busy; a port that cannot be opened is said by
+        ``status_changed``.
+        """
+        if self.recording or self.busy:
+            return
+        self.unwatch_strap()
+        if port:
+            self.jobs.submit("monitor", self._open_monitor, port, protocol, done=self._monitor_done)
+
+    def _open_monitor(self, port: str, protocol: str) -> StrapMonitor:
+        monitor = StrapMonitor(port, protocol)
+        with self._opened_lock:
+            if self._closing:  # the window closed while the job waited: open nothing
+                raise UserError(f"{port}: not watched (the stage is closing)")
+            monitor.start()
+            self._opened.append(monitor)  # closed at shutdown even if its done callback never runs
+        return monitor
+
+    def _monitor_done(self, result: JobResult) -> None:
+        if result.error is not None:
+            self.monitor_changed.emit(None)
+            if not isinstance(result.error, (UserError, OSError)):
+                raise result.error
+            self.status_changed.emit(f"Live heart rate: {_error_line(result.error)}", True)
+            return
+        if self.recording or self.busy:  # Record was pressed while it opened
+            self.jobs.submit("monitor-stop", result.value.stop, done=_ignore)
+            return
+        self.monitor = result.value
+
+    def unwatch_strap(self) -> None:
+        """Stop watching the strap (in a job: closing a port may take a moment)."""
+        monitor, self.monitor = self.monitor, None
+        if monitor is not None:
+            self.jobs.submit("monitor-stop", monitor.stop, done=_ignore)
+            self.monitor_changed.emit(None)
+
+    def release_monitor(self) -> Callable[[], None]:
+        """Stop showing the strap and return the blocking close of its port, to run in a job
+        (protocol detection needs the port to itself)."""
+        monitor, self.monitor = self.monitor, None
+        if monitor is None:
+            return _nothing
+        self.monitor_changed.emit(None)
+        return monitor.stop
+
+    def watching(self, port: str, protocol: str | None = None) -> bool:
+        """True if the monitor holds ``port`` now (with ``protocol``, if given): the pre-flight need
+        not open it again."""
+        monitor = self.monitor
+        return (monitor is not None and monitor.port == port
+                and (protocol is None or monitor.protocol == protocol))
 
     def sync_flash(self) -> float:
         """Record the on-screen flash of the sync self-test; return its time."""
@@ -338,8 +615,13 @@ class CaptureSession:
         The new rows go to ``live_changed`` and are returned (None when not recording).
         """
         self.jobs.drain()
+        if self.monitor is not None and not self.recording:
+            self.monitor_changed.emit(self.monitor.poll())
         update = self.live_update()
         if update is not None:
+            if self._runner is not None and self.recorder is not None:
+                self._runner.step(self.recorder.clock())
+            self.events.extend(update.events)
             self.live_changed.emit(update)
         return update
 
@@ -382,8 +664,22 @@ class CaptureSession:
         return sessions
 
     def shutdown(self) -> None:
-        """Stop the background jobs (the window is closing)."""
+        """Stop the strap monitors (also one a job opened but did not deliver) and the background jobs."""
+        self.monitor = None
         self.jobs.shutdown()
+        with self._opened_lock:
+            self._closing = True
+            opened, self._opened = self._opened, []
+        for monitor in opened:
+            monitor.stop()
+
+
+def _nothing() -> None:
+    """Nothing to close."""
+
+
+def _ignore(result: JobResult) -> None:
+    """``done`` of a job whose outcome does not matter (closing a monitor's port)."""
 
 
 def format_elapsed(t_s: float) -> str:

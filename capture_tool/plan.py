@@ -19,7 +19,7 @@ import dataclasses
 import functools
 import math
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from effortface.core.errors import UserError
@@ -55,11 +55,24 @@ class PlannedPhase:
 
     def events(self) -> list[tuple[str, str, str]]:
         """The ``(kind, label, value)`` rows logged at the phase's start, ``phase_start`` first."""
-        out = [("phase_start", self.exercise, "")]
-        for name, value in self.parameters:
-            kind, label = PARAMETER_COLUMNS[name]
-            out.append((kind, label or self.exercise, f"{value:g}"))
-        return out
+        return [("phase_start", self.exercise, ""), *parameter_events(self.exercise, self.parameters)]
+
+
+def parameter_events(exercise: str, parameters: Sequence[tuple[str, float]]) -> list[tuple[str, str, str]]:
+    """The exercise-log rows ``(kind, label, value)`` of some parameters of ``exercise``.
+
+    Parameters
+    ----------
+    exercise : str
+        Catalog id: the label of ``speed``, ``grade``, ``power``, ``cadence`` and ``rom`` rows.
+    parameters : sequence of (column, value)
+        Keys of :data:`PARAMETER_COLUMNS` (``speed_m_s``, ``back_kg``...) and their values.
+    """
+    out = []
+    for name, value in parameters:
+        kind, label = PARAMETER_COLUMNS[name]
+        out.append((kind, label or exercise, f"{value:g}"))
+    return out
 
 
 def read_plan(path: str | os.PathLike) -> list[PlannedPhase]:

@@ -216,8 +216,10 @@ class MainWindow(QtWidgets.QMainWindow):
         self.stack = QtWidgets.QStackedWidget()
         self._slots: dict[str, QtWidgets.QWidget] = {}
         self.stage_actions: dict[str, QtGui.QAction] = {}
+        self.recording_indicator = QtWidgets.QLabel(wordWrap=True)
         self._build()
         self._build_menus()
+        self._connect_capture()
         self._restore_geometry()
 
     def _build(self) -> None:
@@ -236,7 +238,10 @@ class MainWindow(QtWidgets.QMainWindow):
         central = QtWidgets.QWidget()
         layout = QtWidgets.QHBoxLayout(central)
         layout.setContentsMargins(4, 4, 4, 4)
-        layout.addWidget(self.stage_list)
+        left = QtWidgets.QVBoxLayout()
+        left.addWidget(self.stage_list, 1)
+        left.addWidget(self.recording_indicator)
+        layout.addLayout(left)
         layout.addWidget(self.stack, 1)
         self.setCentralWidget(central)
         self.statusBar().addWidget(self.stage_label)
@@ -302,10 +307,12 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def keyboard_map_html(self) -> str:
         """The keyboard map (Help menu): the window's keys, Capture's hotkeys, Annotate's keys."""
-        from effortface.capture_tool.gui.phases import LOAD_KEY, MARKER_KEY, PHASES, SYNC_KEY
+        from effortface.capture_tool.gui.phases import (END_KEY, EXERCISE_KEY, LOAD_KEY, MARKER_KEY, PHASE_KEYS,
+                                                        PHASE_TITLES, REP_KEY, SYNC_KEY)
 
-        capture = [(key, f"phase: {text}") for _, text, key in PHASES]
-        capture += [(MARKER_KEY, "marker"), (LOAD_KEY, "load / speed change"),
+        capture = [(key, f"phase: {PHASE_TITLES[phase].lower()}") for phase, key in PHASE_KEYS.items()]
+        capture += [(EXERCISE_KEY, "phase: the exercise picked, with its parameters"), (END_KEY, "end the phase"),
+                    (REP_KEY, "one repetition"), (MARKER_KEY, "marker"), (LOAD_KEY, "load / speed change"),
                     (SYNC_KEY, "sync test (a white flash)")]
         sections = (("Everywhere", WINDOW_KEYS), ("Capture", capture), ("Annotate", ANNOTATE_KEYS))
         rows = "".join(f"<tr><td colspan=2><b>{title}</b></td></tr>"
@@ -372,6 +379,43 @@ class MainWindow(QtWidgets.QMainWindow):
         self._ensure_stage("capture")
         self._on_stage_changed(self.stage_list.currentRow())
         return True
+    def _connect_capture(self) -> None:
+        """A recording shows in every stage (the indicator under the stage list), and the Capture
+        stage's hotkeys (F1-F8, enabled while recording) work from every stage."""
+        self.recording_indicator.setFixedWidth(150)
+        self.recording_indicator.setMargin(6)
+        self.recording_indicator.hide()
+        capture = self.stages.get("capture")
+        session = getattr(capture, "session", None)
+        if capture is None or session is None:
+            return
+        self.addActions(getattr(capture, "hotkeys", []))
+        self._indicator_timer = QtCore.QTimer(self, interval=500)
+        self._indicator_timer.timeout.connect(self._show_recording_indicator)
+        session.state_changed.connect(lambda _state: self._show_recording_indicator())
+        session.phase_changed.connect(lambda _phase: self._show_recording_indicator())
+
+    def _show_recording_indicator(self) -> None:
+        """'REC h:mm:ss, participant, phase' in red under the stage list while Capture records."""
+        session = self.stages["capture"].session  # type: ignore[attr-defined]  # a QtCaptureStage
+        recorder = session.recorder
+        item = self.stage_list.item(0)
+        if session.state not in ("recording", "stopping") or recorder is None:
+            self.recording_indicator.hide()
+            self._indicator_timer.stop()
+            item.setText(STAGES["capture"])
+            return
+        elapsed = int(recorder.clock())
+        phase = session.current_exercise or "no phase"
+        self.recording_indicator.setText(
+            f"<b>\u25CF REC {elapsed // 3600}:{elapsed % 3600 // 60:02d}:{elapsed % 60:02d}</b><br>"
+            f"{html.escape(recorder.participant.code)}, {html.escape(phase)}<br>"
+            f"<small>F1-F8 work in every stage</small>")
+        self.recording_indicator.setStyleSheet("background: #b00020; color: white; border-radius: 4px;")
+        self.recording_indicator.show()
+        item.setText(f"{STAGES['capture']} \u25CF")
+        if not self._indicator_timer.isActive():
+            self._indicator_timer.start()
 
     def _ensure_stage(self, key: str) -> QtWidgets.QWidget:
         """Build stage ``key`` into its slot if not done yet; return its widget."""

@@ -15,7 +15,8 @@ The vocabulary (DESIGN.md "Exercise log"; a contract, sessions from every releas
 A parameter holds until the next row of the same kind and label, across phases (the treadmill keeps
 its speed); a ``load`` holds until the next ``load`` row with that label. A ``phase_start`` while a
 phase is open ends that phase. Other kinds (``sync``, ``marker``, ``link``, ``device_gap``...) are not
-part of the log and are ignored here.
+part of the log and are ignored here, except ``correction`` rows: the Capture stage's fix of a
+mistaken phase key, applied first (:mod:`effortface.capture_tool.corrections`).
 
 Rows written by earlier releases are read too: phase labels such as ``walk 1.5 m/s`` /
 ``run 3.4 m/s`` (treadmill walk / run at that speed), ``jumping jacks`` (spaces for ``_``),
@@ -35,6 +36,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from effortface.core.errors import SessionFormatError
+from effortface.capture_tool.corrections import apply_corrections
 from effortface.capture_tool.session import EVENTS_CSV, Event, read_events
 
 #: parameter kinds -> the name of the parameter in a :class:`PhaseState`
@@ -232,6 +234,7 @@ def exercise_log(events: Sequence[Event], source: str = EVENTS_CSV) -> ExerciseL
 
     Line numbers in messages count the header as line 1 and one event per line.
     """
+    events = apply_corrections(events)  # a mistaken phase key fixed in Capture (a ``correction`` row)
     log = ExerciseLog(source, [], {}, {})
     open_phase: tuple[str, str, float, int, dict[str, float]] | None = None
     for line, ev in sorted(((i + 2, e) for i, e in enumerate(events)), key=lambda p: p[1].t_s):

@@ -66,12 +66,15 @@ class SessionEntry:
 
 
 def scan_sessions(folder: str | os.PathLike) -> list[SessionEntry]:
-    """The sessions of ``folder`` (unreadable ones are skipped: Capture reports them)."""
+    """The finished sessions of ``folder``: unreadable ones, incomplete ones (recovered in Capture first)
+    and one being recorded (left out by ``list_sessions``) are skipped."""
     out = []
     for path in list_sessions(folder) if Path(folder).is_dir() else []:
         try:
             info = read_session_info(path)
         except UserError:
+            continue
+        if not info.complete:
             continue
         label = parse_session_id(info.session_id)[2] or "session"
         raters = tuple(sorted(p.stem for p in (path / ANNOTATIONS_DIR).glob("*.json")))

@@ -662,8 +662,8 @@ class QtAnnotateStage(QtWidgets.QWidget):
         except UserError as exc:
             self.show_message(str(exc), True)
             return
-        for folder in folders:
-            if not (folder / "video_frames.csv").is_file():
+        for folder in folders:  # list_sessions leaves out a session being recorded
+            if not (folder / "video_frames.csv").is_file() or not _complete(folder):
                 continue
             text, tip = self._describe(folder)
             item = QtWidgets.QListWidgetItem(text)
@@ -833,3 +833,11 @@ class QtAnnotateStage(QtWidgets.QWidget):
     def shutdown(self) -> None:
         """Stop playback and the video prefetch thread."""
         self.close_session()
+
+
+def _complete(folder: Path) -> bool:
+    """True for a session its capture finished (an incomplete one is recovered in Capture first)."""
+    try:
+        return read_session_info(folder).complete
+    except UserError:
+        return False

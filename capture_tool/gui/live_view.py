@@ -12,8 +12,12 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6 import QtCore, QtGui, QtWidgets
 
-#: heights (fraction of the plot) of successive marker labels
-_LABEL_POSITIONS = (0.95, 0.87, 0.79)
+#: heights (fraction of the plot) of successive marker labels: six rows so close lines do not crowd
+_LABEL_POSITIONS = (0.96, 0.88, 0.80, 0.72, 0.64, 0.56)
+#: approximate width of one label character, pixels (a label's extent on the time axis)
+_CHAR_PX = 7.5
+#: height of a label row, pixels
+_ROW_PX = 17.0
 #: seconds of HR shown on the plot
 WINDOW_S = 300.0
 #: (name, low, high) as fractions of the heart-rate reserve (Karvonen), with their colours
@@ -62,19 +66,23 @@ class QtLiveView(QtWidgets.QWidget):
         self._hr_bpm = np.empty(0)
         self._zone_items: list[pg.LinearRegionItem] = []
         self._markers: list[pg.InfiniteLine] = []
+        self.follow = True
         self._build()
 
     def _build(self) -> None:
         self.preview = QtWidgets.QLabel("no camera")
         self.preview.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
-        self.preview.setMinimumSize(320, 240)
+        self.preview.setMinimumSize(240, 150)
         self.preview.setSizePolicy(QtWidgets.QSizePolicy.Policy.Ignored,
                                    QtWidgets.QSizePolicy.Policy.Ignored)
         self.preview.setStyleSheet("background: #202020; color: #c0c0c0;")
-        self.hr_label = _BigLabel("--", "heart rate (bpm)", 44)
-        self.rr_label = _BigLabel("--", "last R-R interval (ms)", 26)
+        self.hr_label = _BigLabel("--", "heart rate (bpm)", 38)
+        self.rr_label = _BigLabel("--", "last R-R interval (ms)", 22)
         self.counters = _Counters()
         self.plot = self._make_plot()
+        self.follow_box = QtWidgets.QCheckBox("follow live (wheel/drag the plot to zoom)")
+        self.follow_box.setChecked(True)
+        self.follow_box.toggled.connect(self.set_follow)
         self.preview_caption = QtWidgets.QLabel("")
         self.preview_caption.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
         camera = QtWidgets.QVBoxLayout()
@@ -91,8 +99,10 @@ class QtLiveView(QtWidgets.QWidget):
         top.addLayout(figures, 2)
         layout = QtWidgets.QVBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
+        layout.setSpacing(2)
         layout.addLayout(top, 3)
         layout.addWidget(self.plot, 2)
+        layout.addWidget(self.follow_box)
 
     def _make_plot(self) -> pg.PlotWidget:
         plot = pg.PlotWidget(background="w")
@@ -101,8 +111,9 @@ class QtLiveView(QtWidgets.QWidget):
         plot.showGrid(x=True, y=True, alpha=0.2)
         plot.setYRange(50, 200)
         plot.setXRange(0, 60)
-        plot.setMouseEnabled(x=False, y=False)
-        plot.setMinimumHeight(180)
+        plot.setMouseEnabled(x=True, y=True)  # zoom with the wheel, pan by dragging; 'follow live' returns
+        plot.getViewBox().sigRangeChangedManually.connect(lambda *_: self.follow_box.setChecked(False))
+        plot.setMinimumHeight(150)
         self.curve = plot.plot(pen=pg.mkPen("#c0002a", width=2))
         self.curve.setDownsampling(auto=True, method="peak")
         self.curve.setClipToView(True)
@@ -119,36 +130,67 @@ class QtLiveView(QtWidgets.QWidget):
             item = pg.LinearRegionItem((lo, hi), orientation="horizontal", movable=False, brush=brush,
                                        pen=pg.mkPen(None))
             item.setZValue(-10)
-            pg.InfLineLabel(item.lines[1], name, position=0.985, anchors=[(1, 1), (1, 1)], color="#606060")
+            # anchored below the band's upper line: the label sits inside its own band
+            pg.InfLineLabel(item.lines[1], name, position=0.985, anchors=[(1, 0), (1, 0)], color="#606060")
             self.plot.addItem(item)
             self._zone_items.append(item)
         self.plot.setYRange(hr_rest_bpm - 20, hr_max_bpm + 10)
 
     def add_samples(self, t_s: np.ndarray, hr_bpm: np.ndarray) -> None:
-        """Append valid samples (session seconds, bpm) and redraw the last :data:`WINDOW_S`."""
+        """Append samples (session seconds, bpm; NaN for no contact or a gap: drawn as a gap, never
+        a straight line across it) and redraw the last :data:`WINDOW_S` while following live."""
         if len(t_s) == 0:
             return
         self._t_s = np.concatenate([self._t_s, np.asarray(t_s, dtype=float)])
         self._hr_bpm = np.concatenate([self._hr_bpm, np.asarray(hr_bpm, dtype=float)])
         self.curve.setData(self._t_s, self._hr_bpm, connect="finite")
-        self.scroll_to(float(self._t_s[-1]))
+        if self.follow:
+            self.scroll_to(float(self._t_s[-1]))
+
+    def add_gap(self, t_s: float) -> None:
+        """Break the curve at ``t_s`` (the strap was lost: no line across the gap)."""
+        self.add_samples(np.array([t_s]), np.array([np.nan]))
 
     def scroll_to(self, t_s: float) -> None:
         """Show the window of :data:`WINDOW_S` ending at ``t_s`` (at least the first minute)."""
         self.plot.setXRange(max(0.0, t_s - WINDOW_S), max(60.0, t_s), padding=0.02)
 
+    def set_follow(self, follow: bool) -> None:
+        """Follow the live end of the recording (True), or keep the range the user zoomed to."""
+        self.follow = follow
+        self.follow_box.setChecked(follow)
+        if follow and self._t_s.size:
+            self.scroll_to(float(self._t_s[-1]))
+            self.plot.getViewBox().enableAutoRange(y=False)
+
     def n_samples(self) -> int:
-        """Samples drawn so far."""
-        return int(self._t_s.size)
+        """Valid samples drawn so far (gaps not counted)."""
+        return int(np.isfinite(self._hr_bpm).sum())
 
     def add_marker(self, t_s: float, label: str, colour: str = "#404040") -> None:
-        """Draw a phase or marker line at ``t_s`` with its label (labels step down so they do not overlap)."""
-        position = _LABEL_POSITIONS[len(self._markers) % len(_LABEL_POSITIONS)]
+        """Draw a phase or marker line at ``t_s`` with its label.
+
+        A label goes on the highest row where no earlier label's text (its width at the current
+        zoom) reaches ``t_s``, so close markers step down instead of overlapping.
+        """
+        span_s = max(60.0, float(np.diff(self.plot.viewRange()[0])[0]))
+        s_per_px = span_s / max(200.0, float(self.plot.getViewBox().width()))
+        near = {m.label_row for m in self._markers
+                if m.value() - 1.0 * s_per_px * _CHAR_PX <= t_s <= m.value() + len(m.label.format) * _CHAR_PX * s_per_px}
+        row = next((i for i in range(len(_LABEL_POSITIONS)) if i not in near), len(self._markers) % 6)
+        # rows a text line apart whatever the plot's height
+        step = max(0.08, _ROW_PX / max(100.0, float(self.plot.getViewBox().height())))
+        position = max(0.05, _LABEL_POSITIONS[0] - row * step)
         line = pg.InfiniteLine(t_s, angle=90, pen=pg.mkPen(colour, style=QtCore.Qt.PenStyle.DashLine),
                                label=label, labelOpts={"position": position, "color": colour,
-                                                       "anchors": [(0, 0.5), (0, 0.5)]})
+                                                       "anchors": [(0, 0.5), (0, 0.5)], "fill": "#ffffffc0"})
+        line.label_row = row  # the row, for the next labels' layout
         self.plot.addItem(line)
         self._markers.append(line)
+
+    def marker_labels(self) -> list[str]:
+        """The labels of the lines drawn (tests, screenshots)."""
+        return [m.label.format for m in self._markers]
 
     def set_current(self, hr_bpm: float | None, rr_ms: float | None) -> None:
         """Show the current HR and RR in large figures ('--' when unknown)."""
@@ -183,6 +225,7 @@ class QtLiveView(QtWidgets.QWidget):
         self._markers = []
         self.set_current(None, None)
         self.plot.setXRange(0, 60)
+        self.set_follow(True)
 
 
 class _BigLabel(QtWidgets.QWidget):
@@ -208,18 +251,35 @@ class _BigLabel(QtWidgets.QWidget):
 class _Counters(QtWidgets.QWidget):
     """A two-column grid of the recording counters."""
 
-    ROWS = (("elapsed", "Elapsed"), ("link", "Strap"), ("samples", "HR samples"),
-            ("contact_loss", "Contact lost (samples)"), ("bad", "Bad frames / bytes"),
-            ("frames", "Video frames"), ("dropped", "Dropped frames"), ("size", "On disk"))
+    ROWS = (("link", "Strap"), ("elapsed", "Elapsed"), ("rate", "Sample rate"), ("last", "Last sample"),
+            ("contact", "Skin contact"), ("samples", "HR samples"),
+            ("contact_loss", "Contact lost"), ("bad", "Bad frames"),
+            ("frames", "Video frames"), ("dropped", "Dropped"), ("size", "On disk"))
+    #: rows that take the whole width (their text is long)
+    WIDE = ("link", "contact")
 
     def __init__(self) -> None:
         super().__init__()
-        grid = QtWidgets.QFormLayout(self)
+        grid = QtWidgets.QGridLayout(self)
         grid.setContentsMargins(0, 0, 0, 0)
+        grid.setHorizontalSpacing(8)
+        grid.setVerticalSpacing(1)
         self.labels: dict[str, QtWidgets.QLabel] = {}
+        row, col = 0, 0
         for key, text in self.ROWS:
             self.labels[key] = QtWidgets.QLabel("-")
-            grid.addRow(text, self.labels[key])
+            self.labels[key].setToolTip(text)
+            if key in self.WIDE:
+                row, col = (row + 1, 0) if col else (row, 0)
+                grid.addWidget(QtWidgets.QLabel(text), row, 0)
+                grid.addWidget(self.labels[key], row, 1, 1, 3)
+                row += 1
+                continue
+            grid.addWidget(QtWidgets.QLabel(text), row, col)
+            grid.addWidget(self.labels[key], row, col + 1)
+            row, col = (row, 2) if col == 0 else (row + 1, 0)
+        grid.setColumnStretch(1, 1)
+        grid.setColumnStretch(3, 1)
 
     # shadows QWidget.update() (a repaint request, which nothing here calls) with the counters' update
     def update(self, counters: dict[str, Any]) -> None:  # type: ignore[override]  # see above

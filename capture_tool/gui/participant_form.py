@@ -1,5 +1,10 @@
 """The participant form: codes and body data only, never a personal name.
 
+The form starts empty: every body field reads '-' (not confirmed) until the operator sets it, or
+until a participant of the lab's registry (``participants.tsv``) is picked by code, and a field
+never set is never written (None in ``session.json``). Sex, age, height, mass and training level
+must be confirmed before Record (:data:`REQUIRED`); the form says which are.
+
 The form keeps only widget state; :meth:`QtParticipantForm.participant` builds the session module's
 validated ``Participant`` and shows any problem inside the form (STYLE.md E4).
 """
@@ -14,7 +19,16 @@ from PySide6 import QtCore, QtWidgets
 
 from effortface.core.errors import UserError
 from effortface.core.participant import LIMITS, Limit
+from effortface.capture_tool.participants import REQUIRED
 from effortface.capture_tool.session import CODE_RULE, SEXES, Participant, make_session_id
+
+#: what the sex box shows before a choice
+CHOOSE = "- choose -"
+#: the registry box's first entry
+NEW_PARTICIPANT = "(new participant)"
+#: field -> row title
+TITLES = {"sex": "Sex", "age": "Age", "height_m": "Height", "mass_kg": "Mass", "training_level": "Training level",
+          "hr_rest_bpm": "Resting HR", "hr_max_bpm": "Max HR"}
 
 
 def preview_session_name(code: str, label: str = "", when: dt.datetime | None = None) -> str:
@@ -27,7 +41,7 @@ def preview_session_name(code: str, label: str = "", when: dt.datetime | None = 
 
 
 class QtParticipantForm(QtWidgets.QGroupBox):
-    """Participant code, sex, age, height, mass, training level, optional measured HR rest/max.
+    """Participant code (or a registered participant), sex, age, height, mass, training level, measured HR.
 
     Parameters
     ----------
@@ -39,49 +53,128 @@ class QtParticipantForm(QtWidgets.QGroupBox):
 
     def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__("Participant", parent)
+        self.known: dict[str, Participant] = {}
+        self._from_registry = False
         self._build()
         self._preview_timer = QtCore.QTimer(self, interval=1000)
         self._preview_timer.timeout.connect(self._update_preview)
         self._preview_timer.start()
         self._update_preview()
+        self._show_confirmed()
 
     def _build(self) -> None:
         form = QtWidgets.QFormLayout(self)
+        self.registry = QtWidgets.QComboBox()
+        self.registry.addItem(NEW_PARTICIPANT)
+        self.registry.setToolTip("Participants of participants.tsv in the lab folder: pick one by code "
+                                 "(demographics are entered once)")
         self.code = QtWidgets.QLineEdit(placeholderText="P01", maxLength=16)
         self.code.setToolTip(f"Participant code: {CODE_RULE}")
         self.sex = QtWidgets.QComboBox()
-        self.sex.addItems(SEXES)
-        self.age = _spin("age", 30)
+        self.sex.addItems([CHOOSE, *SEXES])
+        self.age = _optional_spin("age")
         # not ``self.height``: that would hide QWidget.height() (mypy found it)
-        self.height_m = _dspin("height_m", 1.75, 0.01, 2)
-        self.mass = _dspin("mass_kg", 70.0, 0.5, 1)
-        self.training_level = _dspin("training_level", 3.0, 0.5, 1)
-        self.hr_rest = _optional_hr("hr_rest_bpm")
-        self.hr_max = _optional_hr("hr_max_bpm")
+        self.height_m = _optional_dspin("height_m", 0.01, 2)
+        self.mass = _optional_dspin("mass_kg", 0.5, 1)
+        self.training_level = _optional_dspin("training_level", 0.5, 1)
+        self.hr_rest = _optional_spin("hr_rest_bpm")
+        self.hr_max = _optional_spin("hr_max_bpm")
+        self.fields: dict[str, QtWidgets.QWidget] = {
+            "sex": self.sex, "age": self.age, "height_m": self.height_m, "mass_kg": self.mass,
+            "training_level": self.training_level, "hr_rest_bpm": self.hr_rest, "hr_max_bpm": self.hr_max}
         self.label = QtWidgets.QLineEdit(placeholderText="optional, e.g. treadmill", maxLength=32)
         self.session_preview = QtWidgets.QLabel(textFormat=QtCore.Qt.TextFormat.PlainText)
         self.session_preview.setTextInteractionFlags(QtCore.Qt.TextInteractionFlag.TextSelectableByMouse)
+        self.confirmed = QtWidgets.QLabel(wordWrap=True)
         self.message = QtWidgets.QLabel(wordWrap=True)
         self.message.setStyleSheet("color: #b00020;")
-        for text, widget in (("Code", self.code), ("Sex", self.sex), ("Age", self.age),
-                             ("Height", self.height_m), ("Mass", self.mass),
-                             ("Training level", self.training_level),
-                             ("Resting HR", self.hr_rest), ("Max HR", self.hr_max),
-                             ("Session label", self.label), ("Session", self.session_preview)):
-            form.addRow(text, widget)
+        self._row_labels: dict[str, QtWidgets.QLabel] = {}
+        form.addRow("Registered", self.registry)
+        form.addRow("Code", self.code)
+        for field, widget in self.fields.items():
+            self._row_labels[field] = QtWidgets.QLabel(TITLES[field])
+            form.addRow(self._row_labels[field], widget)
+        form.addRow("Session label", self.label)
+        form.addRow("Session", self.session_preview)
+        form.addRow(self.confirmed)
         form.addRow(self.message)
-        for edit in (self.code, self.label):
-            edit.textChanged.connect(self._on_changed)
+        self.registry.currentTextChanged.connect(self._on_registry_pick)
+        self.code.textChanged.connect(self._on_code_changed)
+        self.label.textChanged.connect(self._on_changed)
+        self.sex.currentIndexChanged.connect(self._on_changed)
         for spin in (self.age, self.height_m, self.mass, self.training_level, self.hr_rest, self.hr_max):
             spin.valueChanged.connect(self._on_changed)
-        self.sex.currentIndexChanged.connect(self._on_changed)
 
+    # ---------------------------------------------------------------------------- registry
+    def set_known(self, known: dict[str, Participant]) -> None:
+        """Offer the registry's participants (code -> Participant) in the 'Registered' box."""
+        self.known = dict(known)
+        current = self.registry.currentText()
+        self.registry.blockSignals(True)
+        self.registry.clear()
+        self.registry.addItems([NEW_PARTICIPANT, *sorted(self.known)])
+        self.registry.setCurrentText(current if current in self.known else NEW_PARTICIPANT)
+        self.registry.blockSignals(False)
+        self._on_code_changed()
+
+    def _on_registry_pick(self, code: str) -> None:
+        if code in self.known:
+            self.code.setText(code)
+        elif self._from_registry:
+            self.code.clear()
+
+    def _on_code_changed(self, *_: object) -> None:
+        """A registered code fills (and locks) the body fields from the registry; leaving it clears them."""
+        person = self.known.get(self.code.text().strip())
+        if person is not None:
+            self.fill(person)
+        elif self._from_registry:
+            self.clear_fields()
+        self.registry.blockSignals(True)
+        self.registry.setCurrentText(person.code if person is not None else NEW_PARTICIPANT)
+        self.registry.blockSignals(False)
+        self._on_changed()
+
+    def fill(self, person: Participant) -> None:
+        """Show a registered participant's fields (locked: the registry is edited, not the form)."""
+        self._from_registry = True
+        for field, widget in self.fields.items():
+            _set_field(widget, getattr(person, field))
+            widget.setEnabled(getattr(person, field) is None)  # a field the registry lacks can be entered
+
+    def clear_fields(self) -> None:
+        """Every body field back to '-' (not confirmed), editable."""
+        self._from_registry = False
+        for widget in self.fields.values():
+            _set_field(widget, None)
+            widget.setEnabled(True)
+
+    # ------------------------------------------------------------------------------ changes
     def _on_changed(self, *_: object) -> None:
         self.message.clear()
         _mark(self.code, False)
         _mark(self.label, False)
         self._update_preview()
+        self._show_confirmed()
         self.changed.emit()
+
+    def _show_confirmed(self) -> None:
+        """Tick each confirmed field's row and say what Record still needs."""
+        values = self.values()
+        source = " (registry)" if self._from_registry else ""
+        for field, label in self._row_labels.items():
+            ok = values[field] is not None
+            required = field in REQUIRED
+            label.setText(("\u2714 " if ok else ("\u2716 " if required else "")) + TITLES[field])
+            label.setStyleSheet("" if ok or not required else "color: #b00020;")
+        missing = self.missing()
+        self.confirmed.setText(f"All required fields confirmed{source}." if not missing else
+                               "To confirm before Record: " + ", ".join(TITLES[f].lower() for f in missing))
+
+    def missing(self) -> list[str]:
+        """The required fields not confirmed yet."""
+        values = self.values()
+        return [field for field in REQUIRED if values[field] is None]
 
     def _update_preview(self) -> None:
         if not self.isEnabled():
@@ -93,14 +186,16 @@ class QtParticipantForm(QtWidgets.QGroupBox):
         self.session_preview.setText(name)
 
     def values(self) -> dict[str, Any]:
-        """The fields as ``Participant`` keyword arguments (None for HR not measured)."""
+        """The fields as ``Participant`` keyword arguments (None for a field not confirmed)."""
+        sex = self.sex.currentText()
+        height, mass = _optional_value(self.height_m), _optional_value(self.mass)
         return {
             "code": self.code.text().strip(),
-            "sex": self.sex.currentText(),
-            "age": self.age.value(),
-            "height_m": round(self.height_m.value(), 2),
-            "mass_kg": round(self.mass.value(), 1),
-            "training_level": self.training_level.value(),
+            "sex": sex if sex in SEXES else None,
+            "age": _optional_value(self.age),
+            "height_m": None if height is None else round(height, 2),
+            "mass_kg": None if mass is None else round(mass, 1),
+            "training_level": _optional_value(self.training_level),
             "hr_rest_bpm": _optional_value(self.hr_rest),
             "hr_max_bpm": _optional_value(self.hr_max),
         }
@@ -123,10 +218,15 @@ class QtParticipantForm(QtWidgets.QGroupBox):
             self.participant()
         except UserError as exc:
             return str(exc)
+        missing = self.missing()
+        if missing:
+            return (f"participant {', '.join(TITLES[f].lower() for f in missing)}: expected a confirmed value "
+                    "before Record (or pick a registered participant), found none")
         return ""
 
     def participant(self) -> Participant:
-        """The validated :class:`~effortface.capture_tool.session.Participant` built from the form.
+        """The validated :class:`~effortface.capture_tool.session.Participant` built from the form
+        (fields not confirmed are None).
 
         Raises
         ------
@@ -136,23 +236,27 @@ class QtParticipantForm(QtWidgets.QGroupBox):
         return Participant(**self.values())
 
 
-def _spin(field: str, value: int) -> QtWidgets.QSpinBox:
-    """An integer spin box over the whole-number part of :data:`LIMITS` ``[field]``."""
+def _optional_spin(field: str) -> QtWidgets.QSpinBox:
+    """An integer spin box over the whole-number part of :data:`LIMITS` ``[field]`` whose extra lowest
+    value (one below the limit) reads '-': not confirmed (None, see :func:`_optional_value`)."""
     limit = LIMITS[field]
-    spin = QtWidgets.QSpinBox(minimum=math.ceil(limit.lo), maximum=math.floor(limit.hi), value=value,
-                              suffix=_suffix(limit))
-    spin.setToolTip(limit.meaning)
+    spin = QtWidgets.QSpinBox(minimum=math.ceil(limit.lo) - 1, maximum=math.floor(limit.hi), suffix=_suffix(limit))
+    spin.setSpecialValueText("-")
+    spin.setValue(spin.minimum())
+    spin.setToolTip(f"{limit.meaning} ({limit.lo:g}-{limit.hi:g}); '-' = not confirmed")
     spin.setKeyboardTracking(False)
     return spin
 
 
-def _dspin(field: str, value: float, step: float, decimals: int) -> QtWidgets.QDoubleSpinBox:
-    """A spin box over :data:`LIMITS` ``[field]``."""
+def _optional_dspin(field: str, step: float, decimals: int) -> QtWidgets.QDoubleSpinBox:
+    """A spin box over :data:`LIMITS` ``[field]`` whose lowest value, one unit of its last decimal below
+    the limit, reads '-' (not confirmed): every other value it can show is valid."""
     limit = LIMITS[field]
-    spin = QtWidgets.QDoubleSpinBox(minimum=limit.lo, maximum=limit.hi, singleStep=step,
-                                    suffix=_suffix(limit), decimals=decimals)
-    spin.setToolTip(limit.meaning)
-    spin.setValue(value)
+    spin = QtWidgets.QDoubleSpinBox(minimum=round(limit.lo - 10.0 ** -decimals, decimals), maximum=limit.hi,
+                                    singleStep=step, suffix=_suffix(limit), decimals=decimals)
+    spin.setSpecialValueText("-")
+    spin.setValue(spin.minimum())
+    spin.setToolTip(f"{limit.meaning} ({limit.lo:g}-{limit.hi:g}); '-' = not confirmed")
     return spin
 
 
@@ -160,19 +264,19 @@ def _suffix(limit: Limit) -> str:
     return f" {limit.unit}" if limit.unit else ""
 
 
-def _optional_hr(field: str) -> QtWidgets.QSpinBox:
-    """A bpm spin box over :data:`LIMITS` ``[field]`` whose extra lowest value (one below the limit)
-    reads 'not measured' (stored as None, see :func:`_optional_value`)."""
-    spin = _spin(field, 0)
-    spin.setMinimum(spin.minimum() - 1)
-    spin.setSpecialValueText("not measured")
-    spin.setValue(spin.minimum())
-    return spin
+def _optional_value(spin: QtWidgets.QSpinBox | QtWidgets.QDoubleSpinBox) -> Any:
+    """The value of an optional spin box, None when it reads '-' (its lowest value)."""
+    return None if spin.value() <= spin.minimum() else spin.value()
 
 
-def _optional_value(spin: QtWidgets.QSpinBox) -> int | None:
-    """The value of an :func:`_optional_hr` spin box, None when it reads 'not measured'."""
-    return None if spin.value() == spin.minimum() else spin.value()
+def _set_field(widget: QtWidgets.QWidget, value: object) -> None:
+    """Show ``value`` in a field (None: '-' / choose)."""
+    if isinstance(widget, QtWidgets.QComboBox):
+        widget.setCurrentText(str(value) if value is not None else CHOOSE)
+    elif isinstance(widget, QtWidgets.QSpinBox):
+        widget.setValue(widget.minimum() if value is None else int(round(float(value))))  # type: ignore[arg-type]
+    elif isinstance(widget, QtWidgets.QDoubleSpinBox):
+        widget.setValue(widget.minimum() if value is None else float(value))  # type: ignore[arg-type]
 
 
 def _mark(widget: QtWidgets.QWidget, bad: bool) -> None:

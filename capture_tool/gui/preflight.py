@@ -22,7 +22,7 @@ __all__ = ["DeviceChoice", "QtPreflight"]
 
 NO_VIDEO = "No video"
 VIDEO_FILE = "Video file..."
-READY, MISSING, CHECKING = "ready", "missing", "checking..."
+READY, MISSING, CHECKING, OFF = "ready", "missing", "checking...", "off"
 
 
 def check_strap(port: str) -> str:
@@ -89,10 +89,18 @@ class QtPreflight(QtWidgets.QGroupBox):
 
     #: the first frame of the chosen camera, for a preview before recording
     camera_frame = QtCore.Signal(object)
+    #: the chosen strap port opens: (port, protocol), to watch its live heart rate ('' : none opens)
+    strap_ready = QtCore.Signal(str, str)
 
-    def __init__(self, settings: QtCore.QSettings, parent: QtWidgets.QWidget | None = None) -> None:
+    def __init__(self, settings: QtCore.QSettings, parent: QtWidgets.QWidget | None = None,
+                 strap_in_use: Callable[[str], bool] | None = None,
+                 release_strap: Callable[[], Callable[[], None]] | None = None) -> None:
         super().__init__("Devices", parent)
         self.settings = settings
+        #: True for a port this application already holds open (the live monitor): not opened again
+        self.strap_in_use = strap_in_use or (lambda port: False)
+        #: lets go of the port held by the live monitor: returns its blocking close, run in the job
+        self.release_strap = release_strap or (lambda: (lambda: None))
         self.jobs = Jobs(name="preflight")
         self.state = {"strap": MISSING, "camera": MISSING}
         self.detect_seconds = 2.5  # how long Detect listens to the port
@@ -138,7 +146,11 @@ class QtPreflight(QtWidgets.QGroupBox):
         self.camera.currentIndexChanged.connect(lambda _: self._on_camera_changed())
         self.video_path.editingFinished.connect(self.check)
         self.video_path.textChanged.connect(self.video_path.setToolTip)
-        self.protocol.currentTextChanged.connect(lambda p: self.settings.setValue("capture/protocol", p))
+        self.protocol.currentTextChanged.connect(self._on_protocol_changed)
+
+    def _on_protocol_changed(self, protocol: str) -> None:
+        self.settings.setValue("capture/protocol", protocol)
+        self._debounce.start()
 
     def _restore(self) -> None:
         protocol = self.settings.value("capture/protocol", "")
@@ -176,8 +188,11 @@ class QtPreflight(QtWidgets.QGroupBox):
         self.check()
 
     def missing(self) -> list[str]:
-        """Devices chosen but not ready, and devices not chosen ('strap', 'camera')."""
-        return [name for name, state in self.state.items() if state != READY]
+        """Devices chosen but not ready, and a strap not chosen ('strap', 'camera').
+
+        "No video" chosen on purpose is not missing: it is the operator's choice.
+        """
+        return [name for name, state in self.state.items() if state not in (READY, OFF)]
 
     def remember(self) -> None:
         """Store the chosen port and video file as the next defaults (on Record)."""
@@ -189,9 +204,17 @@ class QtPreflight(QtWidgets.QGroupBox):
     def check(self) -> None:
         """Check the chosen strap and camera in the background."""
         choice = self.choice()
-        if self._check_one("strap", choice.port, "no port chosen"):
+        if choice.port and self.strap_in_use(choice.port):
+            self._show("strap", READY, f"{choice.port}: live heart rate shown")
+            self.strap_ready.emit(choice.port, choice.protocol)
+        elif self._check_one("strap", choice.port, "no port chosen"):
             self.jobs.submit("strap", check_strap, choice.port, done=self._strap_checked)
-        if self._check_one("camera", choice.camera, "no video will be recorded"):
+        else:
+            self.strap_ready.emit("", choice.protocol)  # no port: stop watching the previous one
+        if self.camera.currentText() == NO_VIDEO:
+            self._show("camera", OFF, "no video: chosen (heart rate and events only)")
+            self.camera_frame.emit(None)
+        elif self._check_one("camera", choice.camera, "no video file chosen"):
             self.jobs.submit("camera", check_camera, choice.camera, done=self._camera_checked)
 
     def _check_one(self, name: str, target: object, none_text: str) -> bool:
@@ -213,8 +236,8 @@ class QtPreflight(QtWidgets.QGroupBox):
         self.detect_button.setEnabled(False)
         self.detect_button.setText("Listening...")
         seconds = self.detect_seconds
-        self.jobs.submit("detect", lambda: detect_protocol(read_first_bytes(port, seconds)),
-                         done=self._protocol_detected)
+        close_monitor = self.release_strap()
+        self.jobs.submit("detect", _detect_after, close_monitor, port, seconds, done=self._protocol_detected)
 
     def _ports_found(self, result: JobResult) -> None:
         current = self.port.currentText() or str(self.settings.value("capture/port", ""))
@@ -246,6 +269,11 @@ class QtPreflight(QtWidgets.QGroupBox):
 
     def _strap_checked(self, result: JobResult) -> None:
         self._show_result("strap", result)
+        choice = self.choice()
+        if result.error is None and result.value == f"{choice.port} opens":
+            self.strap_ready.emit(choice.port, choice.protocol)
+        elif result.error is not None:
+            self.strap_ready.emit("", choice.protocol)
 
     def _camera_checked(self, result: JobResult) -> None:
         if result.error is not None:
@@ -265,8 +293,14 @@ class QtPreflight(QtWidgets.QGroupBox):
             self._show("strap", self.state["strap"], "protocol not recognised from its bytes "
                                                      "(polled straps such as HRMI cannot be detected)")
         else:
+            self.protocol.blockSignals(True)  # no re-check: it would replace the message
             self.protocol.setCurrentText(result.value)
+            self.protocol.blockSignals(False)
+            self.settings.setValue("capture/protocol", result.value)
             self._show("strap", self.state["strap"], f"detected protocol: {result.value}")
+        if self.state["strap"] == READY:  # watch the live heart rate again, with the protocol found
+            choice = self.choice()
+            self.strap_ready.emit(choice.port, choice.protocol)
 
     def _show_result(self, name: str, result: JobResult) -> None:
         if result.error is None:
@@ -277,8 +311,8 @@ class QtPreflight(QtWidgets.QGroupBox):
     def _show(self, name: str, state: str, note: str) -> None:
         self.state[name] = state
         label = self.strap_status if name == "strap" else self.camera_status
-        colour = {READY: "#1b7f3b", MISSING: "#b00020"}.get(state, "#806000")
-        mark = {READY: "\u2714", MISSING: "\u2716"}.get(state, "\u2026")
+        colour = {READY: "#1b7f3b", MISSING: "#b00020", OFF: "#505050"}.get(state, "#806000")
+        mark = {READY: "\u2714", MISSING: "\u2716", OFF: "\u25CB"}.get(state, "\u2026")
         label.setText(f"<span style='color:{colour}'><b>{mark} {state}</b></span> {note}")
 
     def _browse(self) -> None:
@@ -293,6 +327,12 @@ class QtPreflight(QtWidgets.QGroupBox):
         self._timer.stop()
         self._debounce.stop()
         self.jobs.shutdown()
+
+
+def _detect_after(close_monitor: Callable[[], None], port: str, seconds: float) -> str | None:
+    """Runs in a job: close the live monitor's port, then listen to it and guess the protocol."""
+    close_monitor()
+    return detect_protocol(read_first_bytes(port, seconds))
 
 
 def _row(*widgets: QtWidgets.QWidget) -> QtWidgets.QWidget:

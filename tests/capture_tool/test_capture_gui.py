@@ -141,7 +141,8 @@ def test_record_unplug_replug_phases_stop(qtbot, window, tmp_path, shared_data, 
     start_replay_thread(replay1)
     _key(qtbot, window, QtCore.Qt.Key.Key_F1)                     # rest
     qtbot.waitUntil(lambda: stage.live.n_samples() >= 5, timeout=10_000)
-    _key(qtbot, window, QtCore.Qt.Key.Key_F2)                     # warm-up
+    stage.phases.pick("treadmill_walk", speed_m_s=1.4)
+    _key(qtbot, window, QtCore.Qt.Key.Key_F2)                     # the exercise picked, with its speed
     qtbot.waitUntil(lambda: stage.session.recorder.link.state == "reconnecting", timeout=15_000)
     qtbot.waitUntil(lambda: stage.banner.isVisible() and "Strap lost" in stage.banner.text(), timeout=5_000)
     assert stage.live.hr_label.value.text() == "--"  # no stale heart rate while the strap is gone
@@ -150,14 +151,13 @@ def test_record_unplug_replug_phases_stop(qtbot, window, tmp_path, shared_data, 
     _repoint(link, replay2.path)                                  # replug: same path, new pty
     thread2 = start_replay_thread(replay2)
     qtbot.waitUntil(lambda: stage.session.recorder.link.state == "connected", timeout=10_000)
-    stage.phases.load_kg.setValue(10)
-    stage.phases.speed_kmh.setValue(9.5)
-    _key(qtbot, window, QtCore.Qt.Key.Key_F3)                     # exercise with load and speed
+    stage.phases.pick("treadmill_walk", speed_m_s=1.6, back_kg=10)
+    _key(qtbot, window, QtCore.Qt.Key.Key_F7)                     # a speed and load change
     stage.phases.marker_text.setText("water")
     _key(qtbot, window, QtCore.Qt.Key.Key_F6)                     # marker
     _key(qtbot, window, QtCore.Qt.Key.Key_F8)                     # sync flash
     thread2.join(timeout=30)
-    _key(qtbot, window, QtCore.Qt.Key.Key_F4)                     # recovery
+    _key(qtbot, window, QtCore.Qt.Key.Key_F3)                     # recovery
     qtbot.waitUntil(lambda: not stage.banner.isVisible() or "Strap lost" not in stage.banner.text(),
                     timeout=5_000)
     qtbot.wait(300)
@@ -174,16 +174,16 @@ def test_record_unplug_replug_phases_stop(qtbot, window, tmp_path, shared_data, 
     assert len(session.heart_rate) >= 50
     # events: phases by hotkey, load and speed, marker, sync, gap and reconnect, in time order
     events = [(e.kind, e.label) for e in session.events]
-    for expected in [("phase_start", "rest"), ("phase_end", "rest"), ("phase_start", "warmup"),
-                     ("device_gap", "hxm"), ("reconnect", "hxm"), ("phase_start", "exercise"),
-                     ("marker", "water"), ("sync", "flash"), ("phase_end", "exercise"),
+    for expected in [("phase_start", "rest"), ("phase_end", "rest"), ("phase_start", "treadmill_walk"),
+                     ("speed", "treadmill_walk"), ("device_gap", "hxm"), ("reconnect", "hxm"),
+                     ("load", "back_kg"), ("marker", "water"), ("sync", "flash"), ("phase_end", "treadmill_walk"),
                      ("phase_start", "recovery"), ("phase_end", "recovery")]:
         assert expected in events, expected
-    order = [events.index(k) for k in [("phase_start", "rest"), ("device_gap", "hxm"),
-                                         ("reconnect", "hxm"), ("phase_start", "exercise")]]
+    order = [events.index(k) for k in [("phase_start", "rest"), ("phase_start", "treadmill_walk"),
+                                         ("device_gap", "hxm"), ("reconnect", "hxm"), ("load", "back_kg")]]
     assert order == sorted(order)
-    exercise = next(e for e in session.events if e.kind == "phase_start" and e.label == "exercise")
-    assert exercise.value == "load_kg=10;speed_kmh=9.5"
+    speeds = [e.value for e in session.events if e.kind == "speed"]
+    assert speeds == ["1.4", "1.6"]
     assert [e.t_s for e in session.events] == sorted(e.t_s for e in session.events)
     # video: every frame written has a time, and frame k of the file is frame k of the camera clip
     n_frames = len(session.frame_times_s)
@@ -207,13 +207,12 @@ def test_closing_while_recording_asks(qtbot, window, monkeypatch) -> None:
     stage.preflight.camera.setCurrentText("No video")
     qtbot.waitUntil(stage.settled, timeout=10_000)
     asked: list[str] = []
-    answers = iter([QtWidgets.QMessageBox.StandardButton.Yes,    # record without a camera
-                    QtWidgets.QMessageBox.StandardButton.No,     # close? no
+    answers = iter([QtWidgets.QMessageBox.StandardButton.No,     # close? no
                     QtWidgets.QMessageBox.StandardButton.Yes])   # close? yes
     monkeypatch.setattr(QtWidgets.QMessageBox, "question",
                         lambda parent, title, text, *a: (asked.append(title), next(answers))[1])
     path = _record(qtbot, stage)
-    assert asked == ["No camera"]
+    assert asked == []  # "No video" chosen on purpose: Record asks nothing
     window.close()
     assert asked[-1] == "Recording in progress"
     assert window.isVisible() and stage.session.recording
@@ -237,7 +236,7 @@ def test_full_rate_stream_keeps_gui_responsive(qtbot, window, tmp_path) -> None:
     stage.preflight.set_choice(port=replay.path, protocol="lines")
     stage.preflight.camera.setCurrentText("No video")
     qtbot.waitUntil(stage.settled, timeout=10_000)
-    stage.preflight.state["camera"] = "ready"  # no camera wanted in this test: do not ask
+    assert stage.preflight.missing() == []  # "No video" chosen: nothing to ask
     ticks: list[float] = []
     ticker = QtCore.QTimer(interval=10, timeout=lambda: ticks.append(time.monotonic()))
     path = _record(qtbot, stage)
@@ -308,7 +307,7 @@ def test_contact_loss_shows_banner_and_is_kept_as_invalid_rows(qtbot, window) ->
     stage.preflight.set_choice(port=replay.path, protocol="lines")
     stage.preflight.camera.setCurrentText("No video")
     qtbot.waitUntil(stage.settled, timeout=10_000)
-    stage.preflight.state["camera"] = "ready"  # no camera wanted in this test: do not ask
+    assert stage.preflight.missing() == []  # "No video" chosen: nothing to ask
     path = _record(qtbot, stage)
     start_replay_thread(replay)
     qtbot.waitUntil(lambda: "No skin contact" in stage.banner.text() and stage.banner.isVisible(), timeout=10_000)
@@ -328,6 +327,8 @@ def test_form_validation_shows_message_and_blocks_record(qtbot, window) -> None:
     assert "participant code" in stage.form.message.text() and "never names" in stage.form.message.text()
     assert stage.banner.isVisible()
     stage.form.code.setText("P01")
+    assert "sex, age, height, mass, training level" in stage.form.validate()  # nothing confirmed yet
+    _fill_form(stage, "P01")
     stage.form.hr_rest.setValue(100)
     stage.form.hr_max.setValue(100)
     assert "hr_rest_bpm" in stage.form.validate()
@@ -345,14 +346,14 @@ def test_missing_strap_is_shown_and_start_error_stays_in_window(qtbot, window, t
     stage.preflight.set_choice(port=str(tmp_path / "ttyNONE"), protocol="hxm")
     stage.preflight.camera.setCurrentText("No video")
     qtbot.waitUntil(stage.settled, timeout=10_000)
-    assert stage.preflight.missing() == ["strap", "camera"]
+    assert stage.preflight.missing() == ["strap"]  # "No video" chosen on purpose is not missing
     assert "no such device" in stage.preflight.strap_status.text()
     asked: list[str] = []
     monkeypatch.setattr(QtWidgets.QMessageBox, "question",
                         lambda parent, title, *a: (asked.append(title), QtWidgets.QMessageBox.StandardButton.Yes)[1])
     qtbot.mouseClick(stage.record_button, QtCore.Qt.MouseButton.LeftButton)
     qtbot.waitUntil(stage.settled, timeout=10_000)
-    assert asked == ["Strap not ready", "No camera"]  # recording without a device asks first
+    assert asked == ["Strap not ready"]  # a strap not ready asks first; "No video" chosen never asks
     assert not stage.session.recording
     assert "Could not start" in stage.banner.text() and "ttyNONE" in stage.banner.text()
     assert stage.record_button.isEnabled() and not (tmp_path / "sessions").exists()
