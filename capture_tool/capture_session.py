@@ -15,7 +15,6 @@ import csv
 import dataclasses
 import os
 import statistics
-import threading
 from pathlib import Path
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -25,7 +24,7 @@ from effortface.core.events import Emitter
 from effortface.core.exercises import check_exercise_id
 from effortface.core.jobs import JobResult, Jobs
 from effortface.capture_tool.corrections import CORRECTION_KIND, correction_value
-from effortface.capture_tool.monitor import StrapMonitor
+from effortface.capture_tool.monitor import MonitorPool, StrapMonitor
 from effortface.capture_tool.participants import REGISTRY_TSV, read_registry, register, resolve_participant
 from effortface.capture_tool.plan import PlannedPhase, PlanRunner, parameter_events, read_plan
 from effortface.capture_tool.sync import flash_offset_s, video_brightness
@@ -204,9 +203,7 @@ class CaptureSession:
         self.phase_start_s: float | None = None
         self._corrected: dict[float, str] = {}
         self._runner: PlanRunner | None = None
-        self._opened: list[StrapMonitor] = []
-        self._opened_lock = threading.Lock()
-        self._closing = False
+        self._monitors = MonitorPool()
 
     @property
     def recording(self) -> bool:
@@ -561,13 +558,7 @@ class CaptureSession:
             self.jobs.submit("monitor", self._open_monitor, port, protocol, done=self._monitor_done)
 
     def _open_monitor(self, port: str, protocol: str) -> StrapMonitor:
-        monitor = StrapMonitor(port, protocol)
-        with self._opened_lock:
-            if self._closing:  # the window closed while the job waited: open nothing
-                raise UserError(f"{port}: not watched (the stage is closing)")
-            monitor.start()
-            self._opened.append(monitor)  # closed at shutdown even if its done callback never runs
-        return monitor
+        return self._monitors.open(port, protocol)  # closed at shutdown even if never delivered
 
     def _monitor_done(self, result: JobResult) -> None:
         if result.error is not None:
@@ -667,11 +658,7 @@ class CaptureSession:
         """Stop the strap monitors (also one a job opened but did not deliver) and the background jobs."""
         self.monitor = None
         self.jobs.shutdown()
-        with self._opened_lock:
-            self._closing = True
-            opened, self._opened = self._opened, []
-        for monitor in opened:
-            monitor.stop()
+        self._monitors.close_all()
 
 
 def _nothing() -> None:

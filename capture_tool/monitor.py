@@ -13,6 +13,7 @@ import collections
 import dataclasses
 import queue
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -130,3 +131,33 @@ class StrapMonitor:
             rate_hz=rate, since_last_s=None if last is None else max(0.0, now - last.t_s),
             contact_fraction=sum(s.valid for s in recent) / len(recent) if recent else None,
             contact_now=contact_now, frames_bad=self.link.decoder.stats.frames_bad)
+
+
+class MonitorPool:
+    """The monitors a stage opened (in jobs), so that closing the stage closes every port, even one a
+    job opened whose result was never delivered. Thread-safe."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._opened: list[StrapMonitor] = []
+        self._closing = False
+
+    def open(self, port: str, protocol: str) -> StrapMonitor:
+        """Open a monitor (blocking) and keep it; UserError once :meth:`close_all` was called."""
+        from effortface.core.errors import UserError
+
+        with self._lock:
+            if self._closing:
+                raise UserError(f"{port}: not watched (the stage is closing)")
+            monitor = StrapMonitor(port, protocol)
+            monitor.start()
+            self._opened = [m for m in self._opened if m._dir is not None] + [monitor]
+            return monitor
+
+    def close_all(self) -> None:
+        """Close every monitor opened, and open no more."""
+        with self._lock:
+            self._closing = True
+            opened, self._opened = self._opened, []
+        for monitor in opened:
+            monitor.stop()
