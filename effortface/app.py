@@ -310,7 +310,7 @@ class MainWindow(QtWidgets.QMainWindow):
         from effortface.capture_tool.gui.phases import (END_KEY, EXERCISE_KEY, LOAD_KEY, MARKER_KEY, PHASE_KEYS,
                                                         PHASE_TITLES, REP_KEY, SYNC_KEY)
 
-        capture = [(key, f"phase: {PHASE_TITLES[phase].lower()}") for phase, key in PHASE_KEYS.items()]
+        capture = [(key, f"phase: {PHASE_TITLES[phase]}") for phase, key in PHASE_KEYS.items()]
         capture += [(EXERCISE_KEY, "phase: the exercise picked, with its parameters"), (END_KEY, "end the phase"),
                     (REP_KEY, "one repetition"), (MARKER_KEY, "marker"), (LOAD_KEY, "load / speed change"),
                     (SYNC_KEY, "sync test (a white flash)")]

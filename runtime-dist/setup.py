@@ -19,7 +19,10 @@ from setuptools.command.build_py import build_py
 ROOT = Path(__file__).resolve().parent.parent
 #: the packages the runtime may use -> their folders, relative to this file
 PACKAGE_DIR = {"effortface": "../effortface", "effortface.core": "../effortface/core",
-               "effortface.train": "../train"}
+               "effortface.train": "../train",
+               # read_motion reads .c3d through these (the c3d package is imported only then)
+               "effortface.train.interop": "../train/interop"}
+
 ENTRY = "effortface.runtime"
 
 

@@ -836,8 +836,9 @@ class QtAnnotateStage(QtWidgets.QWidget):
 
 
 def _complete(folder: Path) -> bool:
-    """True for a session its capture finished (an incomplete one is recovered in Capture first)."""
+    """True for a session its capture finished (an incomplete one is recovered in Capture first);
+    an unreadable session.json is listed too, with its error, rather than hidden."""
     try:
         return read_session_info(folder).complete
     except UserError:
-        return False
+        return True

@@ -10,6 +10,7 @@ p, NHR and HR, EPOC and the blendshape weights with a moving time cursor.
 from __future__ import annotations
 
 import time
+import weakref
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -414,6 +415,9 @@ class QtSynthStage(QtWidgets.QWidget):
         Parent widget.
     """
 
+    #: stages whose application-wide player keys are enabled (at most one: the last shown)
+    _key_owners: "weakref.WeakSet[QtSynthStage]" = weakref.WeakSet()
+
     def __init__(self, session: SynthSession, motion_dir: Path | None = None,
                  parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
@@ -748,7 +752,13 @@ class QtSynthStage(QtWidgets.QWidget):
 
     # ---- hosting
     def showEvent(self, event: QtGui.QShowEvent) -> None:
-        """Enable the player's application-wide keys."""
+        """Enable the player's application-wide keys (taken from any other Synthesize stage still
+        alive: two enabled application shortcuts on one key are ambiguous and neither fires)."""
+        for other in list(QtSynthStage._key_owners):
+            if other is not self:
+                for shortcut in other.shortcuts:
+                    shortcut.setEnabled(False)
+        QtSynthStage._key_owners.add(self)
         for shortcut in self.shortcuts:
             shortcut.setEnabled(True)
         _application().installEventFilter(self)
@@ -756,6 +766,7 @@ class QtSynthStage(QtWidgets.QWidget):
 
     def hideEvent(self, event: QtGui.QHideEvent) -> None:
         """Pause playback and release the player's keys when the stage is hidden."""
+        QtSynthStage._key_owners.discard(self)
         for shortcut in self.shortcuts:
             shortcut.setEnabled(False)
         _application().removeEventFilter(self)
@@ -765,6 +776,9 @@ class QtSynthStage(QtWidgets.QWidget):
 
     def shutdown(self) -> None:
         """Stop playback and the background recomputes (the main window calls this on exit)."""
+        QtSynthStage._key_owners.discard(self)
+        for shortcut in self.shortcuts:
+            shortcut.setEnabled(False)
         self.timer.stop()
         self.poll_timer.stop()
         _application().removeEventFilter(self)
