@@ -121,7 +121,9 @@ class QtCaptureStage(QtWidgets.QWidget):
         self.preflight = QtPreflight(settings, strap_in_use=self.session.watching,
                                      release_strap=self.session.release_monitor)
         self.form = QtParticipantForm()
-        self.lsl_box = QtWidgets.QCheckBox("Publish to LSL (HeartRate and Markers streams, for LabRecorder)")
+        self.lsl_box = QtWidgets.QCheckBox("Publish to LSL (for LabRecorder)")
+        self.lsl_box.setToolTip("While recording, also publish the strap as an LSL HeartRate stream and the "
+                                "events as a Markers stream, as 'effortface capture --lsl' does")
         self.lsl_box.setChecked(bool(settings.value("capture/lsl", False, type=bool)))
         self.lsl_box.toggled.connect(lambda on: settings.setValue("capture/lsl", on))
         self.record_button = QtWidgets.QPushButton()
