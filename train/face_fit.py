@@ -12,15 +12,23 @@ column per blendshape, NaN where not annotated).
 - **Hyper-parameters.** A grid over C, gamma and epsilon, scored by mean squared error averaged over
   the folds of leave-one-participant-out CV (the default; ``cv="kfold"`` random-frame folds exist only
   to show how autocorrelated frames inflate the score). gamma is always a number, never ``"scale"``.
-- **Speed (choices).** Training rows are subsampled evenly in time (rows are already 1 Hz) to at most
-  ``max_rows_per_participant`` per participant and ``max_total_rows`` in all, and leave-one-
-  participant-out becomes participant-grouped ``max_folds``-fold CV for large labs: an SVR fit costs
-  about the square of its rows, so these caps bound the cost of a training run whatever the size of
-  the lab (``benchmarks/bench_training.py`` prints the curve). Each fold's scaler and, per gamma,
-  its RBF Gram matrices are computed once and shared by every C, epsilon and blendshape
-  (``SVR(kernel="precomputed")``); libsvm's own solver dominates the time, so this cache is only
-  about as fast as a plain ``GridSearchCV`` over the same grid. Held-out scores reuse the
-  hyper-parameters the same CV chose (not nested CV), which is slightly optimistic.
+- **Every annotated second (choice).** All rows are used by default (``max_rows_per_participant``
+  = 3,600, one hour at 1 Hz; ``--max-rows`` raises it; ``max_total_rows`` is an optional total cap).
+  Up to :data:`EXACT_MAX_ROWS` face rows the models are exact RBF epsilon-SVRs (libsvm, whose cost
+  grows with the square of the rows); above it, every fit of the run (grid search, final fit,
+  protocols) is a **Nystroem kernel approximation**: ``n_landmarks`` training rows drawn at random
+  (seeded) and kernel ridge regression restricted to them, ``f(z) = K(z, landmarks) @ coef + b``
+  minimising ``sum (y - f)^2 + (1 / C) f'K f`` (the squared-loss twin of the SVR's objective, so the
+  grid's C keeps its meaning; epsilon does not enter it). It is the same graph as an SVR (landmarks
+  as support vectors, ``coef`` as dual coefficients), so ``svr.npz``, the runtime and face.onnx
+  evaluate it unchanged. Its cost is linear in the rows (normal equations summed in chunks, memory
+  independent of the rows). ``tests/train/test_face_scale.py`` checks it against exact SVR.
+- **Speed (choices).** Leave-one-participant-out becomes participant-grouped ``max_folds``-fold CV for
+  large labs. For exact SVRs each fold's scaler and, per gamma, its RBF Gram matrices are computed
+  once and shared by every C, epsilon and blendshape (``SVR(kernel="precomputed")``). The folds run
+  through :func:`effortface.train.parallel.map_ordered` (in this process, or on a Dask cluster with
+  identical results). Held-out scores reuse the hyper-parameters the same CV chose (not nested CV),
+  which is slightly optimistic.
 """
 
 from __future__ import annotations
@@ -39,6 +47,7 @@ from sklearn.svm import SVR
 
 from effortface.core.errors import UserError
 from effortface.train.face import FEATURE_NAMES
+from effortface.train.parallel import map_ordered
 
 #: the SVR inputs, in order (units: W/kg, W/kg, 1, 1): the runtime's own list
 FEATURES = FEATURE_NAMES
@@ -57,6 +66,15 @@ CV_CHOICES = ("lopo", "kfold")
 
 #: the fewest face-training rows per participant any fit accepts (train, demo and the Train stage check it)
 MIN_ROWS_PER_PARTICIPANT = 20
+#: The documented switch: exact RBF SVRs up to this many face rows, the Nystroem approximation above
+#: (an exact fit on 3,000 rows takes about 0.3 s; libsvm's cost grows with the square of the rows).
+EXACT_MAX_ROWS = 3000
+#: Landmarks of the Nystroem approximation (measured: held-out RMSE within 1 % of exact SVR).
+N_LANDMARKS = 300
+#: the two kinds of face model of a fit (model.json provenance ``face_fit.method``)
+METHODS = ("exact_svr", "nystroem")
+#: rows per chunk when the approximation sums its normal equations (bounds the memory)
+_CHUNK_ROWS = 16384
 
 
 @dataclasses.dataclass(frozen=True)
@@ -72,28 +90,42 @@ class FaceFitConfig:
     n_splits : int
         Folds for ``cv="kfold"``.
     max_rows_per_participant : int
-        Cap on training rows per participant (evenly spaced in time).
-    max_total_rows : int
-        Cap on all training rows: the per-participant cap shrinks to ``max_total_rows / P``.
+        Cap on training rows per participant (evenly spaced in time; 3,600 = one hour at 1 Hz).
+    max_total_rows : int or None
+        Optional cap on all training rows: the per-participant cap shrinks to ``max_total_rows / P``
+        (None, the default: no total cap).
     max_folds : int
         With more participants than this, ``cv="lopo"`` becomes participant-grouped K-fold
         (``GroupKFold(max_folds)``), so the number of fits stops growing with the lab.
     seed : int
-        Seed for the K-fold shuffle.
+        Seed for the K-fold shuffle and the Nystroem landmarks.
+    exact_max_rows : int
+        Exact SVRs up to this many face rows, the Nystroem approximation above
+        (:data:`EXACT_MAX_ROWS`).
+    n_landmarks : int
+        Landmarks of the approximation (:data:`N_LANDMARKS`).
     """
 
     grid: dict = dataclasses.field(default_factory=lambda: dict(GRIDS["small"]))
     cv: str = "lopo"
     n_splits: int = 5
-    max_rows_per_participant: int = 300
-    max_total_rows: int = 2000
+    max_rows_per_participant: int = 3600
+    max_total_rows: int | None = None
     max_folds: int = 8
     seed: int = 0
+    exact_max_rows: int = EXACT_MAX_ROWS
+    n_landmarks: int = N_LANDMARKS
 
     def rows_per_participant(self, n_participants: int) -> int:
         """The effective per-participant cap for a lab of ``n_participants``."""
+        if self.max_total_rows is None:
+            return max(MIN_ROWS_PER_PARTICIPANT, self.max_rows_per_participant)
         per_share = self.max_total_rows // max(n_participants, 1)
         return max(MIN_ROWS_PER_PARTICIPANT, min(self.max_rows_per_participant, per_share))
+
+    def method(self, n_rows: int) -> str:
+        """``"exact_svr"`` for at most :attr:`exact_max_rows` face rows, else ``"nystroem"``."""
+        return METHODS[0] if n_rows <= self.exact_max_rows else METHODS[1]
 
     def n_folds(self, n_participants: int) -> int:
         """Cross-validation folds of a face fit on ``n_participants`` (the splits of :func:`cv_folds`)."""
@@ -196,6 +228,129 @@ def _fold_kernels(x: np.ndarray, train: np.ndarray, test: np.ndarray, gammas: Se
             xs_tr, xs_te
 
 
+# --------------------------------------------------------------------------- the approximation
+
+
+class LandmarkRegressor:
+    """A fitted Nystroem kernel approximation: ``K(z, landmarks) @ coef + b`` (see the module docstring).
+
+    It has the attributes of a fitted scikit-learn ``SVR`` that the export reads
+    (``support_vectors_`` = the landmarks, ``dual_coef_`` (1, m), ``intercept_`` (1,), ``C``,
+    ``gamma``, ``epsilon``), so the bundle, the runtime and face.onnx take it as they take an SVR.
+    """
+
+    def __init__(self, landmarks: np.ndarray, coef: np.ndarray, intercept: float, C: float,
+                 gamma: float, epsilon: float) -> None:
+        self.support_vectors_ = np.asarray(landmarks, dtype=float)
+        self.dual_coef_ = np.asarray(coef, dtype=float).reshape(1, -1)
+        self.intercept_ = np.array([float(intercept)])
+        self.C, self.gamma, self.epsilon = float(C), float(gamma), float(epsilon)
+
+    def predict(self, xs: np.ndarray) -> np.ndarray:
+        """Predictions for standardised rows ``xs`` (n, F)."""
+        return _landmark_kernel(xs, self.support_vectors_, self.gamma) @ self.dual_coef_[0] \
+            + self.intercept_[0]
+
+
+def _landmark_kernel(xs: np.ndarray, landmarks: np.ndarray, gamma: float) -> np.ndarray:
+    """RBF kernel (n, m) of rows against landmarks."""
+    return rbf_kernel(xs, landmarks, gamma=gamma)
+
+
+def landmark_rows(n_rows: int, n_landmarks: int, seed: int) -> np.ndarray:
+    """Sorted indices of ``min(n_landmarks, n_rows)`` rows drawn without replacement (seeded)."""
+    m = min(n_landmarks, n_rows)
+    return np.sort(np.random.default_rng(seed).choice(n_rows, m, replace=False))
+
+
+def _normal_equations(xs: np.ndarray, y: np.ndarray, landmarks: np.ndarray, gamma: float
+                      ) -> dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Per distinct pattern of annotated rows: ``A'A``, ``A'Y`` and the columns of Y using it.
+
+    ``A = [K(xs, landmarks), 1]``; summed over chunks of rows, so the memory does not grow with
+    the rows. Blendshapes annotated on the same seconds share one ``A'A``.
+    """
+    finite = np.isfinite(y)
+    groups: dict[bytes, list[int]] = {}
+    for b in range(y.shape[1]):
+        groups.setdefault(np.packbits(finite[:, b]).tobytes(), []).append(b)
+    m = len(landmarks)
+    sums = {key: (np.zeros((m + 1, m + 1)), np.zeros((m + 1, len(cols)))) for key, cols in groups.items()}
+    for start in range(0, len(xs), _CHUNK_ROWS):
+        rows = slice(start, start + _CHUNK_ROWS)
+        a = np.empty((len(xs[rows]), m + 1))
+        a[:, :m] = _landmark_kernel(xs[rows], landmarks, gamma)
+        a[:, m] = 1.0
+        for key, cols in groups.items():
+            ok = finite[rows, cols[0]]
+            a_ok = a[ok]
+            ata, aty = sums[key]
+            ata += a_ok.T @ a_ok
+            aty += a_ok.T @ y[rows][ok][:, cols]
+    return {key: (*sums[key], np.array(cols)) for key, cols in groups.items()}
+
+
+def _solve_landmarks(ata: np.ndarray, aty: np.ndarray, k_mm: np.ndarray, c: float) -> np.ndarray:
+    """Coefficients (m + 1, k) (the last row: intercepts) of the ridge ``(A'A + K_mm / C) w = A'Y``."""
+    m = len(k_mm)
+    lhs = ata.copy()
+    lhs[:m, :m] += k_mm / c
+    lhs[np.diag_indices(m)] += 1e-10 * max(float(np.trace(ata)) / (m + 1), 1.0)  # jitter
+    try:
+        return np.linalg.solve(lhs, aty)
+    except np.linalg.LinAlgError:
+        return np.linalg.lstsq(lhs, aty, rcond=None)[0]
+
+
+def fit_landmark_models(xs: np.ndarray, y: np.ndarray, gamma: float, cs: Sequence[float],
+                        n_landmarks: int, seed: int) -> tuple[np.ndarray, dict[float, np.ndarray]]:
+    """Nystroem kernel ridge fits of every column of ``y`` (NaN = not annotated) for every C.
+
+    Parameters
+    ----------
+    xs : ndarray, shape (n, F)
+        Standardised features.
+    y : ndarray, shape (n, k)
+        Targets; each column is fitted on its finite rows.
+    gamma : float
+        RBF gamma.
+    cs : sequence of float
+        Values of C (the ridge penalty is 1 / C).
+    n_landmarks : int
+        Landmarks, drawn from the rows (seeded by ``seed``).
+    seed : int
+
+    Returns
+    -------
+    landmarks : ndarray, shape (m, F)
+    coefs : dict
+        C -> (m + 1, k) array: landmark coefficients, then the intercept in the last row (NaN for
+        a column with fewer than two annotated rows).
+    """
+    landmarks = xs[landmark_rows(len(xs), n_landmarks, seed)]
+    k_mm = _landmark_kernel(landmarks, landmarks, gamma)
+    coefs = {c: np.full((len(landmarks) + 1, y.shape[1]), np.nan) for c in cs}
+    for ata, aty, cols in _normal_equations(xs, y, landmarks, gamma).values():
+        if ata[-1, -1] < 2:
+            continue
+        for c in cs:
+            coefs[c][:, cols] = _solve_landmarks(ata, aty, k_mm, c)
+    return landmarks, coefs
+
+
+def fit_one(xs: np.ndarray, y: np.ndarray, params: dict[str, float], method: str, n_landmarks: int,
+            seed: int) -> SVR | LandmarkRegressor:
+    """One blendshape's model on standardised rows: an exact RBF SVR or its approximation."""
+    c, gamma, eps = float(params["C"]), float(params["gamma"]), float(params["epsilon"])
+    if method == METHODS[0]:
+        return SVR(kernel="rbf", C=c, gamma=gamma, epsilon=eps).fit(xs, y)
+    landmarks, coefs = fit_landmark_models(xs, y[:, None], gamma, [c], n_landmarks, seed)
+    return LandmarkRegressor(landmarks, coefs[c][:-1, 0], coefs[c][-1, 0], c, gamma, eps)
+
+
+# --------------------------------------------------------------------------- the search
+
+
 @dataclasses.dataclass
 class SearchResult:
     """Grid-search outcome for one blendshape."""
@@ -210,14 +365,17 @@ class SearchResult:
 
 def grid_search(data: FaceData, config: FaceFitConfig,
                 progress: Callable[[int], object] | None = None) -> dict[str, SearchResult]:
-    """Grid search of every blendshape's SVR with cached per-fold Gram matrices.
+    """Grid search of every blendshape's model (exact SVR or the approximation, by the rows).
+
+    The folds run through :func:`effortface.train.parallel.map_ordered` (this process or a Dask
+    cluster, same results).
 
     Parameters
     ----------
     data : FaceData
         Training arrays.
     config : FaceFitConfig
-        Grid and CV scheme.
+        Grid, CV scheme and the exact/approximate switch.
     progress : callable, optional
         Called with 1 after each fold (for a progress bar).
 
@@ -232,25 +390,44 @@ def grid_search(data: FaceData, config: FaceFitConfig,
     oof = {p: np.full((n, nb), np.nan) for p in points}
     fold_mse = {p: np.zeros((len(folds), nb)) for p in points}
     base = {k: np.full((n, nb), np.nan) for k in ("mean", "linear")}
-    for f, (train, test) in enumerate(folds):
-        for gamma, k_tr, k_te, xs_tr, xs_te in _fold_kernels(data.x, train, test, config.grid["gamma"]):
-            for b in range(nb):
-                _fit_fold(data, b, train, test, k_tr, k_te, gamma, config, oof, fold_mse, f)
-        _baseline_fold(data, train, test, base)
+    method = config.method(n)
+    results = map_ordered(_search_fold, ((data, train, test, config, method) for train, test in folds))
+    for f, ((train, test), (preds, mses, baselines)) in enumerate(zip(folds, results)):
+        for p in points:
+            oof[p][test] = preds[p]
+            fold_mse[p][f] = mses[p]
+        for k, v in baselines.items():
+            base[k][test] = v
         if progress:
             progress(1)
     return {name: _best(data, b, points, oof, fold_mse, base) for b, name in enumerate(data.blendshapes)}
 
 
+def _search_fold(data: FaceData, train: np.ndarray, test: np.ndarray, config: FaceFitConfig,
+                 method: str) -> tuple[dict, dict, dict]:
+    """One fold of the search: per grid point the test predictions (n_test, B) and MSEs (B,), and
+    the baselines' test predictions. A pure function of its arguments (runs anywhere)."""
+    points = list(itertools.product(config.grid["C"], config.grid["gamma"], config.grid["epsilon"]))
+    nb = data.y_norm.shape[1]
+    preds = {p: np.full((len(test), nb), np.nan) for p in points}
+    mses = {p: np.full(nb, np.nan) for p in points}
+    if method == METHODS[0]:
+        for gamma, k_tr, k_te, _, _ in _fold_kernels(data.x, train, test, config.grid["gamma"]):
+            for b in range(nb):
+                _fit_fold(data, b, train, test, k_tr, k_te, gamma, config, preds, mses)
+    else:
+        _search_fold_landmarks(data, train, test, config, preds, mses)
+    base = {k: np.full((len(test), nb), np.nan) for k in ("mean", "linear")}
+    _baseline_fold(data, train, test, base)
+    return preds, mses, base
+
+
 def _fit_fold(data: FaceData, b: int, train: np.ndarray, test: np.ndarray, k_tr: np.ndarray,
-              k_te: np.ndarray, gamma: float, config: FaceFitConfig, oof: dict, fold_mse: dict,
-              f: int) -> None:
+              k_te: np.ndarray, gamma: float, config: FaceFitConfig, preds: dict, mses: dict) -> None:
     """Fit blendshape b on one fold for every (C, epsilon) at this gamma; store predictions."""
     y = data.y_norm[:, b]
     tr, te = np.isfinite(y[train]), np.isfinite(y[test])
     if tr.sum() < 2 or te.sum() == 0:
-        for c, eps in itertools.product(config.grid["C"], config.grid["epsilon"]):
-            fold_mse[(c, gamma, eps)][f, b] = np.nan
         return
     # slice the Gram matrices once for every (C, epsilon); skip the copy when nothing is missing
     k_fit = k_tr if tr.all() else k_tr[np.ix_(tr, tr)]
@@ -258,21 +435,44 @@ def _fit_fold(data: FaceData, b: int, train: np.ndarray, test: np.ndarray, k_tr:
     for c, eps in itertools.product(config.grid["C"], config.grid["epsilon"]):
         svr = SVR(kernel="precomputed", C=c, epsilon=eps).fit(k_fit, y[train][tr])
         pred = svr.predict(k_pred)
-        oof[(c, gamma, eps)][test[te], b] = pred
-        fold_mse[(c, gamma, eps)][f, b] = float(np.mean((pred - y[test][te]) ** 2))
+        preds[(c, gamma, eps)][te, b] = pred
+        mses[(c, gamma, eps)][b] = float(np.mean((pred - y[test][te]) ** 2))
+
+
+def _search_fold_landmarks(data: FaceData, train: np.ndarray, test: np.ndarray, config: FaceFitConfig,
+                           preds: dict, mses: dict) -> None:
+    """The approximation's fold: per gamma one set of landmarks and normal equations, every C
+    solved from them (epsilon does not enter the approximation: its points share the result)."""
+    scaler = StandardScaler().fit(data.x[train])
+    xs_tr, xs_te = scaler.transform(data.x[train]), scaler.transform(data.x[test])
+    y_tr, y_te = data.y_norm[train], data.y_norm[test]
+    te_ok = np.isfinite(y_te)
+    for gamma in config.grid["gamma"]:
+        landmarks, coefs = fit_landmark_models(xs_tr, y_tr, gamma, config.grid["C"], config.n_landmarks,
+                                               config.seed)
+        k_te = _landmark_kernel(xs_te, landmarks, gamma)
+        for c, eps in itertools.product(config.grid["C"], config.grid["epsilon"]):
+            pred = k_te @ coefs[c][:-1] + coefs[c][-1]
+            pred[~te_ok] = np.nan
+            preds[(c, gamma, eps)][:] = pred
+            err = np.where(te_ok, pred - y_te, np.nan)
+            with np.errstate(invalid="ignore"):
+                mse = np.nanmean(err ** 2, axis=0) if te_ok.any() else np.full(len(mses[(c, gamma, eps)]), np.nan)
+            mses[(c, gamma, eps)][:] = np.where(te_ok.any(axis=0) & np.isfinite(coefs[c][-1]), mse, np.nan)
 
 
 def _baseline_fold(data: FaceData, train: np.ndarray, test: np.ndarray, base: dict) -> None:
-    """Mean and linear-regression baselines on one fold (standardised features)."""
+    """Mean and linear-regression baselines on one fold (standardised features); ``base`` holds
+    (n_test, B) arrays."""
     scaler = StandardScaler().fit(data.x[train])
     for b in range(data.y_norm.shape[1]):
         y = data.y_norm[:, b]
-        tr, te = train[np.isfinite(y[train])], test[np.isfinite(y[test])]
-        if len(tr) < 2 or len(te) == 0:
+        tr, te = train[np.isfinite(y[train])], np.isfinite(y[test])
+        if len(tr) < 2 or not te.any():
             continue
         base["mean"][te, b] = y[tr].mean()
         lin = LinearRegression().fit(scaler.transform(data.x[tr]), y[tr])
-        base["linear"][te, b] = lin.predict(scaler.transform(data.x[te]))
+        base["linear"][te, b] = lin.predict(scaler.transform(data.x[test[te]]))
 
 
 def _best(data: FaceData, b: int, points: list, oof: dict, fold_mse: dict, base: dict) -> SearchResult:
@@ -297,11 +497,24 @@ class FaceModelFit:
 
     blendshapes: tuple[str, ...]
     scaler: StandardScaler
-    svrs: dict[str, SVR]
+    svrs: dict[str, SVR | LandmarkRegressor]
     search: dict[str, SearchResult]
     expressiveness: pd.DataFrame
     data: FaceData
     config: FaceFitConfig
+
+    @property
+    def method(self) -> str:
+        """``"exact_svr"`` or ``"nystroem"`` (chosen from the face rows, see :meth:`FaceFitConfig.method`)."""
+        return self.config.method(len(self.data.x))
+
+    def describe(self) -> dict[str, object]:
+        """The choice for model.json and the model card: method, face rows, landmarks, the switch."""
+        landmarks = [len(m.support_vectors_) for m in self.svrs.values()] \
+            if self.method == METHODS[1] else None
+        return {"method": self.method, "n_face_rows": int(len(self.data.x)),
+                "exact_max_rows": int(self.config.exact_max_rows), "n_landmarks": landmarks,
+                "max_rows_per_participant": int(self.config.max_rows_per_participant)}
 
     def predict_norm(self, x: np.ndarray) -> np.ndarray:
         """Normalised predictions (n, B) from raw features (n, 4), by scikit-learn."""
@@ -348,7 +561,10 @@ def check_face_table(table: pd.DataFrame, blendshapes: Sequence[str], source: st
 def fit_face_models(table: pd.DataFrame, blendshapes: Sequence[str],
                     config: FaceFitConfig | None = None,
                     progress: Callable[[int], object] | None = None) -> FaceModelFit:
-    """Search hyper-parameters by grouped CV, then fit one RBF SVR per blendshape on all rows.
+    """Search hyper-parameters by grouped CV, then fit one model per blendshape on all rows.
+
+    Exact RBF SVRs up to ``config.exact_max_rows`` face rows, the Nystroem approximation above
+    (module docstring).
 
     Parameters
     ----------
@@ -373,12 +589,12 @@ def fit_face_models(table: pd.DataFrame, blendshapes: Sequence[str],
     search = grid_search(data, config, progress)
     scaler = StandardScaler().fit(data.x)
     xs = scaler.transform(data.x)
+    method = config.method(len(data.x))
     svrs = {}
     for b, name in enumerate(data.blendshapes):
         ok = np.isfinite(data.y_norm[:, b])
-        p = search[name].best
-        svrs[name] = SVR(kernel="rbf", C=p["C"], gamma=float(p["gamma"]),
-                         epsilon=p["epsilon"]).fit(xs[ok], data.y_norm[ok, b])
+        svrs[name] = fit_one(xs[ok], data.y_norm[ok, b], search[name].best, method, config.n_landmarks,
+                             config.seed)
     return FaceModelFit(tuple(blendshapes), scaler, svrs, search, e_table, data, config)
 
 
@@ -545,22 +761,32 @@ def _predict_folds(fit: FaceModelFit, folds: list) -> np.ndarray:
 
     No label of a fold's test rows is used: the training targets are normalised and the test
     predictions scaled by expressiveness estimated from the training rows
-    (:func:`training_expressiveness`).
+    (:func:`training_expressiveness`). Each fit is exact or approximate by the run's face rows
+    (the method of ``fit``); the folds run through :func:`~effortface.train.parallel.map_ordered`.
     """
-    d = fit.data
-    out = np.full(d.y_norm.shape, np.nan)
+    out = np.full(fit.data.y_norm.shape, np.nan)
+    params = {name: fit.search[name].best for name in fit.blendshapes}
+    calls = ((fit.data, train, test, params, fit.method, fit.config) for train, test in folds)
+    for (_, test), pred in zip(folds, map_ordered(_protocol_fold, calls)):
+        out[test] = np.where(np.isnan(pred), out[test], pred)
+    return out
+
+
+def _protocol_fold(d: FaceData, train: np.ndarray, test: np.ndarray, params: dict[str, dict[str, float]],
+                   method: str, config: FaceFitConfig) -> np.ndarray:
+    """Predicted weights (n_test, B) of one protocol fold (NaN for a blendshape not fitted)."""
+    out = np.full((len(test), len(d.blendshapes)), np.nan)
     weights = d.y_norm * d.e
-    for train, test in folds:
-        scaler = StandardScaler().fit(d.x[train])
-        e_train = training_expressiveness(d, train, train)
-        e_test = training_expressiveness(d, train, test)
-        for b, name in enumerate(fit.blendshapes):
-            ok = np.isfinite(d.y_norm[train, b])
-            if ok.sum() < 5:
-                continue
-            p = fit.search[name].best
-            svr = SVR(kernel="rbf", C=p["C"], gamma=p["gamma"], epsilon=p["epsilon"])
-            target = np.clip(weights[train[ok], b] / e_train[ok, b], 0.0, 1.0)
-            svr.fit(scaler.transform(d.x[train[ok]]), target)
-            out[test, b] = np.clip(svr.predict(scaler.transform(d.x[test])) * e_test[:, b], 0, 1)
+    scaler = StandardScaler().fit(d.x[train])
+    e_train = training_expressiveness(d, train, train)
+    e_test = training_expressiveness(d, train, test)
+    xs_test = scaler.transform(d.x[test])
+    for b, name in enumerate(d.blendshapes):
+        ok = np.isfinite(d.y_norm[train, b])
+        if ok.sum() < 5:
+            continue
+        target = np.clip(weights[train[ok], b] / e_train[ok, b], 0.0, 1.0)
+        model = fit_one(scaler.transform(d.x[train[ok]]), target, params[name], method,
+                        config.n_landmarks, config.seed)
+        out[:, b] = np.clip(model.predict(xs_test) * e_test[:, b], 0, 1)
     return out

@@ -35,6 +35,7 @@ from effortface.train.face_fit import (GRIDS, MIN_ROWS_PER_PARTICIPANT, FaceFitC
                                        check_face_table, fit_face_models, held_out_scores,
                                        protocol_scores, training_scores)
 from effortface.train.hr_fit import PAPER_HR, HrEvaluation, HrSeries, check_hr_series, evaluate_hr_models
+from effortface.train.parallel import ComputeSettings, compute_backend
 
 REPORT_DIR = "report"
 #: fraction of the progress reached after each step of :func:`train_models` (the CV folds fill the middle)
@@ -69,13 +70,22 @@ class TrainSettings:
     cv : {"lopo", "kfold"}
         Leave-one-participant-out (the paper's honest protocol) or random-frame K-fold.
     max_rows_per_participant : int
-        Face training rows per participant (1 Hz, evenly spaced).
+        Face training rows per participant (1 Hz, evenly spaced; default 3,600 = one hour, i.e.
+        every annotated second of most labs). Above
+        :data:`~effortface.train.face_fit.EXACT_MAX_ROWS` face rows the fit switches to the
+        Nystroem approximation by itself.
+    workers : int or None
+        Run the CV folds on a local Dask cluster of this many worker processes.
+    scheduler : str or None
+        Run the CV folds on the Dask scheduler at this address.
     """
 
     rater_policy: str = "mean"
     grid: str = "small"
     cv: str = "lopo"
-    max_rows_per_participant: int = 300
+    max_rows_per_participant: int = FaceFitConfig().max_rows_per_participant
+    workers: int | None = None
+    scheduler: str | None = None
 
     def __post_init__(self) -> None:
         if self.grid not in GRIDS:
@@ -85,6 +95,11 @@ class TrainSettings:
                             f"found {self.max_rows_per_participant}")
         if not self.rater_policy.strip():
             raise UserError("rater policy: expected 'mean' or a rater's name, found nothing")
+        self.compute()  # checks --workers / --scheduler
+
+    def compute(self) -> ComputeSettings:
+        """Where the folds run (:mod:`effortface.train.parallel`)."""
+        return ComputeSettings(self.workers, self.scheduler)
 
     def config(self) -> FaceFitConfig:
         """The face-fit configuration of these settings."""
@@ -260,11 +275,12 @@ def train_models(table: pd.DataFrame, blendshapes: BlendshapeSet, settings: Trai
     step("prepare", "heart-rate models")
     hr_eval = evaluate_hr_models(series)
     step("hr", "face SVR grid search")
-    face = _fit_face(prepared, blendshapes, config, cancelled, progress)
-    step("folds", "held-out scores")
-    held = held_out_scores(face)
-    step("held_out", "the paper's Fig. 3 protocols")
-    protos, proto_preds = protocol_scores(face)
+    with compute_backend(settings.compute()):
+        face = _fit_face(prepared, blendshapes, config, cancelled, progress)
+        step("folds", "held-out scores")
+        held = held_out_scores(face)
+        step("held_out", "the paper's Fig. 3 protocols")
+        protos, proto_preds = protocol_scores(face)
     step("protocols", "done")
     return TrainingOutcome(prepared, series, hr_eval, face, held, protos, proto_preds, blendshapes,
                            list(sources), settings)
@@ -465,7 +481,7 @@ def training_provenance(prepared: pd.DataFrame, face: Any, sources: Sequence[str
         "participants": sorted(map(str, tls.index)), "n_participants": int(len(tls)),
         "training_levels": [float(v) for v in tls.to_numpy()],
         "n_sessions": int(prepared["session"].nunique()), "n_seconds": int(len(prepared)),
-        "n_face_rows": int(len(face.data.x)), "rater_policy": rater_policy,
+        "n_face_rows": int(len(face.data.x)), "face_fit": face.describe(), "rater_policy": rater_policy,
         "annotation_rule": ("n/a (trained from a long table)" if any(str(p).endswith(".csv") for p in sources)
                             else ANNOTATION_RULE), "cv": config.cv,
         "grid": config.grid, "max_rows_per_participant": config.max_rows_per_participant,

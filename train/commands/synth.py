@@ -5,12 +5,17 @@ On success it prints one line on stdout: the file written, its frames and the cl
 ``MODEL_DIR`` is a model bundle folder or ``default`` (the built-in rule model). The file formats
 (the per-frame CSV, ``--format livelink`` for the Live Link Face CSV) are
 :mod:`effortface.train.curves_io`'s. An existing ``--out`` is never replaced without ``--force``.
+
+``MOTION`` may be a folder of clips: then ``--out`` is a folder and every clip gives one file
+(:mod:`effortface.train.batch_synth`, on Dask with ``--workers N`` or ``--scheduler ADDRESS``), with
+a progress bar and a summary; exit status 1 when some clips failed (they are named and skipped).
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -19,9 +24,11 @@ from effortface.core import bounds
 from effortface.core.docs import DESIGN, SCIENCE
 from effortface.core.errors import UserError
 from effortface.core.fileio import check_apart
+from effortface.train.batch_synth import BatchSummary, SynthOptions, list_clips, synth_batch
 from effortface.train.character_options import add_character_arguments, character_from_args
 from effortface.train.curves_io import CURVE_FORMATS, check_output, units_path, write_curves
 from effortface.train.motion import read_motion
+from effortface.train.parallel import ComputeSettings, add_compute_arguments
 from effortface.train.runtime import load_model
 
 
@@ -32,8 +39,10 @@ HELP_DOCS = (DESIGN, SCIENCE)
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of DESIGN.md's synth line."""
     parser.add_argument("model_dir", metavar="MODEL_DIR", help="model bundle folder, or 'default'")
-    parser.add_argument("motion", metavar="MOTION", help="motion clip (.bvh, .npz, .c3d or joint-positions .csv)")
-    parser.add_argument("--out", required=True, metavar="CSV", help="output CSV file")
+    parser.add_argument("motion", metavar="MOTION|CLIPS_DIR",
+                        help="motion clip (.bvh, .npz, joint-positions .csv or .c3d), or a folder of clips")
+    parser.add_argument("--out", required=True, metavar="CSV|OUT_DIR",
+                        help="output CSV file (a folder, one file per clip, for a folder of clips)")
     parser.add_argument("--format", choices=CURVE_FORMATS, default="csv",
                         help="per-frame curves (default) or a Live Link Face CSV")
     parser.add_argument("--force", action="store_true", help="replace an existing --out file")
@@ -46,25 +55,33 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--unit-m", type=float, default=None, metavar="M",
                         help="BVH length unit in metres (default: detected from the rest pose; "
                              "CMU cgspeed 0.05644)")
+    add_compute_arguments(parser, "a folder of clips")
 
 
 def run(args: argparse.Namespace) -> int:
-    """Synthesize and write the curves; return 0."""
+    """Synthesize and write the curves; return 0 (1 when some clips of a folder failed)."""
     out = Path(args.out)
+    batch = Path(args.motion).is_dir()
+    compute = ComputeSettings(args.workers, args.scheduler)
     model_dir = None if args.model_dir == "default" else args.model_dir
     check_apart("--out", out, [model_dir, args.motion, args.mapping])
-    check_output(out, args.force, args.format)  # fail before the work
+    if not batch:
+        check_output(out, args.force, args.format)  # fail before the work
     model = load_model(args.model_dir)
     character = character_from_args(args, model)
     if args.unit_m is not None and not (math.isfinite(args.unit_m) and args.unit_m > 0):
         raise UserError(f"--unit-m: expected a length in metres above 0, found {args.unit_m:g}")
     if args.unit_m is not None:
         bounds.check("unit_m", args.unit_m, "--unit-m")
-    motion = read_motion(args.motion, unit_m=args.unit_m)
     try:
         taus = model.filter_taus(args.filter_tau_s)
     except UserError as exc:
         raise UserError(f"--filter-tau-s: {exc}") from None
+    if batch:
+        options = SynthOptions(args.model_dir, character, args.format, args.force, args.mapping,
+                               args.unit_m, taus)
+        return _run_batch(Path(args.motion), out, options, compute)
+    motion = read_motion(args.motion, unit_m=args.unit_m)
     curves = model.synthesize(motion, character, mapping=args.mapping, filter_tau_s=taus)
     write_curves(out, curves, model, fmt=args.format, force=args.force)
     print(written_line(out, curves["t_s"], args.format))
@@ -77,3 +94,25 @@ def written_line(out: Path, t_s: np.ndarray, fmt: str) -> str:
     duration_s = float(t_s[-1] - t_s[0]) if n_frames else 0.0
     units = f", units in {units_path(out)}" if fmt == "csv" else ""
     return f"wrote {out}: {n_frames} frames, {duration_s:.2f} s of motion{units}"
+def _run_batch(clips_dir: Path, out: Path, options: SynthOptions, compute: ComputeSettings) -> int:
+    """A folder of clips with a progress bar on stderr and a summary; 1 when some failed."""
+    from tqdm import tqdm
+
+    n_clips = len(list_clips(clips_dir))  # no clips: the one error line, before any bar
+    with tqdm(total=n_clips, desc="synth", unit="clip", file=sys.stderr) as bar:
+        summary = synth_batch(clips_dir, out, options, compute, on_result=lambda _: bar.update(1))
+    return _report(summary, out)
+
+
+def _report(summary: BatchSummary, out: Path) -> int:
+    """Print the summary (stdout) and the failures (stderr); the exit status."""
+    n, failed = len(summary.results), summary.failed
+    rate = summary.n_frames / summary.elapsed_s if summary.elapsed_s > 0 else float("nan")
+    print(f"synthesized {n - len(failed)} of {n} clips into {out} ({summary.n_frames} frames, "
+          f"{summary.elapsed_s:.1f} s, {rate:.0f} frames/s)")
+    for r in failed:
+        print(f"effortface synth: failed: {r.clip}: {r.error}", file=sys.stderr)
+    if failed:
+        print(f"effortface synth: {len(failed)} of {n} clips failed (skipped)", file=sys.stderr)
+        return 1
+    return 0

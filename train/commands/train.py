@@ -15,7 +15,8 @@ import sys
 from effortface.core.docs import DESIGN, SCIENCE
 from effortface.core.blendshapes import load_blendshape_set
 from effortface.core.errors import UserError
-from effortface.train.face_fit import GRIDS, MIN_ROWS_PER_PARTICIPANT, FaceFitConfig
+from effortface.train.face_fit import EXACT_MAX_ROWS, GRIDS, MIN_ROWS_PER_PARTICIPANT, FaceFitConfig
+from effortface.train.parallel import add_compute_arguments
 from effortface.train.pipeline import TrainSettings, run_training, training_table
 
 
@@ -37,7 +38,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="leave-one-participant-out (default) or random-frame K-fold (inflated)")
     parser.add_argument("--grid", choices=tuple(GRIDS), default="small", help="hyper-parameter grid")
     parser.add_argument("--max-rows", type=int, default=FaceFitConfig().max_rows_per_participant,
-                        metavar="N", help="face training rows per participant (1 Hz, evenly spaced)")
+                        metavar="N", help="face training rows per participant (1 Hz, evenly spaced; "
+                        f"default {FaceFitConfig().max_rows_per_participant}); above "
+                        f"{EXACT_MAX_ROWS} rows in all the SVRs become a Nystroem approximation")
+    add_compute_arguments(parser, "the cross-validation folds")
     parser.add_argument("--blendshapes", metavar="JSON", help="blendshape set file (default: the paper's)")
 
 
@@ -61,7 +65,8 @@ def run(args: argparse.Namespace) -> int:
     """Entry point of ``effortface train``."""
     check_inputs(args)
     settings = TrainSettings(rater_policy=args.rater_policy, grid=args.grid, cv=args.cv,
-                             max_rows_per_participant=args.max_rows)
+                             max_rows_per_participant=args.max_rows, workers=args.workers,
+                             scheduler=args.scheduler)
     blendshapes = load_blendshape_set(args.blendshapes)
     table, sources = training_table(args.inputs, args.table, blendshapes, args.rater_policy)
     if args.cv == "kfold":

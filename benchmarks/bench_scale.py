@@ -1,0 +1,253 @@
+"""Issue 15 (scale): training on every annotated second, Dask, batch synthesis, long clips, crowds.
+
+Prints figures and ratios against a baseline measured in the same run:
+
+1. **Training** (the face part of a training run: grid search, final fit, held-out scores and the
+   paper's protocols) on generated tables of P participants x 1 h (P = 10, 30, 100 by default):
+   time, peak memory (the process's maximum RSS; each configuration runs in its own process, Dask
+   workers' memory not included), face rows used, method, mean held-out RMSE; serial and with
+   ``--workers 2``; baseline: the old caps (300 rows per participant, 2,000 in all, exact SVR).
+2. **Batch synthesis** of a folder of real clips: clips/s and frames/s in this process and on a
+   local Dask cluster of 1 and 2 workers.
+3. **Long BVH clips** (the real jumping-jacks clip tiled to 10 min and 1 h at 120 Hz): read time and
+   peak memory (own process each), against the whole-file float64 parse (``BVH_CHUNK_FRAMES`` as
+   large as the clip); whole-process ``effortface synth`` time for the 10-minute clip in x real time.
+4. **Crowd from positions**: characters per core at 60 FPS with a ~2,000-support-vector SVR model,
+   float64 and float32, through ``CrowdStream.step(positions)``.
+
+Run: ``python benchmarks/bench_scale.py [--participants 10 30 100] [--skip train,synth,bvh,crowd]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+CLIP = ROOT.parent / "shared" / "data" / "motion" / "cmu_13_29_jumping_jacks_120fps.bvh"
+SQUATS = ROOT.parent / "shared" / "data" / "motion" / "cmu_13_29_squats_120fps.bvh"
+
+
+def _max_rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def _child(args: list[str]) -> dict:
+    """Run this script on one configuration in its own process; its JSON result."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    done = subprocess.run([sys.executable, __file__, *args], capture_output=True, text=True, env=env,
+                          cwd=ROOT)
+    if done.returncode != 0:
+        raise RuntimeError(done.stderr[-3000:])
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+# --------------------------------------------------------------------------- 1. training
+
+
+def one_training(n_participants: int, workers: int, legacy: bool) -> dict:
+    """The face part of a training run on P participants x 1 h (this process)."""
+    import numpy as np
+
+    from effortface.core.blendshapes import DEFAULT_SET
+    from effortface.train.dataset import prepare, synthetic_table
+    from effortface.train.face_fit import FaceFitConfig, fit_face_models, held_out_scores, protocol_scores
+    from effortface.train.parallel import ComputeSettings, compute_backend
+
+    table = prepare(synthetic_table(n_participants=n_participants, seconds=1800, seed=1))
+    config = FaceFitConfig(max_rows_per_participant=300, max_total_rows=2000) if legacy else FaceFitConfig()
+    rss0 = _max_rss_mb()
+    t0 = time.perf_counter()
+    with compute_backend(ComputeSettings(workers=workers) if workers else None):
+        fit = fit_face_models(table, DEFAULT_SET.names, config)
+        held = held_out_scores(fit)
+        protocol_scores(fit)
+    elapsed = time.perf_counter() - t0
+    svr = held[held["model"] == "svr"]
+    return {"seconds": elapsed, "rows": len(fit.data.x), "all_rows": int(table.dropna().shape[0]),
+            "available": int(len(table)), "method": fit.method, "peak_mb": _max_rss_mb(),
+            "rss_before_mb": rss0, "rmse_pct": float(np.mean(svr["rmse_pct_unit"])),
+            "r": float(np.mean(svr["r"]))}
+
+
+def bench_training(sizes: list[int], workers_list: list[int]) -> None:
+    print("1. training (face part: grid search, final fit, held-out scores, protocols), P x 1 h")
+    for p in sizes:
+        base = _child(["--one-training", str(p), "0", "legacy"])
+        print(f"  P={p:3d} baseline (old caps, exact SVR): {base['seconds']:7.1f} s, "
+              f"{base['rows']:6d} of {base['available']} rows ({100 * base['rows'] / base['available']:.2f} %), "
+              f"held-out RMSE {base['rmse_pct']:.2f} %, r {base['r']:.3f}, peak {base['peak_mb']:.0f} MB")
+        for w in workers_list:
+            res = _child(["--one-training", str(p), str(w), "new"])
+            label = "serial" if w == 0 else f"{w} workers"
+            print(f"  P={p:3d} {label:>9} ({res['method']}): {res['seconds']:7.1f} s "
+                  f"({res['seconds'] / base['seconds']:5.1f}x the baseline's time), {res['rows']:6d} rows "
+                  f"({100 * res['rows'] / res['available']:.0f} %), held-out RMSE {res['rmse_pct']:.2f} % "
+                  f"(baseline {base['rmse_pct']:.2f} %), r {res['r']:.3f}, peak {res['peak_mb']:.0f} MB")
+
+
+# --------------------------------------------------------------------------- 2. batch synthesis
+
+
+def bench_synth(n_clips: int) -> None:
+    from effortface.train.batch_synth import SynthOptions, synth_batch
+    from effortface.train.parallel import ComputeSettings
+    from effortface.train.runtime import Character
+
+    print(f"2. batch synthesis: {n_clips} real clips (squats and jumping jacks, 120 Hz), default model")
+    tmp = Path(tempfile.mkdtemp())
+    clips = tmp / "clips"
+    clips.mkdir()
+    for k in range(n_clips):
+        shutil.copy(SQUATS if k % 2 else CLIP, clips / f"clip{k:03d}.bvh")
+    options = SynthOptions("default", Character(), force=True)
+    base = None
+    for label, compute in (("this process", None), ("1 worker", ComputeSettings(workers=1)),
+                           ("2 workers", ComputeSettings(workers=2))):
+        t0 = time.perf_counter()
+        summary = synth_batch(clips, tmp / "out", options, compute)
+        elapsed = time.perf_counter() - t0  # cluster start-up included
+        rate = len(summary.results) / elapsed
+        base = base or rate
+        print(f"  {label:>12}: {rate:6.2f} clips/s, {summary.n_frames / elapsed:8.0f} frames/s "
+              f"({summary.n_frames / elapsed / 120:6.0f}x real time; {rate / base:4.2f}x this process; "
+              f"cluster start-up included), {len(summary.failed)} failed")
+    shutil.rmtree(tmp)
+
+
+# --------------------------------------------------------------------------- 3. long BVH clips
+
+
+#: the whole-file baseline parse is run up to this length (1 h would need several GB)
+WHOLE_FILE_MAX_MINUTES = 10
+
+
+def tiled_bvh(minutes: float, folder: Path) -> Path:
+    """The real clip's frame lines repeated to ``minutes`` at 120 Hz."""
+    lines = CLIP.read_text().splitlines()
+    at = next(i for i, line in enumerate(lines) if line.strip().upper() == "MOTION")
+    frames = [line for line in lines[at + 3:] if line.strip()]
+    n = int(minutes * 60 * 120)
+    out = folder / f"jj_{minutes:g}min.bvh"
+    with out.open("w") as f:
+        f.write("\n".join(lines[:at + 1]) + f"\nFrames: {n}\nFrame Time: {1 / 120:.7f}\n")
+        for k in range(0, n, len(frames)):
+            f.write("\n".join(frames[: min(len(frames), n - k)]) + "\n")
+    return out
+
+
+def one_read(path: str, whole: bool) -> dict:
+    """Read one BVH (this process): seconds, peak RSS above the start, dtype."""
+    from effortface.train import motion as mo
+
+    if whole:
+        mo.BVH_CHUNK_FRAMES = 10**9
+    rss0 = _max_rss_mb()
+    t0 = time.perf_counter()
+    m = mo.read_bvh(path, dtype=float if whole else None)
+    return {"seconds": time.perf_counter() - t0, "peak_mb": _max_rss_mb(), "start_mb": rss0,
+            "frames": m.n_frames, "dtype": str(m.positions_m.dtype),
+            "data_mb": (m.positions_m.nbytes + m.rotations.nbytes) / 2**20}
+
+
+def bench_bvh(minutes_list: list[float]) -> None:
+    print("3. long BVH clips (120 Hz, 38 joints): read time and peak memory (own process, whole RSS)")
+    tmp = Path(tempfile.mkdtemp())
+    for minutes in minutes_list:
+        path = tiled_bvh(minutes, tmp)
+        size_mb = path.stat().st_size / 2**20
+        new = _child(["--one-read", str(path), "chunked"])
+        line = (f"  {minutes:4g} min ({size_mb:.0f} MB file): chunked ({new['dtype']}) {new['seconds']:6.1f} s, "
+                f"peak {new['peak_mb']:6.0f} MB ({new['data_mb']:.0f} MB of it the motion itself)")
+        if minutes <= WHOLE_FILE_MAX_MINUTES:
+            old = _child(["--one-read", str(path), "whole"])
+            line += (f"; whole-file float64 parse {old['seconds']:6.1f} s, peak {old['peak_mb']:6.0f} MB -> "
+                     f"{old['peak_mb'] / new['peak_mb']:4.1f}x less memory, "
+                     f"{old['seconds'] / new['seconds']:4.2f}x the speed")
+        print(line)
+        if minutes == 10:
+            out = tmp / "x.csv"
+            env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+            t0 = time.perf_counter()
+            done = subprocess.run([sys.executable, "-m", "effortface", "synth", "default", str(path),
+                                   "--out", str(out)], env=env, capture_output=True, text=True)
+            wall = time.perf_counter() - t0
+            print(f"       whole process `effortface synth` on it: {wall:.1f} s wall = "
+                  f"{minutes * 60 / wall:.0f}x real time (target >= 200x), exit {done.returncode}")
+        path.unlink()
+    shutil.rmtree(tmp)
+
+
+# --------------------------------------------------------------------------- 4. crowd
+
+
+def bench_crowd(n_chars: int, frames: int) -> None:
+    import numpy as np
+    from bench_runtime import fit_svrs, svr_model_dir
+
+    from effortface.train.motion import read_motion
+    from effortface.train.runtime import Character, load_model
+
+    print(f"4. crowd from positions, {n_chars} characters, SVR model (~2,000 support vectors each)")
+    svrs, scaler = fit_svrs(2000)
+    model = load_model(svr_model_dir(svrs, scaler, Path(tempfile.mkdtemp()) / "m"))
+    motion = read_motion(CLIP)
+    pos = [np.stack([motion.positions_m[(k + 13 * i) % motion.n_frames] for i in range(n_chars)])
+           for k in range(frames + 1)]
+    results = {}
+    for single in (False, True):
+        crowd = model.stream_batch([Character()] * n_chars, motion, single_precision=single)
+        crowd.step(pos[0], 1 / 60)
+        t0 = time.perf_counter()
+        for k in range(1, frames + 1):
+            out = crowd.step(pos[k], 1 / 60)
+        per_frame = (time.perf_counter() - t0) / frames
+        results[single] = out
+        print(f"  {'float32' if single else 'float64'}: {per_frame * 1e3:7.2f} ms/frame -> "
+              f"{n_chars / 60 / per_frame:6.0f} characters per core at 60 FPS (target >= 2,500)")
+    print(f"  float32 max |weight - float64|: {np.max(np.abs(results[True] - results[False])):.2e}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--participants", type=int, nargs="+", default=[10, 30, 100])
+    parser.add_argument("--workers", type=int, nargs="+", default=[0, 2], help="0 = serial")
+    parser.add_argument("--clips", type=int, default=8)
+    parser.add_argument("--minutes", type=float, nargs="+", default=[10, 60])
+    parser.add_argument("--crowd", type=int, default=1000)
+    parser.add_argument("--skip", default="", help="comma-separated sections to skip")
+    parser.add_argument("--one-training", nargs=3, metavar=("P", "WORKERS", "KIND"), help=argparse.SUPPRESS)
+    parser.add_argument("--one-read", nargs=2, metavar=("PATH", "KIND"), help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.one_training:
+        p, w, kind = args.one_training
+        print(json.dumps(one_training(int(p), int(w), kind == "legacy")))
+        return
+    if args.one_read:
+        print(json.dumps(one_read(args.one_read[0], args.one_read[1] == "whole")))
+        return
+    skip = set(args.skip.split(","))
+    print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}")
+    if "bvh" not in skip:
+        bench_bvh(args.minutes)
+    if "crowd" not in skip:
+        bench_crowd(args.crowd, 10)
+    if "synth" not in skip:
+        bench_synth(args.clips)
+    if "train" not in skip:
+        bench_training(args.participants, args.workers)
+
+
+if __name__ == "__main__":
+    main()
