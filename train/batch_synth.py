@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from effortface.core.errors import UserError
-from effortface.train.curves_io import write_curves
+from effortface.train.curves_io import units_path, write_curves
 from effortface.train.motion import read_motion
 from effortface.train.parallel import ComputeSettings, compute_backend, map_unordered
 from effortface.train.runtime import Character, FaceModel, load_model
@@ -85,8 +85,9 @@ def list_clips(folder: Path) -> list[Path]:
     return clips
 
 
-def output_paths(clips: list[Path], out_dir: Path, force: bool) -> dict[Path, Path]:
-    """The curves file of every clip (``OUT_DIR/<clip stem>.csv``), checked before any work.
+def output_paths(clips: list[Path], out_dir: Path, force: bool, fmt: str = "csv") -> dict[Path, Path]:
+    """The curves file of every clip (``OUT_DIR/<clip stem>.csv``, and its units sidecar for the
+    ``csv`` format), checked before any work.
 
     Raises
     ------
@@ -103,7 +104,8 @@ def output_paths(clips: list[Path], out_dir: Path, force: bool) -> dict[Path, Pa
                             f"(both would write {clip.stem}.csv)")
         seen[clip.stem] = clip
         outs[clip] = out_dir / f"{clip.stem}.csv"
-    existing = [o for o in outs.values() if o.exists()]
+    targets = [t for o in outs.values() for t in ([o, units_path(o)] if fmt == "csv" else [o])]
+    existing = [t for t in targets if t.exists()]
     if existing and not force:
         raise UserError(f"--out {out_dir}: expected new files, found {len(existing)} existing "
                         f"(first {existing[0].name}; use --force to replace them)")
@@ -161,7 +163,7 @@ def synth_batch(clips_dir: Path, out_dir: Path, options: SynthOptions,
         No clips, outputs that exist without ``force``, or an ``--out`` that cannot be made.
     """
     clips = list_clips(clips_dir)
-    outs = output_paths(clips, out_dir, options.force)
+    outs = output_paths(clips, out_dir, options.force, options.fmt)
     if not out_dir.parent.is_dir():
         raise UserError(f"--out {out_dir}: expected an existing parent folder, found no {out_dir.parent}")
     out_dir.mkdir(exist_ok=True)

@@ -106,3 +106,11 @@ def test_form_height_is_the_widget_height(qtbot) -> None:
     form.height_m.setValue(1.81)
     form.code.setText("P01")
     assert form.participant().height_m == 1.81
+
+
+def test_the_bounds_table_and_the_participant_limits_agree_on_body_mass():
+    """One ceiling for a body mass: the segment model's check cannot accept what a participant cannot."""
+    from effortface.core.bounds import BOUNDS
+    from effortface.core.participant import LIMITS
+
+    assert BOUNDS["mass_kg"].high == LIMITS["mass_kg"].bounds[1]

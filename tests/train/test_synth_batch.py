@@ -46,7 +46,9 @@ def test_batch_with_one_corrupt_clip_on_two_workers(clips_dir: Path, tmp_path: P
                            "--out", str(out), "--workers", "2"], cwd=ROOT, capture_output=True,
                           text=True, env=env, timeout=TIMEOUT_S)
     assert done.returncode == 1, done.stderr[-2000:]
-    assert sorted(p.name for p in out.iterdir()) == ["amp_humanoid_walk.csv", "cmu_13_29_jumping_jacks_120fps.csv"]
+    assert sorted(p.name for p in out.iterdir()) == [
+        "amp_humanoid_walk.csv", "amp_humanoid_walk.units.json",
+        "cmu_13_29_jumping_jacks_120fps.csv", "cmu_13_29_jumping_jacks_120fps.units.json"]
     assert _frames(out / "cmu_13_29_jumping_jacks_120fps.csv") == 439
     failed = [line for line in done.stderr.splitlines() if line.startswith("effortface synth: failed:")]
     assert len(failed) == 1 and "broken.bvh" in failed[0]
@@ -78,3 +80,14 @@ def test_a_folder_without_clips_is_one_error_line(tmp_path: Path, capsys) -> Non
     assert main(["synth", "default", str(empty), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "expected motion clips (.bvh, .npz, .csv, .c3d), found none" in err[0]
+
+
+def test_an_existing_units_sidecar_is_not_replaced_silently(clips_dir: Path, tmp_path: Path, capsys) -> None:
+    (clips_dir / "broken.bvh").unlink()
+    out = tmp_path / "curves"
+    out.mkdir()
+    sidecar = out / "amp_humanoid_walk.units.json"
+    sidecar.write_text("{}\n")
+    assert main(["synth", "default", str(clips_dir), "--out", str(out)]) == 2
+    assert "found 1 existing (first amp_humanoid_walk.units.json" in capsys.readouterr().err
+    assert sidecar.read_text() == "{}\n" and not (out / "amp_humanoid_walk.csv").exists()
