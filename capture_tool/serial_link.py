@@ -180,6 +180,7 @@ class SerialLink:
         self._ser: serial.SerialBase | None = None
         self._log: SerlogWriter | None = None
         self._stop = threading.Event()
+        self._stopping = threading.Lock()  # stop() from two threads runs once at a time
         self._thread: threading.Thread | None = None
         self._last_sync = 0.0
         self._last_poll = 0.0
@@ -213,19 +214,20 @@ class SerialLink:
 
     def stop(self, timeout_s: float = 5.0) -> None:
         """Stop the thread, flush the decoder's last samples, close port and log."""
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout_s)
-        self._close_port()
-        self._emit_samples(self.decoder.finish())
-        if self._log is not None:
-            try:
-                self._log.sync()
-                self._log.close()
-            except OSError as exc:
-                self._fail(_LogFailed(exc))
-        if self.state != "failed":
-            self.state = "stopped"
+        with self._stopping:
+            self._stop.set()
+            if self._thread is not None:
+                self._thread.join(timeout_s)
+            self._close_port()
+            self._emit_samples(self.decoder.finish())
+            if self._log is not None and not self._log.closed:
+                try:
+                    self._log.sync()
+                    self._log.close()
+                except OSError as exc:
+                    self._fail(_LogFailed(exc))
+            if self.state != "failed":
+                self.state = "stopped"
 
     def _run(self) -> None:
         try:

@@ -129,6 +129,11 @@ class SerlogWriter:
         """Force the data to disk (``os.fsync``); called about once a second by the link."""
         os.fsync(self._fh.fileno())
 
+    @property
+    def closed(self) -> bool:
+        """True once :meth:`close` ran."""
+        return self._fh.closed
+
     def close(self) -> None:
         """Close the file (idempotent)."""
         if not self._fh.closed:

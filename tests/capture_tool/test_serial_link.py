@@ -151,3 +151,31 @@ def test_real_ant_stick_needs_the_key_replays_do_not(monkeypatch, tmp_path) -> N
     assert err.value.reason is DeviceErrorReason.NO_KEY
     monkeypatch.setenv(ENV_VAR, "01 02 03 04 05 06 07 08")
     assert device_startup_frames("ant", str(stick)) == open_sequence(bytes(range(1, 9)))
+
+
+def test_stop_from_two_threads_at_once_closes_the_log_once(tmp_path, shared_data) -> None:
+    """Shutdown and a stage's own stop can race; neither may fail on the closed log."""
+    import threading
+
+    chunks = hxm_chunks(shared_data, 0, 10)
+    log = write_serlog(tmp_path / "in.serlog", chunks)
+    q: queue.Queue = queue.Queue()
+    link = _link(f"replay://{log}?speed=50", q)
+    link.start(tmp_path / "hxm.serlog")
+    _wait_for(lambda: link.bytes_in >= sum(len(d) for _, d in chunks))
+    errors: list[BaseException] = []
+
+    def stop() -> None:
+        try:
+            link.stop()
+        except BaseException as exc:  # noqa: BLE001 - the test reports it
+            errors.append(exc)
+
+    threads = [threading.Thread(target=stop) for _ in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(10)
+    link.stop()  # and once more, afterwards
+    assert errors == [] and link.state == "stopped"
+    assert read_serlog(tmp_path / "hxm.serlog").data_bytes() == b"".join(d for _, d in chunks)
