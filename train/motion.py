@@ -252,12 +252,12 @@ def read_motion(path: str | Path, *, unit_m: float | None = None) -> Motion:
     """Read a motion file, choosing the reader by suffix (:data:`MOTION_SUFFIXES`).
 
     ``.bvh`` (:func:`read_bvh`), ``.npz`` (:func:`read_npz_motion`), ``.csv`` joint positions in
-    either dialect (``<joint>_x_m`` columns with a ``.skeleton.json`` beside the clip:
-    :func:`effortface.train.motion_csv.read_positions_csv`; or ``<joint>_x`` columns with an
-    optional ``# parents:`` comment: :func:`read_positions_csv`) and ``.c3d`` (the Plug-in Gait
-    marker set: :func:`effortface.train.interop.c3d_motion.read_c3d`; other labelled points as
-    joints: :func:`effortface.train.motion_c3d.read_c3d`). The C3D readers import the ``c3d``
-    package only when called, so the runtime stays numpy and scipy only.
+    either dialect (``<joint>_x_m`` or ``<joint>_x`` columns:
+    :func:`effortface.train.motion_csv.read_positions_csv`) and ``.c3d`` (Plug-in Gait markers to
+    joint centres, or other labelled points as joints:
+    :func:`effortface.train.interop.c3d_motion.read_c3d`). Both modules are imported only when such
+    a file is read, and the C3D reader imports the ``c3d`` package only then, so the runtime stays
+    numpy and scipy only.
 
     Parameters
     ----------
@@ -278,123 +278,28 @@ def read_motion(path: str | Path, *, unit_m: float | None = None) -> Motion:
     """
     path = Path(path)
     suffix = path.suffix.lower()
-    if suffix in (".bvh", ".npz") and path.exists():  # a FIFO or device would block or read forever
+    if suffix in MOTION_SUFFIXES and path.exists():  # a FIFO or device would block or read forever
         check_regular_file(path, f"a motion file ({suffix})", MotionFormatError)
     if suffix == ".bvh":
         return read_bvh(path, unit_m=unit_m)
     if suffix == ".npz":
         return read_npz_motion(path)
     if suffix == ".csv":
-        from effortface.train.motion_csv import is_positions_csv
-        from effortface.train.motion_csv import read_positions_csv as read_skeleton_csv  # imports this module
-
-        return read_skeleton_csv(path) if is_positions_csv(path) else read_positions_csv(path)
+        return read_positions_csv(path)
     if suffix == ".c3d":
-        return _read_c3d(path)
+        from effortface.train.interop.c3d_motion import read_c3d  # imports the c3d package when called
+
+        return read_c3d(path)
     raise MotionFormatError(f"{path}: expected a motion file ending in {', '.join(MOTION_SUFFIXES)}, "
                             f"got suffix {suffix!r}")
 
 
-def _read_c3d(path: Path) -> Motion:
-    """A C3D clip: Plug-in Gait markers become joint centres (a file with most of the set is read as
-    Plug-in Gait, so a missing marker is named), other labelled points are joints."""
-    from effortface.train.interop.c3d_motion import PLUG_IN_GAIT, read_c3d, read_c3d_markers
-    from effortface.train.motion_c3d import read_c3d as read_c3d_points
-
-    markers, _ = read_c3d_markers(path)
-    plug_in_gait = len(set(PLUG_IN_GAIT) & set(markers)) >= len(PLUG_IN_GAIT) // 2
-    return read_c3d(path) if plug_in_gait else read_c3d_points(path)
-
-
-#: the first column of a joint-positions CSV
-POSITIONS_TIME_COLUMN = "t_s"
-#: tolerated spread of the frame intervals of a joint-positions CSV (fraction of the median)
-POSITIONS_DT_TOLERANCE = 0.05
-
-
 def read_positions_csv(path: str | Path) -> Motion:
-    """Read a joint-positions CSV: ``t_s,<joint>_x,<joint>_y,<joint>_z,...`` in metres, Z up.
+    """Thin alias of :func:`effortface.train.motion_csv.read_positions_csv` (the one joint-positions
+    CSV reader, both dialects), kept for code that imports it from here."""
+    from effortface.train.motion_csv import read_positions_csv as read  # imports this module
 
-    Lines starting with ``#`` are comments; an optional ``# parents: Spine=Hips, Head=Spine, ...``
-    comment gives the skeleton tree (joints not named there hang from the first joint, which is the
-    root). Energies need positions only, so the tree matters little; frames must be evenly spaced
-    (within 5 %).
-
-    Parameters
-    ----------
-    path : str or Path
-
-    Returns
-    -------
-    Motion
-        Without rotations.
-
-    Raises
-    ------
-    MotionFormatError
-        Header not of that form, a row of another length, a value that is not a number, fewer than
-        two frames, or uneven frame times; the message names the file and line.
-    """
-    path = Path(path)
-    try:
-        lines = path.read_text(encoding="utf-8").splitlines()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise MotionFormatError(f"{path}: expected a joint-positions CSV (UTF-8 text), found {exc}") from None
-    comments = [ln for ln in lines if ln.startswith("#")]
-    rows = [(i + 1, ln) for i, ln in enumerate(lines) if ln.strip() and not ln.startswith("#")]
-    if not rows:
-        raise MotionFormatError(f"{path}: expected a header t_s,<joint>_x,<joint>_y,<joint>_z,..., found no rows")
-    header_line, header = rows[0]
-    names = _positions_joint_names(path, header_line, header.split(","))
-    values = np.array([_positions_row(path, line, text, 1 + 3 * len(names)) for line, text in rows[1:]])
-    if len(values) < 2:
-        raise MotionFormatError(f"{path}: expected at least 2 frames, found {len(values)}")
-    dt = np.diff(values[:, 0])
-    median = float(np.median(dt))
-    if median <= 0 or np.abs(dt - median).max() > POSITIONS_DT_TOLERANCE * median:
-        raise MotionFormatError(f"{path}: column t_s: expected increasing, evenly spaced frame times, found "
-                                f"intervals from {dt.min():g} to {dt.max():g} s")
-    positions = values[:, 1:].reshape(len(values), len(names), 3)
-    parents = _positions_parents(path, names, comments)
-    return motion_from_positions(positions, names, parents, 1.0 / median, source=str(path))
-
-
-def _positions_joint_names(path: Path, line: int, header: list[str]) -> list[str]:
-    """Joint names from a ``t_s,<joint>_x,<joint>_y,<joint>_z,...`` header."""
-    cols = [c.strip() for c in header]
-    names = [c[:-2] for c in cols[1::3]]
-    expected = [POSITIONS_TIME_COLUMN] + [f"{n}_{axis}" for n in names for axis in "xyz"]
-    if cols != expected or not names:
-        raise MotionFormatError(f"{path}: line {line}: expected the header t_s,<joint>_x,<joint>_y,<joint>_z,... "
-                                f"(metres, Z up), found {','.join(cols)[:120]!r}")
-    return names
-
-
-def _positions_row(path: Path, line: int, text: str, n_columns: int) -> list[float]:
-    """One data row as floats (MotionFormatError naming the line otherwise)."""
-    cells = text.split(",")
-    try:
-        if len(cells) != n_columns:
-            raise ValueError
-        return [float(c) for c in cells]
-    except ValueError:
-        raise MotionFormatError(f"{path}: line {line}: expected {n_columns} numbers, found {text[:80]!r}") from None
-
-
-def _positions_parents(path: Path, names: list[str], comments: list[str]) -> list[int]:
-    """Parents from an optional ``# parents: child=parent, ...`` comment (default: the first joint)."""
-    parents = [-1] + [0] * (len(names) - 1)
-    for comment in comments:
-        key, _, spec = comment.lstrip("#").partition(":")
-        if key.strip().lower() != "parents":
-            continue
-        for pair in filter(None, (p.strip() for p in spec.split(","))):
-            child, _, parent = pair.partition("=")
-            if child.strip() not in names or parent.strip() not in names:
-                raise MotionFormatError(f"{path}: parents: expected child=parent joint names of the header, "
-                                        f"found {pair!r}")
-            parents[names.index(child.strip())] = names.index(parent.strip())
-    return parents
+    return read(path)
 
 
 # --------------------------------------------------------------------------------------------

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import sys
 import warnings
 from pathlib import Path
 
@@ -66,3 +67,75 @@ def test_an_occluded_point_is_named(shared_data: Path, tmp_path: Path) -> None:
     with pytest.raises(MotionFormatError, match=rf"gap.c3d: point '{bvh.joint_names[3]}': expected a position "
                                                 r"in every frame, found it occluded in 1 point-frames \(first at frame 40\)"):
         read_motion(path)
+
+
+# --------------------------------------------------------------------------------------------
+# the one C3D reader (effortface.train.interop.c3d_motion): labelled points and Plug-in Gait alike
+
+
+def _write_points(path: Path, labels: list[str], xyz: np.ndarray, units: str = "mm", fps: float = 100.0) -> Path:
+    """Labelled points (T, P, 3) in ``units`` as a C3D file declaring them."""
+    writer = c3d.Writer(point_rate=fps, analog_rate=0, point_units=f"{units:<4}")
+    writer.set_point_labels(labels)
+    frames = []
+    for frame in xyz:
+        points = np.zeros((len(labels), 5), dtype=np.float32)
+        points[:, :3] = frame
+        frames.append((points, np.zeros((0, 0), dtype=np.float32)))
+    with open(path, "wb") as fh, warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        writer.add_frames(frames)
+        writer.write(fh)
+    return path
+
+
+def _walk_xyz(n_frames: int = 20) -> np.ndarray:
+    """Two points moving 1 unit a frame along x, 40 and 90 units up."""
+    t = np.arange(n_frames, dtype=float)
+    return np.stack([np.column_stack([t, np.zeros_like(t), np.full_like(t, h)]) for h in (90.0, 40.0)], axis=1)
+
+
+def test_read_c3d_is_the_one_api_for_labelled_points_with_its_units_and_up_axis(tmp_path: Path) -> None:
+    from effortface.train.interop.c3d_motion import read_c3d
+
+    path = _write_points(tmp_path / "in.c3d", ["Hips", "LeftFoot"], _walk_xyz(), units="in")
+    motion = read_c3d(path)
+    assert motion.joint_names == ("Hips", "LeftFoot") and list(motion.parents) == [-1, 0]
+    np.testing.assert_allclose(motion.positions_m, _walk_xyz() * 0.0254, rtol=1e-6)
+    assert motion.fps == 100.0 and motion.positions_m.shape == read_motion(path).positions_m.shape
+    y_up = read_c3d(path, up_axis="y")
+    np.testing.assert_allclose(y_up.positions_m[..., 2], motion.positions_m[..., 1], atol=1e-9)
+    np.testing.assert_allclose(y_up.positions_m[..., 0], motion.positions_m[..., 2], rtol=1e-6)
+
+
+def test_an_all_zero_point_is_missing_in_labelled_points_too(tmp_path: Path) -> None:
+    """The one definition of a missing point: before, labelled points took an all-zero gap as a
+    position at the lab origin (a 2 m jump in one frame)."""
+    xyz = _walk_xyz()
+    xyz[7:9, 1] = 0.0
+    path = _write_points(tmp_path / "gap.c3d", ["Hips", "LeftFoot"], xyz)
+    with pytest.raises(MotionFormatError, match=r"gap\.c3d: point 'LeftFoot': expected a position in every frame, "
+                                                r"found it occluded in 2 point-frames \(first at frame 7\); fill"):
+        read_motion(path)
+
+
+def test_without_the_c3d_package_reading_and_writing_say_what_to_install(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from effortface.train.interop.c3d_motion import write_c3d_markers
+
+    path = _write_points(tmp_path / "clip.c3d", ["Hips", "LeftFoot"], _walk_xyz())
+    monkeypatch.setitem(sys.modules, "c3d", None)  # `import c3d` raises ImportError, as in the runtime's venv
+    expected = r"expected the 'c3d' package to read C3D files, found it not installed \(pip install 'c3d>=0\.5\.2,<0\.7'\)"
+    with pytest.raises(MotionFormatError, match=rf"clip\.c3d: {expected}"):
+        read_motion(path)
+    with pytest.raises(MotionFormatError, match=rf"new\.c3d: {expected}"):
+        write_c3d_markers(tmp_path / "new.c3d", {"Hips": _walk_xyz()[:, 0]}, 100.0)
+    assert not (tmp_path / "new.c3d").exists()
+
+
+def test_a_bad_up_axis_is_named(tmp_path: Path) -> None:
+    from effortface.core.errors import UserError
+    from effortface.train.interop.c3d_motion import read_c3d
+
+    with pytest.raises(UserError, match=r"up_axis: expected 'z' or 'y', found 'x'"):
+        read_c3d(tmp_path / "none.c3d", up_axis="x")

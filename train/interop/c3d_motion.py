@@ -1,10 +1,23 @@
-"""C3D motion: labelled markers -> joint centres -> a :class:`~effortface.train.motion.Motion`.
+"""C3D motion, the one reader: labelled points -> a :class:`~effortface.train.motion.Motion`.
 
-Read with the ``c3d`` package, imported only when a ``.c3d`` file is read (the runtime stays numpy
-and scipy only). Points are converted from ``POINT:UNITS`` (mm by default) to metres; the lab frame
-is taken as Z up (Vicon, Qualisys and Motion Analysis defaults; pass ``up_axis="y"`` otherwise).
-Frames where a marker is missing (residual < 0, or all zeros) are filled by linear interpolation
-over time; a marker missing in every frame is an error naming it.
+Read with the ``c3d`` package, imported only by :func:`import_c3d`, when a ``.c3d`` file is read or
+written (so :func:`effortface.train.motion.read_motion` and the runtime stay numpy and scipy only
+until then). Points are converted from ``POINT:UNITS`` (``mm``, ``cm``, ``m``, ``in``; mm when the
+parameter is absent) to metres; the lab frame is taken as Z up (Vicon, Qualisys and Motion
+Analysis defaults; pass ``up_axis="y"`` otherwise). A point is **missing** in a frame when its
+residual is negative (the C3D convention for an occluded marker), its position is all zeros or not
+finite. :func:`read_c3d` reads a file one of two ways:
+
+* **Plug-in Gait**, when the file holds at least half of :data:`PLUG_IN_GAIT`: the markers become
+  the joint centres below (a missing Plug-in Gait marker is then named). Frames where a marker is
+  missing are filled by linear interpolation over time; a point missing in every frame is an error
+  naming it.
+* **Labelled points**, otherwise: the points become joints named by their labels (a repeated or
+  empty label gets its index), the first point the root (the sync jump is looked for in its
+  height) and the others hanging from it: energies use positions only. Body segments are found
+  from the labels like any skeleton's joints (joint-centre exports such as ``LeftUpLeg``), or from
+  a mapping file. A point missing in a frame is refused naming the point and frame: fill the gaps
+  in the capture software first.
 
 **The Plug-in Gait marker set** (:data:`PLUG_IN_GAIT`) gives the joints of the skeleton below,
 named as the built-in CMU convention of :mod:`effortface.train.segments` expects, so the 14
@@ -47,9 +60,11 @@ import os
 import struct
 import warnings
 from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 
+from effortface.core.errors import UserError
 from effortface.train.motion import Motion, MotionFormatError, motion_from_positions
 
 #: Plug-in Gait marker labels used (T10, STRN, SACR, the PSIS are optional helpers)
@@ -68,7 +83,10 @@ SKELETON = (("Hips", ""), ("LeftUpLeg", "Hips"), ("LeftLeg", "LeftUpLeg"), ("Lef
             ("LeftHand", "LeftForeArm"), ("LeftHandIndex1", "LeftHand"), ("RightArm", "Neck1"),
             ("RightForeArm", "RightArm"), ("RightHand", "RightForeArm"),
             ("RightHandIndex1", "RightHand"))
-_UNITS_M = {"mm": 0.001, "cm": 0.01, "m": 1.0, "in": 0.0254}
+#: POINT:UNITS -> metres per unit (a file without the parameter is in mm)
+C3D_UNITS_M = {"mm": 0.001, "cm": 0.01, "m": 1.0, "in": 0.0254}
+#: the ``c3d`` versions read (as pyproject.toml requires)
+C3D_REQUIREMENT = "c3d>=0.5.2,<0.7"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -83,7 +101,86 @@ class MarkerSetOptions:
     head_top_offset_m: float = 0.08
 
 
-def read_c3d_markers(path: str | os.PathLike) -> tuple[dict[str, np.ndarray], float]:
+@dataclasses.dataclass(frozen=True)
+class C3dPoints:
+    """The labelled points of a C3D file, as read (no gap filled).
+
+    Attributes
+    ----------
+    labels : tuple of str
+        One unique name per point (a repeated or empty label gets its index).
+    positions_m : ndarray, shape (T, P, 3)
+        Positions in metres, in the file's lab frame.
+    missing : ndarray of bool, shape (T, P)
+        Where a point is missing (see the module docstring).
+    rate_hz : float
+        Frames per second (``POINT:RATE``).
+    """
+
+    labels: tuple[str, ...]
+    positions_m: np.ndarray
+    missing: np.ndarray
+    rate_hz: float
+
+
+def import_c3d(path: str | os.PathLike[str]) -> ModuleType:
+    """The ``c3d`` package, imported now (the one place that imports it); an error naming ``path``
+    and the requirement if it is not installed (the numpy/scipy-only runtime does not bring it)."""
+    try:
+        import c3d
+    except ImportError:
+        raise MotionFormatError(f"{path}: expected the 'c3d' package to read C3D files, found it not "
+                                f"installed (pip install '{C3D_REQUIREMENT}')") from None
+    module: ModuleType = c3d
+    return module
+
+
+def read_c3d_points(path: str | os.PathLike[str]) -> C3dPoints:
+    """Read the labelled points of a C3D file in metres, marking the missing ones.
+
+    Parameters
+    ----------
+    path : path-like
+        The ``.c3d`` file.
+
+    Returns
+    -------
+    C3dPoints
+
+    Raises
+    ------
+    MotionFormatError
+        The ``c3d`` package missing, a file it cannot read, an unknown unit, no points, fewer than
+        2 frames.
+    """
+    path = Path(path)
+    c3d = import_c3d(path)
+    try:
+        with open(path, "rb") as fh, warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # "No analog data found in file." is not our concern
+            reader = c3d.Reader(fh)
+            labels = [str(label).strip() for label in reader.point_labels]
+            rate_hz = float(reader.point_rate)
+            units = reader.get("POINT:UNITS")
+            unit = units.string_value.strip() if units is not None else "mm"
+            frames = np.array([points[:, :4] for _, points, _ in reader.read_frames()], dtype=float)
+    except FileNotFoundError:
+        raise MotionFormatError(f"{path}: expected a C3D file, found no such file") from None
+    except (OSError, ValueError, AssertionError, struct.error, IndexError, KeyError, AttributeError) as exc:
+        raise MotionFormatError(f"{path}: expected a C3D file, found {type(exc).__name__}: {exc}") from None
+    if unit.lower() not in C3D_UNITS_M:
+        raise MotionFormatError(f"{path}: POINT:UNITS: expected one of {', '.join(C3D_UNITS_M)}, found {unit!r}")
+    if frames.ndim != 3 or len(frames) < 2:
+        raise MotionFormatError(f"{path}: expected at least 2 frames of points, found {len(frames)}")
+    if frames.shape[1] == 0:
+        raise MotionFormatError(f"{path}: expected labelled points, found none")
+    xyz = frames[:, :, :3]
+    missing = (frames[:, :, 3] < 0) | ~np.isfinite(xyz).all(axis=2) | (xyz == 0).all(axis=2)
+    names = _unique((labels + [""] * frames.shape[1])[:frames.shape[1]])
+    return C3dPoints(tuple(names), xyz * C3D_UNITS_M[unit.lower()], missing, rate_hz)
+
+
+def read_c3d_markers(path: str | os.PathLike[str]) -> tuple[dict[str, np.ndarray], float]:
     """Labelled points of a C3D file in metres (gaps filled), and the point rate.
 
     Returns
@@ -94,43 +191,54 @@ def read_c3d_markers(path: str | os.PathLike) -> tuple[dict[str, np.ndarray], fl
     Raises
     ------
     MotionFormatError
-        Unreadable file, no frames, unknown units, a point missing in every frame.
+        As :func:`read_c3d_points`, and a point missing in every frame.
     """
-    import c3d  # lazy: only C3D readers pay for it
-
-    path = Path(path)
-    try:
-        with open(path, "rb") as fh, warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # "No analog data found in file."
-            reader = c3d.Reader(fh)
-            labels = [str(label).strip() for label in reader.point_labels]
-            rate_hz = float(reader.point_rate)
-            units = reader.get("POINT:UNITS")
-            unit = units.string_value.strip() if units is not None else "mm"
-            frames = np.array([pts[:, :4] for _, pts, _ in reader.read_frames()], dtype=float)
-    except FileNotFoundError:
-        raise MotionFormatError(f"{path}: expected a C3D file, found no such file") from None
-    except (OSError, ValueError, AssertionError, struct.error, IndexError, KeyError) as exc:
-        raise MotionFormatError(f"{path}: expected a C3D file, found {type(exc).__name__}: {exc}") from None
-    if unit.lower() not in _UNITS_M:
-        raise MotionFormatError(f"{path}: POINT:UNITS: expected one of {', '.join(_UNITS_M)}, found {unit!r}")
-    if frames.ndim != 3 or len(frames) < 2:
-        raise MotionFormatError(f"{path}: expected at least 2 frames of points, found {len(frames)}")
-    scale = _UNITS_M[unit.lower()]
-    return {label: _filled(path, label, frames[:, i]) * scale for i, label in enumerate(labels)}, rate_hz
+    points = read_c3d_points(path)
+    return _filled_markers(Path(path), points), points.rate_hz
 
 
-def _filled(path: Path, label: str, xyzr: np.ndarray) -> np.ndarray:
-    """A point's (T, 3) positions with missing frames linearly interpolated."""
-    valid = (xyzr[:, 3] >= 0) & np.any(xyzr[:, :3] != 0, axis=1) & np.all(np.isfinite(xyzr[:, :3]), axis=1)
-    if not valid.any():
-        raise MotionFormatError(f"{path}: point {label}: expected positions, found it missing in every frame")
-    t = np.arange(len(xyzr))
-    return np.column_stack([np.interp(t, t[valid], xyzr[valid, k]) for k in range(3)])
+def is_plug_in_gait(labels: tuple[str, ...] | list[str]) -> bool:
+    """Whether point labels hold at least half of the Plug-in Gait markers (:data:`PLUG_IN_GAIT`)."""
+    return len(set(PLUG_IN_GAIT) & set(labels)) >= len(PLUG_IN_GAIT) // 2
+
+
+def _filled_markers(path: Path, points: C3dPoints) -> dict[str, np.ndarray]:
+    """``label -> (T, 3)`` positions with the missing frames linearly interpolated."""
+    t = np.arange(len(points.positions_m))
+    markers = {}
+    for i, label in enumerate(points.labels):
+        valid = ~points.missing[:, i]
+        if not valid.any():
+            raise MotionFormatError(f"{path}: point {label}: expected positions, found it missing in every frame")
+        xyz = points.positions_m[:, i]
+        markers[label] = np.column_stack([np.interp(t, t[valid], xyz[valid, k]) for k in range(3)])
+    return markers
+
+
+def _check_visible(path: Path, points: C3dPoints) -> None:
+    """MotionFormatError naming the first missing point (by frame) and its frame."""
+    if points.missing.any():
+        frame, point = (int(i) for i in np.argwhere(points.missing)[0])
+        raise MotionFormatError(f"{path}: point {points.labels[point]!r}: expected a position in every frame, "
+                                f"found it occluded in {int(points.missing.sum())} point-frames (first at frame "
+                                f"{frame}); fill the gaps in the capture software")
+
+
+def _unique(labels: list[str]) -> list[str]:
+    """Labels made unique (a repeated or empty label gets its index)."""
+    seen: set[str] = set()
+    out = []
+    for i, label in enumerate(labels):
+        name = label if label and label not in seen else f"{label or 'point'}_{i}"
+        seen.add(name)
+        out.append(name)
+    return out
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+    """``v`` divided by its length along the last axis."""
+    unit: np.ndarray = v / np.linalg.norm(v, axis=-1, keepdims=True)
+    return unit
 
 
 def _need(path: Path, markers: dict[str, np.ndarray], labels: tuple[str, ...]) -> None:
@@ -164,7 +272,7 @@ def hip_centres(m: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
 
 
 def joint_centres(m: dict[str, np.ndarray], opts: MarkerSetOptions = MarkerSetOptions(),
-                  source: str | os.PathLike = "markers") -> dict[str, np.ndarray]:
+                  source: str | os.PathLike[str] = "markers") -> dict[str, np.ndarray]:
     """The joints of :data:`SKELETON` from Plug-in Gait markers (rules in the module docstring)."""
     _need(Path(source), m, PLUG_IN_GAIT)
     lateral, _, _ = pelvis_frame(m)
@@ -191,51 +299,61 @@ def joint_centres(m: dict[str, np.ndarray], opts: MarkerSetOptions = MarkerSetOp
     return j
 
 
-def read_c3d(path: str | os.PathLike, *, options: MarkerSetOptions = MarkerSetOptions(),
+def read_c3d(path: str | os.PathLike[str], *, options: MarkerSetOptions = MarkerSetOptions(),
              up_axis: str = "z") -> Motion:
-    """Read a C3D file with the Plug-in Gait marker set as a :class:`Motion` (metres, Z up).
+    """Read a C3D file as a :class:`Motion` (metres, Z up): Plug-in Gait joint centres or labelled points.
+
+    A file with at least half of :data:`PLUG_IN_GAIT` (:func:`is_plug_in_gait`) gives the joints of
+    :data:`SKELETON` by the joint-centre rules, its gaps filled; any other gives its labelled points
+    as joints, the first the root, and refuses a missing point (see the module docstring).
 
     Parameters
     ----------
     path : path-like
         The ``.c3d`` file.
     options : MarkerSetOptions
-        Subject widths and offsets of the joint-centre rules.
+        Subject widths and offsets of the joint-centre rules (Plug-in Gait files).
     up_axis : {"z", "y"}
         The lab frame's vertical axis (Y-up files are turned to Z up).
 
     Returns
     -------
     Motion
-        The joints of :data:`SKELETON`, without rotations.
+        Without rotations.
 
     Raises
     ------
     MotionFormatError
-        Unreadable file, missing markers (named), bad units.
+        As :func:`read_c3d_points`; a Plug-in Gait marker absent (named) or missing in every frame;
+        a labelled point missing in a frame (named with the frame).
+    UserError
+        ``up_axis`` not ``"z"`` or ``"y"``.
     """
     path = Path(path)
-    markers, rate_hz = read_c3d_markers(path)
+    if up_axis not in ("z", "y"):
+        raise UserError(f"up_axis: expected 'z' or 'y', found {up_axis!r}")
+    points = read_c3d_points(path)
     if up_axis == "y":
-        markers = {k: v[:, [2, 0, 1]] for k, v in markers.items()}
-    elif up_axis != "z":
-        raise MotionFormatError(f"{path}: up_axis: expected 'z' or 'y', found {up_axis!r}")
-    joints = joint_centres(markers, options, path)
+        points = dataclasses.replace(points, positions_m=points.positions_m[..., [2, 0, 1]])
+    if not is_plug_in_gait(points.labels):
+        _check_visible(path, points)
+        parents = [-1] + [0] * (len(points.labels) - 1)
+        return motion_from_positions(points.positions_m, points.labels, parents, points.rate_hz, source=str(path))
+    joints = joint_centres(_filled_markers(path, points), options, path)
     names = [name for name, _ in SKELETON]
     parents = [names.index(parent) if parent else -1 for _, parent in SKELETON]
     positions_m = np.stack([joints[n] for n in names], axis=1)
-    return motion_from_positions(positions_m, names, parents, rate_hz, source=str(path))
+    return motion_from_positions(positions_m, names, parents, points.rate_hz, source=str(path))
 
 
-def write_c3d_markers(path: str | os.PathLike, markers: dict[str, np.ndarray], rate_hz: float) -> Path:
+def write_c3d_markers(path: str | os.PathLike[str], markers: dict[str, np.ndarray], rate_hz: float) -> Path:
     """Write labelled points (metres, (T, 3) each) as a C3D file in millimetres (tests, tools).
 
     Written atomically through :func:`effortface.core.fileio.atomic_write`.
     """
-    import c3d
-
     from effortface.core.fileio import atomic_write
 
+    c3d = import_c3d(path)
     labels = list(markers)
     stacked_mm = np.stack([markers[k] for k in labels], axis=1) * 1000.0      # (T, P, 3)
     writer = c3d.Writer(point_rate=float(rate_hz), analog_rate=0.0, point_units="mm  ")
