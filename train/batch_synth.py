@@ -21,12 +21,12 @@ from typing import Any
 
 from effortface.core.errors import UserError
 from effortface.train.curves_io import units_path, write_curves
-from effortface.train.motion import read_motion
+from effortface.train.motion import MOTION_SUFFIXES, read_motion
 from effortface.train.parallel import ComputeSettings, compute_backend, map_unordered
 from effortface.train.runtime import Character, FaceModel, load_model
 
 #: suffixes of the clips a batch takes (those :func:`read_motion` reads)
-CLIP_SUFFIXES = (".bvh", ".npz", ".csv", ".c3d")
+CLIP_SUFFIXES = MOTION_SUFFIXES
 
 
 @dataclasses.dataclass(frozen=True)

@@ -29,13 +29,12 @@ from effortface.core.fileio import refuse_overwrite
 from effortface.core.jobs import JobResult, Jobs
 from effortface.train.curves_io import CURVE_FORMATS, write_curves
 from effortface.train.energy import EnergyCurves, looped, work_and_power
-from effortface.train.motion import Motion, read_motion
+from effortface.train.motion import MOTION_SUFFIXES, Motion, read_motion
 from effortface.train.motion_csv import is_positions_csv
 from effortface.train.runtime import Character, FaceModel, load_model
 from effortface.core.events import Emitter
 
 EXPORT_FORMATS = CURVE_FORMATS
-MOTION_SUFFIXES = (".bvh", ".npz", ".c3d", ".csv")
 MAX_LOOPS = 200
 
 

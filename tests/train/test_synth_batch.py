@@ -91,3 +91,13 @@ def test_an_existing_units_sidecar_is_not_replaced_silently(clips_dir: Path, tmp
     assert main(["synth", "default", str(clips_dir), "--out", str(out)]) == 2
     assert "found 1 existing (first amp_humanoid_walk.units.json" in capsys.readouterr().err
     assert sidecar.read_text() == "{}\n" and not (out / "amp_humanoid_walk.csv").exists()
+
+
+def test_one_list_of_motion_suffixes() -> None:
+    """Batch synth, the Synthesize stage and motion attach take exactly what read_motion reads."""
+    from effortface.train import attach, batch_synth, synth_session
+    from effortface.train.motion import MOTION_SUFFIXES
+
+    assert batch_synth.CLIP_SUFFIXES is MOTION_SUFFIXES
+    assert synth_session.MOTION_SUFFIXES is MOTION_SUFFIXES
+    assert set(attach.CLIP_FORMATS) == set(MOTION_SUFFIXES)
