@@ -79,7 +79,7 @@ def test_a_folder_without_clips_is_one_error_line(tmp_path: Path, capsys) -> Non
     empty.mkdir()
     assert main(["synth", "default", str(empty), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "expected motion clips (.bvh, .npz, .csv, .c3d), found none" in err[0]
+    assert len(err) == 1 and "expected motion clips (.bvh, .npz, .c3d, .csv), found none" in err[0]
 
 
 def test_an_existing_units_sidecar_is_not_replaced_silently(clips_dir: Path, tmp_path: Path, capsys) -> None:
