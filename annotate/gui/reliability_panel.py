@@ -134,12 +134,12 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         left_widget.setLayout(left)
         left_widget.setMinimumWidth(2 * _PICTURE_MIN[0] + 30)  # the two pictures side by side
         left_widget.setMaximumWidth(460)
-        row = QtWidgets.QHBoxLayout()
-        row.addWidget(left_widget, 2)
-        row.addWidget(self._build_report(), 5)
+        self._row = QtWidgets.QHBoxLayout()
+        self._row.addWidget(left_widget, 1)  # the pictures grow with its width, up to 460 px
+        self._row.addWidget(self._build_report(), 2)
         layout = QtWidgets.QVBoxLayout(self)
         layout.addWidget(self.status)
-        layout.addLayout(row, 1)
+        layout.addLayout(self._row, 1)
 
     def _build_report(self) -> QtWidgets.QWidget:
         box = QtWidgets.QGroupBox("Agreement report")
@@ -385,6 +385,8 @@ class QtReliabilityPanel(QtWidgets.QWidget):
     def _show_report(self) -> None:
         rep = self.report
         self.results.setCurrentIndex(0 if rep is None else 1)
+        # rating blind, the pictures take half the room; with the report, its tables take two thirds
+        self._row.setStretch(1, 1 if rep is None else 2)
         if rep is None:
             _fill(self.per_pose, [])
             _fill(self.per_shape, [])

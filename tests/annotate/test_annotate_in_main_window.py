@@ -167,3 +167,19 @@ def test_the_reliability_round_fits_1280x800(qtbot, window: MainWindow) -> None:
         assert table.horizontalHeader().length() <= table.viewport().width()
     for picture in (panel.image, panel.face):
         assert abs(picture.height() - max(98, min(round(0.75 * picture.width()), 260))) <= 1
+
+
+def test_rating_blind_the_pictures_get_the_report_s_room(qtbot, window: MainWindow) -> None:
+    shutil.copytree(SAMPLES / "reliability", window.sessions_dir / "reliability")
+    _click_stage(window, "annotate")
+    stage = window.stages["annotate"]
+    stage.tabs.setCurrentIndex(1)
+    for rater in ("R1", "R8"):  # the report shown, then a new rater's blind round
+        stage.rater.setText(rater)
+        QTest.keyClick(stage.rater, Key.Key_Return)
+        _settle()
+        if rater == "R1":
+            with_report = stage.reliability.image.width()
+    panel = stage.reliability
+    assert panel.report is None and panel.image.width() > 1.3 * with_report
+    assert abs(panel.image.height() - min(round(0.75 * panel.image.width()), 260)) <= 1
