@@ -46,7 +46,7 @@ from effortface.capture_tool.session import VIDEO_FRAMES_CSV, list_sessions, rea
 
 SPEEDS = (0.25, 0.5, 1.0, 2.0, 4.0)
 #: the side panel (sessions, rater) is this wide, and may shrink to SIDE_MIN_WIDTH on a small screen
-SIDE_WIDTH, SIDE_MIN_WIDTH = 250, 170
+SIDE_WIDTH, SIDE_MIN_WIDTH = 230, 170
 PLAY_TICK_MS = 15
 WEIGHT_NUDGE = 0.05
 #: a selection of keys is scaled by this factor (]) or its inverse ([) about its mean weight
@@ -102,13 +102,14 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         pictures = QtWidgets.QHBoxLayout()
         pictures.addLayout(self._captioned(self.video_view, "Video"), 4)
         pictures.addLayout(self._captioned(self.face_view, "Face from the current weights"), 3)
-        protocol_scroll = QtWidgets.QScrollArea()  # a short top pane scrolls the panel, never clips it
-        protocol_scroll.setWidget(self.protocol)
-        protocol_scroll.setWidgetResizable(True)
-        protocol_scroll.setFrameShape(QtWidgets.QFrame.Shape.NoFrame)
-        protocol_scroll.setHorizontalScrollBarPolicy(QtCore.Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
-        protocol_scroll.setFixedWidth(self.protocol.sizeHint().width() + 16)
-        pictures.addWidget(protocol_scroll, 0)
+        # a top pane made short with the splitter scrolls the panel, never clips it (at 1280x800 it fits)
+        self.protocol_scroll = QtWidgets.QScrollArea()
+        self.protocol_scroll.setWidget(self.protocol)
+        self.protocol_scroll.setWidgetResizable(True)
+        self.protocol_scroll.setFrameShape(QtWidgets.QFrame.Shape.NoFrame)
+        self.protocol_scroll.setHorizontalScrollBarPolicy(QtCore.Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+        self.protocol_scroll.setFixedWidth(self.protocol.sizeHint().width() + 16)
+        pictures.addWidget(self.protocol_scroll, 0)
         top = QtWidgets.QWidget()
         top_layout = QtWidgets.QVBoxLayout(top)
         top_layout.setContentsMargins(0, 0, 0, 0)
@@ -120,6 +121,9 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         self.splitter.addWidget(self._build_curves_pane())
         self.splitter.setStretchFactor(0, 6)
         self.splitter.setStretchFactor(1, 4)
+        # the curves' size hints would take half the height: start at 55:45 (the protocol panel fits
+        # unscrolled at 1280x800 with room to spare, the video gets the rest)
+        self.splitter.setSizes([550, 450])
         help_label = QtWidgets.QLabel(HELP_TEXT, wordWrap=True)
         help_label.setStyleSheet("color:#505050;")
         layout = QtWidgets.QVBoxLayout(self)

@@ -65,7 +65,7 @@ class QtProtocolPanel(QtWidgets.QWidget):
         self.shapes.setFocusPolicy(QtCore.Qt.FocusPolicy.NoFocus)
         for i, name in enumerate(self.session.blendshape_names, start=1):
             self.shapes.addItem(f"{i}. {name}")
-        self.shapes.setMaximumHeight(22 * len(self.session.blendshape_names) + 8)
+        self.shapes.setVerticalScrollBarPolicy(QtCore.Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
         self.shapes.currentRowChanged.connect(self._on_row)
         self.drives = QtWidgets.QLabel(wordWrap=True)
         self.next_button = QtWidgets.QPushButton("Next blendshape (N)")
@@ -114,6 +114,8 @@ class QtProtocolPanel(QtWidgets.QWidget):
         buttons.addWidget(self.delete_button)
         layout = QtWidgets.QVBoxLayout(self)
         layout.setContentsMargins(4, 0, 4, 0)
+        layout.setSpacing(4)  # with the list as tall as its rows, the panel fits a 1280x800 screen unscrolled
+        form.setVerticalSpacing(4)
         layout.addWidget(QtWidgets.QLabel("<b>Blendshapes, in keying order</b>"))
         layout.addWidget(self.shapes)
         layout.addWidget(self.drives)
@@ -137,6 +139,7 @@ class QtProtocolPanel(QtWidgets.QWidget):
             font.setBold(i == row)
             item.setFont(font)
         self.shapes.setCurrentRow(row)
+        self._fit_shapes()
         shape = m.annotations.blendshapes.shapes[row]
         self.drives.setText(f"Keying <b>{shape.name}</b>: {shape.drives}")
         self._refresh_next()
@@ -152,6 +155,11 @@ class QtProtocolPanel(QtWidgets.QWidget):
         self.readout.setText(self._readout())
         self._updating = False
 
+    def _fit_shapes(self) -> None:
+        """The blendshape list exactly as tall as its rows: no empty band, no scrolling."""
+        rows = sum(self.shapes.sizeHintForRow(i) for i in range(self.shapes.count()))
+        self.shapes.setFixedHeight(rows + 2 * self.shapes.frameWidth())
+
     def _refresh_next(self) -> None:
         nxt = self.session.next_blendshape
         done = self.session.blendshape in self.session.passes_done
@@ -162,12 +170,14 @@ class QtProtocolPanel(QtWidgets.QWidget):
                                     "Key this blendshape over the whole video first (the paper's protocol)")
 
     def _readout(self) -> str:
-        rows = []
+        """Every blendshape's weight at this frame, two to a row (the current one in blue)."""
+        cells = []
         for name, w in self.session.weights().items():
             text = "-" if math.isnan(w) else f"{w:.2f}"
             style = " style='color:#1f5fbf'" if name == self.session.blendshape else ""
-            rows.append(f"<tr{style}><td>{name}</td><td align='right'>&nbsp;{text}</td></tr>")
-        return "<b>Weights at this frame</b><table>" + "".join(rows) + "</table>"
+            cells.append(f"<td{style}>{name}</td><td{style} align='right'>&nbsp;{text}&nbsp;&nbsp;&nbsp;</td>")
+        rows = ("<tr>" + "".join(cells[i:i + 2]) + "</tr>" for i in range(0, len(cells), 2))
+        return "<b>Weights at this frame</b><table cellspacing='0'>" + "".join(rows) + "</table>"
 
     # ----------------------------------------------------------------------------- to the model
     def _set_weight(self, weight: float) -> None:

@@ -38,6 +38,9 @@ _PAIR_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#8c564b", "#e377c2
 _FLAG_BRUSH = QtGui.QBrush(QtGui.QColor("#f8d7da"))
 #: the spin box value that means "not rated yet" (shown as "unrated"; never saved)
 UNRATED = -0.01
+#: smallest pose frame and face picture (4:3): small enough for the report's tables at 1280x800
+_PICTURE_MIN = (130, 98)
+_ROW_PX = 22
 
 
 def _table(headers: list[str], fit: bool = False) -> QtWidgets.QTableWidget:
@@ -45,14 +48,23 @@ def _table(headers: list[str], fit: bool = False) -> QtWidgets.QTableWidget:
     table = QtWidgets.QTableWidget(0, len(headers))
     table.setHorizontalHeaderLabels(headers)
     table.verticalHeader().setVisible(False)
-    table.verticalHeader().setDefaultSectionSize(22)
+    table.verticalHeader().setDefaultSectionSize(_ROW_PX)
     table.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
     table.setSelectionBehavior(QtWidgets.QAbstractItemView.SelectionBehavior.SelectRows)
-    table.horizontalHeader().setSectionResizeMode(QtWidgets.QHeaderView.ResizeMode.ResizeToContents)
-    table.horizontalHeader().setStretchLastSection(True)
-    if fit:
-        table.horizontalHeader().setMinimumSectionSize(36)
+    header = table.horizontalHeader()
+    if fit:  # before the stretch is set (it keeps the size the last column has then as its minimum),
+        header.setMinimumSectionSize(36)  # so the last column shrinks to its content, not to 100 pixels
+        header.setDefaultSectionSize(36)
+    header.setSectionResizeMode(QtWidgets.QHeaderView.ResizeMode.ResizeToContents)
+    header.setStretchLastSection(True)
     return table
+
+
+def _fit_rows(table: QtWidgets.QTableWidget, rows: int) -> None:
+    """At least as tall as its header and ``rows`` rows (with a horizontal scroll bar's room if it has one)."""
+    scroll = table.horizontalScrollBar().sizeHint().height() if table.horizontalScrollBar().isVisible() else 0
+    table.setMinimumHeight(table.horizontalHeader().sizeHint().height() + rows * _ROW_PX
+                           + 2 * table.frameWidth() + scroll)
 
 
 def _fill(table: QtWidgets.QTableWidget, rows: list[list[str]], flagged: Collection[int] = frozenset()) -> None:
@@ -92,11 +104,12 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         self.propose_button.clicked.connect(self.propose)
         self.poses = _table(["pose", "session", "frame", "rated"])
         self.poses.currentCellChanged.connect(lambda row, *_: self._show_pose(row))
-        self.image = QtImageView("pose frame", (150, 112))
-        self.face = QtImageView("face from your weights", (150, 112))
+        self.image = QtImageView("pose frame", _PICTURE_MIN)
+        self.face = QtImageView("face from your weights", _PICTURE_MIN)
         for view in (self.image, self.face):  # as tall as their width allows (4:3), no empty band
             view.setSizePolicy(QtWidgets.QSizePolicy.Policy.Expanding, QtWidgets.QSizePolicy.Policy.Fixed)
         self.face.setToolTip("The face drawn from the weights you typed (unrated: 0): match it to the frame")
+        self.image.installEventFilter(self)
         self.spins: dict[str, QtWidgets.QDoubleSpinBox] = {}
         form = QtWidgets.QFormLayout()
         self.save_button = QtWidgets.QPushButton("Save my rating of this pose (Ctrl+Enter)")
@@ -119,14 +132,14 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         left.addWidget(rate_box, 0)
         left_widget = QtWidgets.QWidget()
         left_widget.setLayout(left)
-        left_widget.setMinimumWidth(330)
+        left_widget.setMinimumWidth(2 * _PICTURE_MIN[0] + 30)  # the two pictures side by side
         left_widget.setMaximumWidth(460)
-        row = QtWidgets.QHBoxLayout()
-        row.addWidget(left_widget, 2)
-        row.addWidget(self._build_report(), 5)
+        self._row = QtWidgets.QHBoxLayout()
+        self._row.addWidget(left_widget, 1)  # the pictures grow with its width, up to 460 px
+        self._row.addWidget(self._build_report(), 2)
         layout = QtWidgets.QVBoxLayout(self)
         layout.addWidget(self.status)
-        layout.addLayout(row, 1)
+        layout.addLayout(self._row, 1)
 
     def _build_report(self) -> QtWidgets.QWidget:
         box = QtWidgets.QGroupBox("Agreement report")
@@ -137,7 +150,7 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         self.per_pose = _table(["pose", "|diff| %", "review"], fit=True)  # sorted worst first
         self.per_shape = _table(["blendshape", "n", "diff %", "ICC(A,1)", "95 % CI", "ICC(C,1)", "95 % CI",
                                  "alpha"], fit=True)
-        self.per_shape.setMinimumHeight(6 * 22 + 8)  # the four blendshapes and "overall", no scrolling
+        _fit_rows(self.per_shape, 5)  # the four blendshapes and "all", no scrolling (again when filled)
         self.per_shape.setToolTip("n: rated items; diff %: mean |difference| between raters in % of the weight "
                                   "range; ICC(A,1) absolute agreement, ICC(C,1) consistency; alpha: Krippendorff")
         self.pairs = _table(["pair", "n", "bias", "lower limit", "upper limit"], fit=True)
@@ -161,6 +174,7 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         lower.addWidget(self.pairs, 3)
         lower_widget = QtWidgets.QWidget()
         lower_widget.setLayout(lower)
+        _fit_rows(self.pairs, 3)  # three raters' pairs unscrolled (the worst poses come first above them)
         results = QtWidgets.QSplitter(QtCore.Qt.Orientation.Vertical)
         results.setChildrenCollapsible(False)
         results.addWidget(self.per_shape)
@@ -215,16 +229,20 @@ class QtReliabilityPanel(QtWidgets.QWidget):
             self._form.addRow(name, spin)
         self.save_button.setEnabled(bool(names))
 
-    def resizeEvent(self, event: QtGui.QResizeEvent) -> None:  # noqa: N802 - Qt override
-        """Keep the pose frame and the face 4:3 at the width they get."""
-        super().resizeEvent(event)
-        height = max(112, min(int(self.image.width() * 0.75), 260))
+    def _fit_pictures(self) -> None:
+        """Keep the pose frame and the face 4:3 at the width they get (on the frame's own resize: the
+        panel's resize comes before its children's, so their width would be the previous one)."""
+        height = max(_PICTURE_MIN[1], min(int(self.image.width() * 0.75), 260))
         for view in (self.image, self.face):
             if view.height() != height:
                 view.setFixedHeight(height)
 
     def eventFilter(self, watched: QtCore.QObject, event: QtCore.QEvent) -> bool:  # noqa: N802 - Qt override
-        """Enter in a rating box: the next blendshape's box, and after the last one, save the pose."""
+        """The pose frame resized: fit both pictures. Enter in a rating box: the next blendshape's
+        box, and after the last one, save the pose."""
+        if watched is self.image and event.type() == QtCore.QEvent.Type.Resize:
+            self._fit_pictures()
+            return False
         if (isinstance(event, QtGui.QKeyEvent) and event.type() == QtCore.QEvent.Type.KeyPress
                 and event.key() in (QtCore.Qt.Key.Key_Return, QtCore.Qt.Key.Key_Enter)
                 and not event.modifiers() & QtCore.Qt.KeyboardModifier.ControlModifier
@@ -367,6 +385,8 @@ class QtReliabilityPanel(QtWidgets.QWidget):
     def _show_report(self) -> None:
         rep = self.report
         self.results.setCurrentIndex(0 if rep is None else 1)
+        # rating blind, the pictures take half the room; with the report, its tables take two thirds
+        self._row.setStretch(1, 1 if rep is None else 2)
         if rep is None:
             _fill(self.per_pose, [])
             _fill(self.per_shape, [])
@@ -379,6 +399,7 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         _fill(self.per_shape, [[s.name, str(s.n_items), f"{s.disagreement_pct:.1f}", f"{s.icc_a1:.3f}",
                                 format_ci(s.icc_a1_ci), f"{s.icc_c1:.3f}", format_ci(s.icc_c1_ci),
                                 f"{s.alpha:.3f}"] for s in [*rep.per_blendshape, rep.overall]])
+        _fit_rows(self.per_shape, self.per_shape.rowCount())
         _fill(self.pairs, [[f"{p.rater_a}-{p.rater_b}", str(p.n), f"{p.bias:+.3f}", f"{p.loa_low:+.3f}",
                             f"{p.loa_high:+.3f}"] for p in rep.pairs])
         self._plot_bland_altman(rep)

@@ -3,7 +3,7 @@
 :class:`QtTimeline` views an :class:`~effortface.annotate.annotate_session.AnnotateSession`:
 
 - top plot: heart rate (valid samples; gaps where the strap lost contact) with the exercise
-  phases shaded and named;
+  phases shaded and named (a name elided to its band's width on screen, in full in its tooltip);
 - bottom plot, the curve editor: the rater's own curve of the current blendshape (their other
   blendshapes thinner, each in its own colour, each shown or hidden with :meth:`QtTimeline.set_shown`),
   its key-frames as points. Click a key to select it (and go to its frame), Shift+click to add keys
@@ -24,7 +24,7 @@ from collections.abc import Callable
 
 import numpy as np
 import pyqtgraph as pg
-from PySide6 import QtCore, QtWidgets
+from PySide6 import QtCore, QtGui, QtWidgets
 
 from effortface.annotate.annotate_session import AnnotateSession
 
@@ -123,6 +123,7 @@ class QtTimeline(pg.GraphicsLayoutWidget):
         self.extra: set[int] = set()  # keys added to the selection with Shift+click
         self.hidden: set[str] = set()  # blendshapes whose curve the rater switched off
         self.t_s = session.times.t_s
+        self.phase_labels: list[tuple[pg.LinearRegionItem, pg.InfLineLabel, str]] = []
         self.hr_plot = self.addPlot(row=0, col=0)
         self._curve_box = _ClickViewBox()
         self.curve_plot = self.addPlot(row=1, col=0, viewBox=self._curve_box)
@@ -165,8 +166,23 @@ class QtTimeline(pg.GraphicsLayoutWidget):
                                              brush=_PHASE_BRUSHES[i // 2 % 2], pen=pg.mkPen(None))
                 region.setZValue(-10)
                 plot.addItem(region)
-                pg.InfLineLabel(region.lines[0], e.label, position=0.93, anchors=[(0, 0), (0, 0)],
-                                color="#404040")
+                label = pg.InfLineLabel(region.lines[0], "", position=0.93, anchors=[(0, 0), (0, 0)],
+                                        color="#404040")
+                self.phase_labels.append((region, label, e.label))
+        plot.vb.sigXRangeChanged.connect(self._fit_phase_labels)
+        plot.vb.sigResized.connect(self._fit_phase_labels)
+
+    def _fit_phase_labels(self, *_: object) -> None:
+        """Elide each phase's name to its band's width on screen, so that no name runs into the next."""
+        view = self.hr_plot.vb
+        for region, label, text in self.phase_labels:
+            lo, hi = region.getRegion()
+            width_px = view.mapViewToScene(QtCore.QPointF(hi, 0)).x() - view.mapViewToScene(QtCore.QPointF(lo, 0)).x()
+            metrics = QtGui.QFontMetricsF(label.textItem.font())
+            # the label sits a few pixels into its band (its text item's margins): keep them on both sides
+            shown = metrics.elidedText(text, QtCore.Qt.TextElideMode.ElideRight, max(width_px - 12, 0.0))
+            label.setFormat(shown.replace("{", "{{").replace("}", "}}"))  # a format string: braces doubled
+            label.setToolTip(text)
 
     def _build_curves(self) -> None:
         plot = self.curve_plot

@@ -139,6 +139,10 @@ class QtCaptureStage(QtWidgets.QWidget):
         self.notes.setFixedHeight(64)
         self.event_list = QtWidgets.QListWidget()
         self.event_list.setMinimumHeight(110)
+        # a long event (a link error's text) wraps in the fixed-width panel instead of scrolling sideways
+        self.event_list.setWordWrap(True)
+        self.event_list.setResizeMode(QtWidgets.QListView.ResizeMode.Adjust)
+        self.event_list.setHorizontalScrollBarPolicy(QtCore.Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
         self.correct_to = QtWidgets.QComboBox()
         self.correct_to.addItems(list(catalog_models()))
         self.correct_button = QtWidgets.QPushButton("Correct phase")

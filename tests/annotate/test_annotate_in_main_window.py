@@ -102,3 +102,84 @@ def test_annotate_fits_a_1280x800_screen(qtbot, window: MainWindow, tmp_path: Pa
     QtWidgets.QApplication.processEvents()
     assert window.width() == 1280
     assert window.grab().save(str(tmp_path / "annotate_1280x800.png"))
+
+
+def _settle() -> None:
+    for _ in range(3):
+        QtWidgets.QApplication.processEvents()
+
+
+def test_the_protocol_panel_fits_1280x800_unscrolled(qtbot, window: MainWindow) -> None:
+    """Blendshapes in keying order, Next, Weight, Set key and the weights at this frame, with no scroll
+    bar, for every blendshape (two of them have a 'Keying ...' line on two lines)."""
+    _, editor = _open(window)
+    protocol, scroll = editor.protocol, editor.protocol_scroll
+    for name in editor.session.blendshape_names:
+        editor.session.set_blendshape(name)
+        _settle()
+        assert scroll.verticalScrollBar().maximum() == 0, name
+        assert protocol.sizeHint().height() <= scroll.viewport().height(), name
+        last = protocol.shapes.visualItemRect(protocol.shapes.item(protocol.shapes.count() - 1))
+        assert last.bottom() < protocol.shapes.viewport().height(), name  # every blendshape in the list
+        assert protocol.readout.geometry().bottom() <= scroll.viewport().height(), name
+
+
+def test_phase_names_stay_inside_their_bands(qtbot, window: MainWindow) -> None:
+    """Short bouts show their name elided (in full in the tooltip); zoomed in, in full."""
+    _, editor = _open(window)
+    _settle()
+    timeline = editor.timeline
+    view = timeline.hr_plot.vb
+
+    def overflowing() -> list[str]:
+        out = []
+        for region, label, text in timeline.phase_labels:
+            assert label.toolTip() == text
+            right_px = view.mapViewToScene(QtCore.QPointF(region.getRegion()[1], 0)).x()
+            if label.isVisible() and label.sceneBoundingRect().right() > right_px:
+                out.append(label.textItem.toPlainText())
+        return out
+
+    assert len(timeline.phase_labels) == 8 and overflowing() == []
+    shown = [label.textItem.toPlainText() for _, label, _ in timeline.phase_labels]
+    assert "treadmill" in shown and any(s.endswith("\u2026") for s in shown)  # long bouts in full, short elided
+    editor.session.go_to_time(300.0)  # inside the 60 s bout from 270 s
+    timeline.zoom(8.0)
+    _settle()
+    assert overflowing() == []
+    assert [label.textItem.toPlainText() for region, label, _ in timeline.phase_labels
+            if region.getRegion()[0] == 270.0] == ["treadmill"]
+
+
+def test_the_reliability_round_fits_1280x800(qtbot, window: MainWindow) -> None:
+    """The report's tables need no scroll bar; the pose pictures are 4:3 from the first showing."""
+    shutil.copytree(SAMPLES / "reliability", window.sessions_dir / "reliability")
+    _click_stage(window, "annotate")
+    stage = window.stages["annotate"]
+    stage.tabs.setCurrentIndex(1)
+    stage.rater.setText("R1")  # R1 finished the sample round: the report is shown
+    QTest.keyClick(stage.rater, Key.Key_Return)
+    panel = stage.reliability
+    qtbot.waitUntil(lambda: panel.report is not None and panel.per_shape.isVisible())
+    _settle()
+    for table in (panel.per_shape, panel.pairs):
+        assert table.horizontalScrollBar().maximum() == 0 and table.verticalScrollBar().maximum() == 0
+        assert table.horizontalHeader().length() <= table.viewport().width()
+    for picture in (panel.image, panel.face):
+        assert abs(picture.height() - max(98, min(round(0.75 * picture.width()), 260))) <= 1
+
+
+def test_rating_blind_the_pictures_get_the_report_s_room(qtbot, window: MainWindow) -> None:
+    shutil.copytree(SAMPLES / "reliability", window.sessions_dir / "reliability")
+    _click_stage(window, "annotate")
+    stage = window.stages["annotate"]
+    stage.tabs.setCurrentIndex(1)
+    for rater in ("R1", "R8"):  # the report shown, then a new rater's blind round
+        stage.rater.setText(rater)
+        QTest.keyClick(stage.rater, Key.Key_Return)
+        _settle()
+        if rater == "R1":
+            with_report = stage.reliability.image.width()
+    panel = stage.reliability
+    assert panel.report is None and panel.image.width() > 1.3 * with_report
+    assert abs(panel.image.height() - min(round(0.75 * panel.image.width()), 260)) <= 1

@@ -139,6 +139,19 @@ def test_untouched_defaults_are_never_written_and_record_waits_for_confirmed_fie
     assert "(registry)" in form.confirmed.text()
 
 
+def test_a_long_event_wraps_in_the_list(qtbot, window):
+    """A link error's long text wraps in the fixed-width events list (no sideways scrolling)."""
+    stage = window.stages["capture"]
+    window.resize(1280, 800)
+    stage._list_events([Event(14.0, "device_gap", "ant", "device reports readiness to read but returned no "
+                              "data (device disconnected or multiple access on port?)")])
+    QtWidgets.QApplication.processEvents()
+    events = stage.event_list
+    rect = events.visualItemRect(events.item(0))
+    assert events.horizontalScrollBar().maximum() == 0 and rect.width() <= events.viewport().width()
+    assert rect.height() >= 2 * events.fontMetrics().height()  # on two lines or more
+
+
 # ------------------------------------------------------------------------ live heart rate
 def test_live_heart_rate_before_record(qtbot, window, tmp_path):
     stage = window.stages["capture"]

@@ -242,6 +242,26 @@ def test_clip_combo_shows_the_loaded_clip(qtbot, stage: QtSynthStage, shared_dat
     assert "elsewhere" in stage.clip_label.text()
 
 
+def test_clip_combo_elides_a_long_path_in_the_middle(qtbot, stage: QtSynthStage, shared_data: Path) -> None:
+    """A clip in a session's motion folder: the box keeps the file name in view (not 'P02_2026...')."""
+    from effortface.train.gui.synth_stage import QtSynthStage as Stage, SynthSession as Session
+
+    view = Stage(Session(background=True), motion_dir=SAMPLE)  # clips under <session>/motion/
+    qtbot.addWidget(view)
+    try:
+        clip = next(SAMPLE.glob("*/motion/*.bvh"))
+        assert view.load_clip(clip)
+        combo = view.clip_combo
+        combo.show()
+        assert combo.currentText() == str(clip.relative_to(SAMPLE))
+        shown = combo.elided_text()
+        assert shown.endswith(clip.name) and "\u2026" in shown
+        assert combo.fontMetrics().horizontalAdvance(shown) < combo.width()
+    finally:
+        view.shutdown()
+        view.session.wait(30)
+
+
 def test_hiding_the_stage_pauses_playback(qtbot, stage: QtSynthStage) -> None:
     """Showing another stage of the main window (a QStackedWidget) pauses the clip."""
     from PySide6 import QtWidgets

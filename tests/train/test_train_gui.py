@@ -402,3 +402,60 @@ def test_no_session_column_is_clipped(qtbot, stage: QtTrainStage, size: tuple[in
     table = stage.picker.table
     assert table.horizontalScrollBar().maximum() == 0       # every column in view
     assert table.viewport().width() >= table.horizontalHeader().length()
+
+
+def test_columns_that_repeat_others_are_hidden(tmp_path: Path) -> None:
+    from effortface.train.gui.train_stage import _redundant_columns
+    from effortface.train.train_session import SessionEntry
+
+    def entry(session_id: str = "P01_20260112-093000_cardio", **changes) -> SessionEntry:
+        values = dict(path=tmp_path, session_id=session_id, participant="P01", exercise="cardio",
+                      training_level=2.5, raters=("R1",), complete=True, tracks="R1 4/4")
+        return SessionEntry(**{**values, **changes})
+
+    all_hidden = {"participant", "exercise", "complete", "raters"}
+    assert _redundant_columns([entry(), entry(raters=(), tracks="")]) == all_hidden
+    assert _redundant_columns([entry(), entry("P01_20260112-093000")]) == all_hidden - {"exercise"}
+    assert _redundant_columns([entry(participant="P07")]) == all_hidden - {"participant"}
+    assert _redundant_columns([entry(complete=False)]) == all_hidden - {"complete"}
+    assert _redundant_columns([entry(tracks="unreadable")]) == all_hidden - {"raters"}
+
+
+@pytest.mark.qt_log_ignore("This plugin does not support propagateSizeHints")
+def test_the_stage_fits_the_main_window_at_1280x800(qtbot, tmp_path: Path, monkeypatch) -> None:
+    """Beside the stage list: every session column and the Fig. 2 / Fig. 3 / comparison tables in view."""
+    import shutil
+
+    from effortface.app import MainWindow
+
+    lab = tmp_path / "lab"
+    for name in CARDIO:
+        shutil.copytree(SAMPLE / name, lab / name, ignore=shutil.ignore_patterns("serial"))
+    monkeypatch.setenv("EFFORTFACE_SETTINGS", str(tmp_path / "settings.ini"))
+    window = MainWindow(lab, QtCore.QSettings(str(tmp_path / "settings.ini"), QtCore.QSettings.Format.IniFormat))
+    qtbot.addWidget(window)
+    window.resize(1280, 800)
+    window.show()
+    qtbot.waitExposed(window)
+    try:
+        stage = window.show_stage("train")
+        _pick_cardio_small(stage)
+        _train(qtbot, stage)
+        table = stage.picker.table
+        shown = [table.horizontalHeaderItem(c).text() for c in range(table.columnCount())
+                 if not table.isColumnHidden(c)]
+        assert shown == ["use", "session", "TL", "complete tracks"]
+        for tab, results in enumerate((stage.hr_results.table, stage.face_results.table, table)):
+            stage.tabs.setCurrentIndex(min(tab, 1))
+            qtbot.waitUntil(lambda t=results: t.isVisible())
+            assert results.horizontalScrollBar().maximum() == 0
+            assert results.horizontalHeader().length() <= results.viewport().width()
+        assert "HR RMSE\nbpm" in [stage.hr_results.table.horizontalHeaderItem(c).text()
+                                 for c in range(stage.hr_results.table.columnCount())]
+        stage.tabs.setCurrentWidget(stage.run_log)
+        for plot in (stage.run_log.scatter, stage.run_log.residuals):  # no plot wider than its widget
+            qtbot.waitUntil(plot.isVisible)
+            assert plot.getPlotItem().geometry().width() <= plot.viewport().width()
+    finally:
+        window.shutdown()
+        stage.session.wait(30)

@@ -22,7 +22,7 @@ from PySide6 import QtCore, QtGui, QtWidgets
 from effortface.annotate.face import render_face
 from effortface.core.gui.qt_compat import guard_none_refcount
 from effortface.core.errors import UserError
-from effortface.core.gui.widgets import QtElidedLabel, caption
+from effortface.core.gui.widgets import QtElidedComboBox, QtElidedLabel, caption
 from effortface.core.participant import SEXES
 from effortface.train.runtime import AGE_RANGE, HEIGHT_RANGE_M, MASS_RANGE_KG, TRAINING_LEVEL_RANGE
 from effortface.train.synth_session import (
@@ -552,9 +552,10 @@ class QtSynthStage(QtWidgets.QWidget):
     def _clip_combo(self) -> QtWidgets.QComboBox:
         """The clips of the motion folder after a neutral entry; its width does not follow the names.
 
-        The list that drops down is as wide as the names need (up to 640 pixels).
+        The list that drops down is as wide as the names need (up to 640 pixels); the box elides the
+        chosen clip's path in the middle (its file name stays in view).
         """
-        combo = QtWidgets.QComboBox()
+        combo = QtElidedComboBox()
         combo.setToolTip(f"motion clips found in {self.motion_dir}")
         combo.setSizeAdjustPolicy(QtWidgets.QComboBox.SizeAdjustPolicy.AdjustToMinimumContentsLengthWithIcon)
         combo.setMinimumContentsLength(18)

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import pyqtgraph as pg
-from PySide6 import QtCore, QtWidgets
+from PySide6 import QtCore, QtGui, QtWidgets
 
 from effortface.annotate.completeness import RULE_TEXT as COMPLETENESS_RULE
 from effortface.core.gui.qt_compat import guard_none_refcount
@@ -39,8 +39,26 @@ def _fmt(value: Any) -> str:
     return f"{value:.3g}" if isinstance(value, (float, np.floating)) else str(value)
 
 
+#: a column narrowed to fit its table keeps at least this width (its text wraps)
+_MIN_WRAPPED_PX = 80
+
+
+def _two_lines(label: str) -> str:
+    """``label`` broken at the space nearest its middle."""
+    spaces = [i for i, ch in enumerate(label) if ch == " "]
+    if not spaces:
+        return label
+    i = min(spaces, key=lambda k: abs(2 * k - len(label)))
+    return f"{label[:i]}\n{label[i + 1:]}"
+
+
 class QtFrameTable(QtWidgets.QTableWidget):
-    """A read-only table showing a DataFrame (floats to 3 significant digits)."""
+    """A read-only table showing a DataFrame (floats to 3 significant digits).
+
+    A column label wider than the column's values goes on two lines, so that short numbers under
+    long labels (``HR RMSE bpm``) take the width of the numbers; rows are as tall as their text. A
+    table still wider than its view narrows its widest column, whose text then wraps.
+    """
 
     def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
@@ -58,6 +76,28 @@ class QtFrameTable(QtWidgets.QTableWidget):
             for c, value in enumerate(row):
                 self.setItem(r, c, QtWidgets.QTableWidgetItem(_fmt(value)))
         self.resizeColumnsToContents()
+        header = self.horizontalHeader()
+        for c, label in enumerate(frame.columns):
+            if header.sectionSizeHint(c) > self.sizeHintForColumn(c):
+                self.setHorizontalHeaderItem(c, QtWidgets.QTableWidgetItem(_two_lines(str(label))))
+        self._fit_width()
+
+    def _fit_width(self) -> None:
+        """Columns as wide as their content, the widest narrowed (its text wrapped) if they overflow."""
+        self.resizeColumnsToContents()
+        header = self.horizontalHeader()
+        # room left by a vertical scroll bar, shown or not: wrapped rows may bring one
+        room = self.maximumViewportSize().width() - self.verticalScrollBar().sizeHint().width()
+        excess = header.length() - room
+        if excess > 0 and self.columnCount():
+            widest = max(range(self.columnCount()), key=header.sectionSize)
+            header.resizeSection(widest, max(header.sectionSize(widest) - excess, _MIN_WRAPPED_PX))
+        self.resizeRowsToContents()
+
+    def resizeEvent(self, event: QtGui.QResizeEvent) -> None:  # noqa: N802 - Qt override
+        """Fit the columns to the new width."""
+        super().resizeEvent(event)
+        self._fit_width()
 
 
 def _plot(title: str, y_label: str) -> pg.PlotWidget:
@@ -70,6 +110,26 @@ def _plot(title: str, y_label: str) -> pg.PlotWidget:
 
 
 # --------------------------------------------------------------------------- data and settings
+
+
+def _redundant_columns(entries: list[Any]) -> set[str]:
+    """Session columns that say nothing the others do not (hidden, so the stage fits 1280x800).
+
+    ``participant`` and ``exercise``: the session id (``<code>_<date>-<time>_<label>``) names them,
+    unless a session's does not; ``complete``: the lab lists finished sessions only, so it shows
+    only if one is not; ``raters``: the complete tracks name every rater, unless a session's tracks
+    could not be read.
+    """
+    hidden = set()
+    if all(e.session_id.startswith(f"{e.participant}_") for e in entries):
+        hidden.add("participant")
+    if all(e.session_id.endswith(f"_{e.exercise}") for e in entries):
+        hidden.add("exercise")
+    if all(e.complete for e in entries):
+        hidden.add("complete")
+    if all(e.tracks not in ("", "unreadable") or not e.raters for e in entries):
+        hidden.add("raters")
+    return hidden
 
 
 class QtDataPicker(QtWidgets.QGroupBox):
@@ -86,6 +146,7 @@ class QtDataPicker(QtWidgets.QGroupBox):
         self.table = QtWidgets.QTableWidget(0, len(_SESSION_COLUMNS))
         self.table.setHorizontalHeaderLabels(list(_SESSION_COLUMNS))
         self.table.verticalHeader().setVisible(False)
+        self.table.verticalHeader().setDefaultSectionSize(self.table.fontMetrics().height() + 8)  # 12 fit
         self.table.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
         self.table.horizontalHeader().setSectionResizeMode(   # the last column takes the room left
             len(_SESSION_COLUMNS) - 1, QtWidgets.QHeaderView.ResizeMode.Stretch)
@@ -156,6 +217,9 @@ class QtDataPicker(QtWidgets.QGroupBox):
                 if c == len(_SESSION_COLUMNS) - 1:
                     cell.setToolTip("each rater's complete tracks / tracks: " + COMPLETENESS_RULE)
                 self.table.setItem(r, c, cell)
+        hidden = _redundant_columns(shown)
+        for c, name in enumerate(_SESSION_COLUMNS):
+            self.table.setColumnHidden(c, name in hidden)
         self.table.resizeColumnsToContents()
         self._fit_table_width()
         self.table.blockSignals(False)
@@ -165,7 +229,7 @@ class QtDataPicker(QtWidgets.QGroupBox):
         """As wide as its columns (no column clipped), up to 640 pixels (then it scrolls)."""
         header = self.table.horizontalHeader()
         columns = sum(max(self.table.sizeHintForColumn(c), header.sectionSizeHint(c))
-                      for c in range(self.table.columnCount()))
+                      for c in range(self.table.columnCount()) if not self.table.isColumnHidden(c))
         needed = columns + self.table.verticalScrollBar().sizeHint().width() + 2 * self.table.frameWidth() + 2
         self.table.setMinimumWidth(min(needed, 640))
 
@@ -440,7 +504,10 @@ class QtRunLog(QtWidgets.QWidget):
 
     @staticmethod
     def _plot(title: str, x_label: str, y_label: str) -> pg.PlotWidget:
-        w = pg.PlotWidget(background="w", title=title)
+        w = pg.PlotWidget(background="w")
+        # a title sets the plot's smallest width: at its default size the long one is wider than the
+        # plot gets at 1280x800, and the plot's right edge (the last tick label) would be cut off
+        w.setTitle(title, size="9pt")
         w.showGrid(x=True, y=True, alpha=0.2)
         w.setLabel("bottom", x_label)
         w.setLabel("left", y_label)

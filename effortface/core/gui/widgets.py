@@ -1,4 +1,4 @@
-"""Small widgets shared by the stages: captions that wrap, labels that elide.
+"""Small widgets shared by the stages: captions that wrap, labels and combo boxes that elide.
 
 Both keep a stage's minimum width independent of its texts (long captions, file names, paths),
 so that the stages fit a 1280 x 800 window beside the main window's stage list.
@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from PySide6 import QtCore, QtGui, QtWidgets
 
-__all__ = ["QtElidedLabel", "caption"]
+__all__ = ["QtElidedComboBox", "QtElidedLabel", "caption", "elide_path"]
 
 
 def caption(text: str, parent: QtWidgets.QWidget | None = None) -> QtWidgets.QLabel:
@@ -85,3 +85,52 @@ class QtElidedLabel(QtWidgets.QLabel):
         self.style().drawItemText(painter, self.contentsRect(), int(self.alignment()), self.palette(),
                                   self.isEnabled(), self.elided_text(), self.foregroundRole())
         painter.end()
+
+
+def elide_path(metrics: QtGui.QFontMetrics, path: str, width_px: int) -> str:
+    """``path`` shortened to ``width_px``: its folders elided first, so the file name stays whole.
+
+    Parameters
+    ----------
+    metrics : QFontMetrics
+        The font the text is painted in.
+    path : str
+        A path, ``/`` or ``\\`` separated.
+    width_px : int
+        The room in pixels.
+
+    Returns
+    -------
+    str
+        ``path`` if it fits, else its folders elided in the middle before the whole file name (a
+        file name wider than the room by itself is elided in the middle).
+    """
+    middle = QtCore.Qt.TextElideMode.ElideMiddle
+    cut = max(path.rfind("/"), path.rfind("\\")) + 1  # after the last separator (0: none)
+    folders, name = path[:cut], path[cut:]
+    room = width_px - metrics.horizontalAdvance(name)  # for the folders, with their ellipsis
+    if metrics.horizontalAdvance(path) <= width_px or not folders or room < metrics.horizontalAdvance("\u2026/"):
+        return metrics.elidedText(path, middle, width_px)
+    return metrics.elidedText(folders, middle, room) + name
+
+
+class QtElidedComboBox(QtWidgets.QComboBox):
+    """A combo box of file paths that shortens its current text to its width (:func:`elide_path`);
+    the list that drops down shows the whole entries."""
+
+    def elided_text(self) -> str:
+        """The current text as painted at the current width."""
+        option = QtWidgets.QStyleOptionComboBox()
+        self.initStyleOption(option)
+        field = self.style().subControlRect(QtWidgets.QStyle.ComplexControl.CC_ComboBox, option,
+                                            QtWidgets.QStyle.SubControl.SC_ComboBoxEditField, self)
+        return elide_path(self.fontMetrics(), self.currentText(), field.width())
+
+    def paintEvent(self, event: QtGui.QPaintEvent) -> None:
+        """Paint the frame and arrow as usual, the text elided."""
+        painter = QtWidgets.QStylePainter(self)
+        option = QtWidgets.QStyleOptionComboBox()
+        self.initStyleOption(option)
+        painter.drawComplexControl(QtWidgets.QStyle.ComplexControl.CC_ComboBox, option)
+        option.currentText = self.elided_text()
+        painter.drawControl(QtWidgets.QStyle.ControlElement.CE_ComboBoxLabel, option)
