@@ -9,7 +9,7 @@ normalised weights in the blendshape set's order:
 - :class:`RuleFaceModel`: the paper's empirical rules (section 4.1.1), deterministic, no training;
   the default model until a trained one exists and a baseline after.
 
-numpy and scipy only (the runtime imports this module).
+numpy only (the runtime imports this module).
 """
 
 from __future__ import annotations
@@ -20,10 +20,10 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from scipy import signal
 
 from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
 from effortface.core.errors import UserError
+from effortface.train import iir
 
 #: SVR input features, in order, and their units.
 FEATURE_NAMES = ("w_per_kg", "p_per_kg", "nhr", "epoc_norm")
@@ -138,12 +138,11 @@ def filter_weights(weights: Any, dt_s: float, tau_s: Any) -> np.ndarray:
     y = np.array(weights, dtype=float)
     if y.shape[0] == 0:
         return y
-    for b, tau in enumerate(np.broadcast_to(np.asarray(tau_s, dtype=float), y.shape[1:])):
-        if tau <= 0:
-            continue
+    taus = np.broadcast_to(np.asarray(tau_s, dtype=float), y.shape[1:])
+    for tau in np.unique(taus[taus > 0]):  # the blendshapes sharing a time constant together
         gain = -np.expm1(-dt_s / tau)
-        for _ in range(2):  # y[k] = (1 - gain) y[k-1] + gain x[k], from the first value
-            y[:, b], _ = signal.lfilter([gain], [1.0, gain - 1.0], y[:, b], zi=[(1 - gain) * y[0, b]])
+        stage = [gain, 0.0, 0.0, 1.0, gain - 1.0, 0.0]  # y[k] = (1 - gain) y[k-1] + gain x[k]
+        y[:, taus == tau] = iir.sosfilt(np.array([stage, stage]), y[:, taus == tau])  # from the first value
     return y
 
 
