@@ -727,14 +727,14 @@ class EnergyStream:
         parts = [pos.reshape(*self._batch, -1)]
         if rot is not None:
             parts.append(rot[..., self.body.frame_joint, :, :].reshape(*self._batch, -1))
-        flat = self._filter.step(np.concatenate(parts, axis=-1), dt_s)
+        flat = self._filter.step(np.concatenate(parts, axis=-1) if len(parts) > 1 else parts[0], dt_s)
         n_pos = parts[0].shape[-1]
         cur = (flat[..., :n_pos].reshape(pos.shape),
                None if rot is None else flat[..., n_pos:].reshape(*self._batch, -1, 3, 3))
-        energy = self._energy(cur, dt_s)
+        energy = self._energy(cur, dt_s)  # (S, characters)
         rate = np.zeros(self._batch)
         if self._frame >= 2:
-            rate = np.sum(np.abs(energy - self._prev_e), axis=-1) / self.body.mass_kg
+            rate = np.sum(np.abs(energy - self._prev_e), axis=0).reshape(self._batch) / self.body.mass_kg
         self._prev_e = energy
         self._frame += 1
         return self._work.push(rate, float(dt_s)), self._power.push(rate, float(dt_s))
@@ -761,8 +761,8 @@ class EnergyStream:
         return pos, rot
 
     def _energy(self, cur: tuple[np.ndarray, np.ndarray | None], dt_s: float) -> np.ndarray:
-        """Total energy per segment ([N,] S) at the half frame before this one (at this frame for the
-        first): :func:`kinematic_energies`' causal scheme, from the previous frame's kept values."""
+        """Total energy per segment (S, characters) at the half frame before this one (at this frame
+        for the first): :func:`kinematic_energies`' causal scheme, from the previous frame's values."""
         pos, rot = cur
         n = int(np.prod(self._batch, dtype=int))  # characters: 1 for a single stream
         layout = self._layout
@@ -780,7 +780,7 @@ class EnergyStream:
         if layout.has_back_load:
             layout.add_back_load(pot, trans, mid[3], (point - prev[4]) / dt_s)
         self._prev, self._prev_rot = (com, u, limb, hip_line, point), rot
-        return (pot + trans + rot_e).T.reshape(*self._batch, -1)
+        return pot + trans + rot_e
 
 
 class EnergyCrowd(EnergyStream):
