@@ -143,11 +143,16 @@ def filter_frames(x: np.ndarray, sos: np.ndarray, *, zero_phase: bool) -> np.nda
     -------
     ndarray, same shape as ``x``
     """
-    flat = x.reshape(x.shape[0], -1)  # frames first: effortface.train.iir filters along axis 0
-    if zero_phase:
-        padlen = max(min(3 * (2 * len(sos) + 1), flat.shape[0] - 1), 0)  # scipy's default padding
-        return iir.sosfiltfilt(sos, flat, padlen).reshape(x.shape)
-    return iir.sosfilt(sos, flat).reshape(x.shape)
+    return np.moveaxis(_filter_time_last(np.moveaxis(np.asarray(x), 0, -1), sos, zero_phase), -1, 0)
+
+
+def _filter_time_last(x: Any, sos: np.ndarray, zero_phase: bool) -> np.ndarray:
+    """:func:`filter_frames` along the last axis of ``x`` (or of the stack of a sequence of (c_i, T)
+    arrays, see :func:`effortface.train.iir.sosfilt`)."""
+    if not zero_phase:
+        return iir.sosfilt(sos, x)
+    n_frames = x.shape[-1] if isinstance(x, np.ndarray) else np.shape(x[0])[-1]
+    return iir.sosfiltfilt(sos, x, max(min(3 * (2 * len(sos) + 1), n_frames - 1), 0))  # scipy's padding
 
 
 # --------------------------------------------------------------------------------------------
@@ -276,11 +281,12 @@ class _Layout:
         return cls(mixer.reshape(len(mixer), -1), n_seg, seg(body.com_frac), m + seg(body.load_kg), m,
                    inertia, np.asarray(body.back_load_kg, dtype=float), body.trunk_index)
 
-    def points(self, pos_flat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def points(self, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Segment CMs and long-axis vectors (distal - proximal end), each (3, S, M), and the
-        left-minus-right hip vector (3, M), of flat joint positions (M, 3 J): one matrix product."""
+        left-minus-right hip vector (3, M), of joint positions (3 J, M) ordered (joint, axis): one
+        matrix product."""
         n = self.n_segments
-        ends = self.mixer @ pos_flat.T
+        ends = self.mixer @ pos
         prox = ends[:3 * n].reshape(3, n, -1)
         limb = ends[3 * n:6 * n].reshape(3, n, -1) - prox
         return prox + self.com_frac * limb, limb, ends[6 * n:6 * n + 3] - ends[6 * n + 3:]
@@ -344,10 +350,20 @@ def kinematic_energies(
     potential_j, translational_j, rotational_j : ndarray, shape (T, S)
         Loads are included in their segment's energy.
     """
+    pos = np.asarray(pos_m, dtype=float).reshape(len(pos_m), -1).T
+    rot = None if frame_rot is None else np.asarray(frame_rot, dtype=float).reshape(len(frame_rot), -1).T
+    pot, trans, rot_e = _time_last_energies(pos, rot, dt_s, body, centred)
+    return pot.T, trans.T, rot_e.T
+
+
+def _time_last_energies(pos: np.ndarray, rot: np.ndarray | None, dt_s: float, body: BodyModel,
+                        centred: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`kinematic_energies` on time-last arrays: positions (3 J, T) ordered (joint, axis),
+    frame rotations (9 S, T) ordered (segment, row, column) or None; energies (S, T)."""
     layout = _Layout.of(body)
-    com, limb, hip_line = layout.points(pos_m.reshape(len(pos_m), -1))
-    rot = None if frame_rot is None else \
-        np.ascontiguousarray(np.asarray(frame_rot, dtype=float).transpose(2, 3, 1, 0))  # (3, 3, S, T)
+    com, limb, hip_line = layout.points(pos)
+    if rot is not None:
+        rot = rot.reshape(layout.n_segments, 3, 3, -1).transpose(1, 2, 0, 3)  # (3, 3, S, T), a view
     u = _unit(limb)[0]
     if centred:
         v = _central_diff(com, dt_s)
@@ -364,7 +380,7 @@ def kinematic_energies(
         point = layout.back_load_point(com, hip_line)
         v_point = _central_diff(point, dt_s) if centred else _backward_diff(point, dt_s)
         layout.add_back_load(pot, trans, point if centred else _half_frames(point), v_point)
-    return pot.T, trans.T, rot_e.T
+    return pot, trans, rot_e
 
 
 def _on_used_joints(body: BodyModel) -> tuple[BodyModel, np.ndarray]:
@@ -384,12 +400,15 @@ def _filtered_kinematics(
     motion: Motion, used: np.ndarray, frame_joint: np.ndarray, cutoff_hz: float, zero_phase: bool,
     use_rotations: bool,
 ) -> tuple[np.ndarray, np.ndarray | None]:
-    """Filtered positions of the ``used`` joints and filtered frame-joint rotations (or None)."""
+    """Filtered positions of the ``used`` joints (3 U, T) and filtered frame-joint rotations (9 S, T)
+    or None, time last (each joint's values go straight into the filter's buffer)."""
     sos = butterworth_sos(cutoff_hz, motion.fps)
-    pos = filter_frames(motion.positions_m[:, used], sos, zero_phase=zero_phase)
+    pos = _filter_time_last([motion.positions_m[:, j].T for j in used], sos, zero_phase)
     if motion.rotations is None or not use_rotations:
         return pos, None
-    return pos, filter_frames(motion.rotations[:, frame_joint], sos, zero_phase=zero_phase)
+    n_frames = motion.n_frames
+    rot = [motion.rotations[:, j].reshape(n_frames, 9).T for j in frame_joint]
+    return pos, _filter_time_last(rot, sos, zero_phase)
 
 
 def _used_joints(body: BodyModel) -> np.ndarray:
@@ -428,8 +447,8 @@ def segment_energies(
     _check_body(motion, body)
     on_used, used = _on_used_joints(body)  # the other joints do not enter the energies
     pos, rot = _filtered_kinematics(motion, used, body.frame_joint, cutoff_hz, zero_phase, use_rotations)
-    pot, trans, rot_e = kinematic_energies(pos, rot, 1.0 / motion.fps, on_used, centred=zero_phase)
-    return SegmentEnergies(motion.t_s, pot, trans, rot_e, body.segment_names)
+    pot, trans, rot_e = _time_last_energies(pos, rot, 1.0 / motion.fps, on_used, zero_phase)
+    return SegmentEnergies(motion.t_s, pot.T, trans.T, rot_e.T, body.segment_names)
 
 
 def _check_body(motion: Motion, body: BodyModel) -> None:
@@ -766,7 +785,7 @@ class EnergyStream:
         pos, rot = cur
         n = int(np.prod(self._batch, dtype=int))  # characters: 1 for a single stream
         layout = self._layout
-        com, limb, hip_line = layout.points(pos.reshape(n, -1))
+        com, limb, hip_line = layout.points(pos.reshape(n, -1).T)
         u = _unit(limb)[0]
         point = layout.back_load_point(com, hip_line) if layout.has_back_load else hip_line
         if rot is not None:

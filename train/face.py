@@ -158,7 +158,7 @@ def filter_weights(weights: Any, dt_s: float, tau_s: Any) -> np.ndarray:
     for tau in np.unique(taus[taus > 0]):  # the blendshapes sharing a time constant together
         gain = -np.expm1(-dt_s / tau)
         stage = [gain, 0.0, 0.0, 1.0, gain - 1.0, 0.0]  # y[k] = (1 - gain) y[k-1] + gain x[k]
-        y[:, taus == tau] = iir.sosfilt(np.array([stage, stage]), y[:, taus == tau])  # from the first value
+        y[:, taus == tau] = iir.sosfilt(np.array([stage, stage]), y[:, taus == tau].T).T  # from the first value
     return y
 
 
