@@ -9,6 +9,9 @@ normalised weights in the blendshape set's order:
 - :class:`RuleFaceModel`: the paper's empirical rules (section 4.1.1), deterministic, no training;
   the default model until a trained one exists and a baseline after.
 
+For big crowds, :class:`SvrSurrogate` stands in for an :class:`SvrModel` with far fewer kernel terms
+(within :data:`SURROGATE_MAX_ERROR` on the training range; the crowd's ``surrogate`` option).
+
 numpy only (the runtime imports this module).
 """
 
@@ -38,6 +41,9 @@ _MAX_FACTORED_EXPONENT = 600.0
 #: Values per block of the single-precision kernel matrix (2 MB of float32: the L2 cache); measured
 #: on 2,500 rows x 8,000 support vectors, 32-128 rows per block run at the speed of one ``exp``.
 _SINGLE_BLOCK_VALUES = 512 * 1024
+#: Bound on the float32 error of :meth:`SvrModel.predict` (``single_precision``) per unit of a
+#: blendshape's sum |alpha|: float32's unit roundoff, 2^-24, on every kernel term (measured: 2-3e-8).
+SINGLE_PRECISION_ERROR_PER_ALPHA = 6e-8
 #: The largest error (weight units) a :class:`SvrSurrogate` may make against its exact SVR on the
 #: held-out points of the training range it checks (choice: 0.1 % of the weight range, below what
 #: float32 kernels cost a C = 100 model; the surrogates fitted so far stay under 1e-4).
@@ -294,10 +300,11 @@ class SvrModel:
         single_precision : bool
             Evaluate the kernels in float32 (all blendshapes in one block of rows at a time: one
             product, one ``exp``): about 2x faster for crowds, but each kernel term is rounded to
-            float32, so the error grows with the dual coefficients: about 3e-8 x sum |alpha|
-            (measured: 6.5e-3 of the weight range over the training range of the benchmark's
-            C = 100 model, 2,250 support vectors per blendshape and sum |alpha| = 2.2e5; 6e-4 on
-            its crowd; 1e-12 in float64). Off by default.
+            float32, so the error grows with the dual coefficients: at most
+            :data:`SINGLE_PRECISION_ERROR_PER_ALPHA` (6e-8) x sum |alpha| per blendshape (measured
+            2-3e-8 x: 6.5e-3 of the weight range over the training range of the benchmark's C = 100
+            model, 2,250 support vectors per blendshape and sum |alpha| = 2.2e5; 6e-4 on its crowd;
+            1e-12 in float64). Off by default.
 
         Returns
         -------
