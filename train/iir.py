@@ -84,8 +84,9 @@ def steady_state(sos: np.ndarray, x0: np.ndarray) -> np.ndarray:
     """The filter's state (q, channels) for a constant input ``x0`` (channels,): scipy's ``sosfilt_zi``
     times ``x0``."""
     a_mat, b_vec, _, _ = _state_space(sos)
-    unit = np.linalg.solve(np.eye(b_vec.size) - a_mat, b_vec)
-    return unit[:, None] * np.asarray(x0, dtype=float)[None, :]
+    unit: np.ndarray = np.linalg.solve(np.eye(b_vec.size) - a_mat, b_vec)
+    state: np.ndarray = unit[:, None] * np.asarray(x0, dtype=float)[None, :]
+    return state
 
 
 def sosfilt(sos: np.ndarray, x: Any, state: np.ndarray | None = None) -> np.ndarray:
