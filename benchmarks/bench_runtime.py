@@ -165,7 +165,7 @@ def bench_crowd_positions(model: FaceModel, n_chars: int, frames: int, motion: M
     per_frame = (time.perf_counter() - t0) / frames
     print(f"  step (positions in), {n_chars} characters: {per_frame * 1e3:6.2f} ms/frame -> "
           f"{n_chars * (1 / 60) / per_frame:5.0f} characters in real time per core "
-          "(energies are per character, in Python)")
+          "(energies vectorised over the characters, exact float64 face)")
 
 
 def bench_memory(model: FaceModel, skeleton: Motion, n: int = 50) -> None:
