@@ -303,7 +303,7 @@ class SvrModel:
             float32, so the error grows with the dual coefficients: at most
             :data:`SINGLE_PRECISION_ERROR_PER_ALPHA` (6e-8) x sum |alpha| per blendshape (measured
             2-3e-8 x: 6.5e-3 of the weight range over the training range of the benchmark's C = 100
-            model, 2,250 support vectors per blendshape and sum |alpha| = 2.2e5; 6e-4 on its crowd;
+            model, 2,250 support vectors per blendshape and sum |alpha| = 2.2e5; 8e-4 on its crowd;
             1e-12 in float64). Off by default.
 
         Returns
