@@ -11,11 +11,19 @@ Prints figures and ratios against a baseline measured in the same run:
    local Dask cluster of 1 and 2 workers.
 3. **Long BVH clips** (the real jumping-jacks clip tiled to 10 min and 1 h at 120 Hz): read time and
    peak memory (own process each), against the whole-file float64 parse (``BVH_CHUNK_FRAMES`` as
-   large as the clip); whole-process ``effortface synth`` time for the 10-minute clip in x real time.
-4. **Crowd from positions**: characters per core at 60 FPS with a ~2,000-support-vector SVR model,
-   float64 and float32, through ``CrowdStream.step(positions)``.
+   large as the clip); whole-process ``effortface synth`` time for the 10-minute clip in x real time
+   (interpreter start-up and imports included; best and median of 3 runs), with the default model
+   and with each ``--svr-model`` bundle.
+4. **Crowd from positions**: characters per core at 60 FPS (one BLAS thread) with a
+   ~2,000-support-vector SVR model (best frame, and the median), through ``CrowdStream.step(positions)``: the exact face in
+   float64 (the baseline), in float32 and the compact surrogate (``surrogate=True``); the time
+   split between the energies and physiology + face (``step_work`` on the same work); each
+   option's max |weight - float64| against its stated bound; the floor of an exact float32 face.
 
-Run: ``python benchmarks/bench_scale.py [--participants 10 30 100] [--skip train,synth,bvh,crowd]``.
+Clips come from ``../shared/data``, else the repository's ``tests/data`` (``bench_data.py``).
+
+Run: ``python benchmarks/bench_scale.py [--participants 10 30 100] [--skip train,synth,bvh,crowd]
+[--svr-model DIR] [--crowd 2500]``.
 """
 
 from __future__ import annotations
@@ -35,8 +43,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-CLIP = ROOT.parent / "shared" / "data" / "motion" / "cmu_13_29_jumping_jacks_120fps.bvh"
-SQUATS = ROOT.parent / "shared" / "data" / "motion" / "cmu_13_29_squats_120fps.bvh"
+from bench_data import DATA  # noqa: E402  (../shared/data, else tests/data)
+
+CLIP = DATA / "motion" / "cmu_13_29_jumping_jacks_120fps.bvh"
+SQUATS = DATA / "motion" / "cmu_13_29_squats_120fps.bvh"
+#: whole-process runs of ``effortface synth`` timed on the 10-minute clip (best and median shown)
+SYNTH_RUNS = 3
 
 
 def _max_rss_mb() -> float:
@@ -161,7 +173,27 @@ def one_read(path: str, whole: bool) -> dict:
             "data_mb": (m.positions_m.nbytes + m.rotations.nbytes) / 2**20}
 
 
-def bench_bvh(minutes_list: list[float]) -> None:
+def _whole_process_synth(path: Path, model: str, duration_s: float) -> None:
+    """Time ``python -m effortface synth MODEL CLIP`` (interpreter start-up and imports included)."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    walls, status = [], 0
+    for k in range(SYNTH_RUNS):
+        out = path.with_name(f"synth_{k}.csv")
+        t0 = time.perf_counter()
+        done = subprocess.run([sys.executable, "-m", "effortface", "synth", model, str(path), "--out", str(out)],
+                              env=env, capture_output=True, text=True)
+        walls.append(time.perf_counter() - t0)
+        status = status or done.returncode
+        for f in (out, out.with_name(out.stem + ".units.json")):
+            f.unlink(missing_ok=True)
+    best, median = min(walls), sorted(walls)[len(walls) // 2]
+    print(f"       whole process `effortface synth {model if model == 'default' else 'SVR_BUNDLE'}` on it "
+          f"({SYNTH_RUNS} runs): best {best:.2f} s = {duration_s / best:.0f}x real time, median "
+          f"{median:.2f} s = {duration_s / median:.0f}x (target >= 200x), exit {status}"
+          + ("" if model == "default" else f" [{model}]"))
+
+
+def bench_bvh(minutes_list: list[float], svr_models: list[str]) -> None:
     print("3. long BVH clips (120 Hz, 38 joints): read time and peak memory (own process, whole RSS)")
     tmp = Path(tempfile.mkdtemp())
     for minutes in minutes_list:
@@ -177,14 +209,8 @@ def bench_bvh(minutes_list: list[float]) -> None:
                      f"{old['seconds'] / new['seconds']:4.2f}x the speed")
         print(line)
         if minutes == 10:
-            out = tmp / "x.csv"
-            env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-            t0 = time.perf_counter()
-            done = subprocess.run([sys.executable, "-m", "effortface", "synth", "default", str(path),
-                                   "--out", str(out)], env=env, capture_output=True, text=True)
-            wall = time.perf_counter() - t0
-            print(f"       whole process `effortface synth` on it: {wall:.1f} s wall = "
-                  f"{minutes * 60 / wall:.0f}x real time (target >= 200x), exit {done.returncode}")
+            for model in ["default", *svr_models]:
+                _whole_process_synth(path, model, minutes * 60)
         path.unlink()
     shutil.rmtree(tmp)
 
@@ -192,31 +218,106 @@ def bench_bvh(minutes_list: list[float]) -> None:
 # --------------------------------------------------------------------------- 4. crowd
 
 
+#: the crowd's face options timed, each against the float64 exact face
+CROWD_OPTIONS = (("float64", {}), ("float32", {"single_precision": True}), ("surrogate", {"surrogate": True}))
+
+
 def bench_crowd(n_chars: int, frames: int) -> None:
     import numpy as np
     from bench_runtime import fit_svrs, svr_model_dir
+    from threadpoolctl import threadpool_limits
 
+    from effortface.train.face import SINGLE_PRECISION_ERROR_PER_ALPHA, SURROGATE_MAX_ERROR
     from effortface.train.motion import read_motion
     from effortface.train.runtime import Character, load_model
 
-    print(f"4. crowd from positions, {n_chars} characters, SVR model (~2,000 support vectors each)")
     svrs, scaler = fit_svrs(2000)
     model = load_model(svr_model_dir(svrs, scaler, Path(tempfile.mkdtemp()) / "m"))
+    n_sv = sum(len(s.support_) for s in svrs)
+    print(f"4. crowd from positions, {n_chars} characters, SVR model ({n_sv} support vectors in all), "
+          "one core (BLAS limited to one thread), best of the frames")
     motion = read_motion(CLIP)
     pos = [np.stack([motion.positions_m[(k + 13 * i) % motion.n_frames] for i in range(n_chars)])
            for k in range(frames + 1)]
+    chars = [Character()] * n_chars
     results = {}
-    for single in (False, True):
-        crowd = model.stream_batch([Character()] * n_chars, motion, single_precision=single)
-        crowd.step(pos[0], 1 / 60)
+    with threadpool_limits(limits=1):
+        for label, options in CROWD_OPTIONS:
+            results[label] = _one_crowd(model, chars, motion, pos, options)
+        floor_s = _exact_float32_floor(model, n_chars)
+    base = results["float64"][0]
+    for label, (step_s, face_s, _, median_s) in results.items():
+        print(f"  {label:>9}: {step_s * 1e3:6.2f} ms/frame (energies {(step_s - face_s) * 1e3:5.2f} ms, "
+              f"physiology + face {face_s * 1e3:5.2f} ms) -> {n_chars / 60 / step_s:5.0f} characters per core "
+              f"at 60 FPS (target >= 2,500; median frame {n_chars / 60 / median_s:5.0f}); "
+              f"{base / step_s:4.1f}x float64's speed")
+    exact, face = results["float64"][2], model.face
+    surrogate = face.surrogate()
+    alpha = max(np.abs(a).sum() for a in face.dual_coef)
+    print(f"  max |weight - float64|: float32 {np.max(np.abs(results['float32'][2] - exact)):.2e} (bound "
+          f"{SINGLE_PRECISION_ERROR_PER_ALPHA:g} x sum|alpha| = {SINGLE_PRECISION_ERROR_PER_ALPHA * alpha:.1e}); "
+          f"surrogate {np.max(np.abs(results['surrogate'][2] - exact)):.2e} (stated <= {SURROGATE_MAX_ERROR:g}; "
+          f"{surrogate.n_centres} centres, {surrogate.max_error.max():.1e} on its held-out points)")
+    for how, seconds in zip(("as one matrix", "in cached blocks of rows"), floor_s):
+        print(f"  floor of the exact face in float32, one sgemm + one exp over {n_chars} x {n_sv} {how}: "
+              f"{seconds * 1e3:.2f} ms -> at most {n_chars / 60 / seconds:.0f} characters per core with "
+              "free energies and physiology")
+
+
+def _one_crowd(model, chars, motion, pos, options) -> tuple[float, float, object, float]:
+    """Seconds per step (positions in) and per step_work on the same work, best frames (the machine
+    is shared: the fastest frame is the least disturbed); the last weights; the median step."""
+    import numpy as np
+
+    crowd = model.stream_batch(chars, motion, **options)  # a surrogate is fitted here, once
+    crowd.step(pos[0], 1 / 60)
+    steps, work = [], []
+    for k in range(1, len(pos)):
         t0 = time.perf_counter()
-        for k in range(1, frames + 1):
-            out = crowd.step(pos[k], 1 / 60)
-        per_frame = (time.perf_counter() - t0) / frames
-        results[single] = out
-        print(f"  {'float32' if single else 'float64'}: {per_frame * 1e3:7.2f} ms/frame -> "
-              f"{n_chars / 60 / per_frame:6.0f} characters per core at 60 FPS (target >= 2,500)")
-    print(f"  float32 max |weight - float64|: {np.max(np.abs(results[True] - results[False])):.2e}")
+        out = crowd.step(pos[k], 1 / 60)
+        steps.append(time.perf_counter() - t0)
+        work.append((crowd.last["w_per_kg"], crowd.last["p_per_kg"]))
+    replay = model.stream_batch(chars, motion, **options)
+    faces = []
+    for w, p in work:
+        t0 = time.perf_counter()
+        replay.step_work(w, p, 1 / 60)
+        faces.append(time.perf_counter() - t0)
+    return min(steps), min(faces), out, float(np.median(steps))
+
+
+def _exact_float32_floor(model, n_chars: int) -> tuple[float, float]:
+    """Best seconds of one (n, 6) x (6, support vectors) sgemm and one in-place exp over it: as one
+    matrix, and in blocks of rows that stay in the cache (as ``SvrModel`` evaluates it)."""
+    import numpy as np
+
+    block = model.face._single  # (features + 2, support vectors): exponents from [z, 1, |z|^2]
+    x = np.array([25.0, 40.0, 1.0, 1.0]) * np.random.default_rng(0).uniform(size=(n_chars, 4))
+    z = model.face.standardise(x)
+    z = np.column_stack([z, np.ones(n_chars), np.einsum("ij,ij->i", z, z)]).astype(np.float32)
+    whole = np.empty((n_chars, block.shape[1]), dtype=np.float32)
+    rows = model.face._single_rows
+    part = whole[:rows]
+
+    def one_matrix() -> None:
+        np.matmul(z, block, out=whole)
+        np.exp(whole, out=whole)
+
+    def in_blocks() -> None:
+        for start in range(0, n_chars, rows):
+            k = part[:len(z[start:start + rows])]
+            np.matmul(z[start:start + rows], block, out=k)
+            np.exp(k, out=k)
+
+    best = []
+    for run in (one_matrix, in_blocks):
+        times = []
+        for _ in range(15):
+            t0 = time.perf_counter()
+            run()
+            times.append(time.perf_counter() - t0)
+        best.append(min(times))
+    return best[0], best[1]
 
 
 def main() -> None:
@@ -225,7 +326,11 @@ def main() -> None:
     parser.add_argument("--workers", type=int, nargs="+", default=[0, 2], help="0 = serial")
     parser.add_argument("--clips", type=int, default=8)
     parser.add_argument("--minutes", type=float, nargs="+", default=[10, 60])
-    parser.add_argument("--crowd", type=int, default=1000)
+    parser.add_argument("--crowd", type=int, default=2500)
+    parser.add_argument("--crowd-frames", type=int, default=20)
+    parser.add_argument("--svr-model", action="append", default=[], metavar="DIR",
+                        help="also time the whole-process synth with this model bundle (e.g. the sample "
+                             "lab's: effortface train sample_sessions --out DIR)")
     parser.add_argument("--skip", default="", help="comma-separated sections to skip")
     parser.add_argument("--one-training", nargs=3, metavar=("P", "WORKERS", "KIND"), help=argparse.SUPPRESS)
     parser.add_argument("--one-read", nargs=2, metavar=("PATH", "KIND"), help=argparse.SUPPRESS)
@@ -240,9 +345,9 @@ def main() -> None:
     skip = set(args.skip.split(","))
     print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}")
     if "bvh" not in skip:
-        bench_bvh(args.minutes)
+        bench_bvh(args.minutes, args.svr_model)
     if "crowd" not in skip:
-        bench_crowd(args.crowd, 10)
+        bench_crowd(args.crowd, args.crowd_frames)
     if "synth" not in skip:
         bench_synth(args.clips)
     if "train" not in skip:

@@ -37,7 +37,7 @@ Choices (named parameters):
 
 Paths: :func:`work_and_power` for a whole clip (zero-phase or causal), :class:`EnergyStream` one
 frame at a time (equal to the causal whole-clip path), :class:`EnergyCrowd` for N characters at once.
-numpy and scipy only (the runtime imports this module).
+numpy only (the runtime imports this module; the filters are :mod:`effortface.train.iir`).
 """
 
 from __future__ import annotations
@@ -46,11 +46,12 @@ import collections
 import dataclasses
 import math
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
-from scipy import signal
 
 from effortface.core.errors import UserError
+from effortface.train import iir
 from effortface.train.motion import Motion
 from effortface.train.segments import BACK_LOAD_OFFSET_M, BodyModel, stack_bodies
 
@@ -124,7 +125,7 @@ def butterworth_sos(cutoff_hz: float, fps: float, order: int = 2) -> np.ndarray:
     if not 0 < cutoff_hz < fps / 2:
         raise UserError(
             f"cutoff_hz: expected a value between 0 and fps/2 = {fps / 2:g} Hz, got {cutoff_hz!r}")
-    return signal.butter(order, cutoff_hz, btype="low", fs=fps, output="sos")
+    return iir.butterworth_lowpass_sos(order, cutoff_hz, fps)
 
 
 def filter_frames(x: np.ndarray, sos: np.ndarray, *, zero_phase: bool) -> np.ndarray:
@@ -142,137 +143,179 @@ def filter_frames(x: np.ndarray, sos: np.ndarray, *, zero_phase: bool) -> np.nda
     -------
     ndarray, same shape as ``x``
     """
-    # channels-first and contiguous: scipy filters the last axis much faster
-    flat = np.ascontiguousarray(x.reshape(x.shape[0], -1).T)
-    padlen = max(min(3 * (2 * len(sos) + 1), flat.shape[1] - 1), 0)
-    if len(sos) == 1:  # one section: lfilter runs the same recursion about twice as fast
-        b, a = sos[0, :3], sos[0, 3:]
-        if zero_phase:
-            out = signal.filtfilt(b, a, flat, axis=-1, padlen=padlen)
-        else:
-            out, _ = signal.lfilter(b, a, flat, axis=-1, zi=signal.lfilter_zi(b, a)[None, :] * flat[:, :1])
-    elif zero_phase:
-        out = signal.sosfiltfilt(sos, flat, axis=-1, padlen=padlen)
-    else:
-        zi = signal.sosfilt_zi(sos)[:, None, :] * flat[:, :1]
-        out, _ = signal.sosfilt(sos, flat, axis=-1, zi=zi)
-    return out.T.reshape(x.shape)
+    return np.moveaxis(_filter_time_last(np.moveaxis(np.asarray(x), 0, -1), sos, zero_phase), -1, 0)
+
+
+def _filter_time_last(x: Any, sos: np.ndarray, zero_phase: bool) -> np.ndarray:
+    """:func:`filter_frames` along the last axis of ``x`` (or of the stack of a sequence of (c_i, T)
+    arrays, see :func:`effortface.train.iir.sosfilt`)."""
+    if not zero_phase:
+        return iir.sosfilt(sos, x)
+    n_frames = x.shape[-1] if isinstance(x, np.ndarray) else np.shape(x[0])[-1]
+    return iir.sosfiltfilt(sos, x, max(min(3 * (2 * len(sos) + 1), n_frames - 1), 0))  # scipy's padding
 
 
 # --------------------------------------------------------------------------------------------
 # kinematics -> energies (shared by the whole-clip path and the stream)
+#
+# Components first: a vector quantity is an array (3, S, M) (x, y, z; segments; M frames of a clip or
+# characters of a crowd), a rotation (3, 3, S, M), a scalar (S, M). Dot and cross products are then
+# a few whole-array operations (a reduction over a last axis of length 3 costs over 10x more).
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Dot product over the leading (component) axis."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product over the leading (component) axis."""
+    return np.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
 def _unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unit vectors along the last axis and the norms (zero vectors stay zero)."""
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return np.divide(v, n, out=np.zeros_like(v), where=n > 1e-12), n[..., 0]
+    """Unit vectors over the leading axis and the norms (zero vectors stay zero)."""
+    n = np.sqrt(_dot(v, v))
+    return np.divide(v, n, out=np.zeros_like(v), where=n > 1e-12), n
 
 
 def _rotation_vector(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Rotation vector (rad) of ``b @ a^T`` for rotation matrices a (previous) and b, shape (..., 3)."""
+    """Rotation vector (rad, (3, ...)) of ``b @ a^T`` for rotations a (previous) and b, (3, 3, ...)."""
 
-    def rel(i: int, k: int) -> np.ndarray:  # (b @ a^T)[i, k], without a slow batched 3x3 matmul
-        return np.sum(b[..., i, :] * a[..., k, :], axis=-1)
+    def rel(i: int, k: int) -> np.ndarray:  # (b @ a^T)[i, k]
+        return _dot(b[i], a[k])
 
-    vee = 0.5 * np.stack([rel(2, 1) - rel(1, 2), rel(0, 2) - rel(2, 0), rel(1, 0) - rel(0, 1)], axis=-1)
+    vee = 0.5 * np.stack([rel(2, 1) - rel(1, 2), rel(0, 2) - rel(2, 0), rel(1, 0) - rel(0, 1)])
     axis, sin_angle = _unit(vee)
-    cos_angle = 0.5 * (np.sum(b * a, axis=(-2, -1)) - 1.0)
-    return axis * np.arctan2(sin_angle, cos_angle)[..., None]
+    cos_angle = 0.5 * (rel(0, 0) + rel(1, 1) + rel(2, 2) - 1.0)
+    return axis * np.arctan2(sin_angle, cos_angle)
 
 
 def _axis_turn(u_prev: np.ndarray, u: np.ndarray) -> np.ndarray:
     """Rotation vector (rad) turning unit vector u_prev onto u (no spin about the axis)."""
-    axis, sin_angle = _unit(np.cross(u_prev, u))
-    return axis * np.arctan2(sin_angle, np.sum(u_prev * u, axis=-1))[..., None]
+    axis, sin_angle = _unit(_cross(u_prev, u))
+    return axis * np.arctan2(sin_angle, _dot(u_prev, u))
 
 
-def _backward_diff(x: np.ndarray, dt_s: float) -> np.ndarray:
-    """(x[k] - x[k-1]) / dt along axis 0, with zero for the first frame."""
-    d = np.zeros_like(x)
-    d[1:] = (x[1:] - x[:-1]) / dt_s
-    return d
-
-
-def _forward_axes(pos: np.ndarray, body: BodyModel) -> np.ndarray:
-    """Body forward direction per frame, shape (T, 3): hip line x vertical (x axis if degenerate)."""
-    left, right = body.hip_joints
-    fwd, norm = _unit(np.cross(pos[..., left, :] - pos[..., right, :], _EZ))
-    fwd[norm < 1e-9] = (1.0, 0.0, 0.0)
+def _forward_axes(hip_line: np.ndarray) -> np.ndarray:
+    """Body forward direction (3, M) from the left-minus-right hip vector (3, M): hip line x
+    vertical (the x axis if degenerate)."""
+    fwd, norm = _unit(np.stack([hip_line[1], -hip_line[0], np.zeros_like(hip_line[0])]))
+    fwd[:, norm < 1e-9] = np.array([1.0, 0.0, 0.0])[:, None]
     return fwd
 
 
 def _segment_axes(u: np.ndarray, fwd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Sagittal and transverse unit axes (T, S, 3) for long axes u (T, S, 3)."""
-    a = fwd[..., None, :] - np.sum(fwd[..., None, :] * u, axis=-1, keepdims=True) * u
-    up = _EZ - u[..., 2:3] * u
-    a, norm = _unit(a)
-    a = np.where((norm < 0.3)[..., None], _unit(up)[0], a)
-    return a, np.cross(u, a)
+    """Sagittal and transverse unit axes (3, S, M) for long axes u (3, S, M), forward (3, M)."""
+    fwd = fwd[:, None, :]
+    a, norm = _unit(fwd - _dot(fwd, u) * u)
+    up = _unit(np.stack([-u[2] * u[0], -u[2] * u[1], 1.0 - u[2] * u[2]]))[0]  # vertical minus its u part
+    a = np.where(norm < 0.3, up, a)
+    return a, _cross(u, a)
 
 
 def _half_frames(x: np.ndarray) -> np.ndarray:
-    """Values at the half frames t(k-1/2): means of frames k-1 and k along axis 0 (frame 0 kept)."""
+    """Values at the half frames t(k-1/2): means of frames k-1 and k along the last axis (frame 0 kept)."""
     mid = x.copy()
-    mid[1:] = 0.5 * (x[1:] + x[:-1])
+    mid[..., 1:] = 0.5 * (x[..., 1:] + x[..., :-1])
     return mid
 
 
+def _backward_diff(x: np.ndarray, dt_s: float) -> np.ndarray:
+    """(x[k] - x[k-1]) / dt along the last axis, with zero for the first frame."""
+    d = np.zeros_like(x)
+    d[..., 1:] = (x[..., 1:] - x[..., :-1]) / dt_s
+    return d
+
+
 def _central_diff(x: np.ndarray, dt_s: float) -> np.ndarray:
-    """(x[k+1] - x[k-1]) / (2 dt) along axis 0; one-sided at the two ends, zero for one frame."""
-    if x.shape[0] < 2:
+    """(x[k+1] - x[k-1]) / (2 dt) along the last axis; one-sided at the two ends, zero for one frame."""
+    if x.shape[-1] < 2:
         return np.zeros_like(x)
-    return np.gradient(x, dt_s, axis=0)
+    return np.gradient(x, dt_s, axis=-1)
 
 
 def _central_turn(turn: Callable[[np.ndarray, np.ndarray], np.ndarray], a: np.ndarray,
                   dt_s: float) -> np.ndarray:
-    """Angular velocity at every frame from a frame-pair turn function, central where possible."""
-    if a.shape[0] < 2:
+    """Angular velocity at every frame (last axis) from a frame-pair turn function, central where possible."""
+    if a.shape[-1] < 2:
         return turn(a, a)  # no turn: zeros of the right shape
-    return np.concatenate([turn(a[:1], a[1:2]), 0.5 * turn(a[:-2], a[2:]),
-                           turn(a[-2:-1], a[-1:])]) / dt_s
+    return np.concatenate([turn(a[..., :1], a[..., 1:2]), 0.5 * turn(a[..., :-2], a[..., 2:]),
+                           turn(a[..., -2:-1], a[..., -1:])], axis=-1) / dt_s
 
 
-def _joint_mix(weights: np.ndarray, pos_m: np.ndarray) -> np.ndarray:
-    """``weights @ pos_m`` for weights (S, J) shared by every frame and character, pos (..., J, 3).
+@dataclasses.dataclass(frozen=True)
+class _Layout:
+    """A body's numbers arranged for the components-first energies: per-segment values (S, 1) for
+    one body, (S, N) for N stacked bodies, and the matrix mixing joints into end points."""
 
-    One matrix product over all frames and characters (numpy's broadcast ``@`` runs one small
-    product per frame and character, many times slower for a crowd).
-    """
-    return np.swapaxes(np.tensordot(pos_m, weights, axes=([-2], [1])), -1, -2)
+    mixer: np.ndarray        # (6 S + 6, 3 J): flat joint positions -> proximal, distal ends, hips
+    n_segments: int
+    com_frac: np.ndarray
+    mass_kg: np.ndarray       # segment mass, loads included
+    segment_mass_kg: np.ndarray
+    inertia: np.ndarray       # (3, S, .): m (L r_axis)^2 about the sagittal, transverse, long axes
+    back_load_kg: np.ndarray  # () or (N,)
+    trunk_index: int
 
+    @classmethod
+    def of(cls, body: BodyModel) -> _Layout:
+        """The layout of one body, or of bodies stacked by :func:`~effortface.train.segments.stack_bodies`."""
+        n_seg, n_joints = body.proximal_weights.shape
+        weights = np.concatenate([body.proximal_weights, body.distal_weights])  # (2 S, J)
+        mixer = np.zeros((6 * n_seg + 6, n_joints, 3))  # rows (end, component, segment), then hips
+        for c in range(3):
+            for e in range(2):
+                mixer[(3 * e + c) * n_seg:(3 * e + c + 1) * n_seg, :, c] = weights[e * n_seg:(e + 1) * n_seg]
+            for h in range(2):
+                mixer[6 * n_seg + 3 * h + c, body.hip_joints[h], c] = 1.0
 
-def _segment_points(body: BodyModel, pos_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Segment CMs and long-axis vectors (distal - proximal end), each (..., S, 3).
+        def seg(x: Any) -> np.ndarray:  # (S,) -> (S, 1); stacked (N, S) -> (S, N)
+            x = np.asarray(x, dtype=float)
+            return x[:, None] if x.ndim == 1 else x.T
 
-    The CM is ``proximal + com_frac (distal - proximal)``; the end points are shared-weight
-    products (:func:`_joint_mix`), so a crowd's per-character ``com_frac`` costs one multiply.
-    """
-    prox = _joint_mix(body.proximal_weights, pos_m)
-    limb = _joint_mix(body.distal_weights, pos_m) - prox
-    return prox + body.com_frac[..., None] * limb, limb
+        radii = np.asarray(body.radii, dtype=float)
+        radii = radii.T[:, :, None] if radii.ndim == 2 else radii.transpose(2, 1, 0)  # (3, S, .)
+        m = seg(body.segment_mass_kg)
+        inertia = m[None] * (seg(body.length_m)[None] * radii) ** 2
+        return cls(mixer.reshape(len(mixer), -1), n_seg, seg(body.com_frac), m + seg(body.load_kg), m,
+                   inertia, np.asarray(body.back_load_kg, dtype=float), body.trunk_index)
 
+    def points(self, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Segment CMs and long-axis vectors (distal - proximal end), each (3, S, M), and the
+        left-minus-right hip vector (3, M), of joint positions (3 J, M) ordered (joint, axis): one
+        matrix product."""
+        n = self.n_segments
+        ends = self.mixer @ pos
+        prox = ends[:3 * n].reshape(3, n, -1)
+        limb = ends[3 * n:6 * n].reshape(3, n, -1) - prox
+        return prox + self.com_frac * limb, limb, ends[6 * n:6 * n + 3] - ends[6 * n + 3:]
 
-def _kinematic_state(pos_m: np.ndarray, frame_rot: np.ndarray | None, dt_s: float, body: BodyModel,
-                     centred: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Positions, CM positions, CM velocities and angular velocities at the scheme's instants."""
-    com, limb = _segment_points(body, pos_m)
-    if centred:
-        v = _central_diff(com, dt_s)
-        if frame_rot is not None:
-            omega = _central_turn(_rotation_vector, frame_rot, dt_s)
-        else:
-            omega = _central_turn(_axis_turn, _unit(limb)[0], dt_s)
-        return pos_m, com, v, omega
-    v = _backward_diff(com, dt_s)
-    omega = np.zeros(com.shape)
-    if frame_rot is not None:
-        omega[1:] = _rotation_vector(frame_rot[:-1], frame_rot[1:]) / dt_s
-    else:
-        u_frame, _ = _unit(limb)
-        omega[1:] = _axis_turn(u_frame[:-1], u_frame[1:]) / dt_s
-    return _half_frames(pos_m), _half_frames(com), v, omega
+    def energies(self, com: np.ndarray, u: np.ndarray, hip_line: np.ndarray, v: np.ndarray,
+                 omega: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Potential, translational and rotational energy (S, M) from the CMs, unit long axes and hip
+        line at one instant and the CM and angular velocities about it."""
+        pot = self.mass_kg * G_M_PER_S2 * com[2]
+        trans = 0.5 * self.mass_kg * _dot(v, v)
+        sag, tra = _segment_axes(u, _forward_axes(hip_line))
+        i_sag, i_tra, i_long = self.inertia
+        w_sag, w_tra, w_long = _dot(omega, sag), _dot(omega, tra), _dot(omega, u)
+        return pot, trans, 0.5 * (i_sag * w_sag**2 + i_tra * w_tra**2 + i_long * w_long**2)
+
+    @property
+    def has_back_load(self) -> bool:
+        """Whether a back load is carried (and there is a trunk to carry it)."""
+        return self.trunk_index >= 0 and bool(np.any(self.back_load_kg > 0))
+
+    def back_load_point(self, com: np.ndarray, hip_line: np.ndarray) -> np.ndarray:
+        """The back load's position (3, M): BACK_LOAD_OFFSET_M behind the trunk CM."""
+        return com[:, self.trunk_index] - BACK_LOAD_OFFSET_M * _forward_axes(hip_line)
+
+    def add_back_load(self, pot: np.ndarray, trans: np.ndarray, point: np.ndarray, v: np.ndarray) -> None:
+        """Add the back load's energy (its position and velocity at the instant) to the trunk's."""
+        k = self.trunk_index
+        pot[k] += self.back_load_kg * G_M_PER_S2 * point[2]
+        trans[k] += 0.5 * self.back_load_kg * _dot(v, v)
 
 
 def kinematic_energies(
@@ -291,57 +334,81 @@ def kinematic_energies(
 
     Parameters
     ----------
-    pos_m : ndarray, shape (T, J, 3) or (T, N, J, 3)
-        Filtered joint positions, metres, Z up (N characters with a stacked body).
-    frame_rot : ndarray, shape (T, [N,] S, 3, 3), or None
+    pos_m : ndarray, shape (T, J, 3)
+        Filtered joint positions, metres, Z up.
+    frame_rot : ndarray, shape (T, S, 3, 3), or None
         Filtered rotation of each segment's frame joint, or None (long-axis turn only).
     dt_s : float
         Frame interval in seconds.
     body : BodyModel
-        One body, or N bodies stacked by :func:`~effortface.train.segments.stack_bodies`.
+        The body (one character).
     centred : bool
         The scheme, see above.
 
     Returns
     -------
-    potential_j, translational_j, rotational_j : ndarray, shape (T, [N,] S)
+    potential_j, translational_j, rotational_j : ndarray, shape (T, S)
         Loads are included in their segment's energy.
     """
-    m, ml = body.segment_mass_kg, body.load_kg
-    at, com_at, v, omega = _kinematic_state(pos_m, frame_rot, dt_s, body, centred)
-    pot = (m + ml) * G_M_PER_S2 * com_at[..., 2]
-    trans = 0.5 * (m + ml) * np.sum(v * v, axis=-1)
-    u, _ = _unit(_segment_points(body, at)[1])
-    sag, tra = _segment_axes(u, _forward_axes(at, body))
-    w_seg = np.stack([np.sum(omega * e, axis=-1) for e in (sag, tra, u)], axis=-1)
-    inertia = m[..., None] * (body.length_m[..., None] * body.radii) ** 2
-    rot = 0.5 * np.sum(inertia * w_seg**2, axis=-1)
-    if np.any(body.back_load_kg > 0) and body.trunk_index >= 0:
-        _add_back_load(pot, trans, _segment_points(body, pos_m)[0], pos_m, dt_s, body, centred)
-    return pot, trans, rot
+    pos = np.asarray(pos_m, dtype=float).reshape(len(pos_m), -1).T
+    rot = None if frame_rot is None else np.asarray(frame_rot, dtype=float).reshape(len(frame_rot), -1).T
+    pot, trans, rot_e = _time_last_energies(pos, rot, dt_s, body, centred)
+    return pot.T, trans.T, rot_e.T
 
 
-def _add_back_load(pot: np.ndarray, trans: np.ndarray, com: np.ndarray, pos_m: np.ndarray,
-                   dt_s: float, body: BodyModel, centred: bool) -> None:
-    """Add the back load (a point BACK_LOAD_OFFSET_M behind the trunk CM) to the trunk's energy."""
-    k = body.trunk_index
-    point = com[..., k, :] - BACK_LOAD_OFFSET_M * _forward_axes(pos_m, body)
-    v = _central_diff(point, dt_s) if centred else _backward_diff(point, dt_s)
-    pot[..., k] += body.back_load_kg * G_M_PER_S2 * (point if centred else _half_frames(point))[..., 2]
-    trans[..., k] += 0.5 * body.back_load_kg * np.sum(v * v, axis=-1)
+def _time_last_energies(pos: np.ndarray, rot: np.ndarray | None, dt_s: float, body: BodyModel,
+                        centred: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`kinematic_energies` on time-last arrays: positions (3 J, T) ordered (joint, axis),
+    frame rotations (9 S, T) ordered (segment, row, column) or None; energies (S, T)."""
+    layout = _Layout.of(body)
+    com, limb, hip_line = layout.points(pos)
+    if rot is not None:
+        rot = rot.reshape(layout.n_segments, 3, 3, -1).transpose(1, 2, 0, 3)  # (3, 3, S, T), a view
+    u = _unit(limb)[0]
+    if centred:
+        v = _central_diff(com, dt_s)
+        omega = _central_turn(_rotation_vector, rot, dt_s) if rot is not None else _central_turn(_axis_turn, u, dt_s)
+        at = (com, u, hip_line)
+    else:  # the half frames: positions averaged (limbs too: the mixing is linear), velocities about them
+        v = _backward_diff(com, dt_s)
+        omega = np.zeros(com.shape)
+        omega[..., 1:] = (_rotation_vector(rot[..., :-1], rot[..., 1:]) if rot is not None
+                          else _axis_turn(u[..., :-1], u[..., 1:])) / dt_s
+        at = (_half_frames(com), _unit(_half_frames(limb))[0], _half_frames(hip_line))
+    pot, trans, rot_e = layout.energies(*at, v, omega)
+    if layout.has_back_load:
+        point = layout.back_load_point(com, hip_line)
+        v_point = _central_diff(point, dt_s) if centred else _backward_diff(point, dt_s)
+        layout.add_back_load(pot, trans, point if centred else _half_frames(point), v_point)
+    return pot, trans, rot_e
+
+
+def _on_used_joints(body: BodyModel) -> tuple[BodyModel, np.ndarray]:
+    """The body with its end-point weights on the joints they use only, and those joints' indices.
+
+    The energies see only these joints (the other ones' weights are zero), so filtering and
+    mixing the rest would be wasted work.
+    """
+    used = _used_joints(body)
+    at = {int(j): i for i, j in enumerate(used)}
+    return dataclasses.replace(body, proximal_weights=body.proximal_weights[:, used],
+                               distal_weights=body.distal_weights[:, used],
+                               hip_joints=(at[body.hip_joints[0]], at[body.hip_joints[1]])), used
 
 
 def _filtered_kinematics(
-    motion: Motion, body: BodyModel, cutoff_hz: float, zero_phase: bool, use_rotations: bool
+    motion: Motion, used: np.ndarray, frame_joint: np.ndarray, cutoff_hz: float, zero_phase: bool,
+    use_rotations: bool,
 ) -> tuple[np.ndarray, np.ndarray | None]:
-    """Filtered joint positions and filtered frame-joint rotations (or None)."""
+    """Filtered positions of the ``used`` joints (3 U, T) and filtered frame-joint rotations (9 S, T)
+    or None, time last (each joint's values go straight into the filter's buffer)."""
     sos = butterworth_sos(cutoff_hz, motion.fps)
-    used = _used_joints(body)  # other joints do not enter the energies: copy them unfiltered
-    pos = motion.positions_m.copy()
-    pos[:, used] = filter_frames(motion.positions_m[:, used], sos, zero_phase=zero_phase)
+    pos = _filter_time_last([motion.positions_m[:, j].T for j in used], sos, zero_phase)
     if motion.rotations is None or not use_rotations:
         return pos, None
-    return pos, filter_frames(motion.rotations[:, body.frame_joint], sos, zero_phase=zero_phase)
+    n_frames = motion.n_frames
+    rot = [motion.rotations[:, j].reshape(n_frames, 9).T for j in frame_joint]
+    return pos, _filter_time_last(rot, sos, zero_phase)
 
 
 def _used_joints(body: BodyModel) -> np.ndarray:
@@ -378,9 +445,10 @@ def segment_energies(
     SegmentEnergies
     """
     _check_body(motion, body)
-    pos, rot = _filtered_kinematics(motion, body, cutoff_hz, zero_phase, use_rotations)
-    pot, trans, rot_e = kinematic_energies(pos, rot, 1.0 / motion.fps, body, centred=zero_phase)
-    return SegmentEnergies(motion.t_s, pot, trans, rot_e, body.segment_names)
+    on_used, used = _on_used_joints(body)  # the other joints do not enter the energies
+    pos, rot = _filtered_kinematics(motion, used, body.frame_joint, cutoff_hz, zero_phase, use_rotations)
+    pot, trans, rot_e = _time_last_energies(pos, rot, 1.0 / motion.fps, on_used, zero_phase)
+    return SegmentEnergies(motion.t_s, pot.T, trans.T, rot_e.T, body.segment_names)
 
 
 def _check_body(motion: Motion, body: BodyModel) -> None:
@@ -635,7 +703,12 @@ class EnergyStream:
         self._power = _TimeWindow(check_window(power_window_s, "power_window_s"), self._batch)
         self._frame = 0
         self._with_rotations: bool | None = None
-        self._prev: tuple[np.ndarray, np.ndarray | None] | None = None
+        on_used, self._used = _on_used_joints(body)  # the joints the energies see
+        self._layout = _Layout.of(on_used)
+        #: the previous frame's CMs, unit long axes, limbs, hip line and back-load point (3, S, M)
+        #: or (3, M), and its frame rotations (3, 3, S, M)
+        self._prev: tuple[np.ndarray, ...] | None = None
+        self._prev_rot: np.ndarray | None = None
         self._prev_e: np.ndarray | None = None
 
     def step(self, joint_positions_m: np.ndarray, dt_s: float,
@@ -669,18 +742,19 @@ class EnergyStream:
                  rotations: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         """One frame for one character or a crowd: filter, energies, window sums."""
         pos, rot = self._check_frame(joint_positions_m, dt_s, rotations)
+        pos = pos[..., self._used, :]
         parts = [pos.reshape(*self._batch, -1)]
         if rot is not None:
             parts.append(rot[..., self.body.frame_joint, :, :].reshape(*self._batch, -1))
-        flat = self._filter.step(np.concatenate(parts, axis=-1), dt_s)
+        flat = self._filter.step(np.concatenate(parts, axis=-1) if len(parts) > 1 else parts[0], dt_s)
         n_pos = parts[0].shape[-1]
         cur = (flat[..., :n_pos].reshape(pos.shape),
                None if rot is None else flat[..., n_pos:].reshape(*self._batch, -1, 3, 3))
-        energy = self._energy(cur, dt_s)
+        energy = self._energy(cur, dt_s)  # (S, characters)
         rate = np.zeros(self._batch)
         if self._frame >= 2:
-            rate = np.sum(np.abs(energy - self._prev_e), axis=-1) / self.body.mass_kg
-        self._prev, self._prev_e = cur, energy
+            rate = np.sum(np.abs(energy - self._prev_e), axis=0).reshape(self._batch) / self.body.mass_kg
+        self._prev_e = energy
         self._frame += 1
         return self._work.push(rate, float(dt_s)), self._power.push(rate, float(dt_s))
 
@@ -706,13 +780,26 @@ class EnergyStream:
         return pos, rot
 
     def _energy(self, cur: tuple[np.ndarray, np.ndarray | None], dt_s: float) -> np.ndarray:
-        """Total energy per segment ([N,] S) at this frame, from the previous and current states."""
-        prev = self._prev if self._prev is not None else cur
-        pos = np.stack([prev[0], cur[0]])
-        rot = None if cur[1] is None or prev[1] is None else np.stack([prev[1], cur[1]])
-        pot, trans, rot_e = kinematic_energies(pos, rot, dt_s, self.body)
-        k = 0 if self._prev is None else 1
-        return pot[k] + trans[k] + rot_e[k]
+        """Total energy per segment (S, characters) at the half frame before this one (at this frame
+        for the first): :func:`kinematic_energies`' causal scheme, from the previous frame's values."""
+        pos, rot = cur
+        n = int(np.prod(self._batch, dtype=int))  # characters: 1 for a single stream
+        layout = self._layout
+        com, limb, hip_line = layout.points(pos.reshape(n, -1).T)
+        u = _unit(limb)[0]
+        point = layout.back_load_point(com, hip_line) if layout.has_back_load else hip_line
+        if rot is not None:
+            rot = np.ascontiguousarray(rot.reshape(n, -1, 3, 3).transpose(2, 3, 1, 0))
+        prev = self._prev if self._prev is not None else (com, u, limb, hip_line, point)
+        prev_rot = self._prev_rot if self._prev is not None else rot
+        v = (com - prev[0]) / dt_s
+        turn = _axis_turn(prev[1], u) if rot is None or prev_rot is None else _rotation_vector(prev_rot, rot)
+        mid = [0.5 * (x + x_prev) for x, x_prev in zip((com, limb, hip_line, point), (prev[0], *prev[2:]))]
+        pot, trans, rot_e = layout.energies(mid[0], _unit(mid[1])[0], mid[2], v, turn / dt_s)
+        if layout.has_back_load:
+            layout.add_back_load(pot, trans, mid[3], (point - prev[4]) / dt_s)
+        self._prev, self._prev_rot = (com, u, limb, hip_line, point), rot
+        return pot + trans + rot_e
 
 
 class EnergyCrowd(EnergyStream):

@@ -9,7 +9,10 @@ normalised weights in the blendshape set's order:
 - :class:`RuleFaceModel`: the paper's empirical rules (section 4.1.1), deterministic, no training;
   the default model until a trained one exists and a baseline after.
 
-numpy and scipy only (the runtime imports this module).
+For big crowds, :class:`SvrSurrogate` stands in for an :class:`SvrModel` with far fewer kernel terms
+(within :data:`SURROGATE_MAX_ERROR` on the training range; the crowd's ``surrogate`` option).
+
+numpy only (the runtime imports this module).
 """
 
 from __future__ import annotations
@@ -20,10 +23,10 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from scipy import signal
 
 from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
 from effortface.core.errors import UserError
+from effortface.train import iir
 
 #: SVR input features, in order, and their units.
 FEATURE_NAMES = ("w_per_kg", "p_per_kg", "nhr", "epoc_norm")
@@ -32,9 +35,28 @@ FEATURE_UNITS = ("W/kg", "W/kg", "1", "1")
 #: Rows per chunk in :meth:`SvrModel.predict`: keeps each (rows x support vectors) kernel block in
 #: the L2 cache (16 rows x 2,000 vectors x 8 bytes = 256 KB); measured fastest of 16/64/256/1000.
 _CHUNK_ROWS = 16
-#: Largest gamma |z|^2 for which the factored kernel (see :func:`_rbf_block`) cannot overflow,
-#: in double and in single precision (exp overflows at about 709 and 88).
-_MAX_FACTORED_EXPONENT = {np.dtype(np.float64): 600.0, np.dtype(np.float32): 60.0}
+#: Largest gamma |z|^2 for which the factored kernel (see :func:`_rbf_block`) cannot overflow
+#: (exp overflows at about 709).
+_MAX_FACTORED_EXPONENT = 600.0
+#: Values per block of the single-precision kernel matrix (2 MB of float32: the L2 cache); measured
+#: on 2,500 rows x 8,000 support vectors, 32-128 rows per block run at the speed of one ``exp``.
+_SINGLE_BLOCK_VALUES = 512 * 1024
+#: Bound on the float32 error of :meth:`SvrModel.predict` (``single_precision``) per unit of a
+#: blendshape's sum |alpha|: float32's unit roundoff, 2^-24, on every kernel term (measured: 2-3e-8).
+SINGLE_PRECISION_ERROR_PER_ALPHA = 6e-8
+#: The largest error (weight units) a :class:`SvrSurrogate` may make against its exact SVR on the
+#: held-out points of the training range it checks (choice: 0.1 % of the weight range, below what
+#: float32 kernels cost a C = 100 model; the surrogates fitted so far stay under 1e-4).
+SURROGATE_MAX_ERROR = 1e-3
+#: The surrogate's box: the support vectors' extended by this share of its width on every side
+#: (a crowd at rest sits on the training range's edge: NHR and EPOC 0).
+SURROGATE_BOX_MARGIN = 0.1
+#: Centres a surrogate starts with; doubled until it meets its error bound.
+SURROGATE_FIRST_CENTRES = 256
+#: ... and stops growing there (the least-squares fit of 1,024 centres takes a few seconds).
+SURROGATE_MAX_CENTRES = 1024
+#: A surrogate is kept only if it evaluates at most this share of the model's kernel terms.
+SURROGATE_MAX_COST_SHARE = 0.25
 
 
 def apply_expressiveness(normalised: Any, expressiveness: Any) -> np.ndarray:
@@ -138,12 +160,11 @@ def filter_weights(weights: Any, dt_s: float, tau_s: Any) -> np.ndarray:
     y = np.array(weights, dtype=float)
     if y.shape[0] == 0:
         return y
-    for b, tau in enumerate(np.broadcast_to(np.asarray(tau_s, dtype=float), y.shape[1:])):
-        if tau <= 0:
-            continue
+    taus = np.broadcast_to(np.asarray(tau_s, dtype=float), y.shape[1:])
+    for tau in np.unique(taus[taus > 0]):  # the blendshapes sharing a time constant together
         gain = -np.expm1(-dt_s / tau)
-        for _ in range(2):  # y[k] = (1 - gain) y[k-1] + gain x[k], from the first value
-            y[:, b], _ = signal.lfilter([gain], [1.0, gain - 1.0], y[:, b], zi=[(1 - gain) * y[0, b]])
+        stage = [gain, 0.0, 0.0, 1.0, gain - 1.0, 0.0]  # y[k] = (1 - gain) y[k-1] + gain x[k]
+        y[:, taus == tau] = iir.sosfilt(np.array([stage, stage]), y[:, taus == tau].T).T  # from the first value
     return y
 
 
@@ -251,12 +272,19 @@ class SvrModel:
         ``-gamma |z - s|^2 = z . (2 gamma s) - gamma |s|^2 - gamma |z|^2``: one small matrix product
         per block of rows, then two in-place additions and the exponential.
         """
-        self._blocks: dict[np.dtype, list[tuple[Any, ...]]] = {np.dtype(np.float64): [
+        self._blocks: list[tuple[Any, ...]] = [
             ((2.0 * g * sv).T.copy(), -g * np.einsum("ij,ij->i", sv, sv), float(g), a)
-            for sv, a, g in zip(self.support_vectors, self.dual_coef, self.gamma)]}
-        self._blocks[np.dtype(np.float32)] = [tuple(np.asarray(v, np.float32) if isinstance(v, np.ndarray)
-                                                    else v for v in block)
-                                              for block in self._blocks[np.dtype(np.float64)]]
+            for sv, a, g in zip(self.support_vectors, self.dual_coef, self.gamma)]
+        # single precision: every blendshape's support vectors in one block whose product with
+        # [z, 1, |z|^2] is the exponent -gamma |z - s|^2 itself (no factored form, no overflow check)
+        self._single = np.concatenate([
+            np.vstack([2.0 * g * sv.T, -g * np.einsum("ij,ij->i", sv, sv)[None, :], np.full((1, len(sv)), -g)])
+            for sv, g in zip(self.support_vectors, self.gamma)], axis=1).astype(np.float32)
+        ends = np.cumsum([0] + [a.size for a in self.dual_coef])
+        self._single_coef = [(slice(int(ends[b]), int(ends[b + 1])), a.astype(np.float32))
+                             for b, a in enumerate(self.dual_coef)]
+        #: rows per block of the single-precision kernel matrix: about 2 MB, in the L2 cache
+        self._single_rows = max(8, _SINGLE_BLOCK_VALUES // max(1, self._single.shape[1]))
 
     def standardise(self, features: Any) -> np.ndarray:
         """``(x - mean) / scale`` for rows of [w, p, NHR, EPOC_norm]."""
@@ -270,27 +298,61 @@ class SvrModel:
         features : array_like, shape (n, 4) or (4,)
             Rows of [w_per_kg, p_per_kg, nhr, epoc_norm] (frames of a clip or characters).
         single_precision : bool
-            Evaluate the kernels in float32: about 2x faster for crowds, but each kernel term is
-            rounded to float32, so the error grows with the dual coefficients: about
-            2e-8 x sum |alpha| (measured; 4e-3 of the weight range for a C = 100 model with
-            2,000 support vectors, against 1e-12 in float64). Off by default.
+            Evaluate the kernels in float32 (all blendshapes in one block of rows at a time: one
+            product, one ``exp``): about 2x faster for crowds, but each kernel term is rounded to
+            float32, so the error grows with the dual coefficients: at most
+            :data:`SINGLE_PRECISION_ERROR_PER_ALPHA` (6e-8) x sum |alpha| per blendshape (measured
+            2-3e-8 x: 6.5e-3 of the weight range over the training range of the benchmark's C = 100
+            model, 2,250 support vectors per blendshape and sum |alpha| = 2.2e5; 8e-4 on its crowd;
+            1e-12 in float64). Off by default.
 
         Returns
         -------
         ndarray, shape (n, B)
             The SVR outputs (not clipped; see :func:`apply_expressiveness`).
         """
-        dtype: np.dtype = np.dtype(np.float32 if single_precision else np.float64)
-        z = self.standardise(features).astype(dtype, copy=False)
+        z = self.standardise(features)
+        if single_precision:
+            return self._predict_single(z) + self.intercept
         zz = np.einsum("ij,ij->i", z, z)
         out = np.empty((z.shape[0], self.n_outputs))
         for start in range(0, z.shape[0], _CHUNK_ROWS):
             rows = slice(start, start + _CHUNK_ROWS)
-            for b, block in enumerate(self._blocks[dtype]):
+            for b, block in enumerate(self._blocks):
                 sv2g, bias, gamma, coef = block
-                out[rows, b] = _rbf_block(z[rows], zz[rows], sv2g, bias, gamma, coef,
-                                          _MAX_FACTORED_EXPONENT[dtype])
+                out[rows, b] = _rbf_block(z[rows], zz[rows], sv2g, bias, gamma, coef, _MAX_FACTORED_EXPONENT)
         return out + self.intercept
+
+    def _predict_single(self, z: np.ndarray) -> np.ndarray:
+        """The kernel sums (n, B) in float32 for standardised rows z: per block of rows, one product
+        gives every exponent of every blendshape, one ``exp`` in place, one product per blendshape."""
+        n_rows, n_features = z.shape
+        z_aug = np.empty((n_rows, n_features + 2), dtype=np.float32)
+        z_aug[:, :n_features] = z
+        z_aug[:, n_features] = 1.0
+        z_aug[:, n_features + 1] = np.einsum("ij,ij->i", z, z)
+        out = np.empty((self.n_outputs, n_rows), dtype=np.float32)
+        kernel = np.empty((min(self._single_rows, n_rows), self._single.shape[1]), dtype=np.float32)
+        for start in range(0, n_rows, self._single_rows):
+            rows = slice(start, start + self._single_rows)
+            block = kernel[:len(z_aug[rows])]
+            np.matmul(z_aug[rows], self._single, out=block)
+            np.exp(block, out=block)
+            for b, (columns, coef) in enumerate(self._single_coef):
+                np.matmul(block[:, columns], coef, out=out[b, rows])
+        return out.T.astype(np.float64)
+
+    def kernel_sums(self, z: np.ndarray) -> np.ndarray:
+        """The outputs without the intercepts, (n, B), for standardised rows ``z`` (float64)."""
+        return self.predict(z * self.scaler_scale + self.scaler_mean) - self.intercept
+
+    def surrogate(self, max_error: float = SURROGATE_MAX_ERROR) -> SvrSurrogate | None:
+        """The compact surrogate of this model (:class:`SvrSurrogate`), fitted once and kept; None
+        when none within ``max_error`` is much cheaper than the model itself."""
+        cache: dict[float, SvrSurrogate | None] = self.__dict__.setdefault("_surrogates", {})
+        if max_error not in cache:
+            cache[max_error] = SvrSurrogate.fit(self, max_error)
+        return cache[max_error]
 
     @classmethod
     def from_estimators(cls, estimators: Sequence[Any], scaler_mean: Any,
@@ -309,6 +371,124 @@ class SvrModel:
         return cls([e.support_vectors_ for e in estimators], [e.dual_coef_ for e in estimators],
                    [float(np.ravel(e.intercept_)[0]) for e in estimators], gammas,
                    scaler_mean, scaler_scale)
+
+
+# --------------------------------------------------------------------------- compact surrogate
+
+class SvrSurrogate:
+    """A compact stand-in for an :class:`SvrModel` in crowds: far fewer Gaussian centres, fitted to
+    the model's outputs, on the model's training range; the exact model outside it.
+
+    ``f_b(x) ~ sum_g sum_k w_bgk exp(-gamma_g |z - c_k|^2) + w_b0``: the SVR's kernel widths gamma_g, on
+    M centres spread uniformly (fixed seed) over the box of the support vectors (standardised
+    features: the training range), weights by least squares on the exact outputs at the support
+    vectors and at 8 M uniform points of the box. M starts at :data:`SURROGATE_FIRST_CENTRES` and
+    doubles until the largest error on held-out points (8,192 uniform ones and a 7 x 7 x 7 x 7 grid
+    of the box) is at most ``max_error`` (:data:`SURROGATE_MAX_ERROR`), as long as the surrogate
+    stays cheaper than :data:`SURROGATE_MAX_COST_SHARE` of the model. Rows outside the box get the
+    exact model. Fitting takes about 1-2 s for 8,000 support vectors (:meth:`SvrModel.surrogate`
+    does it once per model). Use :meth:`SvrModel.surrogate`.
+
+    Attributes
+    ----------
+    box_lo, box_hi : ndarray, shape (F,)
+        The (widened) training range, standardised.
+    n_centres : int
+    max_error : ndarray, shape (B,)
+        The largest |surrogate - exact| found on the held-out points, per blendshape.
+    """
+
+    def __init__(self, exact: SvrModel, centres: np.ndarray, weights: np.ndarray,
+                 box: tuple[np.ndarray, np.ndarray], max_error: np.ndarray) -> None:
+        self.exact = exact
+        self.box_lo, self.box_hi = box
+        self.n_centres = len(centres)
+        self.max_error = max_error
+        self._weights = weights  # (M + 1, B): centres, then the intercept
+        self._centres = _exponent_block(centres, exact.gamma)
+
+    @property
+    def n_outputs(self) -> int:
+        """Number of blendshapes B."""
+        return self.exact.n_outputs
+
+    @classmethod
+    def fit(cls, exact: SvrModel, max_error: float = SURROGATE_MAX_ERROR, seed: int = 0) -> SvrSurrogate | None:
+        """Fit the smallest surrogate within ``max_error`` (see the class); None if it would not be
+        much cheaper than ``exact``."""
+        support = np.vstack(exact.support_vectors)
+        lo, hi = support.min(axis=0), support.max(axis=0)
+        box = (lo - SURROGATE_BOX_MARGIN * (hi - lo), hi + SURROGATE_BOX_MARGIN * (hi - lo))
+        rng = np.random.default_rng(seed)
+        held = np.vstack([_uniform(rng, box, 8192), _grid(box, 7)])
+        held_y = exact.kernel_sums(held)
+        n_kernels = len(np.unique(exact.gamma))
+        n_centres = SURROGATE_FIRST_CENTRES
+        while n_centres <= SURROGATE_MAX_CENTRES \
+                and n_centres * n_kernels <= SURROGATE_MAX_COST_SHARE * len(support):
+            centres = _uniform(rng, box, n_centres)
+            points = np.vstack([support, _uniform(rng, box, 8 * n_centres)])
+            design = _design(points, _exponent_block(centres, exact.gamma))
+            weights = np.linalg.lstsq(design, exact.kernel_sums(points) + exact.intercept, rcond=1e-12)[0]
+            error = np.max(np.abs(_design(held, _exponent_block(centres, exact.gamma)) @ weights
+                                  - exact.intercept - held_y), axis=0)
+            if error.max() <= max_error:
+                return cls(exact, centres, weights, box, error)
+            n_centres *= 2
+        return None
+
+    def predict(self, features: Any, *, single_precision: bool = False) -> np.ndarray:
+        """Normalised weights (n, B) for rows of [w, p, NHR, EPOC_norm]: the surrogate inside the
+        training range (float64), the exact model (in ``single_precision`` if asked) outside."""
+        x = _features(features)
+        z = self.exact.standardise(x)
+        inside = np.all((z >= self.box_lo) & (z <= self.box_hi), axis=1)
+        if inside.all():
+            return self._inside(z)
+        out = np.empty((len(z), self.n_outputs))
+        out[inside] = self._inside(z[inside])
+        out[~inside] = self.exact.predict(x[~inside], single_precision=single_precision)
+        return out
+
+
+    def _inside(self, z: np.ndarray) -> np.ndarray:
+        """The surrogate's outputs (n, B) for standardised rows inside the box."""
+        out = _kernels(z, self._centres) @ self._weights[:-1]
+        out += self._weights[-1]
+        return out
+
+
+def _uniform(rng: np.random.Generator, box: tuple[np.ndarray, np.ndarray], n: int) -> np.ndarray:
+    """``n`` points drawn uniformly in the box (lo, hi)."""
+    lo, hi = box
+    return lo + (hi - lo) * rng.uniform(size=(n, lo.size))
+
+
+def _grid(box: tuple[np.ndarray, np.ndarray], n: int) -> np.ndarray:
+    """The regular grid of ``n`` points per axis spanning the box (lo, hi), as rows."""
+    axes = [np.linspace(lo, hi, n) for lo, hi in zip(*box)]
+    return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(axes))
+
+
+def _exponent_block(centres: np.ndarray, gamma: np.ndarray) -> np.ndarray:
+    """The (F + 2, G M) block whose product with [z, 1, |z|^2] is -gamma |z - c|^2 for every centre
+    c and each of the G distinct gammas."""
+    return np.hstack([np.vstack([2.0 * g * centres.T, -g * np.einsum("ij,ij->i", centres, centres)[None, :],
+                                 np.full((1, len(centres)), -g)]) for g in np.unique(gamma)])
+
+
+def _kernels(z: np.ndarray, block: np.ndarray) -> np.ndarray:
+    """Kernel values (n, G M) of every centre and width for standardised rows z (every blendshape
+    may use every width's kernels)."""
+    z_aug = np.empty((len(z), z.shape[1] + 2))
+    z_aug[:, :-2], z_aug[:, -2], z_aug[:, -1] = z, 1.0, np.einsum("ij,ij->i", z, z)
+    kernels = z_aug @ block
+    return np.exp(np.minimum(kernels, 0.0, out=kernels), out=kernels)
+
+
+def _design(z: np.ndarray, block: np.ndarray) -> np.ndarray:
+    """The least-squares design: :func:`_kernels` and a column of ones (the intercept)."""
+    return np.hstack([_kernels(z, block), np.ones((len(z), 1))])
 
 
 # --------------------------------------------------------------------------- rules

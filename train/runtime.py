@@ -37,7 +37,7 @@ from effortface.core.errors import UserError
 from effortface.core.participant import LIMITS, check_limit, check_sex
 from effortface.train.bundle import default_physiology, read_bundle
 from effortface.train.energy import EnergyCrowd, EnergyStream, work_and_power
-from effortface.train.face import (DEFAULT_FILTER_TAU_S, RuleFaceModel, SvrModel, WeightFilter,
+from effortface.train.face import (DEFAULT_FILTER_TAU_S, RuleFaceModel, SvrModel, SvrSurrogate, WeightFilter,
                                    apply_expressiveness, check_filter_tau, filter_weights)
 from effortface.train.motion import Motion, read_motion
 from effortface.train.physiology import (CALIBRATED_REGRESSION, PAPER_REGRESSION, EpocParams, NhrRegression,
@@ -264,10 +264,12 @@ class FaceModel:
 
     def stream_batch(self, characters: Sequence[Character], skeleton: Motion, *,
                      mapping: Any = None, fps: float | None = None,
-                     single_precision: bool = False, filter_tau_s: Any = None) -> CrowdStream:
+                     single_precision: bool = False, filter_tau_s: Any = None,
+                     surrogate: bool = False) -> CrowdStream:
         """A live stream for N characters on one skeleton layout (see :class:`CrowdStream`)."""
         return CrowdStream(self, characters, skeleton, mapping=mapping, fps=fps,
-                           single_precision=single_precision, filter_tau_s=filter_tau_s)
+                           single_precision=single_precision, filter_tau_s=filter_tau_s,
+                           surrogate=surrogate)
 
 
 # --------------------------------------------------------------------------- streams
@@ -324,14 +326,28 @@ class CrowdStream:
     """N characters stepped together: physiology and the face model are vectorised over N.
 
     Energies use one causal :class:`~effortface.train.energy.EnergyCrowd` vectorised over the characters
-    (each keeps its own body: mass, bone lengths, loads). Engines that compute work themselves call :meth:`step_work`. ``single_precision``
-    evaluates an SVR face model in float32 (faster for big crowds, see
-    :meth:`effortface.train.face.SvrModel.predict`).
+    (each keeps its own body: mass, bone lengths, loads). Engines that compute work themselves call
+    :meth:`step_work`. Two options trade exactness for speed with an SVR face model, whose cost
+    grows with its support vectors (2,500 characters x 8,000 support vectors: 20 million kernel
+    terms a frame):
+
+    * ``single_precision``: the kernels in float32, about 2x faster; the error grows with the
+      dual coefficients (:meth:`effortface.train.face.SvrModel.predict`: 6.5e-3 over the training
+      range of a C = 100 model with 9,000 support vectors, 8e-4 on a crowd).
+    * ``surrogate``: the model's compact surrogate (:class:`effortface.train.face.SvrSurrogate`,
+      fitted once per model in 1-2 s): at most :data:`~effortface.train.face.SURROGATE_MAX_ERROR`
+      (1e-3; 8e-5 on its held-out points for that model) from the exact weights on the training
+      range, the exact model outside it; its face about 5x faster than float32 for that model
+      (2.5 ms against 13 ms for 2,500 characters). Models too small to gain from one (no surrogate
+      within 1/4 of their kernel terms) stay exact.
+
+    Neither is used unless asked: single characters (:meth:`FaceModel.stream`) are always exact.
     """
 
     def __init__(self, model: FaceModel, characters: Sequence[Character], skeleton: Motion, *,
                  mapping: Any = None, fps: float | None = None,
-                 single_precision: bool = False, filter_tau_s: Any = None) -> None:
+                 single_precision: bool = False, filter_tau_s: Any = None,
+                 surrogate: bool = False) -> None:
         if not characters:
             raise UserError("characters: expected at least one character, found none")
         self.model = model
@@ -344,6 +360,10 @@ class CrowdStream:
         self._state = PhysiologyState(params)
         self._predict_kw = ({"single_precision": True}
                             if single_precision and isinstance(model.face, SvrModel) else {})
+        face: SvrModel | SvrSurrogate | RuleFaceModel | None = model.face
+        if surrogate and isinstance(model.face, SvrModel):
+            face = model.face.surrogate()
+        self.face = face or model.face  #: what the step evaluates: the model's face, or its surrogate
         self.last: dict[str, np.ndarray] = {}
 
     def __len__(self) -> int:
@@ -361,7 +381,7 @@ class CrowdStream:
         """Advance all characters from work and power (N,) computed elsewhere -> weights (N, B)."""
         phys = self._state.step(w_per_kg, dt_s)
         x = np.column_stack([w_per_kg, p_per_kg, phys["nhr"], phys["epoc_norm"]])
-        weights = apply_expressiveness(self.model.face.predict(x, **self._predict_kw), self._e)
+        weights = apply_expressiveness(self.face.predict(x, **self._predict_kw), self._e)
         weights = self._filter.step(weights, dt_s)
         self.last = dict(phys, w_per_kg=np.asarray(w_per_kg), p_per_kg=np.asarray(p_per_kg))
         return weights

@@ -89,3 +89,21 @@ def test_reading_memory_stays_near_the_motion_itself(shared_data: Path, tmp_path
     monkeypatch.setattr(motion_module, "BVH_CHUNK_FRAMES", 10**9)
     peak_whole, _ = _peak_bytes(path)
     assert peak_whole > 3 * data, (peak_whole / 2**20, data / 2**20)
+
+
+def test_blank_lines_at_chunk_ends(shared_data: Path, tmp_path: Path, monkeypatch) -> None:
+    """Trailing blank lines, even more than a chunk of them, end the clip; a blank line that ends a
+    chunk but has frames after it is a bad frame line, named."""
+    monkeypatch.setattr(motion_module, "BVH_CHUNK_FRAMES", 50)
+    path = _tiled(shared_data, tmp_path, 120)
+    reference = read_bvh(path)
+    path.write_text(path.read_text() + " \n" * 70)
+    trailing = read_bvh(path)
+    assert trailing.n_frames == 120
+    np.testing.assert_array_equal(trailing.rotations, reference.rotations)
+    lines = path.read_text().splitlines()
+    first = next(i for i, line in enumerate(lines) if line.startswith("Frame Time")) + 1
+    lines[first + 49] = "   "  # the last line of the first chunk
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(MotionFormatError, match=rf"line {first + 50}: expected \d+ numbers, found 0"):
+        read_bvh(path)

@@ -341,3 +341,23 @@ def test_synth_filters_the_weights_by_default(shared_data: Path, tmp_path: Path)
     weights = [np.genfromtxt(f, delimiter=",", names=True) for f in (smooth, raw)]
     smooth_w, raw_w = (np.column_stack([w[n] for n in names]) for w in weights)
     assert jitter(smooth_w) < jitter(raw_w) / 2
+
+
+#: what one clip's ``effortface synth`` must not import: scipy (scipy.signal alone costs 0.7 s of
+#: start-up: the filters are effortface.train.iir's), the training, video and GUI libraries, and
+#: what only a folder of clips needs (tqdm, dask)
+SYNTH_NEVER_IMPORTS = ("scipy", "sklearn", "pandas", "cv2", "PySide6", "pyqtgraph", "matplotlib",
+                       "onnx", "onnxruntime", "tqdm", "dask", "distributed")
+
+
+def test_synth_of_one_clip_imports_nothing_heavy(shared_data: Path, tmp_path: Path) -> None:
+    """The whole-process start-up gain of issue 15 (a 10-minute clip in 2 s, not 5): a fresh
+    interpreter runs the command and lists the top-level packages it imported."""
+    code = ("import json, sys; from effortface.cli import main; status = main(sys.argv[1:]); "
+            "print(json.dumps(sorted({m.split('.')[0] for m in sys.modules}))); sys.exit(status)")
+    done = subprocess.run([sys.executable, "-c", code, "synth", "default", str(shared_data / JJ),
+                           "--out", str(tmp_path / "x.csv")], cwd=ROOT, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    imported = set(json.loads(done.stdout.strip().splitlines()[-1]))
+    assert "effortface" in imported and "numpy" in imported
+    assert not imported & set(SYNTH_NEVER_IMPORTS), sorted(imported & set(SYNTH_NEVER_IMPORTS))

@@ -17,6 +17,7 @@ import argparse
 import math
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -24,13 +25,14 @@ from effortface.core import bounds
 from effortface.core.docs import DESIGN, SCIENCE
 from effortface.core.errors import UserError
 from effortface.core.fileio import check_apart
-from effortface.train.batch_synth import BatchSummary, SynthOptions, list_clips, synth_batch
 from effortface.train.character_options import add_character_arguments, character_from_args
 from effortface.train.curves_io import CURVE_FORMATS, check_output, units_path, write_curves
 from effortface.train.motion import read_motion
 from effortface.train.parallel import ComputeSettings, add_compute_arguments
 from effortface.train.runtime import load_model
 
+if TYPE_CHECKING:  # a folder of clips only: one clip does not pay for its imports
+    from effortface.train.batch_synth import BatchSummary, SynthOptions
 
 #: the shipped documents ``--help`` cites (effortface.core.docs)
 HELP_DOCS = (DESIGN, SCIENCE)
@@ -78,6 +80,8 @@ def run(args: argparse.Namespace) -> int:
     except UserError as exc:
         raise UserError(f"--filter-tau-s: {exc}") from None
     if batch:
+        from effortface.train.batch_synth import SynthOptions
+
         options = SynthOptions(args.model_dir, character, args.format, args.force, args.mapping,
                                args.unit_m, taus)
         return _run_batch(Path(args.motion), out, options, compute)
@@ -97,6 +101,8 @@ def written_line(out: Path, t_s: np.ndarray, fmt: str) -> str:
 def _run_batch(clips_dir: Path, out: Path, options: SynthOptions, compute: ComputeSettings) -> int:
     """A folder of clips with a progress bar on stderr and a summary; 1 when some failed."""
     from tqdm import tqdm
+
+    from effortface.train.batch_synth import list_clips, synth_batch
 
     n_clips = len(list_clips(clips_dir))  # no clips: the one error line, before any bar
     with tqdm(total=n_clips, desc="synth", unit="clip", file=sys.stderr) as bar:
