@@ -4,7 +4,8 @@ Prints figures and ratios against a baseline measured in the same run:
 
 1. **Training** (the face part of a training run: grid search, final fit, held-out scores and the
    paper's protocols) on generated tables of P participants x 1 h (P = 10, 30, 100 by default):
-   time (cluster start-up and close included), CPU time (this process and its workers), peak
+   time (cluster start-up and close included), CPU time (this process, the workers and Dask's fork
+   server, all the start-up's imports included), peak
    memory (the process's maximum RSS, and the largest worker's; each configuration runs in its own
    process), face rows used, method, mean held-out RMSE; serial and with ``--workers 2``, and the
    ratio serial / 2 workers; baseline: the old caps (300 rows per participant, 2,000 in all, exact
@@ -24,6 +25,7 @@ Run: ``python benchmarks/bench_scale.py [--participants 10 30 100] [--skip train
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import resource
@@ -42,14 +44,28 @@ CLIP = ROOT.parent / "shared" / "data" / "motion" / "cmu_13_29_jumping_jacks_120
 SQUATS = ROOT.parent / "shared" / "data" / "motion" / "cmu_13_29_squats_120fps.bvh"
 
 
-def _max_rss_mb(who: int = resource.RUSAGE_SELF) -> float:
-    return resource.getrusage(who).ru_maxrss / 1024.0
+def _max_rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
 def _cpu_s() -> float:
-    """CPU seconds of this process and of its children that ended (the workers of a closed cluster)."""
-    return sum(r.ru_utime + r.ru_stime for r in (resource.getrusage(resource.RUSAGE_SELF),
-                                                 resource.getrusage(resource.RUSAGE_CHILDREN)))
+    """CPU seconds of this process and of every live process under it (Dask's fork server, workers)."""
+    import psutil
+
+    me = psutil.Process()
+    return sum(sum(p.cpu_times()[:2]) for p in [me, *me.children(recursive=True)])
+
+
+def _largest_child_peak_mb() -> float:
+    """The largest peak RSS among the live processes under this one (a Dask worker), Linux."""
+    import psutil
+
+    peaks = [0.0]
+    for child in psutil.Process().children(recursive=True):
+        with contextlib.suppress(OSError, psutil.Error):
+            status = Path(f"/proc/{child.pid}/status").read_text()
+            peaks += [int(line.split()[1]) / 1024.0 for line in status.splitlines() if line.startswith("VmHWM:")]
+    return max(peaks)
 
 
 def _child(args: list[str]) -> dict:
@@ -83,12 +99,13 @@ def one_training(n_participants: int, workers: int, legacy: bool) -> dict:
         fit = fit_face_models(table, DEFAULT_SET.names, config)
         held = held_out_scores(fit)
         protocol_scores(fit)
-    elapsed, cpu = time.perf_counter() - t0, _cpu_s() - cpu0
+        cpu, worker_peak_mb = _cpu_s() - cpu0, _largest_child_peak_mb()  # before the workers end
+    elapsed = time.perf_counter() - t0
     svr = held[held["model"] == "svr"]
     return {"seconds": elapsed, "cpu_s": cpu, "start_s": started, "load": os.getloadavg()[0],
             "rows": len(fit.data.x), "all_rows": int(table.dropna().shape[0]),
             "available": int(len(table)), "method": fit.method, "peak_mb": _max_rss_mb(),
-            "worker_peak_mb": _max_rss_mb(resource.RUSAGE_CHILDREN) if workers else 0.0,
+            "worker_peak_mb": worker_peak_mb,
             "rss_before_mb": rss0, "rmse_pct": float(np.mean(svr["rmse_pct_unit"])),
             "r": float(np.mean(svr["r"]))}
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
+import multiprocessing
 import sys
 from collections.abc import Callable, Iterable, Iterator
 from typing import Any
@@ -49,6 +50,12 @@ LOCAL_WORKER_CONFIG: dict[str, object] = {
     "distributed.nanny.pre-spawn-environ.MALLOC_MMAP_THRESHOLD_": 32 * 2**20,
     "distributed.worker.profile.enabled": False,
 }
+#: Where the platform has it (Linux, macOS), the local workers are forked from one fork server that
+#: imported these modules (the tasks' own) once, with the environment above: a worker then starts
+#: in a fraction of a second, ready to run, instead of each spawned worker importing Dask, then
+#: numpy, pandas and scikit-learn at its first task (measured: 4 s of CPU and about 3 s of wall
+#: time for 2 workers). The fork server lives as long as this process: the next cluster starts at once.
+FORKSERVER_PRELOAD = ("distributed", "effortface.train.face_fit", "effortface.train.batch_synth")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -140,6 +147,7 @@ def compute_backend(settings: ComputeSettings | None) -> Iterator[Any]:
     with contextlib.ExitStack() as stack:
         if settings.workers is not None:
             stack.enter_context(dask.config.set(LOCAL_WORKER_CONFIG))
+            _use_forkserver(stack)
             cluster = stack.enter_context(LocalCluster(
                 n_workers=settings.workers, threads_per_worker=1, processes=True, host="127.0.0.1",
                 dashboard_address=None, silence_logs=50))
@@ -157,6 +165,18 @@ def compute_backend(settings: ComputeSettings | None) -> Iterator[Any]:
         finally:
             _OPEN.remove(opened)
             opened.shipped.clear()  # releases the shipped data on the workers
+
+
+def _use_forkserver(stack: contextlib.ExitStack) -> None:
+    """Start the local workers from the fork server (:data:`FORKSERVER_PRELOAD`) where there is one."""
+    import dask
+    from distributed.utils import get_mp_context
+
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        return  # Windows: spawned workers
+    stack.enter_context(dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"}))
+    context = get_mp_context()  # Dask sets its own preload list at its first call: replace it
+    context.set_forkserver_preload(list(FORKSERVER_PRELOAD))  # no effect once the server runs
 
 
 #: len(sys.modules) -> this process's thread-pool controller (see :func:`_thread_pools`)

@@ -5,9 +5,11 @@ abandoned tasks are cancelled. A real two-worker cluster in this process; the Cl
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 import pickle
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -18,8 +20,8 @@ from effortface.core.blendshapes import DEFAULT_SET
 from effortface.train.dataset import prepare, synthetic_table
 from effortface.train.face_fit import (PROTOCOLS, FaceData, FaceFitConfig, _protocol_folds, cv_folds,
                                        fit_face_models, held_out_scores, protocol_scores)
-from effortface.train.parallel import (TASKS_PER_THREAD, ComputeSettings, compute_backend, map_ordered,
-                                       single_threaded)
+from effortface.train.parallel import (FORKSERVER_PRELOAD, TASKS_PER_THREAD, ComputeSettings, compute_backend,
+                                       map_ordered, single_threaded)
 
 #: a task may carry its fold's row indices, never the training data: at most this share of its bytes
 MAX_TASK_SHARE_OF_DATA = 0.05
@@ -100,15 +102,20 @@ def test_the_training_data_is_sent_to_the_workers_once(table, serial, cluster, m
 def _worker_settings() -> dict[str, Any]:
     import dask
 
+    parent = Path(f"/proc/{os.getppid()}/cmdline").read_bytes().replace(b"\0", b" ").decode()
     return {"trim": os.environ.get("MALLOC_TRIM_THRESHOLD_"), "mmap": os.environ.get("MALLOC_MMAP_THRESHOLD_"),
-            "profile": dask.config.get("distributed.worker.profile.enabled")}
+            "profile": dask.config.get("distributed.worker.profile.enabled"), "parent": parent}
 
 
 def test_local_workers_keep_freed_memory_and_run_single_threaded(cluster):
-    """Dask's MALLOC_TRIM_THRESHOLD_=65536 made every fold's temporaries fresh pages (+40 % CPU)."""
+    """Dask's MALLOC_TRIM_THRESHOLD_=65536 made every fold's temporaries fresh pages (+40 % CPU);
+    spawned workers each imported Dask, numpy, pandas and scikit-learn (4 s of CPU for two)."""
     for settings in cluster.run(_worker_settings).values():
         assert settings["trim"] == str(64 * 2**20) and settings["mmap"] == str(32 * 2**20)
         assert settings["profile"] is False
+        if "forkserver" in multiprocessing.get_all_start_methods():
+            assert "multiprocessing.forkserver" in settings["parent"], settings["parent"]
+            assert all(m in settings["parent"] for m in FORKSERVER_PRELOAD), settings["parent"]
     inside = list(map_ordered(_thread_counts, [()]))[0]
     assert inside == {1}
 
