@@ -1,7 +1,8 @@
 """Training on a local Dask cluster (train/parallel.py): the training data goes to the workers once,
-a task carries only its fold's indices and hyper-parameters, the results are the serial run's, and
-abandoned tasks are cancelled. A real two-worker cluster in this process; the Client's own
-``scatter`` and ``submit`` are observed (wrapped, still called), nothing is stubbed."""
+a task carries only fold indices and hyper-parameters, the results are the serial run's, abandoned
+tasks are cancelled, the workers start warm and keep their freed memory, and the data arrives
+aligned. A real two-worker cluster in this process; the Client's own ``scatter`` and ``submit`` are
+observed (wrapped, still called), nothing is stubbed."""
 
 from __future__ import annotations
 
@@ -18,10 +19,10 @@ from distributed import Client, Event, Future
 
 from effortface.core.blendshapes import DEFAULT_SET
 from effortface.train.dataset import prepare, synthetic_table
-from effortface.train.face_fit import (PROTOCOLS, FaceData, FaceFitConfig, _protocol_folds, cv_folds,
+from effortface.train.face_fit import (PROTOCOLS, FaceData, FaceFitConfig, _protocol_folds, cv_folds, face_data,
                                        fit_face_models, held_out_scores, protocol_scores)
 from effortface.train.parallel import (FORKSERVER_PRELOAD, TASKS_PER_THREAD, ComputeSettings, compute_backend,
-                                       map_ordered, single_threaded)
+                                       _chunks, map_ordered, single_threaded)
 
 #: a task may carry its fold's row indices, never the training data: at most this share of its bytes
 MAX_TASK_SHARE_OF_DATA = 0.05
@@ -102,18 +103,19 @@ def test_the_training_data_is_sent_to_the_workers_once(table, serial, cluster, m
 def _worker_settings() -> dict[str, Any]:
     import dask
 
-    parent = Path(f"/proc/{os.getppid()}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+    cmdline = Path(f"/proc/{os.getppid()}/cmdline")
+    parent = cmdline.read_bytes().replace(b"\0", b" ").decode() if cmdline.exists() else None
     return {"trim": os.environ.get("MALLOC_TRIM_THRESHOLD_"), "mmap": os.environ.get("MALLOC_MMAP_THRESHOLD_"),
             "profile": dask.config.get("distributed.worker.profile.enabled"), "parent": parent}
 
 
-def test_local_workers_keep_freed_memory_and_run_single_threaded(cluster):
+def test_local_workers_start_warm_keep_freed_memory_and_run_single_threaded(cluster):
     """Dask's MALLOC_TRIM_THRESHOLD_=65536 made every fold's temporaries fresh pages (+40 % CPU);
     spawned workers each imported Dask, numpy, pandas and scikit-learn (4 s of CPU for two)."""
     for settings in cluster.run(_worker_settings).values():
         assert settings["trim"] == str(64 * 2**20) and settings["mmap"] == str(32 * 2**20)
         assert settings["profile"] is False
-        if "forkserver" in multiprocessing.get_all_start_methods():
+        if "forkserver" in multiprocessing.get_all_start_methods() and settings["parent"] is not None:
             assert "multiprocessing.forkserver" in settings["parent"], settings["parent"]
             assert all(m in settings["parent"] for m in FORKSERVER_PRELOAD), settings["parent"]
     inside = list(map_ordered(_thread_counts, [()]))[0]
@@ -161,8 +163,6 @@ def _alignment(data: FaceData) -> dict[str, bool]:
 
 def test_face_data_is_aligned_when_unpickled(table, cluster):
     """A worker received ``x`` at an odd byte offset (slower loops; a sum may group differently)."""
-    from effortface.train.face_fit import face_data
-
     data = face_data(table.dropna(subset=["nhr"]).head(50), DEFAULT_SET.names)
     data.x = _unaligned_copy(data.x)
     assert not data.x.flags.aligned
@@ -171,3 +171,11 @@ def test_face_data_is_aligned_when_unpickled(table, cluster):
     assert all(_alignment(back).values()) and np.array_equal(back.x, data.x)
     on_worker = list(map_ordered(_alignment, [()], shared=(face_data(table, DEFAULT_SET.names),)))[0]
     assert all(on_worker.values()), on_worker
+
+
+def test_calls_are_cut_into_a_few_even_chunks_in_order():
+    for n_calls in (0, 1, 7, 8, 9, 300):
+        chunks = _chunks(list(range(n_calls)), 8)
+        assert [c for chunk in chunks for c in chunk] == list(range(n_calls))
+        assert len(chunks) == min(n_calls, 8) and all(chunks)
+        assert not chunks or max(map(len, chunks)) - min(map(len, chunks)) <= 1
