@@ -25,10 +25,11 @@ column per blendshape, NaN where not annotated).
   independent of the rows). ``tests/train/test_face_scale.py`` checks it against exact SVR.
 - **Speed (choices).** Leave-one-participant-out becomes participant-grouped ``max_folds``-fold CV for
   large labs. For exact SVRs each fold's scaler and, per gamma, its RBF Gram matrices are computed
-  once and shared by every C, epsilon and blendshape (``SVR(kernel="precomputed")``). The folds run
-  through :func:`effortface.train.parallel.map_ordered` (in this process, or on a Dask cluster with
-  identical results). Held-out scores reuse the hyper-parameters the same CV chose (not nested CV),
-  which is slightly optimistic.
+  once and shared by every C, epsilon and blendshape (``SVR(kernel="precomputed")``). The folds and
+  the final fits (one per blendshape) run through :func:`effortface.train.parallel.map_ordered` (in
+  this process, or on a Dask cluster with identical results: every fit single-threaded, so the
+  model does not depend on the machine's core count either). Held-out scores reuse the
+  hyper-parameters the same CV chose (not nested CV), which is slightly optimistic.
 """
 
 from __future__ import annotations
@@ -186,6 +187,13 @@ class FaceData:
     t_s: np.ndarray
     session: np.ndarray
     blendshapes: tuple[str, ...]
+
+    def __setstate__(self, state: dict) -> None:
+        """Unpickle with every array aligned: a Dask worker may receive an array at any byte offset,
+        where numpy takes slower loops and a sum may group its terms differently."""
+        self.__dict__.update({key: value.copy(order="K")
+                              if isinstance(value, np.ndarray) and not value.flags.aligned else value
+                              for key, value in state.items()})
 
 
 def face_data(table: pd.DataFrame, blendshapes: Sequence[str],
@@ -368,7 +376,7 @@ def grid_search(data: FaceData, config: FaceFitConfig,
     """Grid search of every blendshape's model (exact SVR or the approximation, by the rows).
 
     The folds run through :func:`effortface.train.parallel.map_ordered` (this process or a Dask
-    cluster, same results).
+    cluster, same results; ``data`` goes to the workers once, a task carries its fold's indices).
 
     Parameters
     ----------
@@ -391,7 +399,8 @@ def grid_search(data: FaceData, config: FaceFitConfig,
     fold_mse = {p: np.zeros((len(folds), nb)) for p in points}
     base = {k: np.full((n, nb), np.nan) for k in ("mean", "linear")}
     method = config.method(n)
-    results = map_ordered(_search_fold, ((data, train, test, config, method) for train, test in folds))
+    calls = ((train, test, config, method) for train, test in folds)
+    results = map_ordered(_search_fold, calls, shared=(data,))
     for f, ((train, test), (preds, mses, baselines)) in enumerate(zip(folds, results)):
         for p in points:
             oof[p][test] = preds[p]
@@ -588,14 +597,18 @@ def fit_face_models(table: pd.DataFrame, blendshapes: Sequence[str],
     data = face_data(subsample(table, per_participant), blendshapes, e_table)
     search = grid_search(data, config, progress)
     scaler = StandardScaler().fit(data.x)
-    xs = scaler.transform(data.x)
     method = config.method(len(data.x))
-    svrs = {}
-    for b, name in enumerate(data.blendshapes):
-        ok = np.isfinite(data.y_norm[:, b])
-        svrs[name] = fit_one(xs[ok], data.y_norm[ok, b], search[name].best, method, config.n_landmarks,
-                             config.seed)
+    calls = ((scaler, b, search[name].best, method, config) for b, name in enumerate(data.blendshapes))
+    svrs = dict(zip(data.blendshapes, map_ordered(_final_fit, calls, shared=(data,))))
     return FaceModelFit(tuple(blendshapes), scaler, svrs, search, e_table, data, config)
+
+
+def _final_fit(data: FaceData, scaler: StandardScaler, b: int, params: dict[str, float], method: str,
+               config: FaceFitConfig) -> SVR | LandmarkRegressor:
+    """Blendshape b's model on every annotated row (one task of :func:`fit_face_models`)."""
+    ok = np.isfinite(data.y_norm[:, b])
+    return fit_one(scaler.transform(data.x[ok]), data.y_norm[ok, b], params, method, config.n_landmarks,
+                   config.seed)
 
 
 # --------------------------------------------------------------------------- metrics
@@ -766,8 +779,8 @@ def _predict_folds(fit: FaceModelFit, folds: list) -> np.ndarray:
     """
     out = np.full(fit.data.y_norm.shape, np.nan)
     params = {name: fit.search[name].best for name in fit.blendshapes}
-    calls = ((fit.data, train, test, params, fit.method, fit.config) for train, test in folds)
-    for (_, test), pred in zip(folds, map_ordered(_protocol_fold, calls)):
+    calls = ((train, test, params, fit.method, fit.config) for train, test in folds)
+    for (_, test), pred in zip(folds, map_ordered(_protocol_fold, calls, shared=(fit.data,))):
         out[test] = np.where(np.isnan(pred), out[test], pred)
     return out
 
