@@ -34,8 +34,10 @@ from effortface.capture_tool.captures import read_timed_capture
 from effortface.capture_tool.protocols import get_decoder
 from effortface.capture_tool.replay import PtyReplay, TimedChunk, start_replay_thread
 
+from bench_data import DATA  # ../shared/data, else tests/data
+
 ROOT = Path(__file__).resolve().parents[1]
-HXM = ROOT.parent / "shared" / "data" / "serial" / "zephyr-bt" / "120-second-bt-stream-hxm.dat"
+HXM = DATA / "serial" / "zephyr-bt" / "120-second-bt-stream-hxm.dat"
 SIZE = (640, 480)
 FPS = 30.0
 
@@ -132,7 +134,8 @@ def run_capture(video: Path, chunks: list[TimedChunk], duration_s: float, out: P
     """Record ``duration_s`` through a pty; return the figures."""
     rp = PtyReplay(chunks)
     cmd = [sys.executable, "-m", "effortface", "capture", "--port", rp.path, "--protocol", "hxm",
-           "--video", str(video), "--participant", "B01", "--duration", str(duration_s), "--out", str(out)]
+           "--video", str(video), "--participant", "B01", "--age", "30", "--sex", "female", "--height", "1.70",
+           "--mass", "65", "--training-level", "5", "--duration", str(duration_s), "--out", str(out)]
     cap = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     start_replay_thread(rp)
     session = Path(cap.stdout.readline().strip())

@@ -1,6 +1,6 @@
 """Decoder throughput in MB/s for each protocol, against baselines measured in the same process.
 
-Each decoder is fed a realistic stream (the real captures in ../shared/data/serial where they exist,
+Each decoder is fed a realistic stream (the real captures in ../shared/data/serial, else tests/data/serial, where they exist,
 encoder output otherwise), repeated to about ``TARGET_BYTES``, in 64-byte reads (a typical serial
 read) and in one read. Two baselines run over the same bytes:
 
@@ -27,7 +27,9 @@ sys.path.insert(0, str(ROOT))
 from effortface.capture_tool.protocols import get_decoder  # noqa: E402
 from effortface.capture_tool.protocols.encode import encode_hrmi_reply, encode_line  # noqa: E402
 
-SERIAL = ROOT.parent / "shared" / "data" / "serial"
+from bench_data import DATA  # noqa: E402  (../shared/data, else tests/data)
+
+SERIAL = DATA / "serial"
 
 
 def _streams() -> dict[str, tuple[bytes, int]]:

@@ -46,7 +46,9 @@ from effortface.train.gui.synth_stage import QtSynthStage  # noqa: E402
 from effortface.train.synth_session import SynthSession  # noqa: E402
 from effortface.train.train_session import TrainSession  # noqa: E402
 
-CLIP = ROOT.parent / "shared" / "data" / "motion" / "cmu_13_29_jumping_jacks_120fps.bvh"
+from bench_data import DATA  # noqa: E402  (../shared/data, else tests/data)
+
+CLIP = DATA / "motion" / "cmu_13_29_jumping_jacks_120fps.bvh"
 LOOPS = 30
 TARGET_FPS = 60.0
 
