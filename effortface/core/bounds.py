@@ -15,6 +15,7 @@ import math
 import numbers
 
 from effortface.core.errors import UserError
+from effortface.core.participant import LIMITS
 
 
 @dataclasses.dataclass(frozen=True)
@@ -41,9 +42,9 @@ class Bound:
 
 #: every bounded quantity, by the name used in files and messages
 BOUNDS: dict[str, Bound] = {
-    # people and loads: a body mass has the participant table's ceiling (effortface.core.participant
-    # LIMITS, 300 kg; a test keeps them equal); loads above 500 kg cannot be carried
-    "mass_kg": Bound(0.0, 300.0, "kg", low_open=True),
+    # people and loads: a body mass has the participant table's ceiling (taken from
+    # effortface.core.participant.LIMITS, 300 kg); loads above 500 kg cannot be carried
+    "mass_kg": Bound(0.0, LIMITS["mass_kg"].bounds[1], "kg", low_open=True),
     "load_kg": Bound(0.0, 500.0, "kg"),
     "unit_m": Bound(0.0, 100.0, "m", low_open=True),
     # session times: 0 is the recording start; 1e6 s is 11.6 days of recording
