@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from effortface.core.errors import UserError
-from effortface.train.curves_io import units_path, write_curves
+from effortface.train.curves_io import output_files, write_curves
 from effortface.train.motion import MOTION_SUFFIXES, read_motion
 from effortface.train.parallel import ComputeSettings, compute_backend, map_unordered
 from effortface.train.runtime import Character, FaceModel, load_model
@@ -104,8 +104,7 @@ def output_paths(clips: list[Path], out_dir: Path, force: bool, fmt: str = "csv"
                             f"(both would write {clip.stem}.csv)")
         seen[clip.stem] = clip
         outs[clip] = out_dir / f"{clip.stem}.csv"
-    targets = [t for o in outs.values() for t in ([o, units_path(o)] if fmt == "csv" else [o])]
-    existing = [t for t in targets if t.exists()]
+    existing = [t for o in outs.values() for t in output_files(o, fmt) if t.exists()]
     if existing and not force:
         raise UserError(f"--out {out_dir}: expected new files, found {len(existing)} existing "
                         f"(first {existing[0].name}; use --force to replace them)")

@@ -119,6 +119,11 @@ def units_json(columns: Sequence[str]) -> str:
     return json.dumps({"units": units}, indent=2) + "\n"
 
 
+def output_files(path: Path, fmt: str) -> list[Path]:
+    """The files a curves output writes: ``path``, and its units sidecar for the ``csv`` format."""
+    return [path, units_path(path)] if fmt == "csv" else [path]
+
+
 def check_output(path: Path, force: bool, fmt: str = "livelink") -> None:
     """Raise a UserError naming ``--out`` unless ``path`` can be (re)written as a file.
 
@@ -133,8 +138,7 @@ def check_output(path: Path, force: bool, fmt: str = "livelink") -> None:
     """
     if path.is_dir():
         raise UserError(f"--out {path}: expected a file path, found a folder")
-    targets = [path, units_path(path)] if fmt == "csv" else [path]
-    existing = [t for t in targets if t.exists()]
+    existing = [t for t in output_files(path, fmt) if t.exists()]
     if existing and not force:
         raise UserError(f"--out {path}: expected a new file, found an existing {existing[0]} "
                         "(use --force to replace it)")
