@@ -30,6 +30,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "decode": ("effortface.capture_tool.commands.decode", "raw bytes or .serlog -> heart-rate CSV on stdout"),
     "recover": ("effortface.capture_tool.commands.recover", "finish a session that a crash left incomplete"),
     "agreement": ("effortface.annotate.commands.agreement", "inter-rater agreement report"),
+    "preannotate": ("effortface.annotate.commands.preannotate", "the machine rater (MediaPipe Face Landmarker) on every frame"),
     "train": ("effortface.train.commands.train", "fit the heart-rate and face models, export a bundle"),
     "evaluate": ("effortface.train.commands.evaluate", "re-score a model bundle on sessions or a table"),
     "synth": ("effortface.train.commands.synth", "synthesize face curves from a motion clip"),

@@ -1,0 +1,127 @@
+"""``effortface preannotate SESSION [SESSION ...]``: the machine rater on every recorded frame.
+
+Writes ``SESSION/machine/face_landmarker.csv`` (one row per row of ``video_frames.csv``: ``frame,t_s,face``,
+our four blendshapes, then MediaPipe's 52 ARKit-named scores; empty cells where no face was found) and
+``face_landmarker.json`` beside it (model sha256, software versions, mapping, calibration, frames without
+a face, time taken). The model is the shipped MediaPipe Face Landmarker bundle, or ``--model FILE``;
+nothing is downloaded. Every session is checked before any is rated: one that is being recorded, left
+incomplete, has no video or already has a machine rating (without ``--force``) is refused in one line
+(exit 2). Several sessions are rated in parallel with ``--workers N``. Nothing is written for a session
+until all its frames are rated, so Ctrl-C leaves no half-written file. See docs/guide/machine-rater.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import concurrent.futures as cf
+import multiprocessing
+import os
+import sys
+from pathlib import Path
+
+from effortface.core.docs import SCIENCE
+from effortface.core.errors import UserError
+
+#: the shipped documents ``--help`` cites (effortface.core.docs)
+HELP_DOCS = (SCIENCE,)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """SESSION..., --model, --force, --workers."""
+    parser.add_argument("sessions", nargs="+", metavar="SESSION", help="session folders with video")
+    parser.add_argument("--model", metavar="FILE",
+                        help="a MediaPipe face_landmarker.task bundle (default: the one shipped with effortface)")
+    parser.add_argument("--force", action="store_true", help="replace an existing machine rating")
+    parser.add_argument("--workers", type=int, default=1, metavar="N",
+                        help="sessions rated at once, each in its own process (default 1)")
+
+
+def _check_args(args: argparse.Namespace) -> tuple[list[Path], Path | None]:
+    """The sessions (each checked, before any work) and the model path."""
+    from effortface.annotate.machine.landmarker import litert_interpreter, read_bundle
+    from effortface.annotate.machine.preannotate import check_rateable
+
+    if args.workers < 1:
+        raise UserError(f"--workers: expected a whole number of at least 1, found {args.workers}")
+    litert_interpreter()  # one line where ai-edge-litert has no wheel
+    model = Path(args.model) if args.model is not None else None
+    if model is not None:
+        read_bundle(model)
+    sessions = [Path(s) for s in args.sessions]
+    seen: set[Path] = set()
+    for s in sessions:
+        if s.resolve() in seen:
+            raise UserError(f"{s}: expected each session once, found it given twice")
+        seen.add(s.resolve())
+        check_rateable(s, force=args.force)
+    return sessions, model
+
+
+def _rate_one(session: Path, model: Path | None, force: bool, threads: int) -> str:
+    """Worker: rate one session; the line to print."""
+    from effortface.annotate.machine.preannotate import preannotate_session
+    from effortface.annotate.machine.track import read_machine_track
+
+    out = preannotate_session(session, model_path=model, force=force, num_threads=threads)
+    track = read_machine_track(session)
+    n = 0 if track is None else len(track.frame)
+    found = 0 if track is None else int(track.face.sum())
+    taken = None if track is None else track.sidecar.get("time_taken_s")
+    return f"wrote {out}: {n} frames, a face on {found} ({taken} s)"
+
+
+def run(args: argparse.Namespace) -> int:
+    """Check every session, rate them, print one line each; 2 when one failed."""
+    sessions, model = _check_args(args)
+    if len(sessions) == 1 or args.workers == 1:
+        return _run_serial(sessions, model, args.force)
+    return _run_parallel(sessions, model, args.force, min(args.workers, len(sessions)))
+
+
+def _run_serial(sessions: list[Path], model: Path | None, force: bool) -> int:
+    """One session after the other, a frame progress bar each."""
+    from tqdm import tqdm
+
+    from effortface.annotate.machine.preannotate import preannotate_session
+    from effortface.annotate.machine.track import read_machine_track
+
+    failed = 0
+    for session in sessions:
+        error: UserError | None = None
+        with tqdm(total=None, desc=session.name[:32], unit="frame", file=sys.stderr, leave=False) as bar:
+            def progress(done: int, total: int) -> None:
+                bar.total = total
+                bar.update(done - bar.n)
+            try:
+                out = preannotate_session(session, model_path=model, force=force, progress=progress)
+            except UserError as exc:
+                error = exc
+        if error is not None:  # after the bar has cleared its line
+            print(f"effortface preannotate: error: {error}", file=sys.stderr)
+            failed += 1
+            continue
+        track = read_machine_track(session)
+        assert track is not None
+        print(f"wrote {out}: {len(track.frame)} frames, a face on {int(track.face.sum())} "
+              f"({track.sidecar.get('time_taken_s')} s)")
+    return 2 if failed else 0
+
+
+def _run_parallel(sessions: list[Path], model: Path | None, force: bool, workers: int) -> int:
+    """Sessions in worker processes (spawned: no fork of the interpreters' threads), a bar over sessions."""
+    from tqdm import tqdm
+
+    failed = 0
+    threads = max(1, (os.cpu_count() or 1) // workers)
+    context = multiprocessing.get_context("spawn")
+    with cf.ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool, \
+            tqdm(total=len(sessions), desc="preannotate", unit="session", file=sys.stderr, leave=False) as bar:
+        futures = {pool.submit(_rate_one, s, model, force, threads): s for s in sessions}
+        for future in cf.as_completed(futures):
+            bar.update(1)
+            try:
+                print(future.result())
+            except UserError as exc:
+                print(f"effortface preannotate: error: {exc}", file=sys.stderr)
+                failed += 1
+    return 2 if failed else 0
