@@ -43,7 +43,7 @@ from effortface.annotate.video_index import FrameTimes
 from effortface.core.errors import UserError
 from effortface.core.fileio import refuse_overwrite
 from effortface.core.figures import agg_figure
-from effortface.capture_tool.session import Session, list_sessions, read_session
+from effortface.capture_tool.session import Session, list_sessions, read_session, read_session_info
 
 #: poses whose mean absolute disagreement is above this (% of the weight range) are flagged
 FLAG_PCT = 15.0
@@ -584,3 +584,266 @@ def _poses_for(target: Path, sessions: list[Path], n_poses: int) -> list[Pose]:
     for s in sessions:
         poses += propose_poses(read_session(s), per_session, first_id=len(poses) + 1)
     return poses[:n_poses]
+
+
+def gather_poses(target: str | os.PathLike, *, n_poses: int = N_POSES) -> list[Pose]:
+    """The poses :func:`gather_ratings` rates for ``target``: the blind round's ``poses.csv``, else those of
+    :func:`_poses_for` (empty when ``target`` holds no session)."""
+    target = Path(target)
+    rel = target / RELIABILITY_DIR
+    if (rel / "ratings.csv").is_file() or list(rel.glob("ratings_*.csv")):
+        return read_poses(rel / "poses.csv") if (rel / "poses.csv").is_file() else []
+    sessions = [target] if (target / "session.json").is_file() else list_sessions(target)
+    return _poses_for(target, sessions, n_poses) if sessions else []
+
+
+# ---------------------------------------------------------------------------- the machine rater
+#: the machine's rater code in ratings (never a human's code: the Annotate stage refuses it)
+MACHINE_RATER = "machine"
+#: how the report names the machine
+MACHINE_LABEL = "machine rater (MediaPipe face landmarker)"
+#: name of the humans' mean as a reference
+HUMAN_MEAN = "human mean"
+#: bootstrap resamples of the machine's confidence intervals, and their seed
+N_BOOT = 1000
+BOOT_SEED = 0
+
+
+def machine_ratings(target: str | os.PathLike, poses: Sequence[Pose]) -> tuple[list[Rating], list[str]]:
+    """The machine track's four weights at the pose frames (nearest frame in time), as rater ``machine``.
+
+    Parameters
+    ----------
+    target : path-like
+        A session folder or a folder of sessions (those with ``machine/face_landmarker.csv`` count).
+    poses : sequence of Pose
+        The poses rated; each is looked up in its session's track.
+
+    Returns
+    -------
+    ratings : list of Rating
+        Nothing for a pose whose session has no track or whose nearest frame has no face.
+    no_face : list of str
+        Pose ids whose nearest frame has no face.
+    """
+    from effortface.annotate.machine.track import FOUR, MachineTrack, read_machine_track
+
+    target = Path(target)
+    if not target.is_dir():
+        return [], []
+    sessions = [target] if (target / "session.json").is_file() else list_sessions(target)
+    by_id = {read_session_info(s).session_id: s for s in sessions}
+    out: list[Rating] = []
+    no_face: list[str] = []
+    tracks: dict[str, MachineTrack | None] = {}
+    for pose in poses:
+        folder = by_id.get(pose.session_id)
+        if folder is None:
+            continue
+        if pose.session_id not in tracks:
+            tracks[pose.session_id] = read_machine_track(folder)
+        track = tracks[pose.session_id]
+        if track is None or track.t_s.size == 0:
+            continue
+        i = int(np.argmin(np.abs(track.t_s - pose.t_s)))
+        if not track.face[i]:
+            no_face.append(pose.pose_id)
+            continue
+        out += [Rating(pose.pose_id, MACHINE_RATER, name, float(round(w, 4)))
+                for name, w in zip(FOUR, track.weights[i]) if np.isfinite(w)]
+    return out, no_face
+
+
+@dataclasses.dataclass(frozen=True)
+class MachineStats:
+    """The machine against one reference over one group of items, each figure with its 95 % CI.
+
+    Attributes
+    ----------
+    reference : str
+        A human rater's code or :data:`HUMAN_MEAN`.
+    name : str
+        A blendshape, or ``"all"`` (pooled pose-blendshape items).
+    n_items : int
+        Items where both the machine and the reference have a value.
+    icc_a1, alpha, mad_pct : float
+        ICC(A,1) of the two, Krippendorff's alpha (interval) and the mean absolute difference in % of
+        the weight range.
+    icc_a1_ci, alpha_ci, mad_pct_ci : tuple of float
+        Percentile bootstrap intervals over poses.
+    """
+
+    reference: str
+    name: str
+    n_items: int
+    icc_a1: float
+    alpha: float
+    mad_pct: float
+    icc_a1_ci: tuple[float, float]
+    alpha_ci: tuple[float, float]
+    mad_pct_ci: tuple[float, float]
+
+
+@dataclasses.dataclass
+class MachineReport:
+    """The machine rater's section of the report (see :func:`machine_report`).
+
+    Attributes
+    ----------
+    label : str
+    n_poses : int
+        Poses with a machine value.
+    no_face : list of str
+        Poses whose nearest frame has no face (no machine value).
+    stats : list of MachineStats
+        Per reference (each human, then the human mean), per blendshape then pooled.
+    n_boot, seed : int
+        The bootstrap's resamples and seed.
+    in_mean : bool
+        True when the machine was also counted as a rater in the main report (``--machine-in-mean``).
+    """
+
+    label: str
+    n_poses: int
+    no_face: list[str]
+    stats: list[MachineStats]
+    n_boot: int
+    seed: int
+    in_mean: bool = False
+
+
+def alpha_interval_pairs(a: np.ndarray, b: np.ndarray) -> float:
+    """Krippendorff's alpha (interval) of two raters over complete pairs (closed form, vectorised).
+
+    With the ``N = 2 n`` pairable values, ``D_o = 2 sum (a - b)^2 / N`` and
+    ``D_e = 2 sum (v - mean v)^2 / (N - 1)``; alpha is ``1 - D_o / D_e`` (NaN when every value is equal).
+    Equal to ``krippendorff.alpha`` on complete data.
+    """
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    v = np.concatenate([a, b])
+    n_values = v.size
+    d_e = 2 * np.sum((v - v.mean()) ** 2) / (n_values - 1) if n_values > 1 else 0.0
+    if not d_e > 0:
+        return math.nan
+    return float(1 - (2 * np.sum((a - b) ** 2) / n_values) / d_e)
+
+
+def _pair_figures(a: np.ndarray, b: np.ndarray) -> tuple[float, float, float]:
+    """ICC(A,1), alpha and MAD % of paired values (NaN pairs dropped)."""
+    ok = np.isfinite(a) & np.isfinite(b)
+    a, b = a[ok], b[ok]
+    if a.size < 2:
+        return math.nan, math.nan, 100.0 * float(np.mean(np.abs(a - b))) if a.size else math.nan
+    return icc_a1(np.column_stack([a, b])), alpha_interval_pairs(a, b), 100.0 * float(np.mean(np.abs(a - b)))
+
+
+def _percentile_ci(values: np.ndarray) -> tuple[float, float]:
+    """2.5th and 97.5th percentiles of the finite values (NaN when none)."""
+    v = values[np.isfinite(values)]
+    return (math.nan, math.nan) if v.size == 0 else (float(np.percentile(v, 2.5)), float(np.percentile(v, 97.5)))
+
+
+def machine_stats(machine: np.ndarray, reference: np.ndarray, *, reference_name: str, names: Sequence[str],
+                  n_boot: int = N_BOOT, seed: int = BOOT_SEED) -> list[MachineStats]:
+    """The machine against one reference, per blendshape and pooled, with bootstrap CIs over poses.
+
+    Parameters
+    ----------
+    machine, reference : numpy.ndarray, shape (poses, blendshapes)
+        NaN where a value is missing.
+    reference_name : str
+    names : sequence of str
+        The blendshapes (columns).
+    n_boot : int
+        Resamples of the poses (with replacement); each resample keeps a pose's blendshapes together.
+    seed : int
+        Seed of the resampling (same seed, same intervals).
+
+    Returns
+    -------
+    list of MachineStats
+        One per blendshape, then ``"all"``.
+    """
+    rng = np.random.default_rng(seed)
+    n_poses = machine.shape[0]
+    idx = rng.integers(0, n_poses, size=(n_boot, n_poses))
+    out = []
+    for j, name in enumerate([*names, "all"]):
+        cols = slice(None) if name == "all" else slice(j, j + 1)
+        m, r = machine[:, cols], reference[:, cols]
+        figures = _pair_figures(m.ravel(), r.ravel())
+        boot = np.array([_pair_figures(m[i].ravel(), r[i].ravel()) for i in idx]).reshape(-1, 3)
+        n_items = int(np.sum(np.isfinite(m) & np.isfinite(r)))
+        out.append(MachineStats(reference_name, name, n_items, *figures,
+                                *(_percentile_ci(boot[:, c]) for c in range(3))))
+    return out
+
+
+def machine_report(human: Sequence[Rating], machine: Sequence[Rating], *, no_face: Sequence[str] = (),
+                   blendshapes: BlendshapeSet = DEFAULT_SET, n_boot: int = N_BOOT, seed: int = BOOT_SEED,
+                   in_mean: bool = False) -> MachineReport | None:
+    """The machine rater against each human and against the humans' mean (the machine never in that mean).
+
+    Parameters
+    ----------
+    human : sequence of Rating
+        The humans' ratings (a rating by :data:`MACHINE_RATER` is left out).
+    machine : sequence of Rating
+        The machine's ratings of the same poses (:func:`machine_ratings`).
+    no_face : sequence of str
+        Poses without a face (reported).
+    blendshapes : BlendshapeSet
+    n_boot, seed : int
+        Bootstrap resamples and seed.
+    in_mean : bool
+        Recorded only: whether the caller also counted the machine in the main report.
+
+    Returns
+    -------
+    MachineReport or None
+        None when the machine rated no pose that a human rated.
+    """
+    human = [r for r in human if r.rater != MACHINE_RATER]
+    rated = {r.pose_id for r in machine}
+    poses = [p for p in dict.fromkeys(r.pose_id for r in human) if p in rated]
+    if not poses:
+        return None
+    names = [n for n in blendshapes.names if any(r.blendshape == n for r in human)]
+    pose_set = set(poses)
+    cube, poses_h, names, raters = ratings_cube([r for r in human if r.pose_id in pose_set], names)
+    m_cube, _, _, _ = ratings_cube([r for r in machine if r.pose_id in pose_set], names)
+    m_cube = _align(m_cube[:, :, 0], [r.pose_id for r in machine if r.pose_id in pose_set], poses_h)
+    stats: list[MachineStats] = []
+    counts = np.isfinite(cube).sum(axis=2)
+    mean = np.where(counts > 0, np.nansum(cube, axis=2) / np.maximum(counts, 1), np.nan)
+    for name, ref in [*((rater, cube[:, :, k]) for k, rater in enumerate(raters)), (HUMAN_MEAN, mean)]:
+        stats += machine_stats(m_cube, ref, reference_name=name, names=names, n_boot=n_boot, seed=seed)
+    return MachineReport(MACHINE_LABEL, len(poses), list(no_face), stats, n_boot, seed, in_mean)
+
+
+def _align(values: np.ndarray, order: list[str], poses: list[str]) -> np.ndarray:
+    """Rows of ``values`` (in first-appearance order of ``order``) re-ordered to ``poses``."""
+    first = list(dict.fromkeys(order))
+    out = np.full((len(poses), values.shape[1]), np.nan)
+    for i, p in enumerate(poses):
+        if p in first:
+            out[i] = values[first.index(p)]
+    return out
+
+
+def format_machine_report(report: MachineReport) -> str:
+    """The machine rater's section as plain text (printed after the humans' report)."""
+    mean_note = ("also counted as a rater above (--machine-in-mean)" if report.in_mean
+                 else "not in the human mean")
+    lines = ["", f"{report.label[0].upper()}{report.label[1:]}: apart from the humans ({mean_note})",
+             f"machine/face_landmarker.csv at the pose frames (nearest frame): {report.n_poses} poses; "
+             f"poses without a face: {', '.join(report.no_face) or 'none'}",
+             "", f"  {'against':<12} {'blendshape':<14} {'items':>5} {'ICC(A,1)':>9} {'95 % CI':>14} "
+                 f"{'alpha':>7} {'95 % CI':>14} {'MAD %':>6} {'95 % CI':>14}"]
+    for s in report.stats:
+        mad_ci = f"[{s.mad_pct_ci[0]:.1f}, {s.mad_pct_ci[1]:.1f}]"
+        lines.append(f"  {s.reference:<12} {s.name:<14} {s.n_items:>5} {s.icc_a1:9.3f} {format_ci(s.icc_a1_ci):>14} "
+                     f"{s.alpha:7.3f} {format_ci(s.alpha_ci):>14} {s.mad_pct:6.1f} {mad_ci:>14}")
+    lines.append(f"  (95 % CI: percentile bootstrap over poses, {report.n_boot} resamples, seed {report.seed}; "
+                 f"MAD %: mean |machine - reference| in % of the weight range)")
+    return "\n".join(lines) + "\n"

@@ -29,6 +29,7 @@ from typing import Any
 
 from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
 from effortface.annotate.completeness import TrackStatus, rater_status
+from effortface.annotate.machine_guide import ACCEPT_TOLERANCE, MachineGuide, load_guide
 from effortface.annotate.keyframes import INTERPOLATIONS, Keyframe, KeyframeTrack, RaterAnnotations, read_annotations
 from effortface.annotate.video_index import FrameTimes
 from effortface.core.errors import UserError
@@ -450,6 +451,54 @@ class AnnotateSession:
                    + (f" by {d_weight:+.2f}" if d_weight else "")
                    + (f", weights x{scale:g}" if scale != 1.0 else ""), targets[0])
         return targets
+
+    # ------------------------------------------------------------------------- the machine
+    @property
+    def machine(self) -> MachineGuide | None:
+        """The session's machine track on its frames (``machine/face_landmarker.csv``), None without one;
+        read on first use and again after :meth:`reload_machine`."""
+        if not hasattr(self, "_machine"):
+            self._machine = load_guide(self.session.path, self.n_frames)
+        return self._machine
+
+    def reload_machine(self) -> MachineGuide | None:
+        """Read the machine track again (after a Pre-annotate run)."""
+        self.__dict__.pop("_machine", None)
+        return self.machine
+
+    def accept_machine(self, first: int, last: int, tolerance: float = ACCEPT_TOLERANCE) -> int:
+        """Replace the current track's keys on ``first..last`` by the machine curve's (one undo step).
+
+        The keys are the Ramer-Douglas-Peucker simplification of the machine curve within ``tolerance``
+        (:meth:`MachineGuide.keys`); frames without a face get none. Returns the keys set.
+
+        Raises
+        ------
+        UserError
+            If the session has no machine track, the blendshape is not one the machine rates, the
+            tolerance is outside [0, 1], or the range holds no frame with a face.
+        """
+        guide = self.machine
+        if guide is None:
+            raise UserError(f"{self.session.path / 'machine'}: expected a machine track (Pre-annotate), found none")
+        if not 0.0 <= tolerance <= 1.0:
+            raise UserError(f"accept tolerance: expected a weight from 0 to 1, found {tolerance}")
+        first, last = sorted((self.times.clamp(first), self.times.clamp(last)))
+        if guide.curve(self.blendshape) is None:
+            raise UserError(f"accept machine: expected a blendshape the machine rates, found {self.blendshape!r}")
+        keys = guide.keys(self.blendshape, first, last, tolerance)
+        if not keys:
+            raise UserError(f"accept machine: expected frames with a face in {first}..{last}, found none")
+        old = [k.frame for k in self.track.keys if first <= k.frame <= last]
+
+        def change() -> None:
+            for f in old:
+                self.track.delete(f)
+            for f, w in keys:
+                self.track.add(f, w, "linear")
+        self._edit(change, f"accept machine {self.blendshape} on frames {first}-{last}: {len(keys)} key"
+                   f"{'s' * (len(keys) != 1)} within {tolerance:g}", keys[0][0])
+        return len(keys)
 
     def completeness(self) -> dict[str, TrackStatus]:
         """This rater's completeness per blendshape (:mod:`effortface.annotate.completeness`)."""

@@ -20,6 +20,10 @@ From a session folder (:func:`session_table`), each second ``t_s = 0, 1, 2, ...`
   name. Under either policy only **complete** tracks count (:mod:`effortface.annotate.completeness`:
   keys cover the video with no gap over 30 s and the rater finished the pass); a half-finished track
   is left out, never averaged in as a constant.
+  The raters are ``"humans"`` (default) or ``"humans+machine"``: then, per second and blendshape where
+  no human label exists (no complete human track), the machine track's weight at the nearest frame
+  (``machine/face_landmarker.csv`` from ``effortface preannotate``; none where it found no face) is the
+  label, and the column ``machine_<blendshape>`` is True on those rows (:data:`MACHINE_PREFIX`).
 
 :func:`prepare` then adds ``hr_rest_bpm``, ``hr_max_bpm``, ``nhr`` and ``epoc_norm`` (EPOC from the
 measured NHR through :mod:`effortface.train.physiology`'s recursion), the inputs of both models.
@@ -59,6 +63,10 @@ PARTICIPANT_COLUMNS = ("sex", "age", "height_m", "mass_kg", "training_level")
 #: longest strap gap bridged by interpolation, seconds (choice)
 MAX_HR_GAP_S = 5.0
 ANNOTATIONS_DIR = "annotations"
+#: ``--raters``: who labels the face (the machine only where no human keyed)
+RATER_SOURCES = ("humans", "humans+machine")
+#: prefix of the columns that say a label came from the machine (``machine_mouth_open``...)
+MACHINE_PREFIX = "machine_"
 
 
 class DatasetError(UserError):
@@ -271,7 +279,7 @@ def expand_paths(paths: Iterable[str | os.PathLike]) -> list[Path]:
 
 
 def sessions_table(paths: Iterable[str | os.PathLike], blendshapes: BlendshapeSet = DEFAULT_SET,
-                   rater_policy: str = "mean") -> pd.DataFrame:
+                   rater_policy: str = "mean", raters: str = "humans") -> pd.DataFrame:
     """The long table of several sessions (or folders of sessions), checked for contradictions.
 
     Parameters
@@ -282,6 +290,8 @@ def sessions_table(paths: Iterable[str | os.PathLike], blendshapes: BlendshapeSe
         The blendshape set (column order).
     rater_policy : str
         ``"mean"`` or the name of one rater.
+    raters : {"humans", "humans+machine"}
+        Whether the machine track labels the seconds no human keyed (see the module docstring).
 
     Returns
     -------
@@ -294,7 +304,7 @@ def sessions_table(paths: Iterable[str | os.PathLike], blendshapes: BlendshapeSe
         rater), or a participant whose data differ between sessions.
     """
     folders = expand_paths(paths)
-    table = pd.concat([session_table(f, blendshapes, rater_policy) for f in folders], ignore_index=True)
+    table = pd.concat([session_table(f, blendshapes, rater_policy, raters) for f in folders], ignore_index=True)
     for col in (*PARTICIPANT_COLUMNS[1:], "hr_rest_bpm", "hr_max_bpm"):
         table[col] = pd.to_numeric(table[col]).astype(float)  # None (not recorded) -> NaN
     source = ", ".join(str(f.parent) for f in folders[:1]) or "sessions"
@@ -304,7 +314,7 @@ def sessions_table(paths: Iterable[str | os.PathLike], blendshapes: BlendshapeSe
 
 
 def session_table(folder: str | os.PathLike, blendshapes: BlendshapeSet = DEFAULT_SET,
-                  rater_policy: str = "mean") -> pd.DataFrame:
+                  rater_policy: str = "mean", raters: str = "humans") -> pd.DataFrame:
     """One session folder -> its per-second rows in the long format (plus ``exercise`` and measured HR).
 
     Raises
@@ -321,7 +331,11 @@ def session_table(folder: str | os.PathLike, blendshapes: BlendshapeSet = DEFAUL
     end_s = max(hr_t[-1], s.frame_times_s[-1] if s.frame_times_s else 0.0)
     t = np.arange(0.0, math.floor(end_s) + 1.0)
     w, p = _work(s, t)
-    weights = _weights(s, t, blendshapes, rater_policy)
+    check_raters(raters)
+    weights = _weights(s, t, blendshapes, rater_policy, machine=raters == "humans+machine")
+    from_machine = np.zeros(weights.shape, bool)
+    if raters == "humans+machine":
+        weights, from_machine = _fill_from_machine(s, t, blendshapes, weights)
     part = s.participant
     df = pd.DataFrame({"participant": part.code, "session": s.info.session_id, "t_s": t,
                        "sex": part.sex, "age": part.age, "height_m": part.height_m,
@@ -329,6 +343,9 @@ def session_table(folder: str | os.PathLike, blendshapes: BlendshapeSet = DEFAUL
                        "w_per_kg": w, "p_per_kg": p, "hr_bpm": _hr_per_second(s, t)})
     for j, name in enumerate(blendshapes.names):
         df[name] = weights[:, j]
+    if raters == "humans+machine":
+        for j, name in enumerate(blendshapes.names):
+            df[MACHINE_PREFIX + name] = from_machine[:, j]
     df["exercise"] = _session_label(s.info.session_id)
     df["hr_rest_bpm"], df["hr_max_bpm"] = part.hr_rest_bpm, part.hr_max_bpm
     return df
@@ -390,9 +407,40 @@ def _check_work_times(path: Path, t_s: np.ndarray) -> None:
 
 
 #: the numbers of a motion.json entry, with their bounds-table names and defaults
-def _weights(s: Session, t: np.ndarray, blendshapes: BlendshapeSet, rater_policy: str) -> np.ndarray:
-    """Per-second weights (len(t), B) under the rater policy; DatasetError if unannotated."""
+def check_raters(raters: str) -> str:
+    """``raters`` if it is one of :data:`RATER_SOURCES`, else UserError naming ``--raters``."""
+    if raters not in RATER_SOURCES:
+        raise UserError(f"--raters: expected one of {', '.join(RATER_SOURCES)}, found {raters!r}")
+    return raters
+
+
+def _fill_from_machine(s: Session, t: np.ndarray, blendshapes: BlendshapeSet, weights: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """Weights with the machine's where no human label exists, and where that was done (both (len(t), B))."""
+    from effortface.annotate.machine.track import FOUR, read_machine_track
+
+    track = read_machine_track(s.path)
+    from_machine = np.zeros(weights.shape, bool)
+    if track is None or track.t_s.size == 0:
+        return weights, from_machine
+    idx = _nearest_frames(np.asarray(track.t_s, float), t) if track.t_s.size > 1 else np.zeros(len(t), int)
+    out = weights.copy()
+    for j, name in enumerate(blendshapes.names):
+        if name in FOUR:
+            machine = np.clip(track.weights[idx, FOUR.index(name)], 0.0, 1.0)
+            fill = ~np.isfinite(out[:, j]) & np.isfinite(machine)
+            out[fill, j] = machine[fill]
+            from_machine[:, j] = fill
+    return out, from_machine
+
+
+def _weights(s: Session, t: np.ndarray, blendshapes: BlendshapeSet, rater_policy: str,
+             machine: bool = False) -> np.ndarray:
+    """Per-second weights (len(t), B) under the rater policy; DatasetError if unannotated (with ``machine``,
+    a session with a machine track may have no human annotation: its weights are then all NaN)."""
     files = sorted((s.path / ANNOTATIONS_DIR).glob("*.json"))
+    if machine and not files and s.frame_times_s and (s.path / "machine").is_dir():
+        return np.full((len(t), len(blendshapes)), np.nan)
     if rater_policy != "mean":
         files = [f for f in files if f.stem == rater_policy]
         if not files:
@@ -408,7 +456,7 @@ def _weights(s: Session, t: np.ndarray, blendshapes: BlendshapeSet, rater_policy
     with np.errstate(all="ignore"):
         counts = np.isfinite(stack).sum(axis=0)
         mean = np.where(counts > 0, np.nansum(stack, axis=0) / np.maximum(counts, 1), np.nan)
-    if not np.isfinite(mean).any():
+    if not np.isfinite(mean).any() and not (machine and (s.path / "machine").is_dir()):
         raise DatasetError(f"{s.path / ANNOTATIONS_DIR}: expected complete key-frame tracks "
                            f"({RULE_TEXT}), found none")
     return mean

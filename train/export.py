@@ -502,6 +502,28 @@ def _md_table(rows: list[Mapping[str, Any]], columns: list[str]) -> str:
     return head + "".join("| " + " | ".join(fmt(r.get(c, "")) for c in columns) + " |\n" for r in rows)
 
 
+def _raters_line(prov: dict) -> str:
+    """Who labelled the face: humans, or humans + the machine where no human keyed (with its seconds)."""
+    raters = prov.get("raters", "humans")
+    if raters != "humans+machine":
+        return f"{raters} (human key-frames only)"
+    counts = prov.get("machine_labelled_seconds", {})
+    return ("humans+machine (the machine rater's weights, machine/face_landmarker.csv, only where no human "
+            "keyed; machine-labelled seconds: " + ", ".join(f"{b} {n}" for b, n in counts.items()) + ")")
+
+
+def _label_comparison_card(comparison: object) -> list[str]:
+    """Model-card lines: held-out scores on human labels, human labels only against human + machine."""
+    if comparison is None:
+        return []
+    head = ["", "Face, human labels only against human + machine labels (both fits scored out of fold on "
+                "the held-out participants' human labels only):", ""]
+    if isinstance(comparison, str):
+        return [*head, f"No comparison: {comparison}."]
+    rows = comparison if isinstance(comparison, list) else []
+    return [*head, _md_table(rows, ["blendshape", "labels", "r", "rmse_pct_range", "n", "machine_seconds"])]
+
+
 def model_card(bundle: ModelBundle) -> str:
     """``MODEL_CARD.md``: data, participants, metrics, limitations, intended use."""
     prov, met = bundle.provenance, bundle.metrics
@@ -522,6 +544,7 @@ def model_card(bundle: ModelBundle) -> str:
         f"face training rows after subsampling: {prov.get('n_face_rows', '?')}",
         f"- face fit: {_face_fit_line(prov)}",
         f"- rater policy: {prov.get('rater_policy', 'n/a')}",
+        f"- raters: {_raters_line(prov)}",
         f"- annotation tracks used: {prov.get('annotation_rule', 'all (model trained before the completeness rule)')}", "",
         "## Model",
         f"- heart rate: t_root = {reg.t_root[0]:.3g} {reg.t_root[1]:+.3g} TL W/kg, "
@@ -548,6 +571,7 @@ def model_card(bundle: ModelBundle) -> str:
         _md_table(met.get("face_held_out", []), ["blendshape", "model", "r", "rmse_pct_range", "rmse_pct_unit"]),
         "", "Face in-sample (the final SVRs on their training rows, comparable to the paper's 17-26 %):", "",
         _md_table(met.get("face_in_sample", []), ["blendshape", "model", "r", "rmse_pct_range", "rmse_pct_unit"]),
+        *_label_comparison_card(met.get("face_label_comparison")),
         "", f"Export parity: {met.get('export_parity', {})}", "",
         "## Built-in models",
         "`default` (no bundle) is the rule face model with heart rate calibrated against the 2024 "

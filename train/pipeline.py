@@ -30,7 +30,7 @@ from effortface.core.jobs import Cancelled  # noqa: F401  (re-exported: the one 
 from effortface.core.blendshapes import BlendshapeSet
 from effortface.core.errors import UserError
 from effortface.core.version import __version__
-from effortface.train.dataset import hr_series, prepare, read_table, sessions_table
+from effortface.train.dataset import check_raters, hr_series, prepare, read_table, sessions_table
 from effortface.train.face_fit import (GRIDS, MIN_ROWS_PER_PARTICIPANT, FaceFitConfig, FaceModelFit,
                                        check_face_table, fit_face_models, held_out_scores,
                                        protocol_scores, training_scores)
@@ -65,6 +65,10 @@ class TrainSettings:
     ----------
     rater_policy : str
         ``"mean"`` of the raters or one rater's name.
+    raters : {"humans", "humans+machine"}
+        Who labels the face: the humans' key-frames only (default), or also the machine track
+        where no human keyed (:mod:`effortface.train.dataset`); then the report compares the
+        held-out scores of a fit on the humans' labels only with those of this fit.
     grid : str
         A key of :data:`effortface.train.face_fit.GRIDS`.
     cv : {"lopo", "kfold"}
@@ -81,6 +85,7 @@ class TrainSettings:
     """
 
     rater_policy: str = "mean"
+    raters: str = "humans"
     grid: str = "small"
     cv: str = "lopo"
     max_rows_per_participant: int = FaceFitConfig().max_rows_per_participant
@@ -95,6 +100,7 @@ class TrainSettings:
                             f"found {self.max_rows_per_participant}")
         if not self.rater_policy.strip():
             raise UserError("rater policy: expected 'mean' or a rater's name, found nothing")
+        check_raters(self.raters)
         self.compute()  # checks --workers / --scheduler
 
     def compute(self) -> ComputeSettings:
@@ -108,7 +114,7 @@ class TrainSettings:
 
 
 def training_table(sessions: Sequence[str | Path], table: str | Path | None, blendshapes: BlendshapeSet,
-                   rater_policy: str = "mean") -> tuple[pd.DataFrame, list[str]]:
+                   rater_policy: str = "mean", raters: str = "humans") -> tuple[pd.DataFrame, list[str]]:
     """The long training table of some sessions or of a table file, and its source names.
 
     Parameters
@@ -121,6 +127,8 @@ def training_table(sessions: Sequence[str | Path], table: str | Path | None, ble
         The blendshape set (the table's columns).
     rater_policy : str
         ``"mean"`` of the raters or one rater's key-frames (sessions only).
+    raters : {"humans", "humans+machine"}
+        Also the machine track's labels where no human keyed (sessions only).
 
     Returns
     -------
@@ -130,8 +138,11 @@ def training_table(sessions: Sequence[str | Path], table: str | Path | None, ble
         The table file, or the session folders (provenance and messages).
     """
     if table is not None:
+        if check_raters(raters) != "humans":
+            raise UserError(f"--raters {raters}: expected session folders (a table holds no machine track), "
+                            f"found --table {table}")
         return read_table(table, blendshapes), [str(table)]
-    return sessions_table(sessions, blendshapes, rater_policy), [str(p) for p in sessions]
+    return sessions_table(sessions, blendshapes, rater_policy, raters), [str(p) for p in sessions]
 
 
 def check_training_data(table: pd.DataFrame, blendshapes: BlendshapeSet, source: str,
@@ -185,6 +196,10 @@ class TrainingOutcome:
     blendshapes: BlendshapeSet
     sources: list[str]
     settings: TrainSettings
+    #: ``--raters humans+machine``: held-out scores on human labels of both label sets (rater_sources)
+    label_comparison: pd.DataFrame | None = None
+    #: why there is no comparison (e.g. the machine labelled no second)
+    label_note: str = ""
 
     @property
     def sessions(self) -> list[str]:
@@ -281,9 +296,36 @@ def train_models(table: pd.DataFrame, blendshapes: BlendshapeSet, settings: Trai
         held = held_out_scores(face)
         step("held_out", "the paper's Fig. 3 protocols")
         protos, proto_preds = protocol_scores(face)
+    comparison, note = (_label_comparison(table, blendshapes, config, face, settings, cancelled, progress)
+                        if settings.raters == "humans+machine" else (None, ""))
     step("protocols", "done")
     return TrainingOutcome(prepared, series, hr_eval, face, held, protos, proto_preds, blendshapes,
-                           list(sources), settings)
+                           list(sources), settings, comparison, note)
+
+
+def _label_comparison(table: pd.DataFrame, blendshapes: BlendshapeSet, config: FaceFitConfig,
+                      face: FaceModelFit, settings: TrainSettings, cancelled: Callable[[], bool],
+                      progress: ProgressFn) -> tuple[pd.DataFrame | None, str]:
+    """Fit the face on the humans' labels only and compare held-out scores on human labels
+    (:mod:`effortface.train.rater_sources`); (None, why) when there is nothing to compare."""
+    from effortface.train.rater_sources import humans_only, label_comparison, machine_label_counts
+
+    if sum(machine_label_counts(table, blendshapes.names).values()) == 0:
+        return None, "the machine labelled no second (every second had a human label, or no machine track)"
+    humans = humans_only(table, blendshapes.names)
+    try:
+        prepared_h, _ = check_training_data(humans, blendshapes, "human labels only", config)
+    except UserError as exc:
+        return None, f"no fit on the human labels alone: {exc}"
+    progress(_STEP_FRACTION["protocols"] - 0.01, "face fit on the human labels only (comparison)")
+    with compute_backend(settings.compute()):
+        face_h = _fit_face(prepared_h, blendshapes, config, cancelled, lambda *_: None)
+    return label_comparison(face_h, prepared_h, face, prepare_for_lookup(table)), ""
+
+
+def prepare_for_lookup(table: pd.DataFrame) -> pd.DataFrame:
+    """The table's ``session, t_s`` and ``machine_*`` columns (the keys a fit's rows are looked up by)."""
+    return table[[c for c in table.columns if c in ("session", "t_s") or c.startswith("machine_")]]
 
 
 def _fit_face(prepared: pd.DataFrame, blendshapes: BlendshapeSet, config: FaceFitConfig,
@@ -341,13 +383,22 @@ def export_outcome(outcome: TrainingOutcome, out: str | Path, *, force: bool = F
     progress(0.0, "export and parity checks")
     metrics = training_metrics(o.hr_eval, o.face, o.held_out, o.protocols)
     provenance = training_provenance(o.prepared, o.face, o.sources, o.settings.rater_policy, config)
+    provenance["raters"] = o.settings.raters
+    if o.settings.raters == "humans+machine":
+        from effortface.train.rater_sources import machine_label_counts
+
+        provenance["machine_labelled_seconds"] = machine_label_counts(o.prepared, o.blendshapes.names)
+        metrics["face_label_comparison"] = (_finite_or_none(o.label_comparison.to_dict("records"))
+                                            if o.label_comparison is not None else o.label_note)
     bundle = build_bundle(o.face, o.hr_eval.fit, o.blendshapes, metrics, provenance)
     model_dir = export_model(bundle, o.face, out, force=force, inputs=o.sources)
     progress(0.8, "report")
     report = write_report(model_dir / REPORT_DIR, evaluation=o.hr_eval, series=o.series, fit=o.face,
                           held_out=o.held_out, protocols=o.protocols,
                           protocol_predictions=o.protocol_predictions,
-                          header=report_header(bundle.provenance, model_dir))
+                          header=report_header(bundle.provenance, model_dir),
+                          label_comparison=(o.label_comparison if o.label_comparison is not None
+                                            else o.label_note or None))
     progress(1.0, "done")
     return ExportedModel(model_dir, report, bundle.metrics)
 
@@ -496,5 +547,5 @@ def _software_version() -> str:
 def report_header(prov: dict[str, Any], model_dir: Path) -> dict[str, Any]:
     """The provenance lines shown at the top of the report."""
     keys = ("created_utc", "sources", "participants", "n_sessions", "n_seconds", "n_face_rows",
-            "rater_policy", "cv")
-    return {"model": str(model_dir), **{k: prov[k] for k in keys}}
+            "rater_policy", "raters", "cv")
+    return {"model": str(model_dir), **{k: prov.get(k, "humans") for k in keys}}

@@ -124,7 +124,8 @@ def markdown_table(df: pd.DataFrame) -> str:
 def write_report(folder: str | os.PathLike, *, evaluation: HrEvaluation, series: Sequence[HrSeries],
                  fit: FaceModelFit, held_out: pd.DataFrame, protocols: pd.DataFrame,
                  protocol_predictions: Mapping[str, np.ndarray],
-                 header: Mapping[str, Any] | None = None) -> Path:
+                 header: Mapping[str, Any] | None = None,
+                 label_comparison: pd.DataFrame | str | None = None) -> Path:
     """Write ``report.md`` with ``fig2_nhr.png`` and ``fig3_blendshapes.png`` into ``folder``.
 
     Parameters
@@ -137,6 +138,9 @@ def write_report(folder: str | os.PathLike, *, evaluation: HrEvaluation, series:
         Face fit, its held-out scores, the Fig. 3 protocol scores and predictions.
     header : mapping, optional
         Lines of provenance (``key: value``) for the top of the report.
+    label_comparison : DataFrame or str, optional
+        ``--raters humans+machine``: held-out scores on human labels of a fit on human labels only and
+        of this fit (:func:`effortface.train.rater_sources.label_comparison`), or why there is none.
 
     Returns
     -------
@@ -147,7 +151,8 @@ def write_report(folder: str | os.PathLike, *, evaluation: HrEvaluation, series:
     folder.mkdir(parents=True, exist_ok=True)
     plot_fig2(evaluation, series, folder / FIG2_PNG)
     plot_fig3(fit, protocol_predictions, folder / FIG3_PNG)
-    text = "\n".join(_report_lines(evaluation, fit, held_out, protocols, header or {}))
+    text = "\n".join([*_report_lines(evaluation, fit, held_out, protocols, header or {}),
+                      *label_comparison_lines(label_comparison)])
     path = folder / REPORT_MD
     path.write_text(text, encoding="utf-8")
     return path
@@ -197,6 +202,19 @@ def _report_lines(evaluation: HrEvaluation, fit: FaceModelFit, held_out: pd.Data
         "Expressiveness (maximal key-framed weight per participant):", "",
         markdown_table(fit.expressiveness.reset_index()), "",
     ]
+
+
+def label_comparison_lines(comparison: pd.DataFrame | str | None) -> list[str]:
+    """The report's section "Human labels only against human + machine labels" (nothing for None)."""
+    if comparison is None:
+        return []
+    head = ["## Human labels only against human + machine labels (--raters humans+machine)", "",
+            "The machine (machine/face_landmarker.csv, effortface preannotate) labels only the seconds no "
+            "human keyed. The face models were fitted twice, on the human labels only and on human + machine "
+            "labels; both are scored out of fold on the held-out participants' **human** labels only.", ""]
+    if isinstance(comparison, str):
+        return [*head, f"No comparison: {comparison}.", ""]
+    return [*head, markdown_table(comparison), ""]
 
 
 def _hr_table(evaluation: HrEvaluation) -> pd.DataFrame:

@@ -285,10 +285,11 @@ class TrainSession:
         if self.table_path is None and not paths:
             raise UserError("sessions: expected at least one selected session or a loaded table, "
                             "found none")
-        return training_table(paths, self.table_path, self.blendshapes, self.settings.rater_policy)
+        return training_table(paths, self.table_path, self.blendshapes, self.settings.rater_policy,
+                              self.settings.raters)
 
     def _sessions_table(self, paths: Sequence[Path]) -> pd.DataFrame:
-        return sessions_table(paths, self.blendshapes, self.settings.rater_policy)
+        return sessions_table(paths, self.blendshapes, self.settings.rater_policy, self.settings.raters)
 
     def bundle_sessions(self, *bundles: str | os.PathLike) -> list[SessionEntry]:
         """Annotated sessions of this lab that the bundles were trained on, in the lab's order.
@@ -371,7 +372,7 @@ class TrainSession:
 
         self._start("train", train, self._trained)
         self.status_changed.emit(f"training on {self.describe_data()}...", False)
-        self.log(f"settings: raters {settings.rater_policy}, grid {settings.grid}, cv {settings.cv}, "
+        self.log(f"settings: raters {settings.rater_policy} ({settings.raters}), grid {settings.grid}, cv {settings.cv}, "
                  f"{settings.max_rows_per_participant} face rows per participant")
 
     def log(self, line: str) -> None:

@@ -6,6 +6,12 @@ the pose frames (``reliability/poses.csv`` when present, else poses proposed fro
 extremes). Prints per pose, per blendshape and overall: mean absolute disagreement in % of the
 weight range, ICC(A,1), ICC(C,1), Krippendorff's alpha (interval), Bland-Altman per rater pair,
 flagged poses. ``--plot PNG`` also draws the Bland-Altman plot.
+
+When the sessions hold a machine track (``SESSION/machine/face_landmarker.csv``, written by
+``effortface preannotate``), a section labelled "machine rater" follows the humans' report, unchanged:
+the machine's ICC(A,1), Krippendorff's alpha and mean absolute difference against each human and
+against the human mean, per blendshape and pooled, with 95 % bootstrap intervals over poses. The
+machine is never counted among the humans unless ``--machine-in-mean`` is given.
 """
 
 from __future__ import annotations
@@ -14,7 +20,8 @@ import argparse
 from pathlib import Path
 
 from effortface.core.docs import SCIENCE
-from effortface.annotate.agreement import FLAG_PCT, agreement_report, format_report, gather_ratings, save_bland_altman_png
+from effortface.annotate.agreement import (FLAG_PCT, agreement_report, format_machine_report, format_report, gather_poses,
+                                           gather_ratings, machine_ratings, machine_report, save_bland_altman_png)
 from effortface.annotate.reliability import read_ratings
 from effortface.core.errors import UserError
 from effortface.core.fileio import check_new_png
@@ -25,13 +32,16 @@ HELP_DOCS = (SCIENCE,)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """SESSION | DIR | --ratings CSV, --threshold, --plot."""
+    """SESSION | DIR | --ratings CSV, --threshold, --plot, --machine-in-mean."""
     parser.add_argument("target", nargs="?", metavar="SESSION|DIR",
                         help="a session folder or a folder of sessions")
     parser.add_argument("--ratings", metavar="CSV", help="long-format ratings pose_id,rater,blendshape,weight")
     parser.add_argument("--threshold", type=float, default=FLAG_PCT, metavar="PCT",
                         help=f"flag poses whose mean |difference| exceeds PCT %% of the weight range (default {FLAG_PCT:g})")
     parser.add_argument("--plot", metavar="PNG", help="also write the Bland-Altman plot to PNG (never overwrites)")
+    parser.add_argument("--machine-in-mean", action="store_true",
+                        help="also count the machine rater (machine/face_landmarker.csv) as a rater in the "
+                             "humans' report; by default it is reported apart only")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -49,8 +59,16 @@ def run(args: argparse.Namespace) -> int:
         ratings, source = read_ratings(path), str(path)
     else:
         ratings, source = gather_ratings(args.target)
-    report = agreement_report(ratings, flag_pct=args.threshold, source=source)
+    machine, no_face = (machine_ratings(args.target, gather_poses(args.target)) if args.target is not None
+                        else ([], []))
+    pooled = [*ratings, *machine] if args.machine_in_mean else ratings
+    report = agreement_report(pooled, flag_pct=args.threshold, source=source)
     print(format_report(report), end="")
+    section = machine_report(ratings, machine, no_face=no_face, in_mean=args.machine_in_mean)
+    if section is not None:
+        print(format_machine_report(section), end="")
+    elif args.machine_in_mean:
+        print("\nMachine rater: no machine track at these poses (effortface preannotate SESSION writes one)")
     if plot is not None:
         try:
             save_bland_altman_png(report, plot)

@@ -16,6 +16,14 @@ closing never asks and a crash loses nothing. Editing the rater code hides the o
 reliability round at once, until the new code is confirmed (blind raters never see another's keys
 or ratings). The session list is read again each time the stage is shown (and on F5 / Rescan), and
 playback pauses whenever the editor is out of sight.
+
+The machine rater: "Pre-annotate" (side toolbar) rates the chosen sessions in the background
+(:class:`~effortface.annotate.preannotate_run.PreannotateRun`: progress in the status line, the same
+button cancels); the editor then draws the machine curves dashed under the rater's keys (one
+"Machine" toggle per blendshape), shades the frames without a face, and "Accept machine" (A) turns
+the machine curve of the current blendshape into key-frames over the loop, the selected keys' span
+or else the visible time (Ramer-Douglas-Peucker within the tolerance shown, 0.03 by default; no key
+where no face; one undo step). The reliability round's blind rating shows nothing of the machine.
 """
 
 from __future__ import annotations
@@ -39,6 +47,8 @@ from effortface.core.gui.qt_compat import guard_none_refcount
 from effortface.annotate.gui.reliability_panel import QtReliabilityPanel
 from effortface.annotate.gui.timeline import QtTimeline
 from effortface.annotate.annotate_session import AnnotateSession, check_rater
+from effortface.annotate.machine_guide import ACCEPT_TOLERANCE
+from effortface.annotate.preannotate_run import PreannotateRun, has_track
 from effortface.annotate.video_index import VideoIndex
 from effortface.core.errors import UserError
 from effortface.core.gui.widgets import QtElidedLabel
@@ -148,6 +158,7 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         toggles.addStretch(1)
         self.loop_label = QtWidgets.QLabel("")
         toggles.addWidget(self.loop_label)
+        machine_row = self._build_machine_row()
         self.history_view = QtWidgets.QListWidget()
         self.history_view.setFocusPolicy(QtCore.Qt.FocusPolicy.NoFocus)
         self.history_view.setToolTip("Your edits, oldest first; greyed: undone (redo with Ctrl+Y). "
@@ -168,9 +179,65 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         column = QtWidgets.QVBoxLayout(pane)
         column.setContentsMargins(0, 0, 0, 0)
         column.addLayout(toggles)
+        column.addWidget(machine_row)
         column.addLayout(row, 1)
         self._show_history()
         return pane
+
+    def _build_machine_row(self) -> QtWidgets.QWidget:
+        """Machine guide toggles per blendshape, the accept tolerance and "Accept machine" (hidden without a track)."""
+        row = QtWidgets.QHBoxLayout()
+        row.setContentsMargins(0, 0, 0, 0)
+        row.addWidget(QtWidgets.QLabel("Machine (dashed):"))
+        self.machine_toggles: dict[str, QtWidgets.QCheckBox] = {}
+        for name in self.session.blendshape_names:
+            box = QtWidgets.QCheckBox(name)
+            box.setChecked(True)
+            box.setStyleSheet(f"QCheckBox {{ color:{self.timeline.colour(name)}; }}")
+            box.setFocusPolicy(QtCore.Qt.FocusPolicy.NoFocus)
+            box.setToolTip(f"Show the machine rater's {name} curve (dashed) as a guide under your keys")
+            box.toggled.connect(functools.partial(self.timeline.set_machine_shown, name))
+            self.machine_toggles[name] = box
+            row.addWidget(box)
+        row.addStretch(1)
+        row.addWidget(QtWidgets.QLabel("tolerance"))
+        self.accept_tolerance = QtWidgets.QDoubleSpinBox(minimum=0.0, maximum=0.5, value=ACCEPT_TOLERANCE,
+                                                         decimals=3, singleStep=0.005)
+        self.accept_tolerance.setFocusPolicy(QtCore.Qt.FocusPolicy.ClickFocus)
+        self.accept_tolerance.setToolTip("Accept machine keeps the machine curve within this weight at every frame "
+                                         "(Ramer-Douglas-Peucker): larger, fewer keys")
+        row.addWidget(self.accept_tolerance)
+        self.accept_button = QtWidgets.QPushButton("Accept machine (A)")
+        self.accept_button.setFocusPolicy(QtCore.Qt.FocusPolicy.NoFocus)
+        self.accept_button.setToolTip("Replace the current blendshape's keys by the machine curve over the loop, "
+                                      "the selected keys' span, or else the time shown; none where no face; "
+                                      "one undo step")
+        self.accept_button.clicked.connect(lambda: self._guarded(self.accept_machine))
+        row.addWidget(self.accept_button)
+        self.machine_row = QtWidgets.QWidget()
+        self.machine_row.setLayout(row)
+        self.machine_row.setVisible(self.session.machine is not None)
+        return self.machine_row
+
+    def accept_range(self) -> tuple[int, int]:
+        """The frames "Accept machine" acts on: the loop, else the selected keys' span, else the time shown."""
+        if self.loop is not None:
+            return self.loop
+        chosen = self.timeline.selection
+        if len(chosen) >= 2:
+            return chosen[0], chosen[-1]
+        return self.timeline.visible_frames()
+
+    def accept_machine(self) -> int:
+        """Turn the machine curve into key-frames over :meth:`accept_range` (one undo step)."""
+        first, last = self.accept_range()
+        return self.session.accept_machine(first, last, self.accept_tolerance.value())
+
+    def refresh_machine(self) -> None:
+        """Read the machine track again (after Pre-annotate) and show or hide its controls."""
+        self.session.reload_machine()
+        self.timeline.refresh_machine()
+        self.machine_row.setVisible(self.session.machine is not None)
 
     def _pass_note(self, name: str) -> str:
         nxt = self.session.next_blendshape
@@ -289,7 +356,7 @@ class QtKeyframeEditor(QtWidgets.QWidget):
             (Key.Key_BracketLeft, lambda: self.shift_selection(0, 0.0, 1 / SCALE_STEP)),
             (Key.Key_Plus, lambda: self.timeline.zoom(ZOOM_STEP)), (Key.Key_Equal, lambda: self.timeline.zoom(ZOOM_STEP)),
             (Key.Key_Minus, lambda: self.timeline.zoom(1 / ZOOM_STEP)), (Key.Key_F, self.timeline.frame_all),
-            (Key.Key_L, self.toggle_loop),
+            (Key.Key_L, self.toggle_loop), (Key.Key_A, self.accept_machine),
         ]
         bindings += [(getattr(Key, f"Key_{d}"), functools.partial(m.set_key, d / 10)) for d in range(10)]
         for seq, slot in bindings:
@@ -495,12 +562,21 @@ class QtAnnotateStage(QtWidgets.QWidget):
         self.settings = settings
         self.cache_frames = cache_frames
         self.editor: QtKeyframeEditor | None = None
+        self.preannotate = PreannotateRun()
+        self.preannotate.progress_changed.connect(lambda f, text: self.show_message(
+            f"pre-annotate {100 * f:.0f} %: {text}"))
+        self.preannotate.finished.connect(self._preannotated)
+        self._pre_timer = QtCore.QTimer(self, interval=100)
+        self._pre_timer.timeout.connect(self.preannotate.poll)
+        #: asked before replacing machine tracks (tests replace it): ``confirm_replace(n_sessions) -> bool``
+        self.confirm_replace: Callable[[int], bool] = self._ask_replace
         self._build()
         self.refresh_sessions()
 
     # ---------------------------------------------------------------------------------- layout
     def _build(self) -> None:
         self.sessions = QtWidgets.QListWidget()
+        self.sessions.setSelectionMode(QtWidgets.QAbstractItemView.SelectionMode.ExtendedSelection)
         self.sessions.itemDoubleClicked.connect(lambda *_: self.open_selected())
         rater = str(self.settings.value("annotate/rater", "")) if self.settings is not None else ""
         self.rater = QtWidgets.QLineEdit(rater, placeholderText="your code, e.g. R1", maxLength=32)
@@ -512,6 +588,11 @@ class QtAnnotateStage(QtWidgets.QWidget):
         self.rescan_button = QtWidgets.QPushButton("Rescan (F5)")
         self.rescan_button.setToolTip("List the sessions recorded since")
         self.rescan_button.clicked.connect(self.refresh_sessions)
+        self.preannotate_button = QtWidgets.QPushButton("Pre-annotate")
+        self.preannotate_button.setToolTip("Rate the chosen sessions (Ctrl/Shift+click for several) with the machine "
+                                           "rater (face landmarker): its curves become dashed guides in the editor. "
+                                           "Click again to cancel")
+        self.preannotate_button.clicked.connect(self.toggle_preannotate)
         self.status = QtWidgets.QLabel(wordWrap=True)
         self.status.setMinimumHeight(36)
         self.editor_host = QtWidgets.QStackedWidget()
@@ -544,6 +625,7 @@ class QtAnnotateStage(QtWidgets.QWidget):
         left.addWidget(QtWidgets.QLabel("<b>Rater</b> (you see only your own keys)", wordWrap=True))
         left.addWidget(self.rater)
         left.addLayout(buttons)
+        left.addWidget(self.preannotate_button)
         left.addWidget(self._build_toolbar())
         left.addWidget(self.status)
         side = QtWidgets.QWidget()
@@ -577,6 +659,40 @@ class QtAnnotateStage(QtWidgets.QWidget):
         bar.addWidget(button)
         self.export_menu = export
         return bar
+
+    def chosen_sessions(self) -> list[Path]:
+        """The sessions selected in the list (Ctrl/Shift+click for several), else the current one."""
+        items = self.sessions.selectedItems() or ([self.sessions.currentItem()] if self.sessions.currentItem() else [])
+        return [Path(i.data(QtCore.Qt.ItemDataRole.UserRole)) for i in items if i is not None]
+
+    def toggle_preannotate(self) -> None:
+        """Start Pre-annotate on the chosen sessions, or cancel the run under way."""
+        if self.preannotate.busy:
+            self.preannotate.cancel()
+            self.show_message("pre-annotate: cancelling...")
+            return
+        chosen = self.chosen_sessions()
+        if not chosen:
+            self.show_message("pre-annotate: choose sessions in the list first", True)
+            return
+        existing = sum(has_track(s) for s in chosen)
+        force = bool(existing) and self.confirm_replace(existing)
+        self.preannotate.start(chosen, force=force)
+        self.preannotate_button.setText("Cancel pre-annotate")
+        self.show_message(f"pre-annotate: {len(chosen)} session{'s' * (len(chosen) != 1)} started")
+        self._pre_timer.start()
+
+    def _ask_replace(self, n: int) -> bool:
+        answer = QtWidgets.QMessageBox.question(
+            self, "Pre-annotate", f"{n} of the chosen sessions have a machine track already. Replace them?")
+        return answer == QtWidgets.QMessageBox.StandardButton.Yes
+
+    def _preannotated(self, text: str, is_error: bool, outcome: Any) -> None:
+        self._pre_timer.stop()
+        self.preannotate_button.setText("Pre-annotate")
+        self.show_message(text, is_error)
+        if self.editor is not None:
+            self.editor.refresh_machine()
 
     def _on_editor(self, fn: Callable[[QtKeyframeEditor], Any]) -> None:
         editor = self.shown_editor()
@@ -835,7 +951,9 @@ class QtAnnotateStage(QtWidgets.QWidget):
         return True
 
     def shutdown(self) -> None:
-        """Stop playback and the video prefetch thread."""
+        """Stop playback, the video prefetch thread and a Pre-annotate run."""
+        self._pre_timer.stop()
+        self.preannotate.shutdown()
         self.close_session()
 
 

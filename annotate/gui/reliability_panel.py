@@ -4,7 +4,10 @@
 ratings of ``reliability/poses.csv``) and the lab's :class:`~effortface.annotate.agreement.AgreementReport`:
 per-pose and per-blendshape tables (mean absolute difference in % of the weight range, ICC(A,1) and
 ICC(C,1) each with its 95 % confidence interval, Krippendorff's alpha), flagged poses in red and the
-Bland-Altman plot of every rater pair. The report appears only once this rater has rated every pose, so nobody sees the others'
+Bland-Altman plot of every rater pair; when the sessions carry a machine track
+(``machine/face_landmarker.csv``), the machine rater's table apart from the humans (ICC(A,1), alpha and
+mean absolute difference against each human and the human mean, 95 % bootstrap intervals;
+:func:`~effortface.annotate.agreement.machine_report`). The report appears only once this rater has rated every pose, so nobody sees the others'
 ratings before giving their own. A lab without a pose set can propose one from HR and phase
 extremes (written to ``reliability/poses.csv``, never over an existing one).
 
@@ -24,8 +27,9 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6 import QtCore, QtGui, QtWidgets
 
-from effortface.annotate.agreement import (FLAG_PCT, N_POSES, AgreementReport, agreement_report, format_ci,
-                                           gather_ratings, propose_poses)
+from effortface.annotate.agreement import (FLAG_PCT, MACHINE_LABEL, N_POSES, AgreementReport, MachineReport,
+                                           agreement_report, format_ci, gather_poses, gather_ratings,
+                                           machine_ratings, machine_report, propose_poses)
 from effortface.annotate.face import render_face
 from effortface.annotate.gui.image_view import QtImageView
 from effortface.annotate.reliability import Pose, write_poses
@@ -94,6 +98,8 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         self.rater = rater
         self.round: BlindRound | None = None
         self.report: AgreementReport | None = None
+        self.machine: MachineReport | None = None
+        self._machine_key: tuple | None = None  # the ratings the machine section was computed from
         self._build()
         self.reload()
 
@@ -180,9 +186,24 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         results.addWidget(self.per_shape)
         results.addWidget(lower_widget)
         results.addWidget(self.ba_plot)
+        # a group box is at least as wide as its title: the details go in a wrapped label
+        self.machine_box = QtWidgets.QGroupBox("Machine rater, apart from the humans")
+        self.machine_note = QtWidgets.QLabel(wordWrap=True)
+        self.machine_table = _table(["against", "blendshape", "n", "ICC(A,1)", "95 % CI", "alpha", "95 % CI",
+                                     "MAD %", "95 % CI"], fit=True)
+        self.machine_table.setToolTip("The machine (machine/face_landmarker.csv at the pose frames) against each "
+                                      "human and the human mean; never in the human mean. 95 % CI: bootstrap over "
+                                      "poses. MAD %: mean |machine - reference| in % of the weight range")
+        machine_layout = QtWidgets.QVBoxLayout(self.machine_box)
+        machine_layout.addWidget(self.machine_note)
+        machine_layout.addWidget(self.machine_table, 1)
+        _fit_rows(self.machine_table, 4)  # four rows unscrolled; the rest scrolls (20 with three raters)
+        self.machine_box.setVisible(False)
+        results.addWidget(self.machine_box)
         results.setStretchFactor(0, 2)
         results.setStretchFactor(1, 2)
-        results.setStretchFactor(2, 3)
+        results.setStretchFactor(2, 2)
+        results.setStretchFactor(3, 3)
         self.hidden_note = QtWidgets.QLabel(alignment=QtCore.Qt.AlignmentFlag.AlignCenter, wordWrap=True)
         self.hidden_note.setStyleSheet("color:#505050; font-size:14px;")
         self.results = QtWidgets.QStackedWidget()
@@ -371,6 +392,7 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         try:
             ratings, source = gather_ratings(self.lab_dir)
             self.report = agreement_report(ratings, flag_pct=self.threshold.value(), source=source)
+            self._refresh_machine(ratings)
         except UserError as exc:
             self.report_note.setText(str(exc))
         else:
@@ -382,8 +404,29 @@ class QtReliabilityPanel(QtWidgets.QWidget):
                 f"alpha {o.alpha:.2f}. Flagged for review: {', '.join(self.report.flagged) or 'none'}.")
         self._show_report()
 
+    def _refresh_machine(self, ratings: list) -> None:
+        """The machine section, recomputed only when the ratings or the machine's values changed."""
+        machine, no_face = machine_ratings(self.lab_dir, gather_poses(self.lab_dir))
+        key = (tuple(ratings), tuple(machine))
+        if key != self._machine_key:
+            self.machine = machine_report(ratings, machine, no_face=no_face)
+            self._machine_key = key
+
+    def _show_machine(self) -> None:
+        rep = self.machine if self.report is not None else None
+        self.machine_box.setVisible(rep is not None)
+        if rep is None:
+            _fill(self.machine_table, [])
+            return
+        self.machine_note.setText(f"{rep.label[0].upper()}{rep.label[1:]} at the pose frames: {rep.n_poses} poses; "
+                                  f"no face: {', '.join(rep.no_face) or 'none'}. Never in the human mean.")
+        _fill(self.machine_table, [[s.reference, s.name, str(s.n_items), f"{s.icc_a1:.3f}", format_ci(s.icc_a1_ci),
+                                    f"{s.alpha:.3f}", format_ci(s.alpha_ci), f"{s.mad_pct:.1f}",
+                                    f"[{s.mad_pct_ci[0]:.1f}, {s.mad_pct_ci[1]:.1f}]"] for s in rep.stats])
+
     def _show_report(self) -> None:
         rep = self.report
+        self._show_machine()
         self.results.setCurrentIndex(0 if rep is None else 1)
         # rating blind, the pictures take half the room; with the report, its tables take two thirds
         self._row.setStretch(1, 1 if rep is None else 2)

@@ -11,6 +11,9 @@
   move it in time and weight (one undo step, snapped to a recorded frame), click empty space to go
   to that time, double-click to add a key there; Delete removes the selected key; moving to another
   frame clears a one-key selection;
+- the machine guide (``machine/face_landmarker.csv``): each blendshape's machine curve dashed under the
+  rater's own curves (shown or hidden per blendshape with :meth:`QtTimeline.set_machine_shown`), and the
+  frames where the machine found no face shaded grey and labelled "no face";
 - zoom: :meth:`QtTimeline.zoom` (the editor binds + and -) about the cursor, :meth:`frame_all` (F);
 - a cursor line at the current frame's time in both plots; dragging it scrubs the video.
 
@@ -33,6 +36,9 @@ CURVE_COLOURS = ("#1f5fbf", "#d0601a", "#2a9d3a", "#9a3fb5", "#8c564b", "#c0306a
 _KEY_BRUSH = pg.mkBrush("#1f5fbf")
 _SELECTED_BRUSH = pg.mkBrush("#e07000")
 _PHASE_BRUSHES = (pg.mkBrush(90, 140, 220, 40), pg.mkBrush(230, 150, 60, 40))
+_NO_FACE_BRUSH = pg.mkBrush(120, 120, 120, 60)
+#: "no face" labels drawn at most (every stretch is shaded)
+_MAX_NO_FACE_LABELS = 30
 
 
 class _ClickViewBox(pg.ViewBox):
@@ -122,6 +128,7 @@ class QtTimeline(pg.GraphicsLayoutWidget):
         self.selected: int | None = None
         self.extra: set[int] = set()  # keys added to the selection with Shift+click
         self.hidden: set[str] = set()  # blendshapes whose curve the rater switched off
+        self.machine_hidden: set[str] = set()  # blendshapes whose machine guide the rater switched off
         self.t_s = session.times.t_s
         self.phase_labels: list[tuple[pg.LinearRegionItem, pg.InfLineLabel, str]] = []
         self.hr_plot = self.addPlot(row=0, col=0)
@@ -137,7 +144,7 @@ class QtTimeline(pg.GraphicsLayoutWidget):
         session.frame_changed.connect(self._on_frame)
         session.keys_changed.connect(lambda *_: self.refresh_curves())
         session.blendshape_changed.connect(self._on_blendshape)
-        self.refresh_curves()
+        self.refresh_machine()
         self._on_frame(session.frame)
 
     # -------------------------------------------------------------------------------- building
@@ -193,6 +200,14 @@ class QtTimeline(pg.GraphicsLayoutWidget):
         plot.setYRange(-0.05, 1.05, padding=0)
         plot.setXLink(self.hr_plot)
         self.hr_plot.getAxis("bottom").setStyle(showValues=False)
+        self.no_face = pg.BarGraphItem(x0=[], width=[], y0=-0.05, height=1.1, brush=_NO_FACE_BRUSH, pen=pg.mkPen(None))
+        self.no_face.setZValue(-20)
+        plot.addItem(self.no_face)
+        self.no_face_labels: list[pg.TextItem] = []
+        self.machine_curves = {n: plot.plot(pen=pg.mkPen(self.colour(n), width=1.2, style=QtCore.Qt.PenStyle.DashLine))
+                               for n in self.session.blendshape_names}
+        for item in self.machine_curves.values():
+            item.setZValue(-5)  # under the rater's own curves and keys
         self.others = {n: plot.plot(pen=pg.mkPen(self.colour(n), width=1.2)) for n in self.session.blendshape_names}
         self.current_curve = plot.plot(pen=pg.mkPen(self.colour(self.session.blendshape), width=2.5))
         self.keys = _KeyPoints()
@@ -212,6 +227,43 @@ class QtTimeline(pg.GraphicsLayoutWidget):
         """Show or hide the (non-current) curve of blendshape ``name``."""
         self.hidden.discard(name) if shown else self.hidden.add(name)
         self.refresh_curves()
+
+    def set_machine_shown(self, name: str, shown: bool) -> None:
+        """Show or hide the machine guide of blendshape ``name``."""
+        self.machine_hidden.discard(name) if shown else self.machine_hidden.add(name)
+        self.refresh_curves()
+
+    def refresh_machine(self) -> None:
+        """Read the session's machine guide again: the dashed curves and the no-face shading."""
+        guide = self.session.machine
+        for item in self.no_face_labels:
+            self.curve_plot.removeItem(item)
+        self.no_face_labels = []
+        spans = guide.no_face_spans() if guide is not None else []
+        last = len(self.t_s) - 1
+        t0 = np.array([self.t_s[a] for a, _ in spans], dtype=float)
+        t1 = np.array([self.t_s[min(b + 1, last)] for _, b in spans], dtype=float)
+        self.no_face.setOpts(x0=t0, width=np.maximum(t1 - t0, 1e-3), y0=-0.05, height=1.1)
+        self.no_face.setToolTip("no face: the machine rater found no face on these frames")
+        for t in t0[:_MAX_NO_FACE_LABELS]:
+            label = pg.TextItem("no face", color="#505050", anchor=(0, 1))
+            label.setPos(float(t), -0.04)
+            self.curve_plot.addItem(label, ignoreBounds=True)
+            self.no_face_labels.append(label)
+        for name, item in self.machine_curves.items():
+            curve = guide.curve(name) if guide is not None else None
+            item.setData(self.t_s, curve if curve is not None else np.full(len(self.t_s), np.nan), connect="finite")
+        self.refresh_curves()
+
+    def machine_visible(self, name: str) -> bool:
+        """True when blendshape ``name``'s machine guide is drawn."""
+        return self.machine_curves[name].isVisible()
+
+    def visible_frames(self) -> tuple[int, int]:
+        """First and last frame of the time shown."""
+        lo, hi = self.curve_plot.viewRange()[0]
+        first, last = self.session.times.frame_at(lo), self.session.times.frame_at(hi)
+        return min(first, last), max(first, last)
 
     # ---------------------------------------------------------------------------------- zoom
     def zoom(self, factor: float) -> None:
@@ -262,6 +314,14 @@ class QtTimeline(pg.GraphicsLayoutWidget):
             values = self.session.annotations.tracks[name].evaluate(frames)
             item.setData(self.t_s, values, connect="finite")
             item.setVisible(name != self.session.blendshape and name not in self.hidden)
+        guide = self.session.machine
+        for name, item in self.machine_curves.items():
+            current = name == self.session.blendshape
+            item.setVisible(guide is not None and name not in self.machine_hidden
+                            and (current or name not in self.hidden))
+            colour = pg.mkColor(self.colour(name))
+            colour.setAlpha(255 if current else 110)  # the other blendshapes' guides faint
+            item.setPen(pg.mkPen(colour, width=2.0 if current else 1.0, style=QtCore.Qt.PenStyle.DashLine))
         self.current_curve.setPen(pg.mkPen(self.colour(self.session.blendshape), width=2.5))
         self.current_curve.setData(self.t_s, self.session.track.evaluate(frames), connect="finite")
         kf, kw, _ = self.session.track.arrays()

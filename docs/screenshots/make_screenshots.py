@@ -8,7 +8,9 @@ all): ``app`` (the main window as it opens), ``capture`` (``before``, ``during``
 ANT+ serial log replayed on a pseudo-terminal, the session video played as the camera, recorded into
 an empty lab), ``annotate`` (``keyframes``, ``blind_round``, ``reliability``), ``train`` (``fig2``,
 ``fig3``, ``runlog`` after training in the stage; ``compare`` of two bundles made by
-``effortface train``), ``synth`` (``rule``, ``trained``).
+``effortface train``), ``synth`` (``rule``, ``trained``), ``machine`` (``annotate_machine_guide``:
+R1's keys over the machine rater's dashed curves and the no-face shading, 330-470 s; ``annotate_machine_accept``:
+a new rater after "Accept machine" over the whole session).
 
 The sample lab (``sample_sessions/``) is copied to a temporary folder first and never written to;
 the states are fixed (session P01 cardio, frame at 400 s for rater R1, new rater R7 in the blind
@@ -41,13 +43,14 @@ from effortface.core.fileio import atomic_write  # noqa: E402
 OUT = Path(__file__).resolve().parent
 SAMPLES = ROOT / "sample_sessions"
 SIZES = ((1280, 800), (1920, 1080))
-GROUPS = ("app", "capture", "annotate", "train", "synth")
+GROUPS = ("app", "capture", "annotate", "train", "synth", "machine")
 #: the fixed states of the pictures
 SESSION = "P01_20260112-093000_cardio"
 KEYFRAME_T_S = 400.0            # P01's 3.4 m/s run
 RATER, BLIND_RATER = "R1", "R7"  # R1 finished the sample round, R7 is new to it
 CLIP = Path("P02_20260112-113700_strength") / "motion" / "squats_set2.bvh"
 CLIP_T_S = 2.0
+GUIDE_SPAN_S = (330.0, 470.0)    # the machine guide's close-up (P01's second run)
 STRAP_SPEED = 8.0               # the strap replay runs 8 times faster than recorded
 
 
@@ -227,6 +230,46 @@ def shoot_annotate(lab: Path, tmp: Path, out: Path) -> None:
             grab(window, name, out, before=panel.poses.scrollToTop)
 
 
+def machine_track(session: Path) -> None:
+    """Pre-annotate the session with the machine rater; without the engine (a build without the face
+    landmarker), the test suite's stand-in track (the raters' mean + noise, two no-face stretches)."""
+    from effortface.annotate.machine.preannotate import preannotate_session
+    from effortface.core.errors import UserError
+
+    try:
+        preannotate_session(session)
+    except UserError as exc:
+        from tests.annotate.machine_helpers import write_fake_machine
+
+        print(f"machine: {exc}; drawing the test track instead", flush=True)
+        write_fake_machine(session, noise=0.01)
+
+
+def shoot_machine(lab: Path, tmp: Path, out: Path) -> None:
+    """P01 cardio with a machine track: R1's keys over the dashed machine guides; R7 after "Accept machine"."""
+    machine_track(lab / SESSION)
+    with main_window(lab, tmp, "annotate") as window:
+        stage = window.stages["annotate"]
+        for rater, name in ((RATER, "annotate_machine_guide"), (BLIND_RATER, "annotate_machine_accept")):
+            stage.close_session()
+            stage.rater.setText(rater)
+            editor = stage.open_session(lab / SESSION, rater)
+            if editor is None:
+                raise RuntimeError(stage.status.text())
+            editor.session.set_blendshape("mouth_open")
+            editor.session.go_to_time(KEYFRAME_T_S)
+            if rater == BLIND_RATER:
+                editor.timeline.frame_all()
+                editor.accept_machine()
+
+            def framed(editor=editor, whole=rater == BLIND_RATER) -> None:
+                if whole:
+                    editor.timeline.frame_all()
+                else:  # around the no-face stretch before the cursor, where the dashes show
+                    editor.timeline.curve_plot.setXRange(*GUIDE_SPAN_S, padding=0)
+            grab(window, name, out, before=framed)
+
+
 def shoot_train(lab: Path, bundles: dict[str, Path], tmp: Path, out: Path) -> None:
     """Train in the stage on every session (defaults), show its results, compare the two CLI bundles."""
     with main_window(lab, tmp, "train") as window:
@@ -298,6 +341,8 @@ def main(argv: list[str] | None = None) -> int:
             shoot_train(lab, bundles, tmp, args.out)
         if "synth" in args.only:
             shoot_synth(lab, bundles, tmp, args.out)
+        if "machine" in args.only:
+            shoot_machine(lab, tmp, args.out)
     finally:
         app.processEvents()
         shutil.rmtree(tmp, ignore_errors=True)

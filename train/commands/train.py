@@ -15,6 +15,7 @@ import sys
 from effortface.core.docs import DESIGN, SCIENCE
 from effortface.core.blendshapes import load_blendshape_set
 from effortface.core.errors import UserError
+from effortface.train.dataset import RATER_SOURCES
 from effortface.train.face_fit import EXACT_MAX_ROWS, GRIDS, MIN_ROWS_PER_PARTICIPANT, FaceFitConfig
 from effortface.train.parallel import add_compute_arguments
 from effortface.train.pipeline import TrainSettings, run_training, training_table
@@ -34,6 +35,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rater-policy", default="mean", metavar="mean|RATER",
                         help="mean of raters (default) or one rater's key-frames; complete tracks only "
                              "(keys over the whole video, no gap over 30 s, pass finished)")
+    parser.add_argument("--raters", choices=RATER_SOURCES, default="humans",
+                        help="who labels the face: the humans' key-frames (default), or also the machine "
+                             "rater (machine/face_landmarker.csv from effortface preannotate) where no human "
+                             "keyed; then the report compares held-out scores on human labels of a fit on "
+                             "human labels only and of this one")
     parser.add_argument("--cv", choices=("lopo", "kfold"), default="lopo",
                         help="leave-one-participant-out (default) or random-frame K-fold (inflated)")
     parser.add_argument("--grid", choices=tuple(GRIDS), default="small", help="hyper-parameter grid")
@@ -64,11 +70,11 @@ def check_inputs(args: argparse.Namespace) -> None:
 def run(args: argparse.Namespace) -> int:
     """Entry point of ``effortface train``."""
     check_inputs(args)
-    settings = TrainSettings(rater_policy=args.rater_policy, grid=args.grid, cv=args.cv,
+    settings = TrainSettings(rater_policy=args.rater_policy, raters=args.raters, grid=args.grid, cv=args.cv,
                              max_rows_per_participant=args.max_rows, workers=args.workers,
                              scheduler=args.scheduler)
     blendshapes = load_blendshape_set(args.blendshapes)
-    table, sources = training_table(args.inputs, args.table, blendshapes, args.rater_policy)
+    table, sources = training_table(args.inputs, args.table, blendshapes, args.rater_policy, args.raters)
     if args.cv == "kfold":
         print("effortface train: warning: --cv kfold puts neighbouring, autocorrelated seconds of the "
               "same participant in training and test folds: its scores are inflated", file=sys.stderr)

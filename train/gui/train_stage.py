@@ -21,6 +21,7 @@ from effortface.annotate.completeness import RULE_TEXT as COMPLETENESS_RULE
 from effortface.core.gui.qt_compat import guard_none_refcount
 from effortface.core.errors import UserError
 from effortface.core.gui.widgets import caption
+from effortface.train.dataset import RATER_SOURCES
 from effortface.train.face_fit import CV_CHOICES, GRIDS, PROTOCOLS
 from effortface.train.run_log import CV_LABELS, cv_caption, grid_tooltip, held_out_pairs
 from effortface.train.train_session import ANY, TrainSession, filter_entries
@@ -30,6 +31,8 @@ __all__ = ["QtTrainStage", "TrainSession"]
 POLL_MS = 50
 _REAL, _OWN, _PRED, _B = "#1f77b4", "#ff7f0e", "#d62728", "#2ca02c"
 _FACE_COLORS = ("#d62728", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#17becf")
+#: the Raters box's label sources (``effortface train --raters``)
+_SOURCE_LABELS = {"humans": "humans", "humans+machine": "humans + machine where no human keyed"}
 _SESSION_COLUMNS = ("use", "session", "participant", "TL", "exercise", "raters", "complete",
                     "complete tracks")
 _ANNOTATION_CHOICES = {"any annotation status": None, "annotated": True, "not annotated": False}
@@ -283,8 +286,19 @@ class QtSettingsPanel(QtWidgets.QGroupBox):
                                  "train faster, more use more of the key-framed data.")
         self.rater.setToolTip("'mean' averages the raters of each session; a rater's name trains on "
                               "that rater's key-frames only.")
+        self.sources = QtWidgets.QComboBox()
+        for key in RATER_SOURCES:
+            self.sources.addItem(_SOURCE_LABELS[key], key)
+        self.sources.setToolTip("humans: the raters' key-frames only. humans + machine: also the machine "
+                                "rater's weights (machine/face_landmarker.csv, Pre-annotate) where no human "
+                                "keyed; the report then compares held-out scores on human labels of a fit on "
+                                "human labels only and of this one.")
+        raters_row = QtWidgets.QHBoxLayout()
+        raters_row.setContentsMargins(0, 0, 0, 0)
+        raters_row.addWidget(self.rater, 1)
+        raters_row.addWidget(self.sources, 1)
         form = QtWidgets.QFormLayout(self)
-        form.addRow("Raters", self.rater)
+        form.addRow("Raters", raters_row)
         form.addRow("SVR grid", self.grid)
         form.addRow("Cross-validation", self.cv)
         form.addRow("Face rows per participant", self.max_rows)
@@ -294,6 +308,7 @@ class QtSettingsPanel(QtWidgets.QGroupBox):
         # not on every keystroke (an editable combo box always has its line edit)
         self.rater.lineEdit().editingFinished.connect(self.commit_rater)  # type: ignore[union-attr]  # see above
         self.rater.activated.connect(self.commit_rater)                    # a pick from the list
+        self.sources.currentIndexChanged.connect(lambda i: self._write(raters=self.sources.itemData(i)))
         self.grid.currentTextChanged.connect(lambda v: self._write(grid=v))
         self.grid.currentTextChanged.connect(lambda v: self.grid.setToolTip(grid_tooltip(v)))
         self.cv.currentIndexChanged.connect(lambda i: self._write(cv=self.cv.itemData(i)))
@@ -333,14 +348,15 @@ class QtSettingsPanel(QtWidgets.QGroupBox):
     def show_settings(self) -> None:
         """Show the session's settings (without writing back)."""
         s = self.session.settings
-        for w in (self.rater, self.grid, self.cv, self.max_rows):
+        for w in (self.rater, self.sources, self.grid, self.cv, self.max_rows):
             w.blockSignals(True)
         self.rater.setCurrentText(s.rater_policy)
+        self.sources.setCurrentIndex(RATER_SOURCES.index(s.raters))
         self.grid.setCurrentText(s.grid)
         self.grid.setToolTip(grid_tooltip(s.grid))
         self.cv.setCurrentIndex(CV_CHOICES.index(s.cv))
         self.max_rows.setValue(s.max_rows_per_participant)
-        for w in (self.rater, self.grid, self.cv, self.max_rows):
+        for w in (self.rater, self.sources, self.grid, self.cv, self.max_rows):
             w.blockSignals(False)
 
 

@@ -1,0 +1,132 @@
+"""``effortface train --raters humans|humans+machine``: the machine labels only the seconds no human
+keyed; recorded in model.json and the model card; the report compares both label sets on human labels."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from effortface.annotate.machine.track import FOUR, read_machine_track
+from effortface.cli import main
+from effortface.train.dataset import MACHINE_PREFIX, DatasetError, session_table
+from tests.annotate.machine_helpers import write_fake_machine
+
+ROOT = Path(__file__).resolve().parents[2]
+SAMPLES = ROOT / "sample_sessions"
+SESSIONS = ("P01_20260112-093000_cardio", "P02_20260119-121100_cardio", "P03_20260113-094400_cardio",
+            "P04_20260120-123300_cardio")
+UNKEYED = SESSIONS[1]  # its human annotations are removed: the machine labels it
+
+
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Four sample sessions with machine tracks; one has no human key-frame."""
+    out = tmp_path_factory.mktemp("raters") / "lab"
+    for name in SESSIONS:
+        shutil.copytree(SAMPLES / name, out / name, ignore=shutil.ignore_patterns("serial"))
+        write_fake_machine(out / name)
+    shutil.rmtree(out / UNKEYED / "annotations")
+    return out
+
+
+def test_machine_labels_only_where_no_human_keyed(lab: Path) -> None:
+    keyed = session_table(lab / SESSIONS[0], raters="humans+machine")
+    humans = session_table(lab / SESSIONS[0])
+    for name in FOUR:
+        assert not keyed[MACHINE_PREFIX + name].any()  # complete human tracks: the machine adds nothing
+        np.testing.assert_array_equal(keyed[name].to_numpy(), humans[name].to_numpy())
+    assert not any(c.startswith(MACHINE_PREFIX) for c in humans.columns)
+    machine = session_table(lab / UNKEYED, raters="humans+machine")
+    track = read_machine_track(lab / UNKEYED)
+    for j, name in enumerate(FOUR):
+        for t in (30.0, 300.0):
+            i = int(np.argmin(np.abs(track.t_s - t)))
+            got = float(machine.loc[machine.t_s == t, name].iloc[0])
+            if track.face[i]:
+                assert got == pytest.approx(track.weights[i, j], abs=1e-4)
+        no_face = ~track.face[[int(np.argmin(np.abs(track.t_s - t))) for t in machine.t_s]]
+        assert no_face.any() and np.all(np.isnan(machine[name].to_numpy()[no_face]))  # no face, no label
+        assert machine[MACHINE_PREFIX + name].to_numpy()[~no_face].all()
+    with pytest.raises(DatasetError, match="annotations"):  # the default policy still wants human keys
+        session_table(lab / UNKEYED)
+
+
+def test_train_humans_plus_machine_records_and_compares(lab: Path, tmp_path: Path,
+                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "model"
+    assert main(["train", str(lab), "--raters", "humans+machine", "--out", str(out)]) == 0
+    doc = json.loads((out / "model.json").read_text())
+    prov, metrics = doc["provenance"], doc["metrics"]
+    assert prov["raters"] == "humans+machine"
+    assert all(n > 500 for n in prov["machine_labelled_seconds"].values())  # the unkeyed session, less no-face
+    rows = metrics["face_label_comparison"]
+    assert [r["labels"] for r in rows] == ["humans"] * 4 + ["humans+machine"] * 4
+    by = {(r["blendshape"], r["labels"]): r for r in rows}
+    for name in FOUR:  # both fits are scored on the same held-out human labels
+        assert by[(name, "humans")]["n"] == by[(name, "humans+machine")]["n"] > 100
+        assert by[(name, "humans")]["r"] != by[(name, "humans+machine")]["r"]
+    card = (out / "MODEL_CARD.md").read_text()
+    assert "- raters: humans+machine (the machine rater's weights" in card
+    assert "human labels only against human + machine labels" in card
+    report = (out / "report" / "report.md").read_text()
+    assert "## Human labels only against human + machine labels" in report
+    assert "- raters: humans+machine" in report
+
+
+def test_default_raters_are_the_humans(lab: Path, tmp_path: Path) -> None:
+    keyed = tmp_path / "keyed"
+    keyed.mkdir()
+    for name in (SESSIONS[0], SESSIONS[2], SESSIONS[3]):
+        (keyed / name).symlink_to(lab / name)
+    out = tmp_path / "model"
+    assert main(["train", str(keyed), "--out", str(out)]) == 0
+    doc = json.loads((out / "model.json").read_text())
+    assert doc["provenance"]["raters"] == "humans" and "face_label_comparison" not in doc["metrics"]
+    assert "- raters: humans (human key-frames only)" in (out / "MODEL_CARD.md").read_text()
+
+
+def test_bad_raters_are_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    table = tmp_path / "t.csv"
+    table.write_text("participant\n")
+    assert main(["train", "--table", str(table), "--raters", "humans+machine", "--out", str(tmp_path / "m")]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1
+    assert "--raters humans+machine: expected session folders (a table holds no machine track), found --table" in err
+    with pytest.raises(SystemExit) as stop:
+        main(["train", "--table", str(table), "--raters", "machine", "--out", str(tmp_path / "m")])
+    assert stop.value.code == 2 and "invalid choice: 'machine'" in capsys.readouterr().err
+
+
+def test_train_stage_raters_box_offers_humans_plus_machine(qtbot, lab: Path, tmp_path: Path) -> None:
+    from PySide6 import QtCore
+
+    from effortface.train.gui.train_stage import QtTrainStage
+    from effortface.train.train_session import TrainSession
+
+    view = QtTrainStage(TrainSession(lab))
+    qtbot.addWidget(view)
+    try:
+        box = view.settings_panel.sources
+        assert [box.itemData(i) for i in range(box.count())] == ["humans", "humans+machine"]
+        assert view.session.settings.raters == "humans"
+        box.setCurrentIndex(box.findData("humans+machine"))
+        assert view.session.settings.raters == "humans+machine"
+        view.picker.select_shown_button.click()
+        view.settings_panel.max_rows.setValue(60)
+        qtbot.mouseClick(view.train_button, QtCore.Qt.MouseButton.LeftButton)
+        qtbot.waitUntil(lambda: not view.session.busy and view.train_button.isEnabled(), timeout=120_000)
+        outcome = view.session.outcome
+        assert outcome is not None, view.status.text()
+        assert list(outcome.label_comparison["labels"].unique()) == ["humans", "humans+machine"]
+        out = tmp_path / "model"
+        assert view.export(out)
+        qtbot.waitUntil(lambda: not view.session.busy and (out / "MODEL_CARD.md").exists(), timeout=120_000)
+        view.session.poll()
+        assert json.loads((out / "model.json").read_text())["provenance"]["raters"] == "humans+machine"
+    finally:
+        view.shutdown()
+        view.session.wait(30)
