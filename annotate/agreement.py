@@ -13,6 +13,14 @@ Statistics, each per blendshape (poses x raters) and overall (pose-blendshape it
 - **Bland-Altman** per rater pair over all items: bias (mean of a - b) and 95 % limits of agreement
   (bias +- 1.96 sd of the differences).
 
+**Confidence intervals that respect the design.** A pose is rated on every blendshape at once, so
+the pose x blendshape items of the overall ("all") row are not independent: the F-based intervals,
+which assume they are, were too narrow there. The "all" row's ICC intervals are therefore a
+**bootstrap over whole poses** (:data:`BOOTSTRAP_RESAMPLES` resamples of the poses with replacement,
+seeded by :data:`BOOTSTRAP_SEED`, percentile intervals), and every row's Krippendorff's alpha and mean
+absolute disagreement get the same pose bootstrap (``alpha_ci``, ``disagreement_ci``). The
+per-blendshape ICC rows keep their F-based intervals (their items are the poses).
+
 Poses whose mean absolute disagreement exceeds a threshold (default :data:`FLAG_PCT`) are flagged for
 review. Gathering ratings (``effortface agreement SESSION | DIR | --ratings CSV``):
 
@@ -31,7 +39,7 @@ import dataclasses
 import itertools
 import math
 import os
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -51,6 +59,10 @@ FLAG_PCT = 15.0
 N_POSES = 18
 RELIABILITY_DIR = "reliability"
 LOA_Z = 1.96
+#: resamples of the pose bootstrap (confidence intervals of the "all" row, alpha and disagreement)
+BOOTSTRAP_RESAMPLES = 2000
+#: seed of the pose bootstrap: the same ratings give the same intervals
+BOOTSTRAP_SEED = 0
 
 
 # ------------------------------------------------------------------------------------ statistics
@@ -185,6 +197,83 @@ def krippendorff_alpha_interval(x: np.ndarray) -> float:
     return float(krippendorff.alpha(reliability_data=data, level_of_measurement="interval"))
 
 
+def alpha_interval(x: np.ndarray) -> float:
+    """Krippendorff's alpha (interval metric) of a ``(units, raters)`` table in closed form (numpy).
+
+    Over the pairable values (units with at least two ratings; n of them in all),
+    ``D_o = (1/n) sum_u 2 (m_u sum x^2 - (sum x)^2) / (m_u - 1)`` and
+    ``D_e = 2 (n sum x^2 - (sum x)^2) / (n (n - 1))``; ``alpha = 1 - D_o / D_e``. The same value as
+    :func:`krippendorff_alpha_interval` (tested), fast enough for a bootstrap. NaN when undefined.
+    """
+    x = np.asarray(x, dtype=float)
+    ok = np.isfinite(x)
+    m = ok.sum(axis=1)
+    pairable = m >= 2
+    if not pairable.any():
+        return math.nan
+    v, ok, m = np.where(ok, x, 0.0)[pairable], ok[pairable], m[pairable]
+    s1, s2 = v.sum(axis=1), (v * v).sum(axis=1)
+    n = float(m.sum())
+    d_o = float(np.sum(2.0 * (m * s2 - s1 * s1) / (m - 1))) / n
+    d_e = 2.0 * (n * float(s2.sum()) - float(s1.sum()) ** 2) / (n * (n - 1.0))
+    return 1.0 - d_o / d_e if d_e > 0 else math.nan
+
+
+def disagreement_pct(cube: np.ndarray) -> float:
+    """Mean absolute pairwise difference (% of [0, 1]) of a ``(poses, blendshapes, raters)`` cube:
+    per item with two or more ratings the mean ``|w_a - w_b|`` over rater pairs, then the mean over
+    items (as :func:`~effortface.annotate.reliability.mean_abs_disagreement_pct`). NaN without items."""
+    flat = np.asarray(cube, dtype=float).reshape(-1, cube.shape[-1])
+    total, pairs = np.zeros(flat.shape[0]), np.zeros(flat.shape[0])
+    for i, j in itertools.combinations(range(flat.shape[1]), 2):
+        both = np.isfinite(flat[:, i]) & np.isfinite(flat[:, j])
+        total += np.where(both, np.abs(flat[:, i] - flat[:, j]), 0.0)
+        pairs += both
+    rated = pairs > 0
+    return 100.0 * float(np.mean(total[rated] / pairs[rated])) if rated.any() else math.nan
+
+
+def _complete_icc(table: np.ndarray, icc: Callable[[np.ndarray], float]) -> float:
+    """An ICC of the table's complete rows (NaN with fewer than two, or when undefined)."""
+    complete = table[np.all(np.isfinite(table), axis=1)]
+    if complete.shape[0] < 2:
+        return math.nan
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return float(icc(complete))
+
+
+def pose_bootstrap(cube: np.ndarray, statistic: Callable[[np.ndarray], float], *,
+                   n_resamples: int = BOOTSTRAP_RESAMPLES, seed: int = BOOTSTRAP_SEED,
+                   confidence: float = ICC_CONFIDENCE) -> tuple[float, float]:
+    """Percentile interval of ``statistic(cube)`` when whole poses are resampled with replacement.
+
+    Parameters
+    ----------
+    cube : ndarray, shape (poses, ...)
+        Ratings with the poses on the first axis (the clusters).
+    statistic : callable
+        Of a resampled cube (same shape), a float (NaN resamples are left out).
+    n_resamples, seed : int
+        Resamples and the seed of their draw (the same inputs give the same interval).
+    confidence : float
+        Coverage of the interval (0.95).
+
+    Returns
+    -------
+    (lower, upper) : tuple of float
+        NaN when fewer than half the resamples give a value.
+    """
+    rng = np.random.default_rng(seed)
+    n = cube.shape[0]
+    values = np.array([statistic(cube[rng.integers(0, n, n)]) for _ in range(n_resamples)])
+    values = values[np.isfinite(values)]
+    if values.size < n_resamples / 2:
+        return math.nan, math.nan
+    tail = 100.0 * (1.0 - confidence) / 2.0
+    low, high = np.percentile(values, [tail, 100.0 - tail])
+    return float(low), float(high)
+
+
 @dataclasses.dataclass(frozen=True)
 class BlandAltman:
     """Bland-Altman statistics of rater ``a`` minus rater ``b`` over paired items.
@@ -235,8 +324,9 @@ def bland_altman(a: np.ndarray, b: np.ndarray, rater_a: str = "a", rater_b: str 
 # ---------------------------------------------------------------------------------------- report
 @dataclasses.dataclass(frozen=True)
 class ItemStats:
-    """Agreement over one group of items (a blendshape, or everything); ``*_ci`` are the ICCs'
-    95 % confidence intervals (lower, upper)."""
+    """Agreement over one group of items (a blendshape, or everything); ``*_ci`` are 95 % confidence
+    intervals (lower, upper): the ICCs' F-based for a blendshape and pose-bootstrap for "all";
+    ``alpha_ci`` and ``disagreement_ci`` pose-bootstrap for every row (module docstring)."""
 
     name: str
     n_items: int
@@ -246,6 +336,8 @@ class ItemStats:
     alpha: float
     icc_a1_ci: tuple[float, float] = (math.nan, math.nan)
     icc_c1_ci: tuple[float, float] = (math.nan, math.nan)
+    alpha_ci: tuple[float, float] = (math.nan, math.nan)
+    disagreement_ci: tuple[float, float] = (math.nan, math.nan)
 
 
 @dataclasses.dataclass
@@ -354,9 +446,10 @@ def agreement_report(ratings: Sequence[Rating], *, flag_pct: float = FLAG_PCT,
     if not per_pose:
         raise UserError(f"ratings{f' ({source})' if source else ''}: expected at least one pose and blendshape "
                         f"rated by two raters, found none ({len(raters)} raters never rated the same pose)")
-    per_shape = [_item_stats(n, cube[:, j, :], [r for r in ratings if r.blendshape == n])
+    per_shape = [_with_bootstrap(_item_stats(n, cube[:, j, :], [r for r in ratings if r.blendshape == n]),
+                                 cube[:, j:j + 1, :], pooled=False)
                  for j, n in enumerate(names)]
-    overall = _item_stats("all", cube.reshape(-1, len(raters)), ratings)
+    overall = _with_bootstrap(_item_stats("all", cube.reshape(-1, len(raters)), ratings), cube, pooled=True)
     flat = cube.reshape(-1, len(raters))
     pairs = []
     for i, j in itertools.combinations(range(len(raters)), 2):
@@ -370,6 +463,25 @@ def agreement_report(ratings: Sequence[Rating], *, flag_pct: float = FLAG_PCT,
     flagged = [p for p, pct in per_pose.items() if pct > flag_pct]
     return AgreementReport(raters, poses, names, per_pose, per_shape, overall, pairs, flag_pct,
                            flagged, incomplete, source)
+
+
+def _with_bootstrap(stats: ItemStats, cube: np.ndarray, *, pooled: bool) -> ItemStats:
+    """``stats`` with pose-bootstrap intervals for alpha and disagreement, and for the ICCs when
+    ``pooled`` (the "all" row, whose items are pose x blendshape)."""
+    if math.isnan(stats.alpha) and math.isnan(stats.disagreement_pct):
+        return stats
+    n_raters = cube.shape[-1]
+
+    def flat(c: np.ndarray) -> np.ndarray:
+        return c.reshape(-1, n_raters)
+
+    stats = dataclasses.replace(stats, alpha_ci=pose_bootstrap(cube, lambda c: alpha_interval(flat(c))),
+                                disagreement_ci=pose_bootstrap(cube, disagreement_pct))
+    if pooled and not math.isnan(stats.icc_a1):
+        stats = dataclasses.replace(
+            stats, icc_a1_ci=pose_bootstrap(cube, lambda c: _complete_icc(flat(c), icc_a1)),
+            icc_c1_ci=pose_bootstrap(cube, lambda c: _complete_icc(flat(c), icc_c1)))
+    return stats
 
 
 def _pose_pct(ratings: Sequence[Rating], pose: str) -> float:
@@ -389,12 +501,15 @@ def format_report(report: AgreementReport) -> str:
     for pose, pct in report.per_pose_pct.items():
         flag = "  FLAGGED for review" if pose in report.flagged else ""
         lines.append(f"  {pose:<12} {pct:6.1f} %{flag}")
-    lines += ["", f"  {'blendshape':<14} {'items':>5} {'diff %':>7} {'ICC(A,1)':>9} {'95 % CI':>14} "
-                  f"{'ICC(C,1)':>9} {'95 % CI':>14} {'alpha':>7}"]
+    lines += ["", f"  {'blendshape':<14} {'items':>5} {'diff %':>7} {'95 % CI':>14} {'ICC(A,1)':>9} "
+                  f"{'95 % CI':>14} {'ICC(C,1)':>9} {'95 % CI':>14} {'alpha':>7} {'95 % CI':>14}"]
     for s in [*report.per_blendshape, report.overall]:
-        lines.append(f"  {s.name:<14} {s.n_items:>5} {s.disagreement_pct:7.1f} {s.icc_a1:9.3f} "
-                     f"{format_ci(s.icc_a1_ci):>14} {s.icc_c1:9.3f} {format_ci(s.icc_c1_ci):>14} {s.alpha:7.3f}")
-    lines.append("  (95 % CI: F-based intervals of McGraw & Wong 1996; few poses give wide intervals)")
+        lines.append(f"  {s.name:<14} {s.n_items:>5} {s.disagreement_pct:7.1f} {format_pct_ci(s.disagreement_ci):>14} "
+                     f"{s.icc_a1:9.3f} {format_ci(s.icc_a1_ci):>14} {s.icc_c1:9.3f} {format_ci(s.icc_c1_ci):>14} "
+                     f"{s.alpha:7.3f} {format_ci(s.alpha_ci):>14}")
+    lines.append(f"  (95 % CI: per blendshape the ICCs' F-based intervals of McGraw & Wong 1996; the \"all\" "
+                 f"row's ICCs, every alpha and diff % by a bootstrap over whole poses, "
+                 f"{BOOTSTRAP_RESAMPLES:,} resamples, seed {BOOTSTRAP_SEED}; few poses give wide intervals)")
     lines += ["", "Bland-Altman per rater pair (weight units, a - b):"]
     for p in report.pairs:
         lines.append(f"  {p.rater_a}-{p.rater_b}  n={p.n:<4} bias {p.bias:+.3f}   "
@@ -408,6 +523,11 @@ def format_report(report: AgreementReport) -> str:
 def format_ci(ci: tuple[float, float]) -> str:
     """An interval as ``[0.61, 0.92]`` (``[nan, nan]`` when undefined)."""
     return f"[{ci[0]:.2f}, {ci[1]:.2f}]"
+
+
+def format_pct_ci(ci: tuple[float, float]) -> str:
+    """A percentage interval as ``[8.1, 12.4]`` (``[nan, nan]`` when undefined)."""
+    return f"[{ci[0]:.1f}, {ci[1]:.1f}]"
 
 
 def save_bland_altman_png(report: AgreementReport, path: str | os.PathLike, *, overwrite: bool = False) -> Path:

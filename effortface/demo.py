@@ -293,12 +293,16 @@ def synth_step(model_dir: Path, lab: Path, out: Path) -> Path:
 def held_out_summary(metrics: dict) -> str:
     """One line of the training run's held-out scores (model.json metrics): heart rate of the
     training-level model on held-out participants and of the own model on held-out sessions; face
-    SVR on held-out participants with expressiveness estimated without their key-frames."""
+    SVR on held-out participants as a game uses it (NHR from work; expressiveness estimated without
+    their key-frames), or on measured NHR for a bundle trained before that row existed."""
     hr = metrics.get("hr", {})
-    face = [r for r in metrics.get("face_held_out", []) if r.get("model") == "svr" and r.get("r") is not None]
+    rows = metrics.get("face_held_out", [])
+    lead = "svr_as_game" if any(r.get("model") == "svr_as_game" for r in rows) else "svr"
+    face = [r for r in rows if r.get("model") == lead and r.get("r") is not None]
     parts = [f"{label} r {hr[k]['r']:.2f}" for k, label in (("tl_regression", "heart rate TL model"),
                                                           ("per_participant", "own model on other sessions"))
              if k in hr and hr[k].get("r") is not None]
     if face:
-        parts.append(f"face r {sum(r['r'] for r in face) / len(face):.2f}")
+        label = "face as a game uses it (NHR from work)" if lead == "svr_as_game" else "face"
+        parts.append(f"{label} r {sum(r['r'] for r in face) / len(face):.2f}")
     return "held out (not fitted on the scored participant or session): " + "; ".join(parts)

@@ -26,7 +26,8 @@ from effortface.core.blendshapes import BlendshapeSet
 from effortface.core.errors import UserError
 from effortface.core.fileio import atomic_write, atomic_write_text, read_json
 from effortface.train.npzio import load_npz
-from effortface.train.face import DEFAULT_FILTER_TAU_S, FEATURE_NAMES, FEATURE_UNITS, SvrModel, check_filter_tau
+from effortface.train.face import (DEFAULT_FILTER_TAU_S, FEATURE_NAMES, FEATURE_UNITS, RestAnchor, SvrModel,
+                                   check_filter_tau)
 from effortface.train.physiology import HR_MAX_FORMULAS, EpocParams, NhrParams, NhrRegression
 
 SCHEMA_VERSION = 1
@@ -78,6 +79,10 @@ class ModelBundle:
     filter_tau_s : tuple of float
         Output-filter time constant per blendshape, seconds (``model.json`` ``output_filter``;
         a bundle without it gets :data:`~effortface.train.face.DEFAULT_FILTER_TAU_S`).
+    rest_anchor : RestAnchor or None
+        The map that puts the SVR's output at rest on a neutral face (``model.json``
+        ``rest_anchor``; applied by the runtime, not by face.onnx). None for a bundle written before
+        it existed: its outputs are used unchanged.
     """
 
     blendshapes: BlendshapeSet
@@ -96,6 +101,7 @@ class ModelBundle:
     feature_names: tuple[str, ...] = FEATURE_NAMES
     feature_units: tuple[str, ...] = FEATURE_UNITS
     filter_tau_s: tuple[float, ...] | None = None
+    rest_anchor: RestAnchor | None = None
 
     def __post_init__(self) -> None:
         if self.filter_tau_s is None:
@@ -140,6 +146,7 @@ def _to_json(bundle: ModelBundle) -> dict[str, Any]:
                                    bundle.dual_coef)],
         "output_filter": {"kind": OUTPUT_FILTER_KIND,
                           "time_constant_s": [float(v) for v in bundle.filter_tau_s or ()]},
+        **({"rest_anchor": bundle.rest_anchor.to_dict()} if bundle.rest_anchor is not None else {}),
         "metrics": bundle.metrics,
         "provenance": bundle.provenance,
     }
@@ -326,6 +333,16 @@ def _read_physiology(doc: dict[str, Any], where: str) -> dict[str, Any]:
     return {"hr_max_formula": formula, "update_period_s": period, "epoc": epoc_vals}
 
 
+def _read_rest_anchor(doc: dict[str, Any], where: str, n: int) -> RestAnchor | None:
+    """The rest anchor; None for a bundle written before it existed (outputs used unchanged)."""
+    if "rest_anchor" not in doc:
+        return None
+    try:
+        return RestAnchor.from_dict(_get(doc, "rest_anchor", where, dict), n, where)
+    except UserError as exc:
+        raise BundleFormatError(str(exc)) from None
+
+
 def _read_output_filter(doc: dict[str, Any], where: str, n: int) -> tuple[float, ...]:
     """The output filter's time constants; a bundle written before the filter existed gets the default."""
     if "output_filter" not in doc:
@@ -439,7 +456,8 @@ def read_bundle(directory: str | os.PathLike[str]) -> ModelBundle:
         support_vectors=[], dual_coef=[], intercept=np.empty(0),
         physiology=_read_physiology(doc, where),
         metrics=_get(doc, "metrics", where, dict), provenance=_get(doc, "provenance", where, dict),
-        filter_tau_s=_read_output_filter(doc, where, len(shapes)))
+        filter_tau_s=_read_output_filter(doc, where, len(shapes)),
+        rest_anchor=_read_rest_anchor(doc, where, len(shapes)))
     bundle.support_vectors, bundle.dual_coef, bundle.intercept = _read_npz(directory / SVR_NPZ,
                                                                            shapes.names)
     try:

@@ -78,6 +78,78 @@ def apply_expressiveness(normalised: Any, expressiveness: Any) -> np.ndarray:
                    0.0, 1.0)
 
 
+# --------------------------------------------------------------------------- rest anchor
+
+#: Features of a character at rest: no work, no power, resting heart rate, no EPOC.
+REST_FEATURES = (0.0, 0.0, 0.0, 0.0)
+#: Training seconds count as rest for the raters' rest level below this work (W/kg) ...
+REST_MAX_W_PER_KG = 0.5
+#: ... and at or below this NHR (a heart back at rest, not a pause between bouts).
+REST_MAX_NHR = 0.02
+
+
+@dataclasses.dataclass(frozen=True)
+class RestAnchor:
+    """An affine map of the normalised SVR outputs that puts the output at rest on a chosen level.
+
+    ``y' = level + (y - at_rest) (1 - level) / (1 - at_rest)`` per blendshape: the SVR's output for
+    :data:`REST_FEATURES` becomes ``level`` and 1 stays 1 (monotone; clipped to [0, 1] with the
+    expressiveness). An epsilon-SVR fitted to noisy labels does not pass through the raters' rest
+    keys: on the sample lab it gave 0.08 to a character that stood still. ``level`` is 0, a neutral
+    face; ``raters_rest_level`` records what the raters keyed at rest (median normalised weight of
+    the training seconds below :data:`REST_MAX_W_PER_KG` and :data:`REST_MAX_NHR`), the tolerance
+    the level must stay under (SCIENCE_NOTES "A still face at rest").
+
+    Parameters
+    ----------
+    at_rest : array_like, shape (B,)
+        The SVR's normalised output for :data:`REST_FEATURES`.
+    level : array_like, shape (B,)
+        The normalised weight it maps to.
+    raters_rest_level : array_like, shape (B,)
+        The raters' median normalised key at rest (NaN without rest seconds); for the record.
+    """
+
+    at_rest: tuple[float, ...]
+    level: tuple[float, ...]
+    raters_rest_level: tuple[float, ...]
+
+    def apply(self, normalised: Any) -> np.ndarray:
+        """The anchored normalised outputs, same shape (..., B) as ``normalised``."""
+        y = np.asarray(normalised, dtype=float)
+        rest, level = np.asarray(self.at_rest, dtype=float), np.asarray(self.level, dtype=float)
+        return level + (y - rest) * (1.0 - level) / (1.0 - rest)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form (``model.json`` ``rest_anchor``)."""
+        return {"features": list(REST_FEATURES), "at_rest": [float(v) for v in self.at_rest],
+                "level": [float(v) for v in self.level],
+                "raters_rest_level": [None if not np.isfinite(v) else float(v) for v in self.raters_rest_level]}
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any], n: int, where: str) -> RestAnchor:
+        """Read the JSON form; raise UserError naming ``where`` for a malformed one."""
+        try:
+            at_rest = tuple(float(v) for v in doc["at_rest"])
+            level = tuple(float(v) for v in doc["level"])
+            raters = tuple(float("nan") if v is None else float(v) for v in doc.get("raters_rest_level", [None] * n))
+        except (KeyError, TypeError, ValueError):
+            raise UserError(f"{where}.rest_anchor: expected at_rest and level lists of numbers, "
+                            f"found {doc!r}") from None
+        if not (len(at_rest) == len(level) == len(raters) == n) or not all(v < 1.0 for v in at_rest) \
+                or not all(0.0 <= v < 1.0 for v in level):
+            raise UserError(f"{where}.rest_anchor: expected {n} values each, at_rest below 1 and level "
+                            f"in [0, 1), found {doc!r}")
+        return cls(at_rest, level, raters)
+
+
+def rest_anchor(at_rest: Any, raters_rest_level: Any) -> RestAnchor:
+    """The anchor of a fitted model: its output at rest mapped to a neutral face (level 0)."""
+    at = np.clip(np.asarray(at_rest, dtype=float).ravel(), 0.0, 0.99)  # already neutral: unchanged
+    return RestAnchor(tuple(float(v) for v in at), (0.0,) * at.size,
+                      tuple(float(v) for v in np.asarray(raters_rest_level, dtype=float).ravel()))
+
+
 # --------------------------------------------------------------------------- output filter
 
 #: Default time constant (s) of the output filter on every blendshape weight (choice, see
@@ -517,6 +589,13 @@ class RuleParams:
     squint_relax_from, squint_relax_to, squint_residual : float
         Squint follows exertion until fatigue reaches ``from``, relaxes until ``to`` to a constant
         residual.
+    exertion_from_work : bool
+        Exertion follows the work rate w (1 s window, the sustained effort the Compendium's METs
+        describe; default) rather than the power p (0.25 s window), which rises and falls inside
+        every repetition: on jumping jacks the squint swung 0.17 peak to peak inside a repetition
+        (0.48 of its mean) with p, 0.04 (0.10) with w (SCIENCE_NOTES "The built-in face follows
+        sustained effort"). ``False`` gives the earlier behaviour. The onset and half-saturation
+        keep their values: in steady rhythmic work w and p have the same mean.
     """
 
     p_onset_w_per_kg: float = 3.0
@@ -527,13 +606,15 @@ class RuleParams:
     squint_relax_from: float = 0.5
     squint_relax_to: float = 0.9
     squint_residual: float = 0.25
+    exertion_from_work: bool = True
 
 
 class RuleFaceModel:
     """The paper's empirical rules as a face model (no training, deterministic).
 
-    - instantaneous exertion follows mechanical power p: ``e / (e + p_half)`` with
-      ``e = max(p - p_onset, 0)``; loads raise p, so expression grows with displaced mass;
+    - exertion follows the work rate w (``RuleParams.exertion_from_work``; the power p before):
+      ``e / (e + p_half)`` with ``e = max(w - p_onset, 0)``; loads raise w, so expression grows with
+      displaced mass;
     - fatigue grows with NHR and EPOC;
     - ``mouth_stretch``: exertion and fatigue;
     - ``mouth_open``: closed early, opens with respiration rate (linear in NHR) and fatigue;
@@ -570,7 +651,7 @@ class RuleFaceModel:
         """Normalised weights in [0, 1], shape (n, B), for rows of [w, p, NHR, EPOC_norm]."""
         x = _features(features)
         q = self.params
-        effort = np.maximum(x[:, 1] - q.p_onset_w_per_kg, 0.0)
+        effort = np.maximum(x[:, 0 if q.exertion_from_work else 1] - q.p_onset_w_per_kg, 0.0)
         exertion = effort / (effort + q.p_half_w_per_kg)
         nhr = x[:, 2]
         fatigue = (1 - q.fatigue_epoc_share) * nhr + q.fatigue_epoc_share * np.minimum(x[:, 3], 1)

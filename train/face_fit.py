@@ -29,7 +29,8 @@ column per blendshape, NaN where not annotated).
   the final fits (one per blendshape) run through :func:`effortface.train.parallel.map_ordered` (in
   this process, or on a Dask cluster with identical results: every fit single-threaded, so the
   model does not depend on the machine's core count either). Held-out scores reuse the
-  hyper-parameters the same CV chose (not nested CV), which is slightly optimistic.
+  hyper-parameters the same CV chose (not nested CV), which is slightly optimistic; the headline
+  score "as a game uses it" (:mod:`effortface.train.game_score`) nests the search and measures that.
 """
 
 from __future__ import annotations

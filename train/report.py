@@ -18,6 +18,7 @@ from effortface.core.docs import DESIGN, SCIENCE, cite
 from effortface.core.figures import agg_figure
 from effortface.train.export import hr_warnings
 from effortface.train.face_fit import PAPER_FACE_TRAINING_RMSE_PCT, FaceModelFit, training_scores
+from effortface.train.game_score import MODEL_MEANINGS, headline
 from effortface.train.hr_fit import HELD_OUT_MODELS, PAPER_HR, HrEvaluation, HrSeries
 
 REPORT_MD = "report.md"
@@ -188,11 +189,12 @@ def _report_lines(evaluation: HrEvaluation, fit: FaceModelFit, held_out: pd.Data
         f"## Face ({SCIENCE} section 5)", "",
         f"Hyper-parameters by {fit.config.cv} cross-validation over C {fit.config.grid['C']}, "
         f"gamma {fit.config.grid['gamma']}, epsilon {fit.config.grid['epsilon']}:", "", markdown_table(best), "",
-        "Held-out participants, the headline (weights = prediction x an expressiveness estimated "
-        "without the scored participant's key-frames: the training participants' mean), against the "
-        "training mean and a linear regression; svr_known_expressiveness multiplies by the "
-        "participant's own maximal key-framed weight instead (it borrows from the test labels: the "
-        "score when the actor's expressiveness is known):", "", markdown_table(held_out), "",
+        *_headline_lines(held_out),
+        "Held-out participants (weights = prediction x an expressiveness estimated without the "
+        "scored participant's key-frames: the training participants' mean, except "
+        "svr_known_expressiveness). What each row is:", "",
+        *[f"- {m}: {MODEL_MEANINGS[m]}" for m in held_out["model"].unique() if m in MODEL_MEANINGS], "",
+        markdown_table(held_out), "",
         "Mean over blendshapes:", "", markdown_table(mean_scores.reset_index()), "",
         "In-sample (the final SVRs on their own training rows) beside the paper's training RMSE of "
         f"{PAPER_FACE_TRAINING_RMSE_PCT[0]:g}-{PAPER_FACE_TRAINING_RMSE_PCT[1]:g} % (also in-sample):", "",
@@ -215,6 +217,17 @@ def label_comparison_lines(comparison: pd.DataFrame | str | None) -> list[str]:
     if isinstance(comparison, str):
         return [*head, f"No comparison: {comparison}.", ""]
     return [*head, markdown_table(comparison), ""]
+def _headline_lines(held_out: pd.DataFrame) -> list[str]:
+    """The face score the report leads with, labelled, and the measured-NHR score beside it."""
+    model, r, rmse = headline(held_out)
+    label = "as a game uses it" if model == "svr_as_game" else "with measured NHR"
+    lines = [f"**Held-out face score {label}: mean r {r:.3f}, RMSE {rmse:.1f} % of the range** ({model}: "
+             f"{MODEL_MEANINGS[model]}).", ""]
+    measured = held_out[held_out["model"] == "svr"]
+    if model != "svr" and len(measured):
+        lines += [f"With the measured NHR (svr, what a game never has): mean r {measured['r'].mean():.3f}, "
+                  f"RMSE {measured['rmse_pct_range'].mean():.1f} % of the range.", ""]
+    return lines
 
 
 def _hr_table(evaluation: HrEvaluation) -> pd.DataFrame:

@@ -37,8 +37,8 @@ from effortface.core.errors import UserError
 from effortface.core.participant import LIMITS, check_limit, check_sex
 from effortface.train.bundle import default_physiology, read_bundle
 from effortface.train.energy import EnergyCrowd, EnergyStream, work_and_power
-from effortface.train.face import (DEFAULT_FILTER_TAU_S, RuleFaceModel, SvrModel, SvrSurrogate, WeightFilter,
-                                   apply_expressiveness, check_filter_tau, filter_weights)
+from effortface.train.face import (DEFAULT_FILTER_TAU_S, RestAnchor, RuleFaceModel, SvrModel, SvrSurrogate,
+                                   WeightFilter, apply_expressiveness, check_filter_tau, filter_weights)
 from effortface.train.motion import Motion, read_motion
 from effortface.train.physiology import (CALIBRATED_REGRESSION, PAPER_REGRESSION, EpocParams, NhrRegression,
                                          PhysiologyParams,
@@ -141,8 +141,10 @@ class FaceModel:
     def __init__(self, face: SvrModel | RuleFaceModel, blendshapes: BlendshapeSet,
                  nhr_regression: NhrRegression = PAPER_REGRESSION,
                  physiology: dict[str, Any] | None = None, name: str = "default",
-                 filter_tau_s: Any = DEFAULT_FILTER_TAU_S) -> None:
+                 filter_tau_s: Any = DEFAULT_FILTER_TAU_S, rest_anchor: RestAnchor | None = None) -> None:
         self.face = face
+        #: maps the face model's output at rest to a neutral face (None: outputs unchanged)
+        self.rest_anchor = rest_anchor
         self.blendshapes = blendshapes
         self.nhr_regression = nhr_regression
         self.physiology = physiology or default_physiology()
@@ -160,6 +162,10 @@ class FaceModel:
         if filter_tau_s is None:
             return self.filter_tau_s
         return check_filter_tau(filter_tau_s, len(self.blendshapes))
+
+    def anchored(self, normalised: np.ndarray) -> np.ndarray:
+        """The face model's normalised outputs through the rest anchor (unchanged without one)."""
+        return normalised if self.rest_anchor is None else self.rest_anchor.apply(normalised)
 
     @property
     def columns(self) -> tuple[str, ...]:
@@ -234,7 +240,8 @@ class FaceModel:
         taus = self.filter_taus(filter_tau_s)
         phys = simulate(w_per_kg, dt_s, self.physiology_params(character))
         features = np.column_stack([w_per_kg, p_per_kg, phys["nhr"], phys["epoc_norm"]])
-        weights = filter_weights(apply_expressiveness(self.face.predict(features), e), dt_s, taus)
+        normalised = self.anchored(self.face.predict(features))
+        weights = filter_weights(apply_expressiveness(normalised, e), dt_s, taus)
         curves = {"t_s": np.asarray(t_s, float), "w_per_kg": np.asarray(w_per_kg, float),
                   "p_per_kg": np.asarray(p_per_kg, float)}
         curves.update({k: phys[k] for k in CURVE_COLUMNS[3:]})
@@ -315,7 +322,8 @@ class CharacterStream:
         self._frames += 1
         phys = self._state.step(w_per_kg, dt_s)
         x = np.array([[w_per_kg, p_per_kg, phys["nhr"], phys["epoc_norm"]]], dtype=float)
-        weights = self._filter.step(apply_expressiveness(self.model.face.predict(x)[0], self._e), dt_s)
+        normalised = self.model.anchored(self.model.face.predict(x)[0])
+        weights = self._filter.step(apply_expressiveness(normalised, self._e), dt_s)
         self.last = {"t_s": self.t_s, "w_per_kg": float(w_per_kg), "p_per_kg": float(p_per_kg),
                      **{k: float(phys[k]) for k in CURVE_COLUMNS[3:]},
                      **dict(zip(self.model.blendshapes.names, weights.tolist()))}
@@ -381,7 +389,7 @@ class CrowdStream:
         """Advance all characters from work and power (N,) computed elsewhere -> weights (N, B)."""
         phys = self._state.step(w_per_kg, dt_s)
         x = np.column_stack([w_per_kg, p_per_kg, phys["nhr"], phys["epoc_norm"]])
-        weights = apply_expressiveness(self.face.predict(x, **self._predict_kw), self._e)
+        weights = apply_expressiveness(self.model.anchored(self.face.predict(x, **self._predict_kw)), self._e)
         weights = self._filter.step(weights, dt_s)
         self.last = dict(phys, w_per_kg=np.asarray(w_per_kg), p_per_kg=np.asarray(p_per_kg))
         return weights
@@ -423,7 +431,8 @@ def load_model(path: str | os.PathLike[str] | None = "default") -> FaceModel:
         return FaceModel(RuleFaceModel(DEFAULT_SET), DEFAULT_SET, regression, name=label)
     bundle = read_bundle(Path(path))  # type: ignore[arg-type]
     return FaceModel(bundle.face_model(), bundle.blendshapes, bundle.nhr_regression,
-                     bundle.physiology, name=str(path), filter_tau_s=bundle.filter_tau_s)
+                     bundle.physiology, name=str(path), filter_tau_s=bundle.filter_tau_s,
+                     rest_anchor=bundle.rest_anchor)
 
 
 __all__ = ["BUILT_IN_MODELS", "Character", "CharacterStream", "CrowdStream", "FaceModel", "load_model",

@@ -112,7 +112,9 @@ def test_a_blendshape_no_two_raters_share_is_reported_as_nan(tmp_path: Path,
             "p1,R1,eye_squint,0.3\n")
     assert main(["agreement", "--ratings", _write(tmp_path, "partial.csv", rows)]) == 0
     out = capsys.readouterr().out
-    assert re.search(r"eye_squint\s+2\s+nan\s+nan\s+\[nan, nan\]\s+nan\s+\[nan, nan\]\s+nan", out), out
+    # diff % and its interval, ICC(A,1), ICC(C,1) and alpha with theirs: all NaN
+    assert re.search(r"eye_squint\s+2\s+nan\s+\[nan, nan\]\s+nan\s+\[nan, nan\]\s+nan\s+\[nan, nan\]"
+                     r"\s+nan\s+\[nan, nan\]", out), out
     assert re.search(r"mouth_open\s+2\s+15\.0", out), out
 
 

@@ -170,3 +170,5 @@ def test_held_out_summary_names_what_is_held_out() -> None:
     line = held_out_summary(metrics)
     assert line == ("held out (not fitted on the scored participant or session): heart rate TL model r 0.95; "
                     "own model on other sessions r 0.91; face r 0.70")
+    metrics["face_held_out"] += [{"model": "svr_as_game", "r": 0.5}, {"model": "svr_as_game", "r": 0.6}]
+    assert held_out_summary(metrics).endswith("face as a game uses it (NHR from work) r 0.55")

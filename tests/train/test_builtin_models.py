@@ -152,3 +152,53 @@ def test_crowd_of_calibrated_characters_equals_single_streams(shared_data: Path)
         apart = np.stack([s.step_work(w, w, 1 / 60) for s in singles])
         np.testing.assert_allclose(together, apart, atol=1e-12)
     assert len(set(np.round(crowd.last["nhr"], 6))) == 3
+
+
+def _within_repetition_swing(shared_data: Path, params: "object | None" = None) -> dict[str, tuple[float, float]]:
+    """Per weight of the built-in face on jumping jacks played 150 s (forwards then backwards): the
+    median peak-to-peak inside one repetition (period from the top joint's height) and the mean
+    weight, over the last 60 s."""
+    import dataclasses
+
+    from effortface.train.face import RuleFaceModel
+
+    clip = read_motion(shared_data / "motion" / "cmu_13_29_jumping_jacks_120fps.bvh")
+    order = np.r_[np.arange(clip.n_frames), np.arange(clip.n_frames)[::-1]]
+    idx = np.resize(order, int(150 * clip.fps))
+    assert clip.rotations is not None
+    motion = dataclasses.replace(clip, positions_m=clip.positions_m[idx], rotations=clip.rotations[idx])
+    model = load_model("default")
+    if params is not None:
+        model.face = RuleFaceModel(model.blendshapes, params)  # type: ignore[arg-type]
+    curves = model.synthesize(motion, Character())
+    late = curves["t_s"] >= 90.0
+    top = motion.positions_m[:, :, 2].max(axis=1)[late]
+    top = top - top.mean()
+    ac = np.correlate(top, top, "full")[len(top) - 1:]
+    lo = int(0.5 * clip.fps)
+    period = lo + int(np.argmax(ac[lo:int(3 * clip.fps)]))
+    out = {}
+    for name in model.blendshapes.names:
+        y = curves[name][late]
+        swings = [np.ptp(y[k * period:(k + 1) * period]) for k in range(len(y) // period)]
+        out[name] = (float(np.median(swings)), float(y.mean()))
+    return out
+
+
+def test_built_in_face_does_not_pulse_with_each_repetition(shared_data: Path) -> None:
+    """Peak-to-peak inside a repetition at most a third of the mean weight (weights above 0.05).
+
+    With exertion on the power p (0.25 s) the squint swung 0.17 (0.48 of its mean) and the brow
+    0.10 (0.66); the work rate w (1 s, the sustained effort) gives 0.04 (0.10) and 0.03 (0.20).
+    """
+    from effortface.train.face import RuleParams
+
+    now = _within_repetition_swing(shared_data)
+    before = _within_repetition_swing(shared_data, RuleParams(exertion_from_work=False))
+    print({k: (round(v[0], 3), round(v[0] / v[1], 2)) for k, v in now.items()},
+          {k: (round(v[0], 3), round(v[0] / v[1], 2)) for k, v in before.items()})
+    for name, (swing, mean) in now.items():
+        if mean > 0.05:
+            assert swing <= mean / 3, name
+    assert before["eye_squint"][0] > before["eye_squint"][1] / 3  # the measure sees the old pulsing
+    assert now["mouth_stretch"][1] > 0.25  # the face still shows the effort

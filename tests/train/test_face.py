@@ -9,7 +9,7 @@ from sklearn.svm import SVR
 
 from effortface.core.blendshapes import DEFAULT_SET, Blendshape, BlendshapeSet
 from effortface.core.errors import UserError
-from effortface.train.face import FEATURE_NAMES, RuleFaceModel, SvrModel, apply_expressiveness
+from effortface.train.face import FEATURE_NAMES, RuleFaceModel, RuleParams, SvrModel, apply_expressiveness
 
 
 def _random_features(rng: np.random.Generator, n: int) -> np.ndarray:
@@ -82,7 +82,12 @@ def test_rules_follow_the_paper() -> None:
     assert effort["mouth_open"] < 0.1 < tired["mouth_open"]           # closed early, opens later
     assert effort["eye_squint"] > tired["eye_squint"] > 0.2           # relaxes to a residual
     assert effort["brow_lower"] > tired["brow_lower"]                 # up with fatigue
-    assert _rule(p=30)["eye_squint"] > _rule(p=5)["eye_squint"]       # power drives exertion
+    # the sustained work rate drives exertion (SCIENCE_NOTES "The built-in face follows sustained
+    # effort"; it was the power p, which pulses inside every repetition); p alone no longer moves it
+    assert _rule(w=30)["eye_squint"] > _rule(w=5)["eye_squint"]
+    assert _rule(w=5, p=30)["eye_squint"] == _rule(w=5, p=5)["eye_squint"]
+    old = RuleFaceModel(params=RuleParams(exertion_from_work=False))
+    assert old.predict([0, 30, 0, 0])[0, 2] > old.predict([0, 5, 0, 0])[0, 2]  # the earlier rule, on request
 
 
 def test_rules_are_deterministic_and_bounded() -> None:

@@ -63,6 +63,28 @@ def test_evaluate_rescoring(trained, table_csv, capsys):
     assert main(["evaluate", str(trained), "--table", str(table_csv)]) == 0
     out = capsys.readouterr().out
     assert "## heart rate" in out and "| mouth_open |" in out
+    # by default no key-frame of the scored data scales the predictions, and stdout says what did
+    assert "Scaling: predictions x the mean expressiveness of the model's 3 training participants" in out
+    assert "no key-frame of the scored data" in out and "borrows from the labels" not in out
+    assert "## face as a game uses it" in out and "## face with the measured NHR" in out
+
+
+def test_evaluate_known_expressiveness_is_an_explicit_option(trained, table_csv, capsys):
+    assert main(["evaluate", str(trained), "--table", str(table_csv)]) == 0
+    default = capsys.readouterr().out
+    assert main(["evaluate", str(trained), "--table", str(table_csv), "--known-expressiveness"]) == 0
+    known = capsys.readouterr().out
+    assert "own maximal key-framed weight (--known-expressiveness: borrows from the labels" in known
+    assert default.split("## face as a game")[1] != known.split("## face as a game")[1]  # scaling changed
+
+
+def test_report_and_card_lead_with_the_score_as_a_game_uses_it(trained):
+    card = (trained / "MODEL_CARD.md").read_text()
+    report = (trained / "report" / "report.md").read_text()
+    assert "**Held-out face score as a game uses it (NHR predicted from work, no measured heart rate)" in card
+    assert "With the measured NHR (svr, labelled" in card and "svr_nested_measured_nhr" in card
+    assert "**Held-out face score as a game uses it" in report and "With the measured NHR" in report
+    assert card.index("as a game uses it") < card.index("| blendshape | model |")
 
 
 def test_train_from_sessions(table, tmp_path, capsys):

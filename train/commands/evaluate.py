@@ -1,7 +1,9 @@
 """``effortface evaluate MODEL_DIR (SESSION | DIR)... | --table CSV``: re-score a bundle on other data.
 
 The scores are :func:`effortface.train.evaluation.evaluate_bundle`'s (the bundle loaded through the
-runtime, as a game would load it); this module parses the options and prints the report.
+runtime, as a game would load it); this module parses the options and prints the report, which
+says how the predictions were scaled (``--known-expressiveness`` borrows the scored participants'
+own key-frames; off by default).
 """
 
 from __future__ import annotations
@@ -27,6 +29,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rater-policy", default="mean", metavar="mean|RATER",
                         help="mean of raters (default) or one rater's key-frames; complete tracks only "
                              "(keys over the whole video, no gap over 30 s, pass finished)")
+    parser.add_argument("--known-expressiveness", action="store_true",
+                        help="multiply predictions by each scored participant's own maximal key-framed "
+                             "weight (borrows from the labels it is scored against); default: the mean "
+                             "expressiveness of the model's training participants")
 
 
 def check_model_dir(model: str) -> Path:
@@ -61,5 +67,6 @@ def run(args: argparse.Namespace) -> int:
     shapes = read_bundle(args.model).blendshapes
     table, sources = training_table(args.inputs, args.table, shapes, args.rater_policy)
     source = ", ".join(sources)
-    print(evaluation_report(evaluate_bundle(args.model, table, source), args.model, source))
+    ev = evaluate_bundle(args.model, table, source, known_expressiveness=args.known_expressiveness)
+    print(evaluation_report(ev, args.model, source))
     return 0
