@@ -181,7 +181,8 @@ def _nearest(times: np.ndarray, t: float) -> float:
 
 
 def attach_clip(session: str | os.PathLike, clip: str | os.PathLike, *, offset_s: float | None = None,
-                sync: bool = False, sync_near_s: float | None = None) -> Alignment:
+                sync: bool = False, sync_near_s: float | None = None,
+                mapping: str | os.PathLike | None = None) -> Alignment:
     """Copy ``clip`` into ``session/motion/`` and record its alignment in ``motion.json``.
 
     Parameters
@@ -196,6 +197,9 @@ def attach_clip(session: str | os.PathLike, clip: str | os.PathLike, *, offset_s
         Align by the sync jump instead (exactly one of ``offset_s`` and ``sync``).
     sync_near_s : float, optional
         With ``sync``: use the sync event nearest this session time (when several fit equally).
+    mapping : path-like, optional
+        A joint-to-segment mapping file: checked against the clip and kept in its motion.json
+        entry (``"mapping"``), so ``effortface work`` uses it.
 
     Returns
     -------
@@ -215,6 +219,7 @@ def attach_clip(session: str | os.PathLike, clip: str | os.PathLike, *, offset_s
         raise AttachError("--offset / --sync: expected exactly one of the two, found "
                           + ("both" if sync else "neither"))
     motion = read_motion(clip)
+    segments = _checked_mapping(motion, mapping) if mapping is not None else None
     folder = s.path / MOTION_DIR
     target = folder / clip.name
     if target.exists():
@@ -228,10 +233,22 @@ def attach_clip(session: str | os.PathLike, clip: str | os.PathLike, *, offset_s
         alignment = Alignment(float(offset_s), "offset")  # type: ignore[arg-type]
     entries = read_motion_index(folder / MOTION_JSON) if (folder / MOTION_JSON).exists() else []
     entries.append(_entry(clip, motion, alignment))
+    if segments is not None:
+        entries[-1]["mapping"] = segments
     folder.mkdir(exist_ok=True)
     shutil.copyfile(clip, target)
     write_json_atomic(folder / MOTION_JSON, {"files": entries})
     return alignment
+
+
+def _checked_mapping(motion: Motion, mapping: str | os.PathLike) -> dict:
+    """The mapping file's ``{segment: [proximal, distal]}``, once it maps the clip's joints (a
+    UserError naming the file or the unmapped segments otherwise)."""
+    from effortface.train.segments import build_body, read_mapping
+
+    segments = read_mapping(Path(mapping))
+    build_body(motion.joint_names, motion.parents, 70.0, "male", mapping=segments)
+    return {k: [list(e) if not isinstance(e, str) else e for e in v] for k, v in segments.items()}
 
 
 def _entry(clip: Path, motion: Motion, alignment: Alignment) -> dict:

@@ -87,8 +87,23 @@ def livelink_timecode(t_s: float, fps: int = LIVELINK_TIMECODE_FPS) -> str:
     return f"{hh:02d}:{mm:02d}:{ss:02d}:{ff:02d}.{int(round(sub * 1000)) % 1000:03d}"
 
 
-def livelink_csv(curves: Mapping[str, np.ndarray], blendshapes: BlendshapeSet) -> str:
-    """A Live Link Face CSV: our blendshapes under their ARKit names, every other column 0."""
+def livelink_rows(curves: Mapping[str, np.ndarray], names: Sequence[str],
+                  fps: int = LIVELINK_TIMECODE_FPS) -> dict[str, np.ndarray]:
+    """``t_s`` and the curves ``names`` linearly resampled to one row per timecode frame at ``fps``
+    (the frames from the first to the last motion frame): importers that key one row per frame then
+    keep the motion's time (a 200 Hz clip gave 3.3 rows per frame before)."""
+    t = np.asarray(curves["t_s"], dtype=float)
+    if len(t) < 2:
+        return {k: np.asarray(curves[k], dtype=float) for k in ("t_s", *names)}
+    grid = np.arange(np.ceil(t[0] * fps - 1e-9), np.floor(t[-1] * fps + 1e-9) + 1) / fps
+    return {"t_s": grid, **{k: np.interp(grid, t, np.asarray(curves[k], dtype=float)) for k in names}}
+
+
+def livelink_csv(curves: Mapping[str, np.ndarray], blendshapes: BlendshapeSet, every_frame: bool = False) -> str:
+    """A Live Link Face CSV: our blendshapes under their ARKit names, every other column 0; one row
+    per frame of its 60 fps timecode (:func:`livelink_rows`), or per motion frame with ``every_frame``."""
+    if not every_frame:
+        curves = livelink_rows(curves, [shape.name for shape in blendshapes.shapes])
     n = len(curves["t_s"])
     values = {name: np.zeros(n) for name in LIVELINK_BLENDSHAPES + LIVELINK_ROTATIONS}
     for shape in blendshapes.shapes:
@@ -113,10 +128,11 @@ def units_path(path: Path) -> Path:
     return path.with_name(path.stem + ".units.json")
 
 
-def units_json(columns: Sequence[str]) -> str:
-    """The sidecar text: ``{"units": {column: unit}}`` for ``columns`` (blendshapes: a weight)."""
+def units_json(columns: Sequence[str], motion: str | None = None) -> str:
+    """The sidecar text: ``{"units": {column: unit}}`` for ``columns`` (blendshapes: a weight), and
+    ``"motion"``: where the motion came from and what was done to it (gaps filled...), when given."""
     units = {c: CURVE_UNITS.get(c, WEIGHT_UNIT) for c in columns}
-    return json.dumps({"units": units}, indent=2) + "\n"
+    return json.dumps({"units": units, **({"motion": motion} if motion else {})}, indent=2) + "\n"
 
 
 def output_files(path: Path, fmt: str) -> list[Path]:
@@ -172,7 +188,7 @@ def write_output(path: Path, text: str, force: bool) -> None:
 
 
 def curves_text(curves: Mapping[str, np.ndarray], model: FaceModel, fmt: str = "csv",
-                digits: int = CSV_DIGITS) -> str:
+                digits: int = CSV_DIGITS, every_frame: bool = False) -> str:
     """The curves of ``model`` as the text of a ``fmt`` file.
 
     Parameters
@@ -185,6 +201,8 @@ def curves_text(curves: Mapping[str, np.ndarray], model: FaceModel, fmt: str = "
         The per-frame CSV or a Live Link Face CSV.
     digits : int
         Significant digits of the per-frame CSV.
+    every_frame : bool
+        Live Link: one row per motion frame instead of per timecode frame (60 fps).
 
     Returns
     -------
@@ -198,12 +216,13 @@ def curves_text(curves: Mapping[str, np.ndarray], model: FaceModel, fmt: str = "
     if fmt not in CURVE_FORMATS:
         raise UserError(f"format: expected one of {', '.join(CURVE_FORMATS)}, found {fmt!r}")
     if fmt == "livelink":
-        return livelink_csv(curves, model.blendshapes)
+        return livelink_csv(curves, model.blendshapes, every_frame)
     return curves_csv(curves, model.columns, digits)
 
 
 def write_curves(path: str | Path, curves: Mapping[str, np.ndarray], model: FaceModel, *,
-                 fmt: str = "csv", force: bool = False, digits: int = CSV_DIGITS) -> Path:
+                 fmt: str = "csv", force: bool = False, digits: int = CSV_DIGITS,
+                 provenance: str | None = None, every_frame: bool = False) -> Path:
     """Write the curves of ``model`` as a ``fmt`` file (atomically; see :func:`curves_text`).
 
     Parameters
@@ -214,6 +233,10 @@ def write_curves(path: str | Path, curves: Mapping[str, np.ndarray], model: Face
         As for :func:`curves_text`.
     force : bool
         Replace an existing file (and, for ``csv``, its units sidecar).
+    provenance : str, optional
+        The motion's :attr:`~effortface.train.motion.Motion.source`, kept in the units sidecar.
+    every_frame : bool
+        Live Link: keep every motion frame (see :func:`livelink_csv`).
 
     Returns
     -------
@@ -227,7 +250,7 @@ def write_curves(path: str | Path, curves: Mapping[str, np.ndarray], model: Face
     """
     out = Path(path)
     check_output(out, force, fmt)
-    write_output(out, curves_text(curves, model, fmt, digits), force)
+    write_output(out, curves_text(curves, model, fmt, digits, every_frame), force)
     if fmt == "csv":
-        write_output(units_path(out), units_json(model.columns), force=True)  # checked with ``out``
+        write_output(units_path(out), units_json(model.columns, provenance), force=True)  # checked with ``out``
     return out

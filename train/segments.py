@@ -56,12 +56,13 @@ def _limbs(
 #: Built-in skeleton conventions: segment -> (proximal end, distal end).
 CONVENTIONS: dict[str, dict[str, tuple[EndPoint, EndPoint]]] = {
     "CMU": {
-        # cgspeed's Neck sits mid-thorax; Neck1 (10 cm higher) is the closer match to C7.
-        "head": ("Head_end", "Neck1|Neck"),
-        "trunk": ("Neck1|Neck", ["LeftUpLeg", "RightUpLeg"]),
+        # cgspeed's Neck sits mid-thorax; Neck1 (10 cm higher) is the closer match to C7. Skeletons
+        # without a neck (PyMO's Spine -> Head) start the head at its Head joint.
+        "head": ("Head_end", "Neck1|Neck|Head"),
+        "trunk": ("Neck1|Neck|Head", ["LeftUpLeg", "RightUpLeg"]),
         **_limbs({
             "upper_arm": ("{S}Arm", "{S}ForeArm"), "forearm": ("{S}ForeArm", "{S}Hand"),
-            "hand": ("{S}Hand", "{S}HandIndex1_end|{S}HandIndex1"),
+            "hand": ("{S}Hand", "{S}HandIndex1_end|{S}HandIndex1|{S}Hand_End|{S}Hand_end"),
             "thigh": ("{S}UpLeg", "{S}Leg"), "shank": ("{S}Leg", "{S}Foot"),
             "foot": ("{S}Foot", "{S}ToeBase_end|{S}ToeBase"),
         }, "Left", "Right"),
@@ -94,6 +95,41 @@ CONVENTIONS: dict[str, dict[str, tuple[EndPoint, EndPoint]]] = {
             "hand": ("{S}Hand", "{S}MiddleProximal|{S}Hand_end"),
             "thigh": ("{S}UpperLeg", "{S}LowerLeg"), "shank": ("{S}LowerLeg", "{S}Foot"),
             "foot": ("{S}Foot", "{S}Toes_end|{S}Toes"),
+        }, "Left", "Right"),
+    },
+    # classic Biovision BVH (the format's own examples): Hips, Chest, Neck, Head, LeftCollar,
+    # LeftUpArm, LeftLowArm, LeftHand, LeftUpLeg, LeftLowLeg, LeftFoot, end sites <joint>_end
+    "Biovision": {
+        "head": ("Head_end|Head", "Neck"),
+        "trunk": ("Neck", ["LeftUpLeg", "RightUpLeg"]),
+        **_limbs({
+            "upper_arm": ("{S}UpArm", "{S}LowArm"), "forearm": ("{S}LowArm", "{S}Hand"),
+            "hand": ("{S}Hand", "{S}Hand_end"),
+            "thigh": ("{S}UpLeg", "{S}LowLeg"), "shank": ("{S}LowLeg", "{S}Foot"),
+            "foot": ("{S}Foot", "{S}Foot_end|{S}Toe|{S}Toe_end"),
+        }, "Left", "Right"),
+    },
+    # SMPL / SMPL-X joint names (and the anatomical left_/right_ names of keypoint sets built on them)
+    "SMPL": {
+        "head": ("head_end|head", "neck"),
+        "trunk": ("neck", ["left_hip", "right_hip"]),
+        **_limbs({
+            "upper_arm": ("{S}_shoulder", "{S}_elbow"), "forearm": ("{S}_elbow", "{S}_wrist"),
+            "hand": ("{S}_wrist", "{S}_hand|{S}_index1|{S}_wrist_end"),
+            "thigh": ("{S}_hip", "{S}_knee"), "shank": ("{S}_knee", "{S}_ankle"),
+            "foot": ("{S}_ankle", "{S}_foot|{S}_ankle_end"),
+        }, "left", "right"),
+    },
+    # Xsens MVN (anatomical segment names): Pelvis, L5 ... T8, Neck, Head, RightShoulder,
+    # RightUpperArm, RightForeArm, RightHand, RightUpperLeg, RightLowerLeg, RightFoot, RightToe
+    "Xsens": {
+        "head": ("Head_end|Head", "Neck"),
+        "trunk": ("Neck", ["LeftUpperLeg", "RightUpperLeg"]),
+        **_limbs({
+            "upper_arm": ("{S}UpperArm", "{S}ForeArm"), "forearm": ("{S}ForeArm", "{S}Hand"),
+            "hand": ("{S}Hand", "{S}Hand_end"),
+            "thigh": ("{S}UpperLeg", "{S}LowerLeg"), "shank": ("{S}LowerLeg", "{S}Foot"),
+            "foot": ("{S}Foot", "{S}Toe_end|{S}Toe"),
         }, "Left", "Right"),
     },
     "AMP": {
@@ -303,7 +339,8 @@ def map_skeleton(
         The skeleton's joints (names match case-insensitively, namespaces such as 'mixamorig:' ignored).
     mapping : mapping, str or Path, optional
         A user mapping (or JSON file, see :func:`read_mapping`). When omitted, the built-in
-        conventions (CMU, Mixamo, Unreal, Unity, AMP) are tried and the first complete one is used.
+        conventions (CMU, Mixamo, Unreal, Unity, Biovision, SMPL, Xsens, AMP) are tried and the first
+        complete one is used.
 
     Returns
     -------
@@ -330,8 +367,9 @@ def map_skeleton(
     assert best is not None
     raise SegmentMappingError(
         f"skeleton joints: expected every segment mapped ({', '.join(candidates)} conventions tried, "
-        f"best {best[0]}); unmapped segments: {', '.join(best[1])}. Give a mapping file "
-        f"(JSON: segment -> [proximal joint, distal joint])"
+        f"best {best[0]}); unmapped segments: {', '.join(best[1])}. Map them with --mapping FILE.json: "
+        f'{{"head": ["<head top joint>", "<neck joint>"], "left_thigh": ["<hip joint>", "<knee joint>"], ...}} '
+        f"(segment -> [proximal, distal] joint names of this skeleton)"
     )
 
 

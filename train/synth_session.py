@@ -102,6 +102,9 @@ class SynthSession:
         self.motion: Motion | None = None
         self.motion_path: Path | None = None
         self.loops = 1
+        #: a user joint-to-segment mapping (``--mapping``), or None for the built-in conventions
+        self.mapping: dict | None = None
+        self.mapping_path: Path | None = None
         self.curves: dict[str, np.ndarray] = {}
         self.position_s = 0.0
         self.playing = False
@@ -149,6 +152,26 @@ class SynthSession:
                                  f"at {motion.fps:g} Hz ({motion.n_frames / motion.fps:.1f} s){reset}",
                                  False)
 
+    def set_mapping(self, path: str | os.PathLike | None) -> None:
+        """Use a joint-to-segment mapping file for the clips (None: the built-in conventions).
+
+        Raises
+        ------
+        UserError
+            A file that is not a mapping, or one that does not map the loaded clip's joints
+            (the old mapping is kept).
+        """
+        from effortface.train.segments import build_body, read_mapping
+
+        mapping = None if path is None else read_mapping(Path(path))
+        if mapping is not None and self.motion is not None:
+            build_body(self.motion.joint_names, self.motion.parents, self.character.mass_kg, self.character.sex,
+                       mapping=mapping)
+        self.mapping, self.mapping_path = mapping, None if path is None else Path(path)
+        self._work_cache = None
+        self._recompute()
+        self.status_changed.emit(f"mapping: {self.mapping_path or 'built-in conventions'}", False)
+
     def set_character(self, **changes: Any) -> None:
         """Change character fields (validated: a bad value raises UserError, nothing changes)."""
         self.character = dataclasses.replace(self.character, **changes)
@@ -169,19 +192,19 @@ class SynthSession:
         self._recompute()
 
     # ---- curves
-    def _work(self, model: FaceModel, motion: Motion, c: Character) -> EnergyCurves:
+    def _work(self, model: FaceModel, motion: Motion, c: Character, mapping: dict | None = None) -> EnergyCurves:
         """Work and power of one pass of the clip, cached on what they depend on."""
-        key = (c.mass_kg, c.sex, c.load_left_kg, c.load_right_kg, c.load_back_kg)
+        key = (c.mass_kg, c.sex, c.load_left_kg, c.load_right_kg, c.load_back_kg, id(mapping))
         cache = self._work_cache
         if cache is None or cache[0] is not motion or cache[1] != key:
-            energy = work_and_power(motion, model.body(c, motion), zero_phase=True)
+            energy = work_and_power(motion, model.body(c, motion, mapping), zero_phase=True)
             cache = self._work_cache = (motion, key, energy)
         return cache[2]
 
-    def _curves(self, model: FaceModel, motion: Motion, character: Character, loops: int
-                ) -> dict[str, np.ndarray]:
+    def _curves(self, model: FaceModel, motion: Motion, character: Character, loops: int,
+                mapping: dict | None = None) -> dict[str, np.ndarray]:
         """Whole-clip curves (runs on the worker thread in background mode)."""
-        e = looped(self._work(model, motion, character), loops, motion.fps)
+        e = looped(self._work(model, motion, character, mapping), loops, motion.fps)
         return model.curves_from_work(e.t_s, e.w_per_kg, e.p_per_kg, 1.0 / motion.fps, character)
 
     def _recompute(self) -> None:
@@ -189,7 +212,7 @@ class SynthSession:
         if self.motion is None:
             return
         self._generation += 1
-        args = (self.model, self.motion, self.character, self.loops)
+        args = (self.model, self.motion, self.character, self.loops, self.mapping)
         if self.jobs is None:
             self._apply(self._curves(*args))
         else:

@@ -72,6 +72,36 @@ def _num(x: float) -> str:
     return "" if math.isnan(x) else f"{x:.4f}"
 
 
+def read_work_csv(path: str | os.PathLike) -> WorkTable:
+    """Read a ``work.csv`` (as :meth:`WorkTable.to_csv` writes it, or hand-made with the first three
+    columns): empty w/p cells become NaN, a missing ``source`` column becomes empty strings.
+
+    Raises
+    ------
+    WorkError
+        Missing columns or a cell that is not a number, in one line naming the file and row.
+    """
+    import csv
+
+    path = Path(path)
+    with open(path, newline="", encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    need = ("t_s", "w_per_kg", "p_per_kg")
+    if not rows or any(c not in rows[0] for c in need):
+        raise WorkError(f"{path}: expected rows with columns {','.join(need)}, "
+                        f"found {','.join(rows[0]) if rows else 'no rows'}")
+    cols: dict[str, list[float]] = {c: [] for c in need}
+    for i, row in enumerate(rows, start=2):
+        for c in need:
+            cell = (row[c] or "").strip()
+            try:
+                cols[c].append(float(cell) if cell else math.nan)
+            except ValueError:
+                raise WorkError(f"{path}: line {i}: {c}: expected a number, found {cell!r}") from None
+    t_s, w, p = (np.array(cols[c]) for c in need)
+    return WorkTable(t_s, w, p, [(r.get("source") or "") for r in rows])
+
+
 def session_seconds(s: Session) -> np.ndarray:
     """t_s = 0, 1, ... to the last heart-rate sample or video frame (or the last logged event)."""
     ends = [h.t_s for h in s.heart_rate[-1:]] + s.frame_times_s[-1:] + [e.t_s for e in s.events[-1:]]
@@ -79,7 +109,7 @@ def session_seconds(s: Session) -> np.ndarray:
 
 
 def derive_work(session: Session | str | os.PathLike, t_s: np.ndarray | None = None,
-                catalog: Catalog | None = None) -> WorkTable:
+                catalog: Catalog | None = None, mapping: str | os.PathLike | None = None) -> WorkTable:
     """w and p per second from ``motion/`` where clips cover the time, else from the exercise log.
 
     Parameters
@@ -90,6 +120,9 @@ def derive_work(session: Session | str | os.PathLike, t_s: np.ndarray | None = N
         The seconds wanted (default :func:`session_seconds`).
     catalog : Catalog, optional
         Default: the shipped catalog.
+    mapping : path-like, optional
+        Joint-to-segment mapping file for the clips of ``motion/`` whose motion.json entry has no
+        ``mapping`` of its own (default: the built-in conventions).
 
     Returns
     -------
@@ -112,7 +145,7 @@ def derive_work(session: Session | str | os.PathLike, t_s: np.ndarray | None = N
     source = [""] * len(t)
     _fill_from_log(log, s.participant.mass_kg, t, w, p, source, catalog or default_catalog())
     if has_motion:
-        _fill_from_motion(s, log, t, w, p, source)
+        _fill_from_motion(s, log, t, w, p, source, mapping)
     return WorkTable(t, w, p, source)
 
 
@@ -144,8 +177,11 @@ LOG_LOAD_LABELS = ("left_kg", "right_kg", "back_kg")
 
 
 def _fill_from_motion(s: Session, log: ExerciseLog, t: np.ndarray, w: np.ndarray, p: np.ndarray,
-                      source: list[str]) -> None:
+                      source: list[str], mapping: str | os.PathLike | None = None) -> None:
     """Overwrite the seconds that a clip of ``motion/motion.json`` covers with its energies.
+
+    A clip's segments come from its entry's ``mapping`` (kept by ``motion attach --mapping``), else
+    ``mapping``, else the built-in conventions.
 
     A clip's loads are its entry's ``load_*_kg`` keys when it has any (earlier releases), else the
     exercise log's ``load`` rows in force at each second: one energy computation per distinct set.
@@ -167,7 +203,7 @@ def _fill_from_motion(s: Session, log: ExerciseLog, t: np.ndarray, w: np.ndarray
             loads = [tuple(_log_load(log, label, t[i]) for label in LOG_LOAD_LABELS) for i in inside]
         for load in sorted(set(loads)):
             rows = inside[[k for k, x in enumerate(loads) if x == load]]
-            curves = _clip_curves(clip, part.mass_kg, part.sex, load)
+            curves = _clip_curves(clip, part.mass_kg, part.sex, load, entry.get("mapping") or mapping)
             w[rows] = np.interp(t[rows], curves.t_s + offset_s, curves.w_per_kg)
             p[rows] = np.interp(t[rows], curves.t_s + offset_s, curves.p_per_kg)
         for i in inside:
@@ -180,12 +216,16 @@ def _log_load(log: ExerciseLog, label: str, t_s: float) -> float:
     return held[-1] if held else 0.0
 
 
-def _clip_curves(clip: Motion, mass_kg: float, sex: str, load: tuple[float, ...]) -> EnergyCurves:
-    """Work and power of a clip for the participant's body carrying ``load`` (left, right, back kg)."""
+def _clip_curves(clip: Motion, mass_kg: float, sex: str, load: tuple[float, ...],
+                 mapping: dict | str | os.PathLike | None = None) -> EnergyCurves:
+    """Work and power of a clip for the participant's body carrying ``load`` (left, right, back kg);
+    ``mapping`` a segment mapping (dict or file) or None for the built-in conventions."""
     from effortface.train.energy import work_and_power
     from effortface.train.segments import Loads, build_body
 
-    body = build_body(clip.joint_names, clip.parents, mass_kg, sex, loads=Loads(*load),
+    segments = {k: (v[0], v[1]) for k, v in mapping.items()} if isinstance(mapping, dict) else \
+        None if mapping is None else Path(mapping)
+    body = build_body(clip.joint_names, clip.parents, mass_kg, sex, loads=Loads(*load), mapping=segments,
                       reference_positions_m=clip.positions_m)
     return work_and_power(clip, body)
 
@@ -235,7 +275,8 @@ def _motion_entry(path: Path, i: int, entry: object) -> dict:
     return out
 
 
-def plan_work(folder: str | os.PathLike, *, force: bool = False) -> tuple[Path, WorkTable]:
+def plan_work(folder: str | os.PathLike, *, force: bool = False,
+              mapping: str | os.PathLike | None = None) -> tuple[Path, WorkTable]:
     """Derive a session's work without writing it: the work.csv path and the table.
 
     Raises
@@ -248,7 +289,7 @@ def plan_work(folder: str | os.PathLike, *, force: bool = False) -> tuple[Path, 
     if path.exists() and not force:
         raise WorkError(f"{path}: expected no work.csv (it may be hand-made), found one; "
                         f"use --force to replace it")
-    return path, derive_work(s)
+    return path, derive_work(s, mapping=mapping)
 
 
 def write_work(folder: str | os.PathLike, *, force: bool = False) -> tuple[Path, WorkTable]:
@@ -283,10 +324,12 @@ def work_folders(paths: Sequence[str | os.PathLike]) -> list[Path]:
     return out
 
 
-def write_works(folders: Sequence[str | os.PathLike], *, force: bool = False) -> list[tuple[Path, WorkTable]]:
+def write_works(folders: Sequence[str | os.PathLike], *, force: bool = False,
+                mapping: str | os.PathLike | None = None) -> list[tuple[Path, WorkTable]]:
     """``effortface work``: derive every session's work first (so a refusal writes nothing), then
-    write each ``work.csv`` atomically; the paths and tables, in order."""
-    planned = [plan_work(folder, force=force) for folder in folders]
+    write each ``work.csv`` atomically; the paths and tables, in order (``mapping``: see
+    :func:`derive_work`)."""
+    planned = [plan_work(folder, force=force, mapping=mapping) for folder in folders]
     for target, table in planned:
         atomic_write_text(target, table.to_csv())
     return planned

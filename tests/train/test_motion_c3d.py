@@ -18,7 +18,7 @@ from effortface.train.segments import build_body
 c3d = pytest.importorskip("c3d")
 
 
-def write_c3d(motion: Motion, path: Path, *, occlude: tuple[int, int] | None = None) -> Path:
+def write_c3d(motion: Motion, path: Path, *, occlude: tuple[int, int] | None = None, n_occluded: int = 1) -> Path:
     """The motion's joints as labelled C3D points in millimetres (optionally one point occluded)."""
     writer = c3d.Writer(point_rate=motion.fps, analog_rate=0)
     writer.set_point_labels(list(motion.joint_names))
@@ -26,7 +26,7 @@ def write_c3d(motion: Motion, path: Path, *, occlude: tuple[int, int] | None = N
     for k in range(motion.n_frames):
         points = np.zeros((len(motion.joint_names), 5), dtype=np.float32)
         points[:, :3] = motion.positions_m[k] * 1000.0
-        if occlude is not None and occlude[0] == k:
+        if occlude is not None and occlude[0] <= k < occlude[0] + n_occluded:
             points[occlude[1], 3] = -1.0
         frames.append((points, np.zeros((0, 0), dtype=np.float32)))
     with open(path, "wb") as fh, warnings.catch_warnings():
@@ -61,11 +61,16 @@ def test_c3d_attaches_with_sync(shared_data: Path, tmp_path: Path, capsys: pytes
     assert entry["format"] == "c3d" and abs(entry["offset_s"] - TRUE_OFFSET_S) < 0.1
 
 
-def test_an_occluded_point_is_named(shared_data: Path, tmp_path: Path) -> None:
+def test_an_occluded_point_is_filled_or_named(shared_data: Path, tmp_path: Path) -> None:
+    """A short occlusion (at most MAX_GAP_S) is interpolated; a longer one is named with its own count."""
     bvh = read_motion(shared_data / "motion" / "cmu_13_29_squats_120fps.bvh")
-    path = write_c3d(bvh, tmp_path / "gap.c3d", occlude=(40, 3))
-    with pytest.raises(MotionFormatError, match=rf"gap.c3d: point '{bvh.joint_names[3]}': expected a position "
-                                                r"in every frame, found it occluded in 1 point-frames \(first at frame 40\)"):
+    short = read_motion(write_c3d(bvh, tmp_path / "short.c3d", occlude=(40, 3), n_occluded=3))
+    assert "linearly interpolated (3 point-frames)" in short.source
+    np.testing.assert_allclose(short.positions_m[40:43, 3], bvh.positions_m[40:43, 3], atol=0.01)
+    path = write_c3d(bvh, tmp_path / "gap.c3d", occlude=(40, 3), n_occluded=30)
+    with pytest.raises(MotionFormatError, match=rf"gap.c3d: point '{bvh.joint_names[3]}': expected gaps of at most "
+                                                r"0.2 s \(24 frames\) to fill, found 30 missing frames of its own, a gap "
+                                                r"of 30 from frame 40"):
         read_motion(path)
 
 
@@ -112,11 +117,12 @@ def test_an_all_zero_point_is_missing_in_labelled_points_too(tmp_path: Path) -> 
     """The one definition of a missing point: before, labelled points took an all-zero gap as a
     position at the lab origin (a 2 m jump in one frame)."""
     xyz = _walk_xyz()
+    truth = xyz.copy()
     xyz[7:9, 1] = 0.0
     path = _write_points(tmp_path / "gap.c3d", ["Hips", "LeftFoot"], xyz)
-    with pytest.raises(MotionFormatError, match=r"gap\.c3d: point 'LeftFoot': expected a position in every frame, "
-                                                r"found it occluded in 2 point-frames \(first at frame 7\); fill"):
-        read_motion(path)
+    motion = read_motion(path)              # a 2-frame gap: interpolated, not taken as the origin
+    assert "linearly interpolated (2 point-frames)" in motion.source
+    assert np.abs(motion.positions_m[7:9, 1] - truth[7:9, 1] / 1000).max() < 0.05
 
 
 def test_without_the_c3d_package_reading_and_writing_say_what_to_install(
@@ -125,6 +131,7 @@ def test_without_the_c3d_package_reading_and_writing_say_what_to_install(
 
     path = _write_points(tmp_path / "clip.c3d", ["Hips", "LeftFoot"], _walk_xyz())
     monkeypatch.setitem(sys.modules, "c3d", None)  # `import c3d` raises ImportError, as in the runtime's venv
+    monkeypatch.setitem(sys.modules, "ezc3d", None)
     expected = r"expected the 'c3d' package to read C3D files, found it not installed \(pip install 'c3d>=0\.5\.2,<0\.7'\)"
     with pytest.raises(MotionFormatError, match=rf"clip\.c3d: {expected}"):
         read_motion(path)

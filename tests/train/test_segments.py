@@ -109,7 +109,7 @@ def test_unknown_joints_name_every_unmapped_segment() -> None:
     names = [n for n in _names("Unreal") if n not in ("hand_l", "foot_r", "neck_01")]
     with pytest.raises(SegmentMappingError, match=(
             r"best Unreal\); unmapped segments: head, trunk, left_forearm, left_hand, right_shank, right_foot\. "
-            r"Give a mapping file")):
+            r"Map them with --mapping FILE.json: \{\"head\": \[")):
         map_skeleton(names)
 
 

@@ -77,7 +77,7 @@ def test_unit_m_overrides_the_detected_bvh_unit(shared_data: Path, tmp_path: Pat
 def test_livelink_output(shared_data: Path, tmp_path: Path) -> None:
     out = tmp_path / "take.csv"
     assert main(["synth", "default", str(shared_data / JJ), "--out", str(out),
-                 "--format", "livelink"]) == 0
+                 "--format", "livelink", "--every-frame"]) == 0
     with out.open(newline="") as f:
         reader = csv.reader(f)
         header = next(reader)
@@ -95,6 +95,17 @@ def test_livelink_output(shared_data: Path, tmp_path: Path) -> None:
     np.testing.assert_allclose(values["EyeSquintRight"], squint, atol=1e-6)
     assert values["JawOpen"].max() >= 0 and values["EyeBlinkLeft"].max() == 0
     assert rows[0][0] == "00:00:00:00.000" and rows[1][0] == "00:00:00:00.500"
+    # the default: one row per frame of the CSV's 60 fps timecode, the curves resampled
+    resampled = tmp_path / "take60.csv"
+    assert main(["synth", "default", str(shared_data / JJ), "--out", str(resampled), "--format", "livelink"]) == 0
+    with resampled.open(newline="") as f:
+        rows60 = list(csv.reader(f))[1:]
+    assert len(rows60) == int(np.floor((len(rows) - 1) / 120 * 60)) + 1
+    assert [r[0] for r in rows60[:3]] == ["00:00:00:00.000", "00:00:00:01.000", "00:00:00:02.000"]
+    assert rows60[60][0] == "00:00:01:00.000"
+    t = np.arange(len(rows)) / 120
+    at60 = np.interp(np.arange(len(rows60)) / 60, t, values["EyeSquintLeft"])
+    np.testing.assert_allclose([float(r[header.index("EyeSquintLeft")]) for r in rows60], at60, atol=1e-6)
 
 
 def test_timecode() -> None:

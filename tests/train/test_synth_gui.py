@@ -377,3 +377,33 @@ def test_character_panel_fits_at_1280x800(qtbot, stage: QtSynthStage) -> None:
     QtWidgets.QApplication.processEvents()
     bar = stage.character_scroll.verticalScrollBar()
     assert bar.maximum() == 0           # nothing of the character panel scrolled out
+
+
+def test_mapping_button_maps_an_unknown_skeleton(qtbot, stage: QtSynthStage, tmp_path: Path) -> None:
+    """A clip whose skeleton no built-in convention knows: an error line, then curves once a mapping is
+    chosen (the Mapping... button's path); a mapping that does not fit is refused and the old one kept."""
+    import json
+
+    data = Path(__file__).resolve().parents[1] / "data" / "bvh"
+    text = (data / "pymo_walk.bvh").read_text().replace("JOINT LeftUpLeg\n", "JOINT Bone07\n")
+    clip = tmp_path / "renamed.bvh"
+    clip.write_text(text)
+    assert stage.load_clip(clip)
+    stage.session.wait(60)
+    assert "unmapped segments: trunk, left_thigh" in stage.status.text()
+    assert stage.mapping_button.isVisible()
+    wrong = tmp_path / "wrong.json"
+    wrong.write_text(json.dumps({"left_thigh": ["NoSuchJoint", "LeftLeg"]}))
+    assert not stage.set_mapping(wrong) and stage.session.mapping is None
+    mapping = tmp_path / "map.json"
+    ends = {"head": ["Head_end", "Head"], "trunk": ["Head", ["Bone07", "RightUpLeg"]],
+            "left_thigh": ["Bone07", "LeftLeg"], "right_thigh": ["RightUpLeg", "RightLeg"]}
+    for s, S in (("left", "Left"), ("right", "Right")):
+        ends |= {f"{s}_upper_arm": [f"{S}Arm", f"{S}ForeArm"], f"{s}_forearm": [f"{S}ForeArm", f"{S}Hand"],
+                 f"{s}_hand": [f"{S}Hand", f"{S}Hand_End"], f"{s}_shank": [f"{S}Leg", f"{S}Foot"],
+                 f"{s}_foot": [f"{S}Foot", f"{S}ToeBase_end"]}
+    mapping.write_text(json.dumps(ends))
+    assert stage.set_mapping(mapping)
+    stage.session.wait(60)
+    assert stage.session.curves and len(stage.session.curves["t_s"]) == stage.session.n_frames
+    assert np.isfinite(stage.session.curves["w_per_kg"]).all()

@@ -13,7 +13,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("format", choices=("bids",), help="the output format")
     parser.add_argument("sessions", metavar="SESSIONS", help="folder of session folders")
     parser.add_argument("--out", required=True, metavar="DIR", help="new or empty dataset folder")
-    parser.add_argument("--name", default="effortface sessions", help="dataset name")
+    parser.add_argument("--name", default=None,
+                        help="dataset name (default: Name of SESSIONS/dataset_description.json, the lab's own "
+                             "description, else 'effortface sessions')")
 
 
 def run(args: argparse.Namespace) -> int:

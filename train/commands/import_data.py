@@ -15,9 +15,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("format", choices=("xdf",), help="the recording's format")
     parser.add_argument("file", metavar="FILE", help="the .xdf file")
     parser.add_argument("--out", required=True, metavar="SESSIONS", help="folder that receives the session")
-    parser.add_argument("--hr-stream", metavar="NAME|TYPE", help="heart-rate stream (default: type HeartRate)")
+    parser.add_argument("--hr-stream", metavar="NAME|TYPE", help="heart-rate stream (default: the one typed HeartRate, else named, typed or with a channel "
+                             "labelled HR/HeartRate/RR or in bpm; R-R in ms becomes heart rate; units and 25-250 bpm "
+                             "checked)")
     parser.add_argument("--marker-stream", action="append", default=[], metavar="NAME|TYPE",
-                        help="marker stream (repeatable; default: every stream of type Markers)")
+                        help="marker stream (repeatable; default: every stream of type Markers or StringMarker)")
     parser.add_argument("--work-stream", metavar="NAME|TYPE", help="EffortWork stream -> work.csv")
     parser.add_argument("--mocap-stream", metavar="NAME|TYPE", help="mocap stream -> motion/mocap.csv")
     parser.add_argument("--video", metavar="FILE", help="the video recorded beside it")

@@ -30,6 +30,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     how.add_argument("--sync", nargs="?", const="auto", metavar="T",
                      help="align the clip's first jump to the session's 'sync,jump' event (the one nearest "
                           "session time T when several fit)")
+    attach.add_argument("--mapping", default=None, metavar="JSON",
+                        help="joint-to-segment mapping for this clip, kept in motion.json for 'effortface work'")
 
 
 def _seconds(option: str, text: str) -> float:
@@ -47,6 +49,6 @@ def run(args: argparse.Namespace) -> int:
     """Attach the clip; print where it went and how it was aligned."""
     near = None if args.sync in (None, "auto") else _seconds("--sync", args.sync)
     alignment = attach_clip(args.session, args.clip, offset_s=args.offset, sync=args.sync is not None,
-                            sync_near_s=near)
+                            sync_near_s=near, mapping=args.mapping)
     print(f"{args.clip} -> {args.session}/motion: {alignment.describe()}")
     return 0

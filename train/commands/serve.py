@@ -24,6 +24,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--input-name", default=None, help="LSL stream name (default: the first of its type)")
     parser.add_argument("--skeleton", default=None, metavar="JSON",
                         help="skeleton file with rest_positions_m (MoCap input)")
+    parser.add_argument("--mapping", default=None, metavar="JSON",
+                        help="joint-to-segment mapping for the --skeleton joints (default: built-in conventions)")
     parser.add_argument("--osc-in-port", type=int, default=9000, metavar="PORT", help="OSC input port (default 9000)")
     parser.add_argument("--output", action="append", choices=("lsl", "osc", "livelink"),
                         help="where weights go (repeatable; default lsl)")
@@ -42,10 +44,11 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--skeleton: expected a skeleton file for --input-type MoCap, found none")
     model = load_model(args.model_dir)
     processor = FaceProcessor(model, character_from_args(args, model),
-                              args.skeleton if args.input_type == MOCAP_TYPE else None, fps=args.fps)
+                              args.skeleton if args.input_type == MOCAP_TYPE else None, fps=args.fps,
+                              mapping=args.mapping)
     outputs = Outputs(model, args.output or ["lsl"], name=args.name,
                       osc_to=parse_host_port("--osc-out", args.osc_out),
-                      livelink_to=parse_host_port("--livelink-out", args.livelink_out))
+                      livelink_to=parse_host_port("--livelink-out", args.livelink_out), rate_hz=args.fps)
     source: LslInput | OscInput
     if args.input == "lsl":
         source = LslInput(args.input_type, args.input_name)

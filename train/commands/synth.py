@@ -46,7 +46,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, metavar="CSV|OUT_DIR",
                         help="output CSV file (a folder, one file per clip, for a folder of clips)")
     parser.add_argument("--format", choices=CURVE_FORMATS, default="csv",
-                        help="per-frame curves (default) or a Live Link Face CSV")
+                        help="per-frame curves (default) or a Live Link Face CSV (one row per frame of its "
+                             "60 fps timecode)")
+    parser.add_argument("--every-frame", action="store_true",
+                        help="with --format livelink: one row per motion frame instead of resampling to 60 fps")
     parser.add_argument("--force", action="store_true", help="replace an existing --out file")
     add_character_arguments(parser)
     parser.add_argument("--mapping", default=None, metavar="JSON",
@@ -87,7 +90,8 @@ def run(args: argparse.Namespace) -> int:
         return _run_batch(Path(args.motion), out, options, compute)
     motion = read_motion(args.motion, unit_m=args.unit_m)
     curves = model.synthesize(motion, character, mapping=args.mapping, filter_tau_s=taus)
-    write_curves(out, curves, model, fmt=args.format, force=args.force)
+    write_curves(out, curves, model, fmt=args.format, force=args.force, provenance=motion.source,
+                 every_frame=args.every_frame)
     print(written_line(out, curves["t_s"], args.format))
     return 0
 

@@ -24,6 +24,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``effortface work``."""
     parser.add_argument("sessions", nargs="+", metavar="SESSION", help="session folders (or folders of sessions)")
     parser.add_argument("--force", action="store_true", help="replace an existing (maybe hand-made) work.csv")
+    parser.add_argument("--mapping", default=None, metavar="JSON",
+                        help="joint-to-segment mapping for clips attached without one (default: built-in "
+                             "conventions and marker sets)")
 
 
 def summary(table: WorkTable) -> str:
@@ -37,6 +40,6 @@ def summary(table: WorkTable) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Derive every session's work, then write the work.csv files (one line each on stdout)."""
-    for target, table in write_works(work_folders(args.sessions), force=args.force):
+    for target, table in write_works(work_folders(args.sessions), force=args.force, mapping=args.mapping):
         print(f"{target}: {summary(table)}", file=sys.stdout)
     return 0

@@ -533,6 +533,10 @@ class QtSynthStage(QtWidgets.QWidget):
         self.clip_label = QtElidedLabel("no clip")
         self.clip_combo = self._clip_combo()
         self.clip_combo.activated.connect(self._on_clip_picked)
+        self.mapping_button = QtWidgets.QPushButton("Mapping...")
+        self.mapping_button.setToolTip("a joint-to-segment mapping (JSON) for a skeleton the built-in "
+                                       "conventions and marker sets do not know")
+        self.mapping_button.clicked.connect(self._ask_mapping)
         self.open_model_button = QtWidgets.QPushButton("Open model...")
         self.open_model_button.clicked.connect(self._ask_model)
         self.default_model_button = QtWidgets.QPushButton("Built-in rule model")
@@ -544,6 +548,7 @@ class QtSynthStage(QtWidgets.QWidget):
         self.export_livelink_button.clicked.connect(lambda: self._ask_export("livelink"))
         bar = QtWidgets.QHBoxLayout()
         for w, stretch in ((self.open_clip_button, 0), (self.clip_combo, 0), (self.clip_label, 1),
+                           (self.mapping_button, 0),
                            (QtWidgets.QLabel("Model:"), 0), (self.model_label, 1),
                            (self.open_model_button, 0), (self.default_model_button, 0)):
             bar.addWidget(w, stretch)     # the two names share the room left (elided if short of it)
@@ -647,6 +652,16 @@ class QtSynthStage(QtWidgets.QWidget):
         path = self.clip_combo.itemData(index)
         if path:
             self.load_clip(path)
+
+    def set_mapping(self, path: str | Path | None) -> bool:
+        """Use a mapping file for the clips, None for the built-in conventions (errors shown in the stage)."""
+        return self._guard(lambda: self.session.set_mapping(path))
+
+    def _ask_mapping(self) -> None:
+        path, _ = QtWidgets.QFileDialog.getOpenFileName(self, "Joint-to-segment mapping", str(self.motion_dir),
+                                                        "Mapping (*.json)")
+        if path:
+            self.set_mapping(path)
 
     def _ask_model(self) -> None:
         path = QtWidgets.QFileDialog.getExistingDirectory(self, "Open model bundle folder")

@@ -15,7 +15,9 @@ Outputs (any of them):
   order), then ``nhr`` and ``hr_bpm``, at the input's nominal rate, time-stamped with the input
   sample's time stamp (so a consumer can measure the latency).
 - ``osc``: ``/effortface/face`` with the same values, to ``HOST:PORT``.
-- ``livelink``: Live Link Face packets over UDP to ``HOST:PORT`` (:func:`livelink_packet`).
+- ``livelink``: Live Link Face packets over UDP to ``HOST:PORT`` (:func:`livelink_packet`): frame
+  times from the input time stamps at the input's nominal rate (:func:`livelink_frame_time`), a
+  stable UUID-style device id per subject name (:func:`livelink_device_id`).
 
 The server survives its input disappearing: a lost LSL inlet is dropped and the stream is resolved
 again (by name, or by type), and the character's state carries on. Every ``report_s`` it prints the
@@ -75,10 +77,13 @@ class FaceProcessor:
         A skeleton file with ``rest_positions_m`` (MoCap input); None for EffortWork input.
     fps : float
         Nominal frame rate (the causal filter of MoCap input, the first frame step).
+    mapping : str, optional
+        A joint-to-segment mapping file for the skeleton's joints (MoCap input; default: the
+        built-in conventions).
     """
 
     def __init__(self, model: FaceModel, character: Character, skeleton: str | None = None,
-                 fps: float = 120.0) -> None:
+                 fps: float = 120.0, mapping: str | None = None) -> None:
         self.model = model
         self.fps = fps
         self.n_joints = 0
@@ -91,7 +96,7 @@ class FaceProcessor:
             rest = motion_from_positions(skel["rest_positions_m"][None], skel["joints"], skel["parents"], fps,
                                          source=str(skeleton))
             self.n_joints = len(skel["joints"])
-            self._stream = model.stream(character, rest, fps=fps)
+            self._stream = model.stream(character, rest, fps=fps, mapping=mapping)
         self.columns = tuple(model.blendshapes.names) + ("nhr", "hr_bpm")
 
     def step(self, values: Sequence[float], dt_s: float) -> list[float]:
@@ -128,8 +133,29 @@ class WorkStream:
 
 # --------------------------------------------------------------------------- outputs
 
+def livelink_device_id(subject: str) -> str:
+    """A stable UUID-style device id for ``subject`` (``8-4-4-4-12`` upper-case hex, as Live Link Face
+    sends its iPhone's identifier): the same subject name gives the same id on every run."""
+    import uuid
+
+    return str(uuid.uuid5(uuid.NAMESPACE_URL, f"effortface:livelink:{subject}")).upper()
+
+
+def livelink_frame_time(t_s: float, rate_hz: float) -> tuple[int, float, int, int]:
+    """Live Link frame time of ``t_s`` seconds at ``rate_hz``: (frame, sub-frame, numerator, denominator).
+
+    The rate is the send rate (rounded to a whole frame rate; 29.97-style rates as n*1000/1001), so
+    Unreal's timecode advances one frame per frame sent and runs at real time.
+    """
+    rate = max(1, int(round(rate_hz)))
+    num, den = (rate * 1000, 1001) if abs(rate_hz - rate * 1000 / 1001) < 1e-3 and rate_hz != rate else (rate, 1)
+    frames = max(0.0, t_s) * num / den
+    whole = int(math.floor(frames + 1e-6))
+    return whole, float(max(0.0, frames - whole)), num, den
+
+
 def livelink_packet(subject: str, device_id: str, frame: int, fps: int,
-                    curves: dict[str, float]) -> bytes:
+                    curves: dict[str, float], *, sub_frame: float = 0.0, denominator: int = 1) -> bytes:
     """One Live Link Face UDP packet (the app's version-6 layout, big-endian).
 
     ``uint8 version=6``, device id and subject name (each ``int32 length`` + UTF-8), frame time
@@ -146,7 +172,7 @@ def livelink_packet(subject: str, device_id: str, frame: int, fps: int,
     for text in (device_id, subject):
         raw = text.encode("utf-8")
         out += struct.pack(">i", len(raw)) + raw
-    out += struct.pack(">ifii", frame, 0.0, fps, 1)
+    out += struct.pack(">ifii", frame, sub_frame, fps, denominator)
     return out + struct.pack(">B", LIVELINK_COUNT) + struct.pack(f">{LIVELINK_COUNT}f", *values)
 
 
@@ -173,8 +199,12 @@ class Outputs:
     """The chosen outputs; :meth:`send` pushes one row to each."""
 
     def __init__(self, model: FaceModel, kinds: Sequence[str], *, name: str, osc_to: tuple[str, int] | None,
-                 livelink_to: tuple[str, int] | None) -> None:
+                 livelink_to: tuple[str, int] | None, rate_hz: float = 60.0) -> None:
         self.model, self.kinds, self.name = model, tuple(kinds), name
+        #: the send rate declared in the Live Link frame times (the input's nominal rate)
+        self.rate_hz = rate_hz
+        self.device_id = livelink_device_id(name)
+        self._t0: float | None = None
         self._outlet: Any = None
         self._osc: Any = None
         self._sock: socket.socket | None = None
@@ -213,8 +243,11 @@ class Outputs:
         if self._osc is not None:
             self._osc.send_message(OSC_FACE_ADDRESS, row)
         if self._sock is not None and self._livelink_to is not None:
-            packet = livelink_packet(self.name, "effortface", self._frame, 60,
-                                     arkit_curves(self.model, row))
+            if self._t0 is None:
+                self._t0 = stamp
+            frame, sub, num, den = livelink_frame_time(stamp - self._t0, self.rate_hz)
+            packet = livelink_packet(self.name, self.device_id, frame, num, arkit_curves(self.model, row),
+                                     sub_frame=sub, denominator=den)
             self._sock.sendto(packet, self._livelink_to)
         self._frame += 1
 
@@ -340,7 +373,7 @@ def serve(processor: FaceProcessor, source: Any, outputs: Outputs, *, stop: thre
             connected = True
             print(f"serve: input {source.stream_type} connected ({source.srate_hz:g} Hz nominal)", file=log, flush=True)
             if source.srate_hz > 0:
-                processor.fps = source.srate_hz
+                processor.fps = outputs.rate_hz = source.srate_hz
             outputs.open_lsl(processor.columns, source.srate_hz)
         values, stamps = got
         for sample, stamp in zip(values, stamps):

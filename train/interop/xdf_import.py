@@ -1,10 +1,16 @@
 """XDF in: a LabRecorder recording -> a session folder (``effortface import xdf``).
 
-Streams are chosen by type or name (:func:`pick_stream`): the heart-rate stream (default type
-``HeartRate``; channels ``hr_bpm`` and ``rr_ms`` by label, or one channel taken as ``hr_bpm``; samples
-sharing a time stamp form one ``heart_rate.csv`` row, as ``capture --lsl`` publishes them), every
-marker stream (type ``Markers``; effortface's JSON markers keep their kind, label and value, other
-strings become ``marker`` events), an optional ``EffortWork`` stream (-> ``work.csv``), an optional
+Streams are chosen by type or name (:func:`pick_stream`): the heart-rate stream (default: the one
+stream whose name, type, a channel label or a channel unit says heart rate or R-R intervals, as other
+apps write them: ``HeartRate`` typed ``ExciteOMeter``, a channel ``HR`` in ``bpm``, an ``RR`` stream
+in ``ms``; :func:`heart_rate_streams`). Its channels (:func:`hr_channels`): heart rate by label or
+unit ``bpm``, R-R intervals by label or unit ``ms``/``s``; a stream of R-R intervals only becomes
+heart rate (60000 / RR ms) with its R-R kept. Units are checked: a unit that is neither bpm nor a
+time is refused, and so is a stream whose values are mostly outside :data:`HR_RANGE_BPM` (an EEG
+named as heart rate); a single value outside that range is never a valid sample. Samples sharing a
+time stamp form one ``heart_rate.csv`` row, as ``capture --lsl`` publishes them. Every marker stream
+(type ``Markers`` or ``StringMarker``; effortface's JSON markers keep their kind, label and value,
+other strings become ``marker`` events, with every channel of a multi-channel marker kept), an optional ``EffortWork`` stream (-> ``work.csv``), an optional
 mocap stream (channels ``<joint>_x``, ``_y``, ``_z`` -> ``motion/mocap.csv``, a joint-positions CSV),
 and a video file given beside it with its frame times: a stream with one sample per frame
 (``--video-stream``), or the LSL time of its first frame (``--video-offset``) and its frame rate.
@@ -20,6 +26,7 @@ import json
 import logging
 import math
 import os
+import re
 import shutil
 from collections.abc import Sequence
 from pathlib import Path
@@ -37,6 +44,18 @@ from effortface.core.fileio import atomic_write_text
 from effortface.core.version import __version__
 
 XdfStream = dict[str, Any]
+
+#: the heart rates a sample may have to be valid (bpm), as the strap readers keep them
+HR_RANGE_BPM = (25.0, 250.0)
+#: names, types and channel labels (lower case, letters and digits only) that say heart rate
+HR_KEYS = frozenset({"heartrate", "hr", "hrbpm", "bpm", "pulse", "pulserate"})
+#: ... and R-R (inter-beat) intervals
+RR_KEYS = frozenset({"rr", "rrms", "rrinterval", "rrintervals", "rrintervalms", "ibi", "interbeatinterval", "nn"})
+BPM_UNITS = frozenset({"bpm", "beatsmin", "beatsperminute", "1min", "min", "min1", "countmin"})
+MS_UNITS = frozenset({"ms", "msec", "millisecond", "milliseconds"})
+S_UNITS = frozenset({"s", "sec", "second", "seconds"})
+#: stream types taken as markers by default
+MARKER_TYPES = frozenset({"markers", "marker", "stringmarker", "events"})
 
 
 class XdfImportError(UserError):
@@ -114,37 +133,162 @@ def _samples(stream: XdfStream) -> tuple[np.ndarray, Any]:
     return np.asarray(stream["time_stamps"], dtype=float), stream["time_series"]
 
 
+def _key(text: str) -> str:
+    """Lower case, letters and digits only: ``Heart Rate`` -> ``heartrate``, ``beats/min`` -> ``beatsmin``."""
+    return re.sub(r"[^a-z0-9]", "", text.lower())
+
+
+def channel_units(stream: XdfStream) -> list[str]:
+    """Channel units from the stream description (``unit`` or ``units``; empty strings where none)."""
+    n = int(_field(stream, "channel_count") or 0)
+    try:
+        chans = stream["info"]["desc"][0]["channels"][0]["channel"]
+        units = [str(((c.get("unit") or c.get("units")) or [""])[0]) for c in chans]
+    except (KeyError, IndexError, TypeError):
+        units = []
+    return units if len(units) == n else [""] * n
+
+
+def _says(stream: XdfStream) -> tuple[bool, bool]:
+    """(says heart rate, says R-R intervals) from the name, type, channel labels and units."""
+    if _field(stream, "channel_format") == "string":
+        return False, False
+    names = {_key(_field(stream, "name")), _key(_field(stream, "type"))}
+    labels = {_key(lab) for lab in channel_labels(stream)}
+    units = {_key(u) for u in channel_units(stream)}
+    hr = bool((names | labels) & HR_KEYS or units & BPM_UNITS)
+    rr = bool((names | labels) & RR_KEYS)
+    return hr, rr
+
+
+def heart_rate_streams(streams: Sequence[XdfStream]) -> list[XdfStream]:
+    """The streams that say heart rate (by name, type, channel label or unit ``bpm``); else those that
+    say R-R intervals."""
+    hr = [s for s in streams if _says(s)[0]]
+    return hr or [s for s in streams if _says(s)[1]]
+
+
+def pick_hr_stream(path: Path, streams: Sequence[XdfStream], wanted: str | None) -> XdfStream:
+    """The heart-rate stream: ``wanted`` by name or type, else the one :func:`heart_rate_streams` finds.
+
+    Raises
+    ------
+    XdfImportError
+        None or several found (naming the streams and ``--hr-stream``).
+    """
+    if wanted:
+        return pick_stream(path, streams, wanted, "HeartRate", "--hr-stream")
+    typed = [s for s in streams if _field(s, "type") == "HeartRate"]
+    found = typed or heart_rate_streams(streams)
+    if not found:
+        raise XdfImportError(f"{path}: expected a heart-rate stream (named or typed HeartRate, HR or RR, or a "
+                             f"channel labelled so or in bpm; or name one with --hr-stream), found {describe(streams)}")
+    if len(found) > 1:
+        raise XdfImportError(f"{path}: expected one heart-rate stream, found {len(found)}: {describe(found)} "
+                             "(choose one by name with --hr-stream)")
+    return found[0]
+
+
+def hr_channels(path: Path, stream: XdfStream) -> tuple[int | None, int | None, float]:
+    """Which channels hold heart rate (bpm) and R-R intervals, and the factor to milliseconds of the latter.
+
+    Returns
+    -------
+    hr_col, rr_col : int or None
+        Column of the heart rate in bpm, of the R-R intervals (at least one is given).
+    rr_to_ms : float
+        1 for a channel in ms, 1000 for one in s.
+
+    Raises
+    ------
+    XdfImportError
+        A unit that is neither bpm nor a time, or several channels none of which says what it holds.
+    """
+    labels, units = channel_labels(stream), channel_units(stream)
+    keys, ukeys = [_key(lab) for lab in labels], [_key(u) for u in units]
+    name = f"{path}: stream {_field(stream, 'name')!r} ({_field(stream, 'type')})"
+    hr_col = next((i for i, (k, u) in enumerate(zip(keys, ukeys)) if k in HR_KEYS or u in BPM_UNITS), None)
+    rr_col = next((i for i, (k, u) in enumerate(zip(keys, ukeys))
+                   if i != hr_col and (k in RR_KEYS or (u in MS_UNITS | S_UNITS and k not in HR_KEYS))), None)
+    if hr_col is None and rr_col is None:
+        if len(labels) != 1:
+            raise XdfImportError(f"{name}: expected a channel labelled hr_bpm, HeartRate or HR (or in bpm) or rr_ms, "
+                                 f"RR or IBI (in ms), found labels {labels}")
+        says_hr, says_rr = _says(stream)
+        if ukeys[0] in MS_UNITS | S_UNITS or (says_rr and not says_hr):
+            rr_col = 0
+        else:
+            hr_col = 0
+    for col, allowed, what in ((hr_col, BPM_UNITS, "bpm"), (rr_col, MS_UNITS | S_UNITS, "ms or s")):
+        if col is not None and ukeys[col] and ukeys[col] not in allowed:
+            raise XdfImportError(f"{name}: channel {labels[col] or col!r}: expected a unit of {what}, found "
+                                 f"{units[col]!r}: not imported as heart rate (convert it, or choose another "
+                                 "stream with --hr-stream)")
+    return hr_col, rr_col, 1000.0 if rr_col is not None and ukeys[rr_col] in S_UNITS else 1.0
+
+
+def _check_hr_range(path: Path, stream: XdfStream, hr_bpm: np.ndarray, what: str) -> None:
+    """XdfImportError unless most finite values are heart rates within :data:`HR_RANGE_BPM`."""
+    name = f"{path}: stream {_field(stream, 'name')!r} ({_field(stream, 'type')})"
+    finite = hr_bpm[np.isfinite(hr_bpm)]
+    if finite.size == 0:
+        raise XdfImportError(f"{name}: expected heart-rate samples, found no finite value")
+    low, high = HR_RANGE_BPM
+    inside = np.count_nonzero((finite >= low) & (finite <= high))
+    if inside * 2 < finite.size:
+        raise XdfImportError(f"{name}: expected heart rates of {low:g}-{high:g} bpm ({what}), found "
+                             f"{finite.size - inside} of {finite.size} values outside (median "
+                             f"{float(np.median(finite)):.4g} bpm): not imported as heart rate "
+                             "(choose another stream with --hr-stream)")
+
+
 def hr_rows(path: Path, stream: XdfStream, t0: float) -> list[HrSample]:
-    """``heart_rate.csv`` rows: samples sharing a time stamp make one row (their R-R intervals)."""
-    labels = channel_labels(stream)
+    """``heart_rate.csv`` rows: samples sharing a time stamp make one row (their R-R intervals).
+
+    A stream of R-R intervals only gives heart rate 60000 / RR (ms) of the row's last interval; a
+    heart rate outside :data:`HR_RANGE_BPM` is never valid.
+
+    Raises
+    ------
+    XdfImportError
+        An empty stream, a unit that is not bpm or a time, values that are not heart rates (one line).
+    """
     stamps, values = _samples(stream)
-    values = np.asarray(values, dtype=float).reshape(len(stamps), -1)
-    hr_col = labels.index("hr_bpm") if "hr_bpm" in labels else 0
-    rr_col = labels.index("rr_ms") if "rr_ms" in labels else None
     device = _field(stream, "name") or "xdf"
+    if len(stamps) == 0:
+        raise XdfImportError(f"{path}: stream {device!r}: expected heart-rate samples, found an empty stream")
+    hr_col, rr_col, rr_to_ms = hr_channels(path, stream)
+    values = np.asarray(values, dtype=float).reshape(len(stamps), -1)
+    rr_ms = values[:, rr_col] * rr_to_ms if rr_col is not None else None
+    with np.errstate(divide="ignore", invalid="ignore"):
+        hr_all: np.ndarray = values[:, hr_col] if hr_col is not None else 60000.0 / np.asarray(rr_ms)
+    what = "its channel in bpm" if hr_col is not None else "60000 / its R-R intervals in ms"
+    _check_hr_range(path, stream, hr_all, what)
+    low, high = HR_RANGE_BPM
     rows: list[HrSample] = []
     for stamp in np.unique(stamps):
-        group = values[stamps == stamp]
-        hr = float(group[0, hr_col])
-        rr = tuple(float(v) for v in group[:, rr_col] if math.isfinite(v)) if rr_col is not None else ()
-        ok = math.isfinite(hr) and hr > 0
+        at = stamps == stamp
+        hr = float(hr_all[at][-1] if hr_col is None else hr_all[at][0])
+        rr = tuple(float(v) for v in rr_ms[at] if math.isfinite(v)) if rr_ms is not None else ()
+        ok = math.isfinite(hr) and low <= hr <= high
         rows.append(HrSample(round(stamp - t0, 4), hr if ok else None, rr, None, device, ok))
-    if not rows:
-        raise XdfImportError(f"{path}: stream {device!r}: expected heart-rate samples, found none")
     return rows
 
 
 def marker_events(stream: XdfStream, t0: float) -> list[Event]:
-    """Events of a marker stream (effortface JSON markers keep kind, label, value)."""
+    """Events of a marker stream (effortface JSON markers keep kind, label, value; the channels after the
+    first of a multi-channel marker become the value, joined by `` | ``)."""
     stamps, values = _samples(stream)
     out = []
     for stamp, sample in zip(stamps, values):
         text = str(sample[0])
+        rest = " | ".join(str(v) for v in list(sample)[1:])
         try:
             doc = json.loads(text)
-            event = Event(stamp - t0, str(doc["kind"]), str(doc.get("label", "")), str(doc.get("value", "")))
-        except (ValueError, KeyError, TypeError):
-            event = Event(stamp - t0, "marker", text, "")
+            event = Event(stamp - t0, str(doc["kind"]), str(doc.get("label", "")),
+                          str(doc.get("value", "")) + (f" | {rest}" if rest else ""))
+        except (ValueError, KeyError, TypeError, AttributeError):
+            event = Event(stamp - t0, "marker", text, rest)
         out.append(event)
     return out
 
@@ -232,9 +376,9 @@ def import_xdf(path: str | os.PathLike, out_dir: str | os.PathLike, participant:
     """
     path = Path(path)
     streams = load_xdf(path)
-    hr = pick_stream(path, streams, hr_stream, "HeartRate", "--hr-stream")
+    hr = pick_hr_stream(path, streams, hr_stream)
     markers = ([pick_stream(path, streams, m, "Markers", "--marker-stream") for m in marker_streams]
-               or [s for s in streams if _field(s, "type") == "Markers"])
+               or [s for s in streams if _key(_field(s, "type")) in MARKER_TYPES])
     work = (pick_stream if work_stream else find_stream)(path, streams, work_stream, "EffortWork", "--work-stream")
     mocap = pick_stream(path, streams, mocap_stream, "MoCap", "--mocap-stream") if mocap_stream else None
     video_path = Path(video) if video is not None else None
@@ -242,9 +386,10 @@ def import_xdf(path: str | os.PathLike, out_dir: str | os.PathLike, participant:
         raise XdfImportError(f"--video {video_path}: expected a video file, found no such file")
     frames = _frame_times(path, streams, video_path, video_stream, video_offset_s) if video_path else None
     used = [s for s in (hr, *markers, work, mocap) if s is not None]
-    t0 = min(float(_samples(s)[0][0]) for s in used if len(_samples(s)[0]))
+    t0 = min((float(_samples(s)[0][0]) for s in used if len(_samples(s)[0])), default=0.0)
     if frames is not None:
         t0 = min(t0, float(frames[0]))
+    rows = hr_rows(path, hr, t0)  # checked before anything is written
     info = SessionInfo(session_id=make_session_id(participant.code, _dt.datetime.now(), label),
                        participant=participant, devices={"heart_rate": {"device": _field(hr, "name"),
                                                                          "protocol": "lsl", "port": str(path)}},
@@ -253,7 +398,7 @@ def import_xdf(path: str | os.PathLike, out_dir: str | os.PathLike, participant:
                        extra={"lsl": {"clock_offset_s": t0, "imported_from": path.name,
                                       "streams": [_field(s, "name") for s in used]}})
     folder = create_session(out_dir, info)
-    _write_rows(HrWriter(folder / HEART_RATE_CSV), hr_rows(path, hr, t0))
+    _write_rows(HrWriter(folder / HEART_RATE_CSV), rows)
     events = sorted((e for m in markers for e in marker_events(m, t0)), key=lambda e: e.t_s)
     _write_rows(EventWriter(folder / EVENTS_CSV), events)
     if work is not None:

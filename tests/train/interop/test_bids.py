@@ -21,7 +21,8 @@ ROOT = Path(__file__).resolve().parents[3]
 SAMPLE = ROOT / "sample_sessions"
 #: BIDS file names of this export: entities in the specification's order, alphanumeric labels
 NAME_RE = re.compile(r"^sub-(?P<sub>[A-Za-z0-9]+)_ses-(?P<ses>[A-Za-z0-9]+)_task-[A-Za-z0-9]+"
-                     r"(_recording-[A-Za-z0-9]+_physio\.(tsv\.gz|json)|_events\.(tsv|json))$")
+                     r"(_recording-[A-Za-z0-9]+_physio\.(tsv\.gz|json)|_events\.(tsv|json)"
+                     r"|_tracksys-mocap(_run-\d+)?_(motion\.tsv|motion\.json|channels\.tsv))$")
 
 
 @pytest.fixture(scope="module")
@@ -51,12 +52,13 @@ def test_top_level_files(dataset):
 
 def test_every_file_follows_the_naming_rules(dataset):
     files = [p for p in dataset.rglob("*") if p.is_file() and p.parent != dataset]
-    assert len(files) == 12 * 6
+    motion = [f for f in files if f.parent.name == "motion"]
+    assert len(files) - len(motion) == 12 * 6 and len(motion) == 3      # P02's attached squats clip
     for f in files:
         m = NAME_RE.match(f.name)
         assert m, f.name
         rel = f.relative_to(dataset).parts
-        assert rel[:3] == (f"sub-{m['sub']}", f"ses-{m['ses']}", "beh")   # folder entities = file entities
+        assert rel[:3] == (f"sub-{m['sub']}", f"ses-{m['ses']}", "motion" if "tracksys" in f.name else "beh")
 
 
 def test_physio_files_and_sidecars(dataset):
@@ -114,3 +116,124 @@ def test_colliding_participant_labels_are_refused(tmp_path):
     with pytest.raises(Exception, match=r"participant 'LAB20-7' becomes BIDS label 'LAB207', as does 'LAB2-07'"):
         export_bids(tmp_path / "lab", tmp_path / "ds")
     assert not (tmp_path / "ds").exists()
+
+
+# --- the official validator, after every documented step (issue 24) ---------------------------------
+
+def _validator() -> list[str]:
+    """The ``bids-validator-deno`` command (the PyPI package's entry point; it runs offline)."""
+    import shutil
+
+    found = shutil.which("bids-validator-deno") or str(Path(sys.base_prefix) / "bin" / "bids-validator-deno")
+    if not Path(found).is_file():
+        pytest.skip("bids-validator-deno (PyPI) is not installed")
+    return [found]
+
+
+def _validate(dataset: Path) -> list[dict]:
+    """The validator's issues (severity, code, location...) for ``dataset``."""
+    done = subprocess.run([*_validator(), str(dataset), "--json"], capture_output=True, text=True, timeout=300)
+    return json.loads(done.stdout)["issues"]["issues"]
+
+
+LAB_DESCRIPTION = {
+    "Name": "Effort faces, sample lab", "Authors": ["A. Researcher", "B. Engineer"], "License": "CC0",
+    "effortface": {"README": "Sample lab of effortface: heart rate, work and events of twelve exercise sessions "
+                             "of six participants, exported after `effortface work`.\n" * 3,
+                   "Tasks": {"cardio": {"TaskName": "cardio", "TaskDescription": "cycling intervals"},
+                             "strength": {"TaskDescription": "resistance sets"}},
+                   "Sidecars": {"InstitutionName": "Sample Lab"}}}
+
+
+@pytest.fixture(scope="module")
+def worked_lab(tmp_path_factory) -> Path:
+    """A copy of the sample lab after the documented ``effortface work`` step, with its own description."""
+    import shutil
+
+    lab = tmp_path_factory.mktemp("worked") / "lab"
+    for folder in list_sessions(SAMPLE):
+        shutil.copytree(folder, lab / folder.name, ignore=shutil.ignore_patterns("video.avi", "serial"))
+    (lab / "dataset_description.json").write_text(json.dumps(LAB_DESCRIPTION))
+    done = subprocess.run([sys.executable, "-m", "effortface", "work", lab], capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert len(list(lab.glob("*/work.csv"))) == 12
+    return lab
+
+
+def test_lab_after_work_exports_with_no_validator_error(worked_lab, tmp_path):
+    out = tmp_path / "ds"
+    done = subprocess.run([sys.executable, "-m", "effortface", "export", "bids", worked_lab, "--out", out],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    issues = _validate(out)
+    assert [i for i in issues if i["severity"] == "error"] == []
+    codes = {i["code"] for i in issues}
+    assert not codes & {"NO_AUTHORS", "TOO_FEW_AUTHORS", "README_FILE_SMALL"}     # the lab's own description
+    assert not any(i.get("subCode") in ("PhysioType", "TaskName", "License", "InstitutionName") for i in issues)
+    desc = json.loads((out / "dataset_description.json").read_text())
+    assert desc["Authors"] == LAB_DESCRIPTION["Authors"] and desc["Name"] == LAB_DESCRIPTION["Name"]
+    assert "effortface" not in desc
+    assert (out / "README").read_text() == LAB_DESCRIPTION["effortface"]["README"]
+    work = json.loads(next(out.rglob("*task-strength_recording-work_physio.json")).read_text())
+    assert work["TaskName"] == "strength" and work["TaskDescription"] == "resistance sets"
+    assert work["PhysioType"] == "generic" and work["InstitutionName"] == "Sample Lab"
+    # the attached mocap as the BIDS motion datatype: joint positions in metres, a channel per column
+    (motion,) = out.rglob("*_tracksys-mocap_motion.tsv")
+    channels = _tsv(motion.with_name(motion.name.replace("_motion.tsv", "_channels.tsv")))
+    sidecar = json.loads(motion.with_suffix(".json").read_text())
+    table = np.loadtxt(motion, delimiter="\t", ndmin=2)
+    assert table.shape[1] == len(channels) == sidecar["MotionChannelCount"] and sidecar["SamplingFrequency"] > 0
+    assert {c["units"] for c in channels} == {"m"} and {c["type"] for c in channels} == {"POS"}
+    assert abs(len(table) / sidecar["SamplingFrequency"] - sidecar["RecordingDuration"]) < 1e-3
+    # the work written by `effortface work` is what is exported (1 Hz, the source column dropped)
+    from effortface.train.work import read_work_csv
+
+    session = next(worked_lab.glob("P06_20260114-120500_strength"))
+    saved = read_work_csv(session / "work.csv")
+    tsv = next(out.rglob("sub-P06_ses-20260114120500_*recording-work_physio.tsv.gz"))
+    got = np.array([[np.nan if v == "n/a" else float(v) for v in ln.split("\t")]
+                    for ln in gzip.decompress(tsv.read_bytes()).decode().splitlines()])
+    assert got.shape == (len(saved.t_s), 2)
+    np.testing.assert_allclose(got[:, 0], saved.w_per_kg, rtol=1e-5, equal_nan=True)
+
+
+def test_the_validator_check_can_fail(worked_lab, tmp_path):
+    out = export_bids(worked_lab, tmp_path / "ds")
+    sidecar = next(out.rglob("*recording-heartrate_physio.json"))
+    doc = json.loads(sidecar.read_text())
+    del doc["SamplingFrequency"]                                   # required by BIDS for physio files
+    sidecar.write_text(json.dumps(doc))
+    errors = [i for i in _validate(out) if i["severity"] == "error"]
+    data = sidecar.name.replace(".json", ".tsv.gz")
+    assert any(i["code"] == "SIDECAR_KEY_REQUIRED" and data in i["location"] for i in errors), errors
+
+
+def test_a_failed_export_leaves_nothing(worked_lab, tmp_path):
+    import shutil
+
+    lab = tmp_path / "lab"
+    shutil.copytree(worked_lab, lab)
+    bad = sorted(lab.glob("P0*"))[-1] / "work.csv"
+    bad.write_text("t_s,w_per_kg,p_per_kg,source\n0,abc,1,log:rest\n")
+    with pytest.raises(Exception, match=r"work\.csv: line 2: w_per_kg: expected a number, found 'abc'"):
+        export_bids(lab, tmp_path / "ds")
+    assert not (tmp_path / "ds").exists()
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(Exception, match="expected a number"):
+        export_bids(lab, tmp_path / "empty")
+    assert list((tmp_path / "empty").iterdir()) == []
+
+
+def test_a_bad_lab_description_is_one_line(tmp_path):
+    import shutil
+
+    lab = tmp_path / "lab"
+    shutil.copytree(SAMPLE / "P01_20260112-093000_cardio", lab / "P01_20260112-093000_cardio",
+                    ignore=shutil.ignore_patterns("video.avi", "serial"))
+    (lab / "dataset_description.json").write_text(json.dumps({"effortface": {"PhysioType": "ecg"}}))
+    done = subprocess.run([sys.executable, "-m", "effortface", "export", "bids", lab, "--out", tmp_path / "ds"],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert "dataset_description.json" in done.stderr and "PhysioType: expected one of generic, eyetrack" in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1

@@ -5,6 +5,7 @@ Link Face packets, with the real pylsl and python-osc on loopback."""
 from __future__ import annotations
 
 import signal
+import re
 import socket
 import struct
 import subprocess
@@ -122,7 +123,7 @@ def test_osc_in_to_osc_and_livelink_out():
     # Live Link Face v6: version, device id, subject, frame time, count, 61 big-endian floats
     assert packet[0] == 6
     n = struct.unpack(">i", packet[1:5])[0]
-    assert packet[5:5 + n] == b"effortface"
+    assert re.fullmatch(rb"[0-9A-F-]{36}", packet[5:5 + n])
     k = 5 + n
     m = struct.unpack(">i", packet[k:k + 4])[0]
     assert packet[k + 4:k + 4 + m] == b"hero"
@@ -171,3 +172,48 @@ def test_mocap_frames_give_the_runtime_stream_weights(shared_data, tmp_path):
         want = live.step(frame, 1 / clip.fps)
     np.testing.assert_allclose(row[:4], want, atol=1e-12)
     assert row[5] == pytest.approx(live.last["hr_bpm"])
+
+
+def decode_livelink(packet: bytes) -> dict:
+    """A Live Link Face UDP packet decoded independently, following Epic's layout (version 6,
+    big-endian): uint8 version; FString device id and subject (int32 length + UTF-8); FQualifiedFrameTime
+    (int32 frame, float32 sub-frame, FFrameRate int32 numerator, int32 denominator); uint8 count; floats."""
+    version = packet[0]
+    k = 1
+    texts = []
+    for _ in range(2):
+        (n,) = struct.unpack_from(">i", packet, k)
+        texts.append(packet[k + 4:k + 4 + n].decode("utf-8"))
+        k += 4 + n
+    frame, sub, num, den = struct.unpack_from(">ifii", packet, k)
+    count = packet[k + 16]
+    values = struct.unpack_from(f">{count}f", packet, k + 17)
+    assert k + 17 + 4 * count == len(packet)
+    return {"version": version, "device": texts[0], "subject": texts[1], "frame": frame, "sub": sub,
+            "rate": num / den, "values": values}
+
+
+@pytest.mark.parametrize("rate_hz", [120.0, 60.0, 29.97])
+def test_livelink_frame_times_follow_the_send_rate(rate_hz):
+    """Frame numbers count frames at the declared rate, the declared rate is the send rate: Unreal's
+    timecode then runs at real time (before: 60 fps declared, one frame per packet at 120 Hz)."""
+    import re
+
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", 0))
+    sock.settimeout(5)
+    model = load_model("default")
+    outputs = Outputs(model, ["livelink"], name="hero", osc_to=None, livelink_to=sock.getsockname(), rate_hz=rate_hz)
+    n = 90
+    row = [0.5] * len(model.columns)
+    for k in range(n):
+        outputs.send(row, 5000.0 + k / rate_hz)
+    packets = [decode_livelink(sock.recvfrom(4096)[0]) for _ in range(n)]
+    sock.close()
+    assert [p["frame"] for p in packets] == list(range(n))
+    assert all(abs(p["rate"] - rate_hz) < 1e-3 and 0.0 <= p["sub"] < 1e-3 for p in packets)
+    device = packets[0]["device"]
+    assert re.fullmatch(r"[0-9A-F]{8}-[0-9A-F]{4}-[0-9A-F]{4}-[0-9A-F]{4}-[0-9A-F]{12}", device)
+    assert {p["device"] for p in packets} == {device} and packets[0]["subject"] == "hero"
+    again = Outputs(model, ["livelink"], name="hero", osc_to=None, livelink_to=("127.0.0.1", 9), rate_hz=rate_hz)
+    assert again.device_id == device                                   # stable across runs

@@ -127,9 +127,10 @@ def test_imported_session_trains_with_the_lab(imported, tmp_path):
 
 @pytest.mark.parametrize(("streams", "args", "match"), [
     (lambda s: [x for x in s if x.type != "HeartRate"], [],
-     "expected a stream named or typed 'HeartRate' (--hr-stream), found 'effortface events' (Markers)"),
+     "expected a heart-rate stream (named or typed HeartRate, HR or RR, or a channel labelled so or in bpm; "
+     "or name one with --hr-stream), found 'effortface events' (Markers)"),
     (lambda s: s + [XdfStream("Polar 2", "HeartRate", [("hr_bpm", "bpm")], [1.0], [[60.0]])], [],
-     "expected one stream named or typed 'HeartRate', found 2: 'Polar H10 P06' (HeartRate), 'Polar 2' "
+     "expected one heart-rate stream, found 2: 'Polar H10 P06' (HeartRate), 'Polar 2' "
      "(HeartRate) (choose one by name with --hr-stream)"),
     (lambda s: s, ["--hr-stream", "Garmin"], "expected a stream named or typed 'Garmin' (--hr-stream)"),
     (lambda s: s, ["--video", "nofile.avi"], "--video nofile.avi: expected a video file, found no such file"),
