@@ -6,7 +6,9 @@ it in a bounded queue; the writer encodes and appends. When the writer cannot ke
 full and the grabber drops the frame and counts it (``dropped``), so the timing of the frames that
 are kept is never distorted. OpenCV is imported inside functions (it is heavy).
 
-OpenCV's writer reports no write error, so the writer watches the disk itself (issue 17): it stops
+Every frame reaches the OS as it is written (:mod:`~effortface.capture_tool.avi_writer`), the frame
+table at least every :data:`FLUSH_EVERY_S`, and both are fsynced every :data:`SYNC_EVERY_S`, so a
+``kill -9`` at any frame rate loses under a second (issue 29). The writer watches the disk itself (issue 17): it stops
 the video cleanly, before a write can fail, when the disk or the process's file-size limit
 (``RLIMIT_FSIZE``) leaves too little room; and it notices a write that failed anyway (the AVI stops
 growing while frames go in). Either way the reason is :attr:`CameraSource.fault` (one line naming
@@ -31,6 +33,7 @@ except ImportError:  # pragma: no cover - not POSIX: no file-size limit to watch
     resource = None  # type: ignore[assignment]
 
 from effortface.core.errors import DeviceError, DeviceErrorReason, UserError
+from effortface.capture_tool.avi_writer import MjpgAviWriter
 from effortface.capture_tool.session import FrameTimeWriter
 
 FOURCC = "MJPG"
@@ -41,6 +44,10 @@ MUXER_CHUNK_BYTES = 32768
 DISK_RESERVE_BYTES = 2 << 20
 #: frames that may go in before the first byte reaches the disk (tiny frames fill a chunk slowly)
 FIRST_GROWTH_FRAMES = 300
+#: the frame table is handed to the OS at least this often, even while the writer is behind
+FLUSH_EVERY_S = 0.5
+#: the video and the frame table are fsynced this often (a power cut loses at most this much)
+SYNC_EVERY_S = 1.0
 
 
 def _cv2() -> Any:
@@ -155,6 +162,7 @@ class CameraSource:
             raise FileExistsError(f"{self.avi_path}: exists; refusing to overwrite")
         self._writer = open_avi_writer(self.avi_path, self.fps, (self.width, self.height))
         self._times = FrameTimeWriter(self.frames_csv)
+        self._flushed_at = self._synced_at = time.monotonic()
         for target, name in ((self._write_loop, "camera-writer"), (self._grab_loop, "camera-grab")):
             t = threading.Thread(target=target, name=name, daemon=True)
             t.start()
@@ -210,8 +218,14 @@ class CameraSource:
         self._times.write(self.frames_written, t_s)
         self.frames_written += 1
         self._check_growth()
-        if self._queue.empty():  # caught up: hand the rows to the OS (kill -9 keeps them)
+        now = time.monotonic()
+        if self._queue.empty() or now - self._flushed_at >= FLUSH_EVERY_S:  # kill -9 keeps the rows
             self._times.flush()
+            self._flushed_at = now
+        if now - self._synced_at >= SYNC_EVERY_S:  # a power cut keeps them too
+            self._writer.sync()
+            self._times.sync()
+            self._synced_at = now
 
     def _set_fault(self, message: str | None, failed: bool = False) -> None:
         """Stop the video for ``message`` (nothing if None) and tell :attr:`on_fault` once."""
@@ -259,7 +273,11 @@ class CameraSource:
             t.join(timeout_s)
         self._threads = []
         if hasattr(self, "_writer"):
-            self._writer.release()
+            try:
+                self._writer.release()
+            except OSError as exc:  # the index could not be written: recover rebuilds it
+                self._set_fault(f"{exc.filename or self.avi_path}: could not write the video's index "
+                                f"({exc.strerror}); run 'effortface recover' on the session", failed=True)
             try:
                 self._times.close()
             except OSError as exc:
@@ -287,18 +305,20 @@ class CameraSource:
         return True
 
 
-def open_avi_writer(path: str | os.PathLike, fps: float, size: tuple[int, int]) -> Any:
-    """An MJPG AVI writer through OpenCV's own AVI muxer (``CAP_OPENCV_MJPEG``).
+def open_avi_writer(path: str | os.PathLike, fps: float, size: tuple[int, int]) -> MjpgAviWriter:
+    """A streaming MJPG AVI writer (:class:`~effortface.capture_tool.avi_writer.MjpgAviWriter`).
 
-    Why not the default FFmpeg backend: it holds whole frames in its buffers, so a ``kill -9``
-    can leave an empty file; OpenCV's muxer hands every 32 KiB to the OS (under one frame at
-    640 x 480), so a crash loses at most the last frames. Raises UserError if it cannot open.
+    Why not OpenCV's writers: the FFmpeg backend holds whole frames in its buffers and OpenCV's own
+    muxer hands the file 32 KiB at a time (five seconds of 160 x 120 video at 1.5 fps), so a
+    ``kill -9`` lost seconds; this one writes every frame to the OS as it comes. Raises UserError if
+    the file cannot be created.
     """
-    cv2 = _cv2()
-    writer = cv2.VideoWriter(str(path), cv2.CAP_OPENCV_MJPEG, cv2.VideoWriter_fourcc(*FOURCC), fps, size)
-    if not writer.isOpened():
-        raise UserError(f"{path}: expected a writable MJPG video file, found OpenCV could not open it")
-    return writer
+    try:
+        return MjpgAviWriter(path, fps, size)
+    except FileExistsError:
+        raise FileExistsError(f"{path}: exists; refusing to overwrite") from None
+    except OSError as exc:
+        raise UserError(f"{path}: expected a writable MJPG video file, found {exc.strerror or exc}") from None
 
 
 def avi_header_frames(path: str | os.PathLike) -> int:

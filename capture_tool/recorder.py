@@ -599,7 +599,7 @@ def decode_serlog(path: str | os.PathLike, notes: list[str] | None = None) -> li
     path : path-like
         The serial log.
     notes : list of str, optional
-        Receives a line counting the corrupt event records skipped, if any.
+        Receives a line counting the corrupt event records and the damaged bytes skipped, if any.
 
     Returns
     -------
@@ -621,6 +621,9 @@ def decode_serlog(path: str | os.PathLike, notes: list[str] | None = None) -> li
     corrupt = sum(rec.is_corrupt_event() for rec in log.records)
     if corrupt and notes is not None:
         notes.append(f"{log.path.name}: skipped {corrupt} corrupt event record(s)")
+    if log.skipped_bytes and notes is not None:
+        notes.append(f"{log.path.name}: skipped {log.skipped_bytes} damaged bytes in {log.skipped_places} "
+                     f"place(s) (first at byte {log.first_skip_at})")
     return out + decoder.finish()
 
 

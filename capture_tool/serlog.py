@@ -10,6 +10,11 @@ Layout (little-endian)::
 "label", "value"}``, e.g. a gap or a reconnect). ``t_s`` is seconds on the session's monotonic
 clock. Records are appended and flushed as they arrive, so a file cut by a crash is readable: a
 truncated last record is ignored and counted by :func:`read_serlog`.
+
+A damaged record (a flipped kind byte, a length longer or shorter than its payload, a time that is
+not a number) costs only itself: the reader resynchronises at the next offset where a well-formed
+record is followed by another well-formed record (or the end of the file), and counts the bytes it
+skipped and the places (:attr:`Serlog.skipped_bytes`, :meth:`Serlog.damage_warning`).
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import BinaryIO
 
+from effortface.core.bounds import BOUNDS
 from effortface.core.errors import SessionFormatError
 from effortface.core.fileio import not_a_file
 
@@ -30,6 +36,8 @@ MAGIC = b"EFSERLOG 1\n"
 DATA, EVENT = 0, 1
 _REC = struct.Struct("<BdI")
 _MAX_PAYLOAD = 1 << 24  # 16 MiB: larger is a corrupt length, not a read
+#: a record time between 0 and this (a denormal from stray bytes) is damage: the clock ticks in ns
+_MIN_T_S = 1e-9
 
 
 @dataclasses.dataclass(frozen=True)
@@ -67,6 +75,17 @@ class Serlog:
     header: dict
     records: list[SerlogRecord]
     truncated_bytes: int = 0
+    #: bytes of damaged records the reader skipped to resynchronise, in how many places, and the first offset
+    skipped_bytes: int = 0
+    skipped_places: int = 0
+    first_skip_at: int | None = None
+
+    def damage_warning(self) -> str | None:
+        """``'warning: FILE: skipped N damaged bytes in K places (first at byte B)'``, or None if none."""
+        if not self.skipped_bytes:
+            return None
+        return (f"warning: {self.path}: skipped {self.skipped_bytes} damaged bytes in {self.skipped_places} "
+                f"place{'s' if self.skipped_places != 1 else ''} (first at byte {self.first_skip_at})")
 
     def data_chunks(self) -> Iterator[tuple[float, bytes]]:
         """Yield ``(t_s, bytes)`` for every data record, in arrival order."""
@@ -162,7 +181,7 @@ def _check_file(path: str | os.PathLike) -> Path:
 
 
 def read_serlog(path: str | os.PathLike) -> Serlog:
-    """Read a ``.serlog`` file, tolerating a truncated last record.
+    """Read a ``.serlog`` file, tolerating a truncated last record and resynchronising after damage.
 
     Parameters
     ----------
@@ -192,21 +211,109 @@ def read_serlog(path: str | os.PathLike) -> Serlog:
         header = None
     if not isinstance(header, dict):
         raise SessionFormatError(f"{path}: expected a JSON header line after the magic, found none")
-    records, pos = _parse_records(blob, nl + 1)
-    return Serlog(path, header, records, truncated_bytes=len(blob) - pos)
+    parsed = _parse_records(blob, nl + 1)
+    return Serlog(path, header, parsed.records, truncated_bytes=parsed.truncated_bytes,
+                  skipped_bytes=parsed.skipped_bytes, skipped_places=parsed.skipped_places,
+                  first_skip_at=parsed.first_skip_at)
 
 
-def _parse_records(blob: bytes, pos: int) -> tuple[list[SerlogRecord], int]:
-    """Parse records from ``pos``; stop at the first incomplete or corrupt one."""
-    records: list[SerlogRecord] = []
-    while pos + _REC.size <= len(blob):
-        kind, t_s, n = _REC.unpack_from(blob, pos)
-        end = pos + _REC.size + n
-        if kind not in (DATA, EVENT) or n > _MAX_PAYLOAD or end > len(blob):
+@dataclasses.dataclass
+class _Parsed:
+    records: list[SerlogRecord]
+    truncated_bytes: int = 0
+    skipped_bytes: int = 0
+    skipped_places: int = 0
+    first_skip_at: int | None = None
+
+
+def _plausible_header(blob: bytes, pos: int) -> tuple[int, float, int] | None:
+    """The ``(kind, t_s, n)`` of a record header at ``pos`` if it can be one (its payload may run past the end)."""
+    if pos + _REC.size > len(blob) or blob[pos] not in (DATA, EVENT):
+        return None
+    kind, t_s, n = _REC.unpack_from(blob, pos)
+    if not (t_s == 0.0 or BOUNDS["t_s"].contains(t_s) and t_s >= _MIN_T_S) or n > _MAX_PAYLOAD:
+        return None
+    return kind, t_s, n
+
+
+def _record_end(blob: bytes, pos: int, min_t_s: float) -> int | None:
+    """End offset of a well-formed record at ``pos`` (time from ``min_t_s`` on) followed by the end or a
+    plausible header no earlier in time: where a resynchronisation may land."""
+    end = _fitting_end(blob, pos)
+    if end is None or not _followed_well(blob, end):
+        return None
+    t_s = _REC.unpack_from(blob, pos)[1]
+    nxt = _plausible_header(blob, end)
+    if t_s < min_t_s or (nxt is not None and nxt[1] < t_s):
+        return None
+    return end
+
+
+def _fitting_end(blob: bytes, pos: int) -> int | None:
+    """End offset of a record at ``pos`` whose header is plausible and whose payload fits in the file."""
+    head = _plausible_header(blob, pos)
+    if head is None or pos + _REC.size + head[2] > len(blob):
+        return None
+    return pos + _REC.size + head[2]
+
+
+def _followed_well(blob: bytes, end: int) -> bool:
+    """True if the file ends at ``end`` (or within a torn header) or a plausible header starts there."""
+    return len(blob) - end < _REC.size or _plausible_header(blob, end) is not None
+
+
+def _parse_records(blob: bytes, pos: int) -> _Parsed:
+    """Parse records from ``pos``, resynchronising after a damaged one; a torn last record is truncation.
+
+    A record whose successor is garbage is dropped too when its length was wrong: too long (a
+    well-formed record chain starts inside its payload) or short by less than a header (the garbage
+    after it is smaller than a record); otherwise only the garbage is skipped.
+    """
+    out = _Parsed([])
+    while pos < len(blob):
+        end = _fitting_end(blob, pos)
+        t_min = out.records[-1].t_s if out.records else 0.0
+        if end is not None and not _followed_well(blob, end):
+            inside = _resync(blob, pos + 1, t_min, end)
+            after = _resync(blob, end, t_min) if inside is None else None
+            stop = inside if inside is not None else after if after is not None and after - end < _REC.size else None
+            if stop is not None:
+                _skip(out, pos, stop)
+                pos = stop
+                continue
+        if end is not None:
+            kind, t_s, _ = _REC.unpack_from(blob, pos)
+            out.records.append(SerlogRecord(kind, t_s, blob[pos + _REC.size:end]))
+            pos = end
+            continue
+        nxt = _resync(blob, pos + 1, t_min)
+        if nxt is None:
+            if _plausible_header(blob, pos) is not None or len(blob) - pos < _REC.size:  # a crash cut it
+                out.truncated_bytes = len(blob) - pos
+            else:
+                _skip(out, pos, len(blob))
             break
-        records.append(SerlogRecord(kind, t_s, blob[pos + _REC.size:end]))
-        pos = end
-    return records, pos
+        _skip(out, pos, nxt)
+        pos = nxt
+    return out
+
+
+def _skip(out: _Parsed, start: int, stop: int) -> None:
+    """Count the damaged bytes ``[start, stop)``."""
+    out.skipped_bytes += stop - start
+    out.skipped_places += 1
+    if out.first_skip_at is None:
+        out.first_skip_at = start
+
+
+def _resync(blob: bytes, start: int, min_t_s: float, stop: int | None = None) -> int | None:
+    """The first offset in ``[start, stop)`` where a well-formed record chain begins at or after ``min_t_s``
+    (None if none does)."""
+    stop = len(blob) - _REC.size + 1 if stop is None else min(stop, len(blob) - _REC.size + 1)
+    for pos in range(start, stop):
+        if blob[pos] in (DATA, EVENT) and _record_end(blob, pos, min_t_s) is not None:
+            return pos
+    return None
 
 
 def read_serlog_header(path: str | os.PathLike) -> dict:

@@ -27,7 +27,7 @@ from typing import Any, TextIO
 
 from effortface.core import bounds
 from effortface.core.errors import SessionFormatError, UserError, json_type, not_text_error
-from effortface.core.fileio import check_regular_file, read_json, refuse_overwrite, write_json_atomic  # noqa: F401  (re-exported for callers)
+from effortface.core.fileio import check_regular_file, naming, read_json, refuse_overwrite, write_json_atomic  # noqa: F401  (re-exported for callers)
 # The participant record lives in the core (one limits table for every stage); re-exported here.
 from effortface.core.participant import (CODE_PATTERN, CODE_RULE, LIMITS, SEX_ALIASES,  # noqa: F401
                                          SEXES, Participant, check_participant_code)
@@ -149,6 +149,7 @@ class SessionInfo:
             raise SessionFormatError(f"{source}: field 'complete': expected true or false, "
                                      f"found {json_type(data['complete'])}")
         known = {"schema_version", "session_id", "complete", "created_utc", "participant", "devices", "software"}
+        _check_numbers(data, source)
         return cls(
             session_id=str(data["session_id"]),
             participant=participant,
@@ -177,6 +178,33 @@ class SessionInfo:
         path = refuse_overwrite(Path(folder) / SESSION_JSON, overwrite=overwrite, what=SESSION_JSON)
         write_json_atomic(path, self.to_dict())
         return path
+
+
+def _check_numbers(data: dict[str, Any], source: str | os.PathLike) -> None:
+    """Refuse absurd numbers ``session.json`` carries, naming the field (issue 29).
+
+    ``devices.camera.fps`` must lie within ``BOUNDS["fps"]`` and its width and height be counts;
+    every number in ``stats`` (frames, drops, bytes...) must be a count (finite, 0 or more).
+
+    Raises
+    ------
+    SessionFormatError
+        ``'<source>: field 'stats.video_frames': expected a number from 0 to 1e+15, found -7'``.
+    """
+    camera = data.get("devices", {}).get("camera") if isinstance(data.get("devices"), dict) else None
+    checks: list[tuple[str, str, object]] = []
+    if isinstance(camera, dict):
+        checks += [("fps", "devices.camera.fps", camera["fps"])] if "fps" in camera else []
+        checks += [("count", f"devices.camera.{k}", camera[k]) for k in ("width", "height") if k in camera]
+    stats = data.get("stats")
+    if isinstance(stats, dict):
+        checks += [("count", f"stats.{k}", v) for k, v in stats.items()
+                   if isinstance(v, (int, float)) and not isinstance(v, bool)]
+    for name, field, value in checks:
+        try:
+            bounds.check(name, value, f"{source}: field {field!r}")
+        except UserError as exc:
+            raise SessionFormatError(str(exc)) from None
 
 
 def _object_field(data: dict[str, Any], key: str, source: str | os.PathLike) -> dict[str, Any]:
@@ -293,18 +321,27 @@ class _LineWriter:
         self.rows = 0
 
     def write_line(self, line: str) -> None:
-        """Append one line (no newline in ``line``)."""
-        self._fh.write(line + "\n")
+        """Append one line (no newline in ``line``); an OSError names the file."""
+        with naming(self.path):
+            self._fh.write(line + "\n")
         self.rows += 1
 
     def flush(self) -> None:
-        """Hand buffered lines to the OS (survives a ``kill -9``)."""
-        self._fh.flush()
+        """Hand buffered lines to the OS (survives a ``kill -9``); an OSError names the file."""
+        with naming(self.path):
+            self._fh.flush()
+
+    def sync(self) -> None:
+        """Flush and fsync (survives a power cut); an OSError names the file."""
+        with naming(self.path):
+            self._fh.flush()
+            os.fsync(self._fh.fileno())
 
     def close(self) -> None:
-        """Flush and close (idempotent)."""
+        """Flush and close (idempotent); an OSError names the file."""
         if not self._fh.closed:
-            self._fh.close()
+            with naming(self.path):
+                self._fh.close()
 
 
 class EventWriter(_LineWriter):

@@ -266,13 +266,19 @@ def _session_label(session_id: str) -> str:
 def expand_paths(paths: Iterable[str | os.PathLike]) -> list[Path]:
     """Session folders from a mix of sessions and folders of sessions (UserError if none).
 
-    Sessions a capture is recording now are left out of folders, and refused when named.
+    Sessions a capture is recording now are left out of folders, and refused when named. Each path
+    given must be a session or hold one: an explicit empty folder is refused (issue 29), never
+    skipped and then listed among a model's sources.
     """
     out: list[Path] = []
     for p in map(Path, paths):
         if (p / "session.json").is_file():
             check_not_recording(p, "train on")
-        out.extend([p] if (p / "session.json").is_file() else list_sessions(p))
+        found = [p] if (p / "session.json").is_file() else list_sessions(p)
+        if not found:
+            what = "a folder with none" if p.is_dir() else "a file" if p.exists() else "nothing"
+            raise DatasetError(f"{p}: expected a session folder or a folder of sessions, found {what}")
+        out.extend(found)
     if not out:
         raise DatasetError(f"{', '.join(map(str, paths))}: expected session folders, found none")
     return out

@@ -20,6 +20,8 @@ from typing import Any, NoReturn, TextIO
 
 import numpy as np
 
+from effortface.core import bounds
+from effortface.core.bounds import BOUNDS
 from effortface.core.errors import UserError
 from effortface.core.fileio import check_regular_file
 from effortface.train.npzio import load_npz
@@ -126,6 +128,35 @@ def check_finite(source: str | Path, name: str, values: np.ndarray, frame_axis: 
         found = values[frame][~ok[frame]].flat[0]
         raise MotionFormatError(f"{source}: {name}: expected finite numbers, found {found} at frame {frame}")
     raise MotionFormatError(f"{source}: {name}: expected finite numbers, found {values[~ok].flat[0]}")
+
+
+#: frames checked at a time by :func:`check_positions` (its working memory does not grow with the clip)
+_CHECK_CHUNK_FRAMES = 4096
+
+
+def check_positions(source: str | Path, positions_m: np.ndarray, joint_names: Sequence[str]) -> None:
+    """Raise naming ``source``, the frame and the joint if a world position is not finite or absurd.
+
+    The one check every motion reader ends with (issue 29): a frame of huge finite values (1e308 in a
+    BVH, 1e200 in a CSV) would make NaN energies and weights downstream. The bound is
+    ``BOUNDS["position_m"]`` (:mod:`effortface.core.bounds`).
+
+    Raises
+    ------
+    MotionFormatError
+        ``'<source>: positions_m: expected <bound>, found 1e+200 at frame 12, joint 'LeftHand''``.
+    """
+    bound = BOUNDS["position_m"]
+    for start in range(0, len(positions_m), _CHECK_CHUNK_FRAMES):
+        chunk = positions_m[start:start + _CHECK_CHUNK_FRAMES]
+        with np.errstate(invalid="ignore"):
+            bad = ~((chunk >= bound.low) & (chunk <= bound.high))
+        if bad.any():
+            frame, joint, axis = (int(i[0]) for i in np.nonzero(bad))
+            name = joint_names[joint] if joint < len(joint_names) else str(joint)
+            raise MotionFormatError(f"{source}: positions_m: expected {bound.describe()}, found "
+                                    f"{float(chunk[frame, joint, axis]):g} at frame {start + frame}, "
+                                    f"joint {name!r}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -241,6 +272,7 @@ def motion_from_positions(
         raise UserError(f"fps: expected a positive number, got {fps!r}")
     par = check_parents(par, source)
     check_finite(source, "positions_m", pos)
+    check_positions(source, pos, names)
     return Motion(names, par, pos, None, float(fps), source)
 
 
@@ -458,8 +490,14 @@ class _Tokens:
 _CHANNELS = {f"{a}{kind}" for a in "XYZ" for kind in ("position", "rotation")}
 
 
-def _parse_joint(tok: _Tokens, joints: list[_BvhJoint], parent: int, n_channels: int) -> int:
+#: the deepest joint nesting a BVH may have (a body is about 10 deep; a hand's finger adds 4)
+MAX_BVH_DEPTH = 200
+
+
+def _parse_joint(tok: _Tokens, joints: list[_BvhJoint], parent: int, n_channels: int, depth: int = 1) -> int:
     """Parse ``name { OFFSET .. CHANNELS .. children }`` after ROOT/JOINT; return channel count."""
+    if depth > MAX_BVH_DEPTH:
+        raise tok.error(f"joints nested at most {MAX_BVH_DEPTH} deep", "a deeper joint")
     name = tok.next("a joint name")
     tok.expect("{")
     tok.expect("OFFSET")
@@ -478,17 +516,17 @@ def _parse_joint(tok: _Tokens, joints: list[_BvhJoint], parent: int, n_channels:
     index = len(joints)
     joints.append(_BvhJoint(name, parent, offset, channels, n_channels))
     n_channels += len(channels)
-    return _parse_children(tok, joints, index, n_channels)
+    return _parse_children(tok, joints, index, n_channels, depth)
 
 
-def _parse_children(tok: _Tokens, joints: list[_BvhJoint], index: int, n_channels: int) -> int:
+def _parse_children(tok: _Tokens, joints: list[_BvhJoint], index: int, n_channels: int, depth: int = 1) -> int:
     """Parse the JOINT / End Site children of joint ``index`` up to its closing brace."""
     while True:
         word = tok.next("JOINT, End Site or '}'")
         if word == "}":
             return n_channels
         if word.upper() == "JOINT":
-            n_channels = _parse_joint(tok, joints, index, n_channels)
+            n_channels = _parse_joint(tok, joints, index, n_channels, depth + 1)
         elif word.upper() == "END":
             tok.expect("Site")
             tok.expect("{")
@@ -542,7 +580,20 @@ def _parse_motion_header(path: Path, lines: list[str], motion_at: int) -> tuple[
     if not frame_time_s > 0:
         raise MotionFormatError(
             f"{path}: line {motion_at + 3}: expected a positive frame time, found {frame_time_s}")
+    bounds.check("frame_time_s", frame_time_s, f"{path}: line {motion_at + 3}: Frame Time")
     return int(n_frames), frame_time_s
+
+
+def _check_frames_fit(path: Path, line: int, n_frames: int, n_channels: int) -> None:
+    """Refuse a ``Frames:`` count the file is too small to hold (before allocating for it).
+
+    Each frame line holds ``n_channels`` numbers of at least one character and a separator.
+    """
+    size = path.stat().st_size
+    most = size // max(1, 2 * n_channels)
+    if n_frames > most:
+        raise MotionFormatError(f"{path}: line {line}: Frames: expected at most {most} frames for a file of "
+                                f"{size} bytes with {n_channels} channels, found {n_frames}")
 
 
 def _read_bvh_header(f: TextIO) -> list[str]:
@@ -739,6 +790,7 @@ def read_bvh(path: str | Path, *, unit_m: float | None = None, up_axis: str = "y
             lines = _read_bvh_header(f)
             joints, n_channels, motion_at = _parse_hierarchy(path, lines)
             n_frames, frame_time_s = _parse_motion_header(path, lines, motion_at)
+            _check_frames_fit(path, motion_at + 2, n_frames, n_channels)
             parents = check_parents(np.array([j.parent for j in joints]), path)
             offsets = np.array([j.offset for j in joints])
             out_dtype = np.dtype(dtype) if dtype is not None else \
@@ -750,6 +802,7 @@ def read_bvh(path: str | Path, *, unit_m: float | None = None, up_axis: str = "y
         raise MotionFormatError(f"{path}: expected a readable BVH file, got {exc.strerror}") from None
     pos *= _bvh_scale(path, offsets, parents, up_axis, unit_m)
     names = tuple(j.name for j in joints)
+    check_positions(path, pos, names)
     return Motion(names, parents, pos, rot, _fps_from_frame_time(frame_time_s), str(path))
 
 
@@ -890,6 +943,7 @@ def read_npz_motion(
         AMP_END_SITES_M if end_sites_m is None else end_sites_m,
     )
     pos, rot = forward_kinematics(parents, offsets, local_rot, root)
+    check_positions(path, pos, names)
     return Motion(tuple(names), parents, pos, rot, fps, str(path))
 
 
@@ -907,7 +961,10 @@ def _npz_fps(path: Path, value: np.ndarray) -> float:
     if value.size != 1 or value.dtype.kind not in "iuf" or not (np.isfinite(value) & (value > 0)).all():
         shown = value.tolist() if value.size <= 4 else f"an array of shape {value.shape}"
         raise MotionFormatError(f"{path}: fps: expected one positive frame rate, found {shown}")
-    return float(value.reshape(()))
+    fps = float(value.reshape(()))
+    if not BOUNDS["motion_fps"].contains(fps):
+        raise MotionFormatError(f"{path}: fps: expected {BOUNDS['motion_fps'].describe()}, found {fps:g}")
+    return fps
 
 
 def _check_npz_values(path: Path, offsets: np.ndarray, quats: np.ndarray, root: np.ndarray) -> None:

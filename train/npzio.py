@@ -52,12 +52,30 @@ def load_npz(path: str | os.PathLike[str], error: type[UserError], what: str,
         ``max_bytes`` or a header declaring more than its member holds).
     """
     path = Path(path)
+    _check_magic(path, error, what)
     check_npz_sizes(path, error, MAX_NPZ_BYTES if max_bytes is None else max_bytes)
     try:
         with np.load(path, allow_pickle=False) as npz:  # a lone .npy has no "with": TypeError
             return {k: npz[k] for k in npz.files}
     except NPZ_ERRORS as exc:
         raise error(f"{path}: expected {what}, found {str(exc) or type(exc).__name__}") from None
+
+
+#: how a zip archive (``.npz``) and a lone ``.npy`` array begin; numpy takes anything else for a pickle
+_NPZ_MAGICS = (b"PK\x03\x04", b"PK\x05\x06", b"\x93NUMPY")
+
+
+def _check_magic(path: Path, error: type[UserError], what: str) -> None:
+    """Refuse a file that is neither a zip nor a ``.npy`` by what it starts with (a text file is not
+    "pickled data", as numpy would say)."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(6)
+    except OSError:
+        return  # np.load says what is wrong with the path
+    if not head.startswith(_NPZ_MAGICS):
+        raise error(f"{path}: expected {what}, found a file that is neither a zip of arrays nor a .npy "
+                    f"(it starts with {head!r})")
 
 
 def check_npz_sizes(path: Path, error: type[UserError], max_bytes: int) -> None:

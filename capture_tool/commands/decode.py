@@ -6,6 +6,11 @@ wins, with a note on stderr if it differs); a pcap or raw capture needs it. The 
 are fed to the decoder with their recorded arrival times, so ``t_s`` is seconds since the first
 chunk. The CSV is ``heart_rate.csv``'s format; a one-line summary of the decoder's counters goes
 to stderr.
+
+A damaged ``.serlog`` (a flipped byte in a record's kind, length or time) is decoded all but the
+damaged records: the reader resynchronises after each, and ``warning: FILE: skipped N damaged bytes
+in K places (first at byte B)`` goes to stderr. Exit status: 0 when every byte was read, 1 when
+damaged bytes were skipped (the CSV is still written), 2 for a file that cannot be decoded at all.
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ from effortface.core.errors import UserError
 from effortface.capture_tool.hr_csv import HR_CSV_HEADER, format_hr_row
 from effortface.capture_tool.protocols import (PROTOCOLS, Decoder, check_protocol, decode_chunks, get_decoder,
                                               header_protocol)
-from effortface.capture_tool.serlog import is_serlog, read_serlog_header
+from effortface.capture_tool.serlog import is_serlog, read_serlog, read_serlog_header
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -84,9 +89,14 @@ def _make_decoder(args: argparse.Namespace) -> Decoder:
 
 
 def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
-    """Decode FILE and print the CSV; return 0."""
+    """Decode FILE and print the CSV; return 0, or 1 when damaged bytes of a ``.serlog`` were skipped."""
     decoder = _make_decoder(args)
-    chunks = read_timed_capture(args.file)
+    warning = None
+    if is_serlog(args.file):
+        log = read_serlog(args.file)
+        chunks, warning = list(log.data_chunks()), log.damage_warning()
+    else:
+        chunks = read_timed_capture(args.file)
     samples = decode_chunks(decoder, chunks)
     out = sys.stdout if out is None else out
     try:
@@ -96,4 +106,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     except BrokenPipeError:  # e.g. piped into head: the reader has all it wanted
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     print(summary_line(decoder), file=sys.stderr)
+    if warning:
+        print(warning, file=sys.stderr)
+        return 1
     return 0

@@ -64,6 +64,20 @@ BOUNDS: dict[str, Bound] = {
     "k_up": Bound(0.0, 1e3, "ml/kg/s", low_open=True),
     "tau_s": Bound(0.0, 1e6, "s", low_open=True),
     "scale_ml_per_kg": Bound(0.0, 1e6, "ml/kg", low_open=True),
+    # live input (serve) and motion files: work and power per kg (a sprint peaks near 25 W/kg) and
+    # joint positions (a capture volume is tens of metres; 1 km is no body)
+    "w_per_kg": Bound(-1e3, 1e3, "W/kg"),
+    "p_per_kg": Bound(-1e3, 1e3, "W/kg"),
+    "position_m": Bound(-1e3, 1e3, "m"),
+    # motion files: a BVH frame time (10 kHz to one frame in 10 s) and a clip's frame rate
+    "frame_time_s": Bound(1e-4, 10.0, "s"),
+    "motion_fps": Bound(0.1, 1e4, "Hz"),
+    # options of the live server
+    "fps": Bound(0.0, 1000.0, "Hz", low_open=True),
+    "report_s": Bound(0.0, 3600.0, "s", low_open=True),
+    "port": Bound(0.0, 65535.0, ""),
+    # session.json: counts of frames, samples, bytes, pixels
+    "count": Bound(0.0, 1e15, ""),
 }
 
 

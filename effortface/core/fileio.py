@@ -9,6 +9,7 @@ write of the same file once they are :data:`STALE_TMP_S` old.
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import itertools
 import json
@@ -18,7 +19,7 @@ import secrets
 import stat
 import tempfile
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import IO, Any
 
@@ -26,6 +27,29 @@ from effortface.core.errors import UserError
 
 #: a temporary file of an atomic write older than this was left by a killed writer (no write takes so long)
 STALE_TMP_S = 300.0
+
+
+def name_os_error(exc: OSError, path: str | os.PathLike[str]) -> OSError:
+    """``exc`` naming ``path`` if it names no file (a full disk on a write or a close names none).
+
+    The one place an OS error gets the file it happened on, so the command line's last-resort line
+    (``<file>: expected a readable/writable path, found No space left on device``) names it.
+    """
+    if exc.filename is not None or exc.errno is None:
+        return exc
+    return type(exc)(exc.errno, exc.strerror, str(path))
+
+
+@contextlib.contextmanager
+def naming(path: str | os.PathLike[str]) -> Iterator[None]:
+    """Re-raise an OSError of the block as :func:`name_os_error` of ``path``."""
+    try:
+        yield
+    except OSError as exc:
+        named = name_os_error(exc, path)
+        if named is exc:
+            raise
+        raise named from None
 
 
 def refuse_overwrite(path: str | os.PathLike[str], *, overwrite: bool = False, what: str = "file",

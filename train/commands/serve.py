@@ -1,13 +1,18 @@
 """``effortface serve MODEL``: stream the face live from an LSL or OSC input (see
-:mod:`effortface.train.interop.serve`). Runs until Ctrl-C or ``--duration``; prints its rates."""
+:mod:`effortface.train.interop.serve`). Runs until Ctrl-C or ``--duration``; prints its rates.
+
+Every option is checked before serving (ports, fps, report period, duration, output hosts): a bad
+one is one line naming it and exit status 2."""
 
 from __future__ import annotations
 
 import argparse
 import signal
+import socket
 import sys
 import threading
 
+from effortface.core import bounds
 from effortface.core.errors import UserError
 from effortface.train.character_options import add_character_arguments, character_from_args
 from effortface.train.interop.serve import (EFFORT_WORK_TYPE, MOCAP_TYPE, FaceProcessor, LslInput, OscInput,
@@ -38,20 +43,54 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_character_arguments(parser)
 
 
-def run(args: argparse.Namespace) -> int:
-    """Build the processor, input and outputs; serve until stopped."""
+def check_options(args: argparse.Namespace) -> dict[str, tuple[str, int] | None]:
+    """Check every option before anything is served; return the output addresses.
+
+    Raises
+    ------
+    UserError
+        One line naming the option: a port outside 0-65535, an fps or report period that is not a
+        positive finite number within :data:`effortface.core.bounds.BOUNDS`, a duration beyond it,
+        an output address that is not ``HOST:PORT`` or whose host does not resolve.
+    """
     if args.input_type == MOCAP_TYPE and args.skeleton is None:
         raise UserError("--skeleton: expected a skeleton file for --input-type MoCap, found none")
+    bounds.check("port", args.osc_in_port, "--osc-in-port")
+    bounds.check("fps", args.fps, "--fps")
+    bounds.check("report_s", args.report, "--report")
+    if args.duration is not None:
+        bounds.check("t_s", args.duration, "--duration")
+    return {"osc_to": resolve_address("--osc-out", args.osc_out),
+            "livelink_to": resolve_address("--livelink-out", args.livelink_out)}
+
+
+def resolve_address(option: str, text: str | None) -> tuple[str, int] | None:
+    """``HOST:PORT`` whose host resolves (checked now, not at the first frame); None stays None."""
+    address = parse_host_port(option, text)
+    if address is None:
+        return None
+    try:
+        socket.getaddrinfo(address[0], address[1], type=socket.SOCK_DGRAM)
+    except (socket.gaierror, UnicodeError) as exc:
+        why = getattr(exc, "strerror", None) or str(exc)
+        raise UserError(f"{option}: expected a host name or address that resolves, found {address[0]!r} "
+                        f"({why})") from None
+    return address
+
+
+def run(args: argparse.Namespace) -> int:
+    """Build the processor, input and outputs; serve until stopped."""
+    addresses = check_options(args)
     model = load_model(args.model_dir)
     processor = FaceProcessor(model, character_from_args(args, model),
                               args.skeleton if args.input_type == MOCAP_TYPE else None, fps=args.fps,
                               mapping=args.mapping)
-    outputs = Outputs(model, args.output or ["lsl"], name=args.name,
-                      osc_to=parse_host_port("--osc-out", args.osc_out),
-                      livelink_to=parse_host_port("--livelink-out", args.livelink_out), rate_hz=args.fps)
+    outputs = Outputs(model, args.output or ["lsl"], name=args.name, osc_to=addresses["osc_to"],
+                      livelink_to=addresses["livelink_to"], rate_hz=args.fps)
     source: LslInput | OscInput
     if args.input == "lsl":
-        source = LslInput(args.input_type, args.input_name)
+        widths = (3 * processor.n_joints,) if processor.n_joints else (2, 3)
+        source = LslInput(args.input_type, args.input_name, widths)
         where = args.input_type
     else:
         source = OscInput(args.osc_in_port)
@@ -66,5 +105,5 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         return 0
     print(f"serve: {stats.received} frames in, {stats.sent} out, {stats.connects} connects, "
-          f"{stats.losses} losses", file=sys.stderr)
+          f"{stats.losses} losses, {stats.bad} bad", file=sys.stderr)
     return 0

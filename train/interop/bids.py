@@ -38,6 +38,7 @@ import io
 import json
 import os
 import re
+import secrets
 import shutil
 from collections.abc import Sequence
 from pathlib import Path
@@ -47,7 +48,7 @@ import numpy as np
 from effortface.capture_tool.hr_csv import read_hr_csv
 from effortface.capture_tool.session import EVENTS_CSV, HEART_RATE_CSV, list_sessions, parse_session_id, read_session
 from effortface.core.errors import UserError
-from effortface.core.fileio import atomic_write, atomic_write_text, read_json, write_json_atomic
+from effortface.core.fileio import atomic_write, atomic_write_text, check_apart, fsync_folder, read_json, write_json_atomic
 from effortface.core.version import __version__
 from effortface.train.dataset import MAX_HR_GAP_S, WORK_CSV
 
@@ -138,6 +139,16 @@ def bids_label(text: str) -> str:
     return label
 
 
+#: characters a BIDS TSV cell cannot hold (tab, line breaks, NUL and the other C0 controls, DEL)
+_NOT_IN_A_CELL = re.compile(r"[\x00-\x1f\x7f]+")
+
+
+def bids_text(text: str) -> str:
+    """``text`` as one BIDS TSV cell: each run of tabs, line breaks, NUL or other control characters
+    becomes one space (a marker from ``import xdf`` may hold any of them), ``n/a`` if nothing is left."""
+    return _NOT_IN_A_CELL.sub(" ", text).strip() or "n/a"
+
+
 def _tsv(rows: Sequence[Sequence[object]], header: Sequence[str] | None) -> str:
     buf = io.StringIO()
     writer = csv.writer(buf, delimiter="\t", lineterminator="\n")
@@ -187,8 +198,9 @@ def _events(folder: Path) -> list[list[str]]:
         if r["kind"] == "phase_start":
             end = next((float(e["t_s"]) for e in rows[i + 1:] if e["kind"] in ("phase_end", "phase_start")), None)
             duration = f"{end - float(r['t_s']):.4f}" if end is not None else "n/a"
-        out.append([f"{float(r['t_s']):.4f}", duration, f"{r['kind']}:{r['label']}" if r["label"] else r["kind"],
-                    r["value"] or "n/a"])
+        label = _NOT_IN_A_CELL.sub(" ", r["label"]).strip()
+        trial = f"{r['kind']}:{label}" if label else r["kind"]
+        out.append([f"{float(r['t_s']):.4f}", duration, bids_text(trial), bids_text(r["value"] or "")])
     return out
 
 
@@ -260,15 +272,19 @@ def export_bids(sessions_dir: str | os.PathLike, out_dir: str | os.PathLike, *, 
 
     ``name`` (the dataset ``Name``) overrides the lab description's; without either it is
     ``"effortface sessions"``.
+    The dataset is written into a hidden folder beside ``out_dir`` and renamed into place at the end,
+    so a failed export (a bad session, a full disk) leaves nothing that looks like a dataset.
 
     Raises
     ------
     UserError
-        No sessions, a non-empty ``out_dir``, colliding participant labels.
+        No sessions, ``out_dir`` inside an input (the sessions folder or a session), a non-empty
+        ``out_dir``, colliding participant labels.
     """
     folders = list_sessions(sessions_dir)
     if not folders:
         raise UserError(f"{sessions_dir}: expected session folders (with session.json), found none")
+    check_apart("--out", out_dir, [sessions_dir, *folders], "a dataset folder")
     out = Path(out_dir)
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise UserError(f"--out {out}: expected a new or empty folder, found {'a file' if not out.is_dir() else 'a folder with files'}")
@@ -281,28 +297,20 @@ def export_bids(sessions_dir: str | os.PathLike, out_dir: str | os.PathLike, *, 
                             f"{getattr(participants[sub], 'code')!r}: rename one")
         participants[sub] = p
     lab = read_lab_description(sessions_dir)
-    created = not out.exists()
-    out.mkdir(parents=True, exist_ok=True)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    staging = out.with_name(f".{out.name}.{secrets.token_hex(6)}.tmp")
+    staging.mkdir()
     try:
         for folder in folders:
-            export_session(folder, out, bids_label(read_session(folder).participant.code), lab)
-        _write_top(out, participants, name, lab)
-    except BaseException:
-        _remove_partial(out, created)
-        raise
+            export_session(folder, staging, bids_label(read_session(folder).participant.code), lab)
+        _write_top(staging, participants, name, lab)
+        if out.is_dir():
+            out.rmdir()  # the empty folder given (checked above)
+        os.rename(staging, out)
+        fsync_folder(out.parent)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
     return out
-
-
-def _remove_partial(out: Path, created: bool) -> None:
-    """Remove a failed export: the folder if this export made it, else what it wrote in it (it was empty)."""
-    if created:
-        shutil.rmtree(out, ignore_errors=True)
-        return
-    for child in out.iterdir():
-        if child.is_dir() and not child.is_symlink():
-            shutil.rmtree(child, ignore_errors=True)
-        else:
-            child.unlink(missing_ok=True)
 
 
 def _write_top(out: Path, participants: dict[str, object], name: str | None, lab: LabDescription) -> None:

@@ -17,6 +17,13 @@ and a video file given beside it with its frame times: a stream with one sample 
 
 Session time 0 is the earliest time stamp of the imported streams; ``session.json`` keeps
 ``lsl.clock_offset_s`` (``lsl_time = t_s + clock_offset_s``) as a capture with ``--lsl`` does.
+
+Every stream is checked before anything is written (issue 29): time stamps finite and spanning at
+most ``BOUNDS["t_s"]``; a heart-rate stream with samples and at least one numeric channel (a rate
+outside :data:`effortface.core.physio_limits.HR_BPM` is written as not valid); a work stream with
+two finite channels within ``BOUNDS["w_per_kg"]``; ``--video-offset`` finite. Each refusal is one
+line naming the file, the stream and the sample. The session is written into a hidden folder
+beside its place and renamed into place at the end, so a failed import leaves no session.
 """
 
 from __future__ import annotations
@@ -27,6 +34,7 @@ import logging
 import math
 import os
 import re
+import secrets
 import shutil
 from collections.abc import Sequence
 from pathlib import Path
@@ -38,9 +46,10 @@ from effortface.capture_tool.protocols import HrSample
 from effortface.capture_tool.session import (EVENTS_CSV, HEART_RATE_CSV, VIDEO_AVI, VIDEO_FRAMES_CSV, Event,
                                              EventWriter, FrameTimeWriter, HrWriter, Participant, SessionInfo,
                                              create_session, make_session_id, utc_now_iso)
+from effortface.core.bounds import BOUNDS
 from effortface.core.errors import UserError
 from effortface.core.opencv import import_cv2
-from effortface.core.fileio import atomic_write_text
+from effortface.core.fileio import atomic_write_text, fsync_folder
 from effortface.core.version import __version__
 
 XdfStream = dict[str, Any]
@@ -71,11 +80,12 @@ def load_xdf(path: str | os.PathLike) -> list[XdfStream]:
         raise XdfImportError(f"{path}: expected an XDF file, found {'a folder' if path.is_dir() else 'no such file'}")
     log = logging.getLogger("pyxdf")
     level = log.level
-    log.setLevel(logging.ERROR)  # its per-stream notes would break the one-line error rule
+    log.setLevel(logging.CRITICAL + 1)  # its notes and logged tracebacks would break the one-line error rule
     try:
         streams, _ = pyxdf.load_xdf(str(path), dejitter_timestamps=False)
-    except Exception as exc:  # pyxdf raises bare Exceptions on a damaged file
-        raise XdfImportError(f"{path}: expected an XDF file, found {type(exc).__name__}: {exc}") from None
+    except (Exception, MemoryError) as exc:  # pyxdf raises bare Exceptions on a damaged file;
+        # a chunk claiming 2^40 samples fails its allocation
+        raise XdfImportError(f"{path}: expected an XDF file, found {type(exc).__name__}: {str(exc)[:200]}") from None
     finally:
         log.setLevel(level)
     return streams
@@ -131,6 +141,23 @@ def channel_labels(stream: XdfStream) -> list[str]:
 
 def _samples(stream: XdfStream) -> tuple[np.ndarray, Any]:
     return np.asarray(stream["time_stamps"], dtype=float), stream["time_series"]
+
+
+def _numeric(path: Path, stream: XdfStream, what: str, min_channels: int) -> np.ndarray:
+    """A stream's samples as a (T, C) float array, or one line: no samples, too few channels, not numbers."""
+    stamps, values = _samples(stream)
+    name = _field(stream, "name") or _field(stream, "type")
+    if len(stamps) == 0:
+        raise XdfImportError(f"{path}: stream {name!r}: expected {what} samples, found none")
+    try:
+        array = np.asarray(values, dtype=float).reshape(len(stamps), -1)
+    except (ValueError, TypeError):
+        raise XdfImportError(f"{path}: stream {name!r}: expected numeric {what} channels, found "
+                             f"{type(values).__name__} of {np.asarray(values).dtype} values") from None
+    if array.shape[1] < min_channels:
+        raise XdfImportError(f"{path}: stream {name!r}: expected at least {min_channels} {what} channel(s), "
+                             f"found {array.shape[1]}")
+    return array
 
 
 def _key(text: str) -> str:
@@ -258,7 +285,7 @@ def hr_rows(path: Path, stream: XdfStream, t0: float) -> list[HrSample]:
     if len(stamps) == 0:
         raise XdfImportError(f"{path}: stream {device!r}: expected heart-rate samples, found an empty stream")
     hr_col, rr_col, rr_to_ms = hr_channels(path, stream)
-    values = np.asarray(values, dtype=float).reshape(len(stamps), -1)
+    values = _numeric(path, stream, "heart-rate", 1)
     rr_ms = values[:, rr_col] * rr_to_ms if rr_col is not None else None
     with np.errstate(divide="ignore", invalid="ignore"):
         hr_all: np.ndarray = values[:, hr_col] if hr_col is not None else 60000.0 / np.asarray(rr_ms)
@@ -266,13 +293,45 @@ def hr_rows(path: Path, stream: XdfStream, t0: float) -> list[HrSample]:
     _check_hr_range(path, stream, hr_all, what)
     low, high = HR_RANGE_BPM
     rows: list[HrSample] = []
-    for stamp in np.unique(stamps):
-        at = stamps == stamp
-        hr = float(hr_all[at][-1] if hr_col is None else hr_all[at][0])
-        rr = tuple(float(v) for v in rr_ms[at] if math.isfinite(v)) if rr_ms is not None else ()
+    order = np.argsort(stamps, kind="stable")  # sorted once and split: linear in samples
+    unique, starts = np.unique(stamps[order], return_index=True)
+    hr_groups = np.split(hr_all[order], starts[1:])
+    rr_groups = np.split(np.asarray(rr_ms)[order], starts[1:]) if rr_ms is not None else [()] * len(unique)
+    for stamp, hr_group, rr_group in zip(unique, hr_groups, rr_groups):
+        hr = float(hr_group[-1] if hr_col is None else hr_group[0])
+        rr = tuple(float(v) for v in rr_group if math.isfinite(v))
         ok = math.isfinite(hr) and low <= hr <= high
-        rows.append(HrSample(round(stamp - t0, 4), hr if ok else None, rr, None, device, ok))
+        rows.append(HrSample(round(float(stamp) - t0, 4), hr if ok else None, rr, None, device, ok))
     return rows
+
+
+def check_stamps(path: Path, streams: Sequence[XdfStream], extra: np.ndarray | None = None) -> float:
+    """Session time 0 (the earliest stamp) after checking every stream's stamps; one line naming the bad one.
+
+    Raises
+    ------
+    XdfImportError
+        A stamp that is not finite, or stamps spanning more than ``BOUNDS["t_s"]`` allows (a marker
+        at +-1e15 s).
+    """
+    named = [(_field(s, "name") or _field(s, "type"), _samples(s)[0]) for s in streams]
+    if extra is not None:
+        named.append(("--video frames", np.asarray(extra, float)))
+    for name, stamps in named:
+        bad = np.flatnonzero(~np.isfinite(stamps))
+        if bad.size:
+            raise XdfImportError(f"{path}: stream {name!r}: expected finite time stamps, found {stamps[bad[0]]} "
+                                 f"at sample {int(bad[0])}")
+    starts = [float(st.min()) for _, st in named if len(st)]
+    if not starts:
+        raise XdfImportError(f"{path}: expected time-stamped samples in the imported streams, found none")
+    t0 = min(starts)
+    bound = BOUNDS["t_s"]
+    for name, stamps in named:
+        if len(stamps) and not bound.contains(float(stamps.max()) - t0):
+            raise XdfImportError(f"{path}: stream {name!r}: expected time stamps within {bound.high:g} s of the "
+                                 f"first, found {float(stamps.max()) - t0:g} s after it")
+    return t0
 
 
 def marker_events(stream: XdfStream, t0: float) -> list[Event]:
@@ -281,23 +340,30 @@ def marker_events(stream: XdfStream, t0: float) -> list[Event]:
     stamps, values = _samples(stream)
     out = []
     for stamp, sample in zip(stamps, values):
-        text = str(sample[0])
+        text = str(sample[0]) if len(sample) else ""
         rest = " | ".join(str(v) for v in list(sample)[1:])
         try:
             doc = json.loads(text)
             event = Event(stamp - t0, str(doc["kind"]), str(doc.get("label", "")),
                           str(doc.get("value", "")) + (f" | {rest}" if rest else ""))
-        except (ValueError, KeyError, TypeError, AttributeError):
+        except (ValueError, KeyError, TypeError, AttributeError, RecursionError):  # a deeply nested marker
             event = Event(stamp - t0, "marker", text, rest)
         out.append(event)
     return out
 
 
-def _write_work(folder: Path, stream: XdfStream, t0: float) -> None:
+def _write_work(path: Path, folder: Path, stream: XdfStream, t0: float) -> None:
     labels = channel_labels(stream)
-    stamps, values = _samples(stream)
-    values = np.asarray(values, dtype=float).reshape(len(stamps), -1)
+    stamps = _samples(stream)[0]
+    values = _numeric(path, stream, "work", 2)
     cols = [labels.index(c) if c in labels else i for i, c in enumerate(("w_per_kg", "p_per_kg"))]
+    for col, field in zip(cols, ("w_per_kg", "p_per_kg")):
+        bound = BOUNDS[field]
+        with np.errstate(invalid="ignore"):
+            bad = np.flatnonzero(~((values[:, col] >= bound.low) & (values[:, col] <= bound.high)))
+        if bad.size:
+            raise XdfImportError(f"{path}: stream {_field(stream, 'name')!r}: {field}: expected "
+                                 f"{bound.describe()}, found {values[bad[0], col]:g} at sample {int(bad[0])}")
     lines = ["t_s,w_per_kg,p_per_kg"] + [f"{t - t0:.4f},{v[cols[0]]:.6g},{v[cols[1]]:.6g}"
                                          for t, v in zip(stamps, values)]
     atomic_write_text(folder / "work.csv", "\n".join(lines) + "\n")
@@ -338,6 +404,8 @@ def _frame_times(path: Path, streams: Sequence[XdfStream], video: Path, video_st
     if video_offset_s is None:
         raise XdfImportError(f"--video {video}: expected its frame times, --video-stream NAME or "
                              "--video-offset S, found neither")
+    if not (math.isfinite(fps) and fps > 0):
+        raise XdfImportError(f"--video {video}: expected a frame rate, found {fps:g}")
     return video_offset_s + np.arange(n_frames) / fps
 
 
@@ -375,6 +443,9 @@ def import_xdf(path: str | os.PathLike, out_dir: str | os.PathLike, participant:
         Missing or ambiguous streams, unreadable files (one line each).
     """
     path = Path(path)
+    if video_offset_s is not None and not (math.isfinite(video_offset_s) and abs(video_offset_s) <= 1e10):
+        raise XdfImportError(f"--video-offset: expected a finite LSL time in seconds (at most 1e10), "
+                             f"found {video_offset_s:g}")
     streams = load_xdf(path)
     hr = pick_hr_stream(path, streams, hr_stream)
     markers = ([pick_stream(path, streams, m, "Markers", "--marker-stream") for m in marker_streams]
@@ -386,10 +457,12 @@ def import_xdf(path: str | os.PathLike, out_dir: str | os.PathLike, participant:
         raise XdfImportError(f"--video {video_path}: expected a video file, found no such file")
     frames = _frame_times(path, streams, video_path, video_stream, video_offset_s) if video_path else None
     used = [s for s in (hr, *markers, work, mocap) if s is not None]
-    t0 = min((float(_samples(s)[0][0]) for s in used if len(_samples(s)[0])), default=0.0)
-    if frames is not None:
-        t0 = min(t0, float(frames[0]))
-    rows = hr_rows(path, hr, t0)  # checked before anything is written
+    if len(_samples(hr)[0]) == 0:  # named before the stamps of all streams are checked
+        raise XdfImportError(f"{path}: stream {_field(hr, 'name') or 'xdf'!r}: expected heart-rate samples, "
+                             "found an empty stream")
+    t0 = check_stamps(path, used, frames)
+    hr_table = hr_rows(path, hr, t0)
+    events = sorted((e for m in markers for e in marker_events(m, t0)), key=lambda e: e.t_s)
     info = SessionInfo(session_id=make_session_id(participant.code, _dt.datetime.now(), label),
                        participant=participant, devices={"heart_rate": {"device": _field(hr, "name"),
                                                                          "protocol": "lsl", "port": str(path)}},
@@ -397,23 +470,32 @@ def import_xdf(path: str | os.PathLike, out_dir: str | os.PathLike, participant:
                        software={"name": "effortface", "version": __version__},
                        extra={"lsl": {"clock_offset_s": t0, "imported_from": path.name,
                                       "streams": [_field(s, "name") for s in used]}})
-    folder = create_session(out_dir, info)
-    _write_rows(HrWriter(folder / HEART_RATE_CSV), rows)
-    events = sorted((e for m in markers for e in marker_events(m, t0)), key=lambda e: e.t_s)
-    _write_rows(EventWriter(folder / EVENTS_CSV), events)
-    if work is not None:
-        _write_work(folder, work, t0)
-    if mocap is not None:
-        _write_mocap(path, folder, mocap, t0)
-    if video_path is not None and frames is not None:
-        _copy_video(video_path, folder / VIDEO_AVI)
-        writer = FrameTimeWriter(folder / VIDEO_FRAMES_CSV)
-        for k, stamp in enumerate(frames):
-            writer.write(k, float(stamp - t0))
-        writer.close()
-    info.complete = True
-    info.save(folder, overwrite=True)
-    return folder
+    final = Path(out_dir) / info.session_id
+    if final.exists():
+        raise FileExistsError(f"{final}: exists; a session folder is never reused")
+    staging = Path(out_dir) / f".import-{secrets.token_hex(6)}.tmp"
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    try:
+        folder = create_session(staging, info)
+        _write_rows(HrWriter(folder / HEART_RATE_CSV), hr_table)
+        _write_rows(EventWriter(folder / EVENTS_CSV), events)
+        if work is not None:
+            _write_work(path, folder, work, t0)
+        if mocap is not None:
+            _write_mocap(path, folder, mocap, t0)
+        if video_path is not None and frames is not None:
+            _copy_video(video_path, folder / VIDEO_AVI)
+            writer = FrameTimeWriter(folder / VIDEO_FRAMES_CSV)
+            for k, stamp in enumerate(frames):
+                writer.write(k, float(stamp - t0))
+            writer.close()
+        info.complete = True
+        info.save(folder, overwrite=True)
+        os.rename(folder, final)  # the session appears whole or not at all
+        fsync_folder(out_dir)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return final
 
 
 def _write_rows(writer: Any, rows: Sequence[Any]) -> None:
