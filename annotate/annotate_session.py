@@ -415,7 +415,7 @@ class AnnotateSession:
                    scale: float = 1.0) -> list[int]:
         """Move several keys of the current track at once (one undo step); return their new frames.
 
-        Each key goes ``d_frames`` frames on (clamped to the video), and its weight becomes
+        Each key goes ``d_frames`` frames on, and its weight becomes
         ``pivot + scale * (weight - pivot) + d_weight`` clipped to [0, 1], where ``pivot`` is the
         keys' mean weight (so ``scale`` stretches or flattens the selection about its middle).
 
@@ -424,7 +424,8 @@ class AnnotateSession:
         KeyError
             If a frame has no key.
         UserError
-            If a key would land on a keyed frame outside the selection, or two on one frame.
+            If a key would land on a keyed frame outside the selection, or two on one frame, or a key
+            would leave the video (a move that cannot move every key moves none, and says why).
         """
         keys = [self.track.get(f) for f in frames]
         if any(k is None for k in keys):
@@ -432,6 +433,14 @@ class AnnotateSession:
         chosen = [k for k in keys if k is not None]
         if not chosen:
             return []
+        last = self.n_frames - 1
+        stuck = [k.frame for k in chosen if not 0 <= k.frame + int(d_frames) <= last]
+        if stuck:  # moving the others alone would change the selection's shape: refuse, nothing moves
+            edge = "first frame (0)" if int(d_frames) < 0 else f"last frame ({last})"
+            raise UserError(f"move keys: expected every selected key to move by {int(d_frames):+d} frames, found "
+                            f"key{'s' * (len(stuck) != 1)} {', '.join(map(str, stuck))} within "
+                            f"{abs(int(d_frames))} frame{'s' * (abs(int(d_frames)) != 1)} of the {edge}: "
+                            f"nothing moved")
         pivot = sum(k.weight for k in chosen) / len(chosen)
         moved = [(self.times.clamp(k.frame + int(d_frames)),
                   round(min(max(pivot + scale * (k.weight - pivot) + d_weight, 0.0), 1.0), 4), k.interp)

@@ -25,7 +25,8 @@ from effortface.core.exercises import check_exercise_id
 from effortface.core.jobs import JobResult, Jobs
 from effortface.capture_tool.corrections import CORRECTION_KIND, correction_value
 from effortface.capture_tool.monitor import MonitorPool, StrapMonitor
-from effortface.capture_tool.participants import REGISTRY_TSV, read_registry, register, resolve_participant
+from effortface.capture_tool.participants import (REGISTRY_TSV, lab_records, lab_registry, resolve_participant,
+                                                  save_participant)
 from effortface.capture_tool.plan import PlannedPhase, PlanRunner, parameter_events, read_plan
 from effortface.capture_tool.sync import flash_offset_s, video_brightness
 from effortface.capture_tool.recorder import Recorder, RecorderStatus, recover_session
@@ -158,7 +159,8 @@ class CaptureSession:
     plan : list of PlannedPhase
         The protocol plan the next recording steps through (empty: none).
     notes : str
-        The experimenter's notes, saved as ``notes`` in session.json at Stop.
+        The experimenter's notes, saved as ``notes`` in session.json at Stop; emptied then, with the
+        plan, so that nothing carries over into the next recording.
     monitor : StrapMonitor or None
         The strap watched before Record (live heart rate).
     last_session : Path or None
@@ -200,6 +202,7 @@ class CaptureSession:
         self.notes = ""
         self.monitor: StrapMonitor | None = None
         self.reps = 0
+        self.flashes = 0  # sync flashes of the running recording
         self.phase_start_s: float | None = None
         self._corrected: dict[float, str] = {}
         self._runner: PlanRunner | None = None
@@ -222,9 +225,11 @@ class CaptureSession:
         self.state_changed.emit(state)
 
     # ---------------------------------------------------------------- blocking primitives
-    def start(self, participant: Participant, choice: DeviceChoice, label: str = "", lsl: bool = False) -> Path:
+    def start(self, participant: Participant, choice: DeviceChoice, label: str = "", lsl: bool = False,
+              update_participant: bool = False) -> Path:
         """Open the devices and start a new session; return its folder (blocking). ``lsl``: also publish
         the strap and events as LSL streams, see :mod:`effortface.capture_tool.lsl`.
+        ``update_participant``: a participant that differs from the lab's record changes it on purpose.
 
         Raises
         ------
@@ -236,15 +241,15 @@ class CaptureSession:
             raise UserError("Record: expected no recording running, found one (stop it first)")
         if not choice.port:
             raise UserError("Strap port: expected a serial port or URL, found none chosen")
-        participant, new = self.resolve_participant(participant)
+        participant, new = self.resolve_participant(participant, update=update_participant)
         recorder = Recorder(self.out_dir, participant, choice.port, choice.protocol,
                             video=choice.camera, label=label or None, lsl=lsl)
         path = recorder.start()
         self.recorder, self.phase, self._latest_frame = recorder, None, None
-        self.events, self.reps, self._corrected = [], 0, {}
+        self.events, self.reps, self._corrected, self.flashes = [], 0, {}, 0
         self._tails = (CsvTail(path / HEART_RATE_CSV), CsvTail(path / EVENTS_CSV))
         if new:
-            register(self.registry_path, participant)
+            save_participant(self.registry_path, participant)
         return path
 
     # ------------------------------------------------------------------------ participants
@@ -254,23 +259,30 @@ class CaptureSession:
         return self.out_dir / REGISTRY_TSV
 
     def known_participants(self) -> dict[str, Participant]:
-        """The registry's participants by code (empty when there is no registry yet).
+        """The lab's participants by code: its registry, or without one its sessions' latest records.
 
         Raises
         ------
         RegistryError
             If participants.tsv cannot be read (the message names the file and line).
         """
-        return read_registry(self.registry_path)
+        return lab_registry(self.out_dir)
 
-    def resolve_participant(self, participant: Participant) -> tuple[Participant, bool]:
-        """Check that the form confirmed every required field and agrees with the registry.
+    def participant_records(self) -> tuple[dict[str, Participant], dict[str, str]]:
+        """:meth:`known_participants` and, per code, the file its record comes from (relative to the
+        lab folder, as the form shows it)."""
+        people, sources = lab_records(self.out_dir)
+        return people, {code: _relative(path, self.out_dir) for code, path in sources.items()}
+
+    def resolve_participant(self, participant: Participant, update: bool = False) -> tuple[Participant, bool]:
+        """Check that the form confirmed every required field and agrees with the lab's record
+        (``update``: it changes the record on purpose).
 
         Returns
         -------
         (Participant, bool)
-            The participant (measured HR completed from the registry) and True if the registry
-            does not know the code yet (it is registered when the recording starts).
+            The participant (measured HR completed from the registry) and True if it is saved to the
+            registry when the recording starts (a new code, or a record changed on purpose).
 
         Raises
         ------
@@ -280,7 +292,8 @@ class CaptureSession:
         """
         options = {f: getattr(participant, f) for f in ("sex", "age", "height_m", "mass_kg", "training_level",
                                                          "hr_rest_bpm", "hr_max_bpm")}
-        return resolve_participant(participant.code, options, self.registry_path)
+        return resolve_participant(participant.code, options, self.registry_path, update=update,
+                                   hint="choose 'Use the record' or 'Change the record'")
 
     def stop(self) -> Path:
         """End the running phase, stop the recording (session complete) and measure the sync test.
@@ -302,6 +315,7 @@ class CaptureSession:
             recorder.info.extra["notes"] = self.notes.strip()
         path = recorder.stop()
         self.recorder, self.phase, self._tails, self.last_session = None, None, None, path
+        self.notes, self.plan = "", []  # nothing carries over into the next recording
         store_sync_result(path)
         return path
 
@@ -311,19 +325,20 @@ class CaptureSession:
 
     # ------------------------------------------------------------------- background jobs
     def start_in_background(self, participant: Participant, choice: DeviceChoice, label: str = "",
-                            lsl: bool = False) -> None:
+                            lsl: bool = False, update_participant: bool = False) -> None:
         """Start a recording in a job: ``state_changed('starting')``, then ``recording_changed(path)``
         or ``status_changed(error, True)`` from :meth:`poll`."""
         self._set_state("starting")
         monitor, self.monitor = self.monitor, None  # the recorder opens the port: the monitor lets go
-        self.jobs.submit("start", self._start_after, monitor, participant, choice, label, lsl, done=self._start_done)
+        self.jobs.submit("start", self._start_after, monitor, participant, choice, label, lsl, update_participant,
+                         done=self._start_done)
 
     def _start_after(self, monitor: StrapMonitor | None, participant: Participant, choice: DeviceChoice,
-                     label: str, lsl: bool = False) -> Path:
+                     label: str, lsl: bool = False, update_participant: bool = False) -> Path:
         """Runs in the job thread: stop the strap monitor, then :meth:`start`."""
         if monitor is not None:
             monitor.stop()
-        return self.start(participant, choice, label, lsl)
+        return self.start(participant, choice, label, lsl, update_participant)
 
     def stop_in_background(self) -> None:
         """Stop in a job; the session is closed, marked complete and summarised."""
@@ -369,10 +384,12 @@ class CaptureSession:
             self.status_changed.emit(f"Stop failed: {result.error}", True)
             raise result.error
         _path, summary, sync = result.value
+        self.plan_changed.emit("")  # the plan was for that recording (stop() emptied it)
         self.recording_changed.emit(None)
         self.sync_changed.emit(sync)
-        if sync is None:
-            summary += ". No sync test was measured: press F8 (the screen flashes) while the camera sees it"
+        if sync is None:  # said first: the banner shows two lines, the rest is in its tooltip
+            summary = ("No sync test was measured: press F8 (the screen flashes) while the camera sees it. "
+                       + summary)
         self.status_changed.emit(summary, False)
 
     def _recover_done(self, result: JobResult) -> None:
@@ -597,7 +614,14 @@ class CaptureSession:
 
     def sync_flash(self) -> float:
         """Record the on-screen flash of the sync self-test; return its time."""
-        return self.mark(SYNC_KIND, FLASH_LABEL)
+        t_s = self.mark(SYNC_KIND, FLASH_LABEL)
+        self.flashes += 1
+        return t_s
+
+    def needs_sync_reminder(self) -> bool:
+        """True while recording video without a sync flash yet (Stop reminds the operator)."""
+        recorder = self.recorder
+        return recorder is not None and getattr(recorder, "camera", None) is not None and self.flashes == 0
 
     # ---------------------------------------------------------------------------- polling
     def poll(self) -> LiveUpdate | None:
@@ -683,6 +707,14 @@ def session_summary(folder: Path) -> str:
     return (f"Saved, complete: {session.info.session_id}  -  {format_elapsed(stats.get('duration_s', 0.0))}, "
             f"{len(session.heart_rate)} HR rows, {len(session.frame_times_s)} video frames "
             f"({stats.get('dropped_frames', 0)} dropped), {phases} phases, {len(session.events)} events")
+
+
+def _relative(path: str, folder: Path) -> str:
+    """``path`` relative to ``folder`` when inside it, else as given."""
+    try:
+        return str(Path(path).relative_to(folder))
+    except ValueError:
+        return path
 
 
 def _error_line(error: BaseException) -> str:

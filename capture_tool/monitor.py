@@ -45,6 +45,12 @@ class MonitorStats:
         Whether the last sample had contact.
     frames_bad : int
         Frames the decoder rejected (checksum, length) since the monitor started.
+    bytes_in, samples_total : int
+        Bytes received and heart-rate samples decoded since the monitor started (bytes without a
+        sample: the protocol is likely wrong).
+    new : tuple of (t_s, hr_bpm or None)
+        The samples arrived since the previous poll (monitor seconds; None: no contact), for the
+        live plot before Record.
     """
 
     port: str
@@ -56,6 +62,9 @@ class MonitorStats:
     contact_fraction: float | None
     contact_now: bool | None
     frames_bad: int
+    bytes_in: int = 0
+    samples_total: int = 0
+    new: tuple[tuple[float, float | None], ...] = ()
 
 
 class StrapMonitor:
@@ -76,6 +85,7 @@ class StrapMonitor:
         self._dir: tempfile.TemporaryDirectory[str] | None = None
         self._recent: collections.deque[HrSample] = collections.deque()
         self._last_valid: HrSample | None = None
+        self._samples_total = 0
         self.link = SerialLink(port, get_decoder(protocol), self._queue, self.clock, protocol,
                                startup_frames=device_startup_frames(protocol, port))
 
@@ -104,18 +114,21 @@ class StrapMonitor:
     def poll(self) -> MonitorStats:
         """Take what arrived since the last call and summarise it (never blocks)."""
         now = self.clock()
+        new: list[tuple[float, float | None]] = []
         while True:
             try:
                 kind, item = self._queue.get_nowait()
             except queue.Empty:
                 break
             if kind == "hr":
+                self._samples_total += 1
                 self._recent.append(item)
+                new.append((item.t_s, item.hr_bpm if item.valid else None))
                 if item.valid and item.hr_bpm is not None:
                     self._last_valid = item
         while self._recent and self._recent[0].t_s < now - WINDOW_S:
             self._recent.popleft()
-        return self._stats(now)
+        return dataclasses.replace(self._stats(now), new=tuple(new))
 
     def _stats(self, now: float) -> MonitorStats:
         recent = list(self._recent)
@@ -130,7 +143,8 @@ class StrapMonitor:
             rr_ms=live.rr_ms[-1] if live is not None and live.rr_ms else None,
             rate_hz=rate, since_last_s=None if last is None else max(0.0, now - last.t_s),
             contact_fraction=sum(s.valid for s in recent) / len(recent) if recent else None,
-            contact_now=contact_now, frames_bad=self.link.decoder.stats.frames_bad)
+            contact_now=contact_now, frames_bad=self.link.decoder.stats.frames_bad,
+            bytes_in=self.link.decoder.stats.bytes_in, samples_total=self._samples_total)
 
 
 class MonitorPool:

@@ -4,16 +4,20 @@ Columns (tab-separated, ``n/a`` for a value not measured; DESIGN.md)::
 
     participant_id  sex  age  height_m  mass_kg  training_level  hr_rest_bpm  hr_max_bpm
 
-Demographics are entered once per participant and then picked by code: :func:`resolve_participant`
-fills what the capture options leave out from the registry, refuses an option that contradicts it,
-and says which of the required fields are still missing. A new participant is appended with
-:func:`register` (the whole file rewritten atomically). ``session.json`` keeps the copy used at
-capture time.
+Demographics are entered once per participant and then picked by code. One truth per participant:
+:func:`lab_registry` reads ``participants.tsv``, or, in a lab without one, builds the registry from
+the lab's own sessions (each code's latest ``session.json``). :func:`resolve_participant` fills what
+the capture options leave out from that registry, refuses options that contradict it
+(:class:`ParticipantConflict`, naming every differing field with both values) unless the record is
+changed on purpose, and says which required fields are still missing. :func:`save_participant`
+writes a new participant, or a changed record whose previous values are kept, dated, in
+``participants_history.tsv`` (earlier sessions keep the copy in their own ``session.json``).
 """
 
 from __future__ import annotations
 
 import contextlib
+import datetime as dt
 import math
 import os
 import time
@@ -22,9 +26,11 @@ from pathlib import Path
 
 from effortface.core.errors import UserError
 from effortface.core.fileio import atomic_write_text
-from effortface.capture_tool.session import Participant
+from effortface.capture_tool.session import Participant, SessionFormatError, list_sessions, read_session_info
 
 REGISTRY_TSV = "participants.tsv"
+#: previous records of participants whose record was changed on purpose (COLUMNS + ``replaced_utc``)
+HISTORY_TSV = "participants_history.tsv"
 COLUMNS = ("participant_id", "sex", "age", "height_m", "mass_kg", "training_level", "hr_rest_bpm", "hr_max_bpm")
 #: participant fields a capture cannot go without -> the capture option that gives each
 REQUIRED = {"sex": "--sex", "age": "--age", "height_m": "--height", "mass_kg": "--mass",
@@ -32,6 +38,10 @@ REQUIRED = {"sex": "--sex", "age": "--age", "height_m": "--height", "mass_kg": "
 MISSING = "n/a"
 #: how long a capture waits for another one registering in the same lab folder, seconds
 LOCK_TIMEOUT_S = 5.0
+
+
+#: what a refused capture tells the user to do to change a record on purpose
+UPDATE_HINT = "pass --update-participant to change the record (earlier sessions keep theirs)"
 
 
 class RegistryError(UserError):
@@ -115,9 +125,107 @@ def _cell(value: object) -> str:
     return str(value)
 
 
-def resolve_participant(code: str, options: Mapping[str, object], registry_path: str | os.PathLike
-                        ) -> tuple[Participant, bool]:
-    """The participant for a capture: the options, completed from the registry.
+class ParticipantConflict(RegistryError):
+    """Options that differ from the lab's record of a code; every differing field is named.
+
+    Attributes
+    ----------
+    code : str
+        The participant code.
+    record : Participant
+        The lab's record.
+    source : str
+        Where the record comes from (``participants.tsv`` or the session it was read from).
+    differences : list of (field, record value, given value)
+        Each field whose given value differs from the record.
+    """
+
+    def __init__(self, code: str, record: Participant, source: str,
+                 differences: list[tuple[str, object, object]], hint: str = UPDATE_HINT) -> None:
+        self.code, self.record, self.source, self.differences = code, record, source, differences
+        super().__init__(conflict_message(code, source, differences, hint))
+
+
+def conflict_message(code: str, source: str, differences: list[tuple[str, object, object]],
+                     hint: str = UPDATE_HINT) -> str:
+    """One line: the lab's record of ``code`` and what was found instead, field by field."""
+    expected = ", ".join(f"{f} {_cell(r)}" for f, r, _ in differences)
+    found = ", ".join(f"{f} {_cell(g)}" for f, _, g in differences)
+    return (f"participant {code}: expected the lab's record ({expected} in {source}), found {found}"
+            + (f"; {hint}" if hint else ""))
+
+
+def differences(record: Participant, values: Mapping[str, object]) -> list[tuple[str, object, object]]:
+    """The fields of ``values`` (None: not given) that differ from ``record`` where it has a value.
+
+    Returns
+    -------
+    list of (field, record value, given value)
+        In registry column order.
+    """
+    out = []
+    for column in COLUMNS[1:]:
+        given, stored = values.get(column), getattr(record, column)
+        if given is not None and stored is not None and _differs(stored, given):
+            out.append((column, stored, given))
+    return out
+
+
+def lab_registry(lab_dir: str | os.PathLike) -> dict[str, Participant]:
+    """The lab's participants: ``participants.tsv``, and each code it lacks (all codes, in a lab
+    without one) from that code's latest session.
+
+    Parameters
+    ----------
+    lab_dir : path-like
+        The lab folder (``--out``): holds the registry and the session folders.
+
+    Returns
+    -------
+    dict
+        participant code -> :class:`Participant` (empty for a lab with neither).
+
+    Raises
+    ------
+    RegistryError
+        A participants.tsv that cannot be read (the message names the file and line).
+    """
+    return dict(lab_records(lab_dir)[0])
+
+
+def lab_records(lab_dir: str | os.PathLike) -> tuple[dict[str, Participant], dict[str, str]]:
+    """:func:`lab_registry` and, per code, where its record comes from (the file to name in a message)."""
+    lab = Path(lab_dir)
+    path = lab / REGISTRY_TSV
+    people: dict[str, Participant] = {}
+    source: dict[str, str] = {}
+    for person, session_json in _session_records(lab):  # oldest first: the latest session wins
+        people[person.code], source[person.code] = person, str(session_json)
+    if path.exists():  # the registry's rows win; a code it lacks keeps its sessions' record
+        registered = read_registry(path)
+        people.update(registered)
+        source.update(dict.fromkeys(registered, str(path)))
+    return people, source
+
+
+def _session_records(lab: Path) -> list[tuple[Participant, Path]]:
+    """Each session's participant with its session.json, oldest first (by created_utc, then name);
+    sessions that cannot be read are left out (recovery and validation report them)."""
+    if not lab.is_dir():
+        return []
+    found = []
+    for folder in list_sessions(lab):
+        try:
+            info = read_session_info(folder)
+        except (SessionFormatError, UserError):
+            continue
+        found.append((info.created_utc, folder.name, info.participant, folder / "session.json"))
+    return [(person, path) for _, _, person, path in sorted(found, key=lambda r: (r[0], r[1]))]
+
+
+def resolve_participant(code: str, options: Mapping[str, object], registry_path: str | os.PathLike,
+                        *, update: bool = False, hint: str = UPDATE_HINT) -> tuple[Participant, bool]:
+    """The participant for a capture: the options, completed from the lab's record.
 
     Parameters
     ----------
@@ -126,29 +234,36 @@ def resolve_participant(code: str, options: Mapping[str, object], registry_path:
     options : mapping
         Participant fields given on the command line (None: not given).
     registry_path : path-like
-        ``participants.tsv`` of the lab folder.
+        ``participants.tsv`` of the lab folder (read through :func:`lab_registry` of its folder).
+    update : bool
+        Options that differ from the record change it on purpose (``--update-participant``).
+    hint : str
+        What the refusal tells the user to do to change the record.
 
     Returns
     -------
     (Participant, bool)
-        The participant, and True if the registry does not know it yet (to :func:`register`).
+        The participant, and True if it must be saved with :func:`save_participant` (a new code, or
+        a record changed on purpose).
 
     Raises
     ------
+    ParticipantConflict
+        An option that differs from the lab's record (without ``update``).
     RegistryError
-        An option that differs from the registry's value, a bad registry, or required fields that
-        neither the options nor the registry give (all of them named, as capture options).
+        A bad registry, or required fields that neither the options nor the record give (all of
+        them named, as capture options).
     """
     registry_path = Path(registry_path)
-    known = read_registry(registry_path).get(code)
+    people, sources = lab_records(registry_path.parent)
+    known = people.get(code)
     values = {k: v for k, v in options.items() if v is not None}
+    changed = False
     if known is not None:
-        for field, given in values.items():
-            stored = getattr(known, field)
-            if stored is not None and _differs(stored, given):
-                option = REQUIRED.get(field, f"--{field.replace('_', '-')}")
-                raise RegistryError(f"{option} {_cell(given)}: expected {_cell(stored)} as in {registry_path} for "
-                                    f"{code} (demographics are entered once; edit the registry to change them)")
+        diff = differences(known, values)
+        if diff and not update:
+            raise ParticipantConflict(code, known, sources[code], diff, hint)
+        changed = bool(diff)
         values = {**{f: getattr(known, f) for f in (*REQUIRED, "hr_rest_bpm", "hr_max_bpm")
                      if getattr(known, f) is not None}, **values}
     missing = [option for field, option in REQUIRED.items() if values.get(field) is None]
@@ -156,7 +271,7 @@ def resolve_participant(code: str, options: Mapping[str, object], registry_path:
         raise RegistryError(f"participant {code}: expected {', '.join(missing)} (or a row for {code} in "
                             f"{registry_path}), found none")
     try:
-        return Participant(code=code, **values), known is None  # type: ignore[arg-type]
+        return Participant(code=code, **values), known is None or changed  # type: ignore[arg-type]
     except UserError as exc:
         raise RegistryError(f"--participant / body options: {exc}") from None
 
@@ -186,6 +301,68 @@ def register(registry_path: str | os.PathLike, participant: Participant) -> Path
         if not text.endswith("\n"):
             text += "\n"
         return atomic_write_text(registry_path, text + _line(participant) + "\n")
+
+
+def save_participant(registry_path: str | os.PathLike, participant: Participant,
+                     when: dt.datetime | None = None) -> Path:
+    """Write ``participant`` to the lab's registry: a new row, or its code's row replaced.
+
+    The file is written with every participant the lab knows (:func:`lab_registry`: codes known
+    only from sessions join it), so that the lab's participants stay known; a new code alone is
+    appended (the file's text kept). A replaced row that differs is appended to
+    ``participants_history.tsv`` with the time it was replaced; sessions keep their own copy.
+
+    Parameters
+    ----------
+    registry_path : path-like
+        ``participants.tsv`` of the lab folder.
+    participant : Participant
+        The record to keep.
+    when : datetime, optional
+        When the record changes (UTC; default now).
+
+    Returns
+    -------
+    Path
+        The registry.
+    """
+    registry_path = Path(registry_path)
+    when = when or dt.datetime.now(dt.timezone.utc)
+    with _locked(registry_path):
+        people = lab_registry(registry_path.parent)
+        registered = read_registry(registry_path) if registry_path.exists() else {}
+        old = people.get(participant.code)
+        if old == participant and participant.code in registered:
+            return registry_path
+        if old is not None and old != participant:
+            _append_history(registry_path.with_name(HISTORY_TSV), old, when)
+        people[participant.code] = participant
+        if registry_path.exists() and old is None and set(registered) == set(people) - {participant.code}:
+            text = registry_path.read_text(encoding="utf-8")
+            text += ("" if text.endswith("\n") else "\n") + _line(participant) + "\n"
+        else:
+            text = "\n".join(["\t".join(COLUMNS), *(_line(people[c]) for c in sorted(people))]) + "\n"
+        return atomic_write_text(registry_path, text)
+
+
+def _append_history(path: Path, old: Participant, when: dt.datetime) -> None:
+    """Append ``old`` to the history with the UTC time it was replaced (header written once)."""
+    stamp = when.astimezone(dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+    text = path.read_text(encoding="utf-8") if path.exists() else "\t".join((*COLUMNS, "replaced_utc")) + "\n"
+    atomic_write_text(path, text + _line(old) + "\t" + stamp + "\n")
+
+
+def read_history(lab_dir: str | os.PathLike) -> list[tuple[Participant, str]]:
+    """The records replaced on purpose, oldest first: (previous record, replaced_utc)."""
+    path = Path(lab_dir) / HISTORY_TSV
+    if not path.exists():
+        return []
+    out = []
+    for n, text in enumerate(path.read_text(encoding="utf-8").splitlines()[1:], start=2):
+        if text.strip():
+            cells = text.split("\t")
+            out.append((_row(path, n, cells[:-1]), cells[-1].strip()))
+    return out
 
 
 @contextlib.contextmanager

@@ -35,6 +35,8 @@ from effortface.core.gui.gui_gc import collect_in_gui_thread
 log = logging.getLogger("effortface.app")
 
 #: stage key (``--stage``) -> title in the stage list
+#: the settings key of the model folder Train exported last (offered in Synthesize)
+LAST_MODEL_KEY = "synth/last_model"
 STAGES = {"capture": "Capture", "annotate": "Annotate", "train": "Train", "synthesize": "Synthesize"}
 #: what each stage does (shown if a stage cannot be built, e.g. a missing optional module)
 _WHAT = {
@@ -56,7 +58,8 @@ WINDOW_KEYS = (
 )
 #: keys of the Annotate stage (README "Annotate")
 ANNOTATE_KEYS = (
-    ("Left / Right", "previous / next frame (Shift: ten frames)"),
+    ("Left / Right", "previous / next frame"),
+    ("Shift+Left / Shift+Right", "ten frames back / on"),
     ("Home / End", "first / last frame"),
     ("Space", "play / pause"),
     ("0 .. 9", "key the weight 0.0 .. 0.9 at this frame"),
@@ -67,6 +70,19 @@ ANNOTATE_KEYS = (
     ("Ctrl+Z / Ctrl+Y", "undo / redo (also Edit menu)"),
     ("Ctrl+C / Ctrl+V", "copy / paste keys"),
     ("Ctrl+G", "go to frame"),
+    ("K", "key the weight typed in the weight box"),
+    ("Backspace", "delete the key (as Del)"),
+    ("Ctrl+Shift+Z", "redo (as Ctrl+Y)"),
+    ("Ctrl+A / Esc", "select every key of the track / clear the selection"),
+    ("Shift+click", "add a key to the selection"),
+    ("Alt+Left / Alt+Right", "move the selected keys one frame (refused if a key would leave the video)"),
+    ("Alt+Shift+Left / Alt+Shift+Right", "move the selected keys ten frames"),
+    ("Alt+Up / Alt+Down", "raise / lower the selected keys' weights"),
+    ("[ / ]", "flatten / stretch the selected keys' weights about their mean"),
+    ("+ / = / -", "zoom the timeline in / in / out"),
+    ("F", "frame the whole track"),
+    ("L", "loop over the selected keys (else the visible time); L again: off"),
+    ("Ctrl+B", "hide / show the session list"),
 )
 
 
@@ -306,7 +322,8 @@ class MainWindow(QtWidgets.QMainWindow):
         self._update_edit_actions()
 
     def keyboard_map_html(self) -> str:
-        """The keyboard map (Help menu): the window's keys, Capture's hotkeys, Annotate's keys."""
+        """The keyboard map (Help menu): the window's keys, Capture's hotkeys, Annotate's keys (the
+        several-key edits too) and Synthesize's player keys."""
         from effortface.capture_tool.gui.phases import (END_KEY, EXERCISE_KEY, LOAD_KEY, MARKER_KEY, PHASE_KEYS,
                                                         PHASE_TITLES, REP_KEY, SYNC_KEY)
 
@@ -314,7 +331,10 @@ class MainWindow(QtWidgets.QMainWindow):
         capture += [(EXERCISE_KEY, "phase: the exercise picked, with its parameters"), (END_KEY, "end the phase"),
                     (REP_KEY, "one repetition"), (MARKER_KEY, "marker"), (LOAD_KEY, "load / speed change"),
                     (SYNC_KEY, "sync test (a white flash)")]
-        sections = (("Everywhere", WINDOW_KEYS), ("Capture", capture), ("Annotate", ANNOTATE_KEYS))
+        from effortface.train.gui.synth_stage import PLAYER_KEYS
+
+        sections = (("Everywhere", WINDOW_KEYS), ("Capture", capture), ("Annotate", ANNOTATE_KEYS),
+                    ("Synthesize", PLAYER_KEYS))
         rows = "".join(f"<tr><td colspan=2><b>{title}</b></td></tr>"
                        + "".join(f"<tr><td>{html.escape(k)}</td><td>{html.escape(v)}</td></tr>" for k, v in keys)
                        for title, keys in sections)
@@ -428,7 +448,25 @@ class MainWindow(QtWidgets.QMainWindow):
             self._slots[key].layout().addWidget(widget)  # type: ignore[union-attr]  # built with one
             self.stages[key] = widget
             self._restore_splitters(key, widget)
+            self._link_last_model(key, widget)
         return self.stages[key]
+
+    def _link_last_model(self, key: str, widget: QtWidgets.QWidget) -> None:
+        """The model Train exported last is remembered (``synth/last_model``) and offered in Synthesize."""
+        session = getattr(widget, "session", None)
+        if key == "train" and hasattr(session, "export_changed"):
+            session.export_changed.connect(self._model_exported)  # type: ignore[union-attr]
+        if key == "synthesize" and hasattr(widget, "offer_model"):
+            last = str(self.settings.value(LAST_MODEL_KEY, "") or "")
+            if last and Path(last).is_dir():
+                widget.offer_model(last)
+
+    def _model_exported(self, path: object) -> None:
+        """Train exported a model to ``path``: remember it, and offer it in Synthesize if built."""
+        self.settings.setValue(LAST_MODEL_KEY, str(path))
+        synth = self.stages.get("synthesize")
+        if synth is not None and hasattr(synth, "offer_model"):
+            synth.offer_model(str(path))
 
     def current_key(self) -> str:
         """The key of the stage shown."""

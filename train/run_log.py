@@ -94,6 +94,39 @@ def grid_table(outcome: TrainingOutcome) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def grid_edge_warnings(grid: pd.DataFrame) -> list[str]:
+    """Blendshapes whose chosen C, gamma or epsilon is the grid's smallest or largest value.
+
+    The best point may then lie outside the grid searched: a wider grid (``paper``) may fit better.
+
+    Parameters
+    ----------
+    grid : DataFrame
+        :func:`grid_table` of a training.
+
+    Returns
+    -------
+    list of str
+        One line per blendshape at an edge, e.g. ``"mouth_open: C 10 is the grid's largest value"``.
+    """
+    out: list[str] = []
+    if grid.empty:
+        return out
+    for name, rows in grid.groupby("blendshape", sort=False):
+        chosen = rows[rows["chosen"] == "yes"]
+        if chosen.empty:
+            continue
+        edges = []
+        for k in ("C", "gamma", "epsilon"):
+            values = sorted(set(rows[k]))
+            value = chosen.iloc[0][k]
+            if len(values) > 1 and value in (values[0], values[-1]):
+                edges.append(f"{k} {value:g} is the grid's {'smallest' if value == values[0] else 'largest'} value")
+        if edges:
+            out.append(f"{name}: " + ", ".join(edges))
+    return out
+
+
 def held_out_pairs(outcome: TrainingOutcome) -> dict[str, np.ndarray]:
     """Key-framed and held-out predicted weights (n, B), rows where the key-frames exist."""
     d = outcome.face.data

@@ -12,6 +12,8 @@ cross-validation folds, and :func:`effortface.train.pipeline.export_outcome`).
 from __future__ import annotations
 
 import dataclasses
+import collections
+import math
 import os
 import time
 from collections.abc import Callable, Sequence
@@ -32,9 +34,12 @@ from effortface.capture_tool.session import (VIDEO_FRAMES_CSV, list_sessions, pa
 from effortface.train.dataset import ANNOTATIONS_DIR, prepare, read_table, sessions_table
 from effortface.train.pipeline import (TrainingOutcome, TrainSettings, export_outcome,
                                        train_models, training_table)
-from effortface.train.run_log import bundle_settings, fold_scores, grid_table, timing_text
+from effortface.train.run_log import bundle_settings, fold_scores, grid_edge_warnings, grid_table, timing_text
 
 ANY = "any"
+#: sessions shorter than this (their video, seconds) are not trained on: too few rows to fit or score
+#: (a 42 s one-rater session gave a fold r of 0.28 on the sample lab)
+MIN_TRAIN_S = 120.0
 #: the background jobs that :meth:`TrainSession.cancel` can stop (an export always finishes)
 CANCELLABLE_JOBS = ("train", "compare")
 #: errors a job reports in the status line only; any other also goes to sys.excepthook
@@ -58,11 +63,22 @@ class SessionEntry:
     #: each rater's complete tracks over tracks, e.g. ``"R1 4/4, R2 2/4"``
     #: (:mod:`effortface.annotate.completeness`: only complete tracks are trained on)
     tracks: str = ""
+    #: the video's length, seconds (NaN when it has no readable video_frames.csv)
+    duration_s: float = float("nan")
 
     @property
     def annotated(self) -> bool:
         """True when at least one rater's key-frames exist."""
         return bool(self.raters)
+
+    @property
+    def unusable(self) -> str:
+        """Why the session cannot be trained on ('' when it can): no annotations, or too short."""
+        if not self.raters:
+            return "no annotations: key it in Annotate first"
+        if self.duration_s == self.duration_s and self.duration_s < MIN_TRAIN_S:
+            return f"too short: {self.duration_s:.0f} s of video (at least {MIN_TRAIN_S:.0f} s to train on)"
+        return ""
 
 
 def scan_sessions(folder: str | os.PathLike) -> list[SessionEntry]:
@@ -81,8 +97,17 @@ def scan_sessions(folder: str | os.PathLike) -> list[SessionEntry]:
         tl = info.participant.training_level
         out.append(SessionEntry(path, info.session_id, info.participant.code, label,
                                 float("nan") if tl is None else float(tl), raters, info.complete,
-                                _tracks_summary(path)))
+                                _tracks_summary(path), _duration_s(path)))
     return out
+
+
+def _duration_s(path: Path) -> float:
+    """The session's video length in seconds (first to last frame); NaN if unreadable or absent."""
+    try:
+        t_s = read_video_frames(path / VIDEO_FRAMES_CSV)
+    except (UserError, OSError):
+        return float("nan")
+    return t_s[-1] - t_s[0] if len(t_s) > 1 else 0.0
 
 
 def _tracks_summary(path: Path) -> str:
@@ -198,7 +223,9 @@ class TrainSession:
         self.run_log: list[str] = []
         self.fold_table = pd.DataFrame()      # run_log.fold_scores of the last training
         self.grid_results = pd.DataFrame()    # run_log.grid_table of the last training
+        self.grid_edges: list[str] = []        # run_log.grid_edge_warnings of the last training
         self._started_s = time.monotonic()
+        self._stamps: collections.deque[float] = collections.deque()  # report times, job thread -> GUI
         self.jobs = Jobs(workers=1, name="train")
         self.sessions_changed, self.selection_changed = Emitter(), Emitter()
         self.progress_changed, self.results_changed = Emitter(), Emitter()
@@ -216,14 +243,24 @@ class TrainSession:
         self.sessions_changed.emit()
 
     def set_selected(self, session_ids: Sequence[str], selected: bool = True) -> None:
-        """Add or remove sessions from the training data (switches back from a loaded table)."""
+        """Add or remove sessions from the training data (switches back from a loaded table).
+
+        A session that cannot be trained on (:attr:`SessionEntry.unusable`: no annotations, too short)
+        is never added; the status line says which and why.
+        """
         known = {e.session_id for e in self.entries}
         unknown = [s for s in session_ids if s not in known]
         if unknown:
             raise UserError(f"sessions: expected sessions of {self.sessions_dir}, found {unknown}")
-        self.selected = (self.selected | set(session_ids)) if selected else (self.selected - set(session_ids))
+        refused = {e.session_id: e.unusable for e in self.entries if e.session_id in session_ids and e.unusable}
+        wanted = set(session_ids) - set(refused) if selected else set(session_ids)
+        self.selected = (self.selected | wanted) if selected else (self.selected - wanted)
         self.table_path = None
         self.selection_changed.emit()
+        if selected and refused:
+            sid, why = next(iter(refused.items()))
+            more = f" and {len(refused) - 1} more" if len(refused) > 1 else ""
+            self.status_changed.emit(f"not ticked: {sid}{more}: {why}", False)
 
     def load_table(self, path: str | os.PathLike) -> None:
         """Use a long training table instead of sessions (read now, so a bad file fails here)."""
@@ -375,9 +412,12 @@ class TrainSession:
         self.log(f"settings: raters {settings.rater_policy} ({settings.raters}), grid {settings.grid}, cv {settings.cv}, "
                  f"{settings.max_rows_per_participant} face rows per participant")
 
-    def log(self, line: str) -> None:
-        """Add a line to the run log (prefixed with the seconds since the job started)."""
-        self.run_log.append(f"[{time.monotonic() - self._started_s:6.1f} s] {line}")
+    def log(self, line: str, at_s: float | None = None) -> None:
+        """Add a line to the run log, prefixed with the wall-clock time and the seconds since the job
+        started, both of when it happened (``at_s``: a ``time.monotonic()`` taken in the job's thread)."""
+        at_s = time.monotonic() if at_s is None else at_s
+        wall = time.strftime("%H:%M:%S", time.localtime(time.time() - (time.monotonic() - at_s)))
+        self.run_log.append(f"[{wall} {at_s - self._started_s:7.2f} s] {line}")
         self.log_changed.emit(self.run_log[-1])
 
     @property
@@ -464,16 +504,31 @@ class TrainSession:
         if key == "train":
             self.run_log = []
             self.log_changed.emit("")
-        self.jobs.submit(key, fn, takes_job=True, progress=self._progress, done=done)
+        stamps = self._stamps = collections.deque()
+
+        def stamped(job: Job) -> Any:
+            """Run ``fn`` with each progress report timed where it happens (the job's thread)."""
+            report = job.report
+
+            def timed_report(fraction: float, text: str) -> None:
+                stamps.append(time.monotonic())  # deque.append: thread-safe
+                report(fraction, text)
+            job.report = timed_report  # type: ignore[method-assign]
+            return fn(job)
+        self.jobs.submit(key, stamped, takes_job=True, progress=self._progress, done=done)
         self.busy_changed.emit(True)
         self.progress_changed.emit(0.0, f"{key}: started")
         self.log(f"{key}: started")
 
     def _progress(self, fraction: float, text: str) -> None:
         """A job's progress (GUI thread): with elapsed time and time left, and into the run log."""
-        elapsed_s = time.monotonic() - self._started_s
+        try:
+            at_s = self._stamps.popleft()  # when the job reported it, not when it was delivered
+        except IndexError:
+            at_s = time.monotonic()
+        elapsed_s = at_s - self._started_s
         self.progress_changed.emit(fraction, f"{text} - {timing_text(fraction, elapsed_s)}")
-        self.log(f"{text} ({fraction:.0%})")
+        self.log(f"{text} ({fraction:.0%})", at_s)
 
     def poll(self) -> None:
         """Deliver the jobs' progress and results to the emitters (GUI thread, e.g. a QTimer)."""
@@ -509,8 +564,22 @@ class TrainSession:
             chosen = self.grid_results[self.grid_results["chosen"] == "yes"]
             for r in chosen.itertuples(index=False):
                 self.log(f"grid: {r.blendshape} chose C {r.C:g}, gamma {r.gamma:g}, epsilon {r.epsilon:g}")
+            self.grid_edges = grid_edge_warnings(self.grid_results)
+            for line in self.grid_edges:
+                self.log(f"warning: grid edge: {line}")
             self.results_changed.emit()
-            self.status_changed.emit(f"trained on {len(self.outcome.series)} sessions", False)
+            edge = (f"; warning: {_count(self.grid_edges, 'blendshape')} chose a value at the grid's edge (see the "
+                    f"run log): a wider grid may fit better" + (" (Wider grid)" if self.wider_grid() else "")
+                    if self.grid_edges else "")
+            self.status_changed.emit(f"trained on {len(self.outcome.series)} sessions{edge}", False)
+
+    def wider_grid(self) -> str:
+        """The next wider grid of :data:`~effortface.train.face_fit.GRIDS` than the current one ('' if none)."""
+        from effortface.train.face_fit import GRIDS
+
+        names = sorted(GRIDS, key=lambda g: math.prod(len(v) for v in GRIDS[g].values()))
+        i = names.index(self.settings.grid) if self.settings.grid in names else len(names)
+        return names[i + 1] if i + 1 < len(names) else ""
 
     def _exported(self, result: JobResult) -> None:
         if self._ended(result):

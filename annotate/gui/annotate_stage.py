@@ -133,7 +133,7 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         self.splitter.setStretchFactor(1, 4)
         # the curves' size hints would take half the height: start at 55:45 (the protocol panel fits
         # unscrolled at 1280x800 with room to spare, the video gets the rest)
-        self.splitter.setSizes([550, 450])
+        self.splitter.setSizes([500, 500])  # a tall curve editor; the splitter moves either way
         help_label = QtWidgets.QLabel(HELP_TEXT, wordWrap=True)
         help_label.setStyleSheet("color:#505050;")
         layout = QtWidgets.QVBoxLayout(self)
@@ -432,7 +432,11 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         if not chosen:
             self.report("select keys first (click, Shift+click, Ctrl+A)", True)
             return
-        moved = self.session.shift_keys(chosen, d_frames, d_weight, scale)
+        try:
+            moved = self.session.shift_keys(chosen, d_frames, d_weight, scale)
+        except UserError as exc:  # e.g. a key at the video's edge: nothing moved, and the line says why
+            self.report(str(exc), True)
+            return
         self.timeline.set_selection(moved)
 
     def toggle_loop(self) -> None:
@@ -608,9 +612,24 @@ class QtAnnotateStage(QtWidgets.QWidget):
         self.tabs.addTab(self.reliability_host, "Reliability round")
         self.tabs.currentChanged.connect(self._on_tab)
         layout = QtWidgets.QHBoxLayout(self)
-        layout.addWidget(self._build_side())
+        self.side = self._build_side()
+        layout.addWidget(self.side)
         layout.addWidget(self.tabs, 1)
+        self.side_button = QtWidgets.QToolButton()
+        self.side_button.setText("\u25c0 Hide sessions")
+        self.side_button.setToolTip("Hide or show the session list, for a wider video and timeline (Ctrl+B)")
+        self.side_button.clicked.connect(self.toggle_side)
+        self.tabs.setCornerWidget(self.side_button, QtCore.Qt.Corner.TopLeftCorner)
         self._add_shortcut("F5", self.refresh_sessions)
+        self._add_shortcut("Ctrl+B", self.toggle_side)
+
+    def toggle_side(self) -> bool:
+        """Hide the session list (more room for the video and the timeline), or show it again;
+        return whether it is shown."""
+        shown = self.side.isHidden()
+        self.side.setVisible(shown)
+        self.side_button.setText("\u25c0 Hide sessions" if shown else "\u25b6 Sessions")
+        return shown
 
     def _build_side(self) -> QtWidgets.QWidget:
         buttons = QtWidgets.QHBoxLayout()

@@ -38,6 +38,8 @@ from effortface.capture_tool.camera import read_frame
 from effortface.core.errors import UserError
 from effortface.capture_tool.session import list_sessions, read_session
 
+#: the Bland-Altman choice that overlays every rater pair
+ALL_PAIRS = "all pairs"
 _PAIR_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#8c564b", "#e377c2")
 _FLAG_BRUSH = QtGui.QBrush(QtGui.QColor("#f8d7da"))
 #: the spin box value that means "not rated yet" (shown as "unrated"; never saved)
@@ -168,12 +170,20 @@ class QtReliabilityPanel(QtWidgets.QWidget):
                                         pen=pg.mkPen("#909090"))
         legend.setZValue(1000)  # drawn over the bias and limit lines, never struck through
         self.ba_plot.setMinimumHeight(160)
+        self.ba_pair = QtWidgets.QComboBox()
+        self.ba_pair.setToolTip("The rater pair drawn (one at a time reads best; a row of the pairs table "
+                                "picks it too)")
+        self.ba_pair.currentIndexChanged.connect(lambda *_: self._replot())
+        self.pairs.currentCellChanged.connect(self._pick_pair_row)
+        self._report: AgreementReport | None = None
         for axis in ("left", "bottom"):
             self.ba_plot.getAxis(axis).enableAutoSIPrefix(False)
         threshold_row = QtWidgets.QHBoxLayout()
         threshold_row.addWidget(QtWidgets.QLabel("Flag poses over"))
         threshold_row.addWidget(self.threshold)
         threshold_row.addStretch(1)
+        threshold_row.addWidget(QtWidgets.QLabel("Bland-Altman of"))
+        threshold_row.addWidget(self.ba_pair)
         lower = QtWidgets.QHBoxLayout()
         lower.setContentsMargins(0, 0, 0, 0)
         lower.addWidget(self.per_pose, 2)
@@ -448,15 +458,40 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         self._plot_bland_altman(rep)
 
     def _plot_bland_altman(self, rep: AgreementReport) -> None:
+        """Offer the report's pairs (one at a time, or all) and draw the one chosen."""
+        names = [f"{p.rater_a}-{p.rater_b}" for p in rep.pairs]
+        keep = self.ba_pair.currentText()
+        self._report = rep
+        self.ba_pair.blockSignals(True)
+        self.ba_pair.clear()
+        self.ba_pair.addItems([ALL_PAIRS, *names])
+        self.ba_pair.setCurrentText(keep if keep and keep in (*names, ALL_PAIRS) else
+                                    (names[0] if names else ALL_PAIRS))
+        self.ba_pair.blockSignals(False)
+        self._replot()
+
+    def _pick_pair_row(self, row: int, *_: int) -> None:
+        """A row of the pairs table picks that pair's Bland-Altman plot."""
+        if row >= 0:
+            self.ba_pair.setCurrentIndex(row + 1)
+
+    def _replot(self) -> None:
+        """Draw the chosen pair's Bland-Altman plot (all pairs overlaid if asked)."""
+        rep = self._report
+        if rep is None:
+            return
         plot = self.ba_plot
         plot.clear()
-        for i, p in enumerate(rep.pairs):
+        chosen = self.ba_pair.currentText()
+        drawn = [(i, p) for i, p in enumerate(rep.pairs) if chosen in (ALL_PAIRS, f"{p.rater_a}-{p.rater_b}")]
+        plot.setTitle(f"Bland-Altman: {chosen if chosen != ALL_PAIRS else 'rater a - rater b, every pair'}")
+        for i, p in drawn:
             colour = _PAIR_COLOURS[i % len(_PAIR_COLOURS)]
             plot.plot(p.means, p.diffs, pen=None, symbol="o", symbolSize=6, symbolPen=None,
                       symbolBrush=pg.mkColor(colour), name=f"{p.rater_a}-{p.rater_b}")
             for y, style in ((p.bias, QtCore.Qt.PenStyle.SolidLine), (p.loa_low, QtCore.Qt.PenStyle.DashLine),
                              (p.loa_high, QtCore.Qt.PenStyle.DashLine)):
                 plot.addItem(pg.InfiniteLine(y, angle=0, pen=pg.mkPen(colour, style=style)))
-        spread = max(0.3, float(np.max([np.max(np.abs(p.diffs)) for p in rep.pairs])) * 1.15)
+        spread = max(0.3, float(np.max([np.max(np.abs(p.diffs)) for _, p in drawn] or [0.0])) * 1.15)
         plot.setXRange(0, 1, padding=0.02)
         plot.setYRange(-spread, spread, padding=0)

@@ -60,12 +60,18 @@ class _ClickViewBox(pg.ViewBox):
             handler(p.x(), p.y())
 
 
+def key_size(n_keys: int) -> int:
+    """Key dots' diameter in pixels: small, and smaller on a dense track so that the curve shows
+    between them (266 keys used to hide it under 11 px dots)."""
+    return 8 if n_keys <= 40 else 6 if n_keys <= 120 else 4
+
+
 class _KeyPoints(pg.ScatterPlotItem):
     """Key-frame points that can be clicked (select) and dragged (move); data of a point = its frame."""
 
     def __init__(self) -> None:
-        super().__init__(size=11, pen=pg.mkPen("w", width=1.5), brush=_KEY_BRUSH, hoverable=True,
-                         hoverSize=14)
+        super().__init__(size=key_size(0), pen=pg.mkPen("w", width=1), brush=_KEY_BRUSH, hoverable=True,
+                         hoverSize=12)
         self.on_select: Callable[[int, bool], None] | None = None
         self.on_drop: Callable[[int, float, float], None] | None = None
         self.dragging: int | None = None
@@ -108,8 +114,8 @@ class _KeyPoints(pg.ScatterPlotItem):
         i = int(np.flatnonzero(data["data"] == self.dragging)[0])
         xs, ys = data["x"].copy(), data["y"].copy()
         xs[i], ys[i] = x, y
-        self.setData(x=xs, y=ys, data=data["data"].copy(), brush=[_SELECTED_BRUSH if k == i else _KEY_BRUSH
-                                                                  for k in range(len(xs))])
+        self.setData(x=xs, y=ys, data=data["data"].copy(), size=key_size(len(xs)),
+                     brush=[_SELECTED_BRUSH if k == i else _KEY_BRUSH for k in range(len(xs))])
 
 
 class QtTimeline(pg.GraphicsLayoutWidget):
@@ -134,7 +140,9 @@ class QtTimeline(pg.GraphicsLayoutWidget):
         self.hr_plot = self.addPlot(row=0, col=0)
         self._curve_box = _ClickViewBox()
         self.curve_plot = self.addPlot(row=1, col=0, viewBox=self._curve_box)
-        self.ci.layout.setRowStretchFactor(0, 2)
+        # the curve editor gets three quarters of the height (the heart rate is context); the splitter
+        # above the timeline makes both taller
+        self.ci.layout.setRowStretchFactor(0, 1)
         self.ci.layout.setRowStretchFactor(1, 3)
         self._build_hr()
         self._build_curves()
@@ -160,7 +168,26 @@ class QtTimeline(pg.GraphicsLayoutWidget):
         if np.isfinite(bpm).any():
             plot.setYRange(np.nanmin(bpm) - 5, np.nanmax(bpm) + 12, padding=0)
         self._add_phases(plot)
+        self._add_marks(plot)
         plot.setXRange(self.t_s[0], self.t_s[-1], padding=0.01)
+
+    def _add_marks(self, plot: pg.PlotItem) -> None:
+        """Sync flashes as dashed lines, repetitions as ticks along the top of the heart-rate plot."""
+        events = self.session.session.events
+        self.sync_lines = []
+        for e in events:
+            if e.kind == "sync" and e.label == "flash":
+                line = pg.InfiniteLine(e.t_s, angle=90, movable=False, label="sync",
+                                       pen=pg.mkPen("#806000", width=1, style=QtCore.Qt.PenStyle.DashLine),
+                                       labelOpts={"position": 0.1, "color": "#806000"})
+                plot.addItem(line)
+                self.sync_lines.append(line)
+        reps = np.array([e.t_s for e in events if e.kind == "reps"], dtype=float)
+        top = plot.vb.viewRange()[1][1]
+        self.rep_marks = pg.ScatterPlotItem(reps, np.full(len(reps), top - 4.0), symbol="t", size=6,
+                                            pen=None, brush=pg.mkBrush("#303030"))
+        self.rep_marks.setToolTip("repetitions counted while recording (F9)")
+        plot.addItem(self.rep_marks)
 
     def _add_phases(self, plot: pg.PlotItem) -> None:
         """Shade each phase between its start and end events and name it."""
@@ -331,7 +358,7 @@ class QtTimeline(pg.GraphicsLayoutWidget):
         self.extra &= keyed
         chosen = set(self.selection)
         brushes = [_SELECTED_BRUSH if f in chosen else pg.mkBrush(self.colour(self.session.blendshape)) for f in kf]
-        self.keys.setData(x=self.t_s[kf], y=kw, data=kf, brush=brushes)
+        self.keys.setData(x=self.t_s[kf], y=kw, data=kf, brush=brushes, size=key_size(len(kf)))
         picked = f", {len(chosen)} selected" if len(chosen) > 1 else ""
         self.title.setColor(self.colour(self.session.blendshape))
         self.title.setText(f"{self.session.blendshape} ({self.session.rater}): {len(kf)} keys{picked}")

@@ -4,8 +4,11 @@ Runs until ``--duration`` (by default the end of ``--plan``) or Ctrl-C / SIGTERM
 (``complete: true``). The first stdout line is the session folder (flushed at once); with ``--plan``
 the phases' countdown follows on stdout (:mod:`effortface.capture_tool.plan`); a status line follows
 every few seconds on stderr. Demographics come from the options or the lab's ``participants.tsv`` in
-``--out`` (:mod:`effortface.capture_tool.participants`); a new participant is registered there once the
-recording has started. A capture that received no heart-rate sample ends with a warning and exit
+``--out`` (:mod:`effortface.capture_tool.participants`; without one, from the lab's own sessions); a
+code alone takes the lab's record, options that differ from it are refused (one line naming every
+differing field, exit 2, nothing written) unless ``--update-participant`` changes the record on
+purpose (the previous record kept, dated, in ``participants_history.tsv``). A new participant, or a
+changed record, is saved once the recording has started. A capture that received no heart-rate sample ends with a warning and exit
 status 1. A fault (a file that cannot be written: disk full, file-size limit) is one line on stderr
 naming the file as soon as it happens; a failed write stops the capture, which then leaves the
 session incomplete for ``effortface recover`` and exits with status 2 (the video stopping early
@@ -24,7 +27,7 @@ from pathlib import Path
 
 from effortface.core.docs import DESIGN
 from effortface.core.errors import UserError
-from effortface.capture_tool.participants import REGISTRY_TSV, register, resolve_participant
+from effortface.capture_tool.participants import HISTORY_TSV, REGISTRY_TSV, resolve_participant, save_participant
 from effortface.capture_tool.plan import PlanRunner, read_plan
 from effortface.capture_tool.protocols import PROTOCOLS, check_protocol
 from effortface.capture_tool.recorder import Recorder
@@ -51,6 +54,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--height", type=float, metavar="M", help="height in metres")
     parser.add_argument("--mass", type=float, metavar="KG", help="mass in kilograms")
     parser.add_argument("--training-level", type=float, metavar="TL", help="training level 0-10")
+    parser.add_argument("--update-participant", action="store_true",
+                        help=f"options that differ from the lab's record of --participant change that record on "
+                             f"purpose (the previous one kept, dated, in {HISTORY_TSV}; earlier sessions keep "
+                             f"theirs); without it they are refused")
     parser.add_argument("--plan", metavar="PLAN.csv",
                         help="timed phases to step through and log (start_s,end_s,exercise[,parameters])")
     parser.add_argument("--label", help="appended to the session folder name")
@@ -71,7 +78,8 @@ def _participant(args: argparse.Namespace) -> tuple[Participant, bool]:
         raise UserError(f"--participant: {exc}") from None
     options = {"sex": args.sex, "age": args.age, "height_m": args.height, "mass_kg": args.mass,
                "training_level": args.training_level}
-    return resolve_participant(code, options, Path(args.out) / REGISTRY_TSV)
+    return resolve_participant(code, options, Path(args.out) / REGISTRY_TSV,
+                               update=bool(getattr(args, "update_participant", False)))
 
 
 def _video_source(args: argparse.Namespace) -> int | str | None:
@@ -104,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"LSL: publishing HeartRate and Markers streams, source id {recorder.lsl.source_id}",
               file=sys.stderr, flush=True)
     if new:
-        register(Path(args.out) / REGISTRY_TSV, participant)
+        save_participant(Path(args.out) / REGISTRY_TSV, participant)
     plan = PlanRunner(phases, recorder.mark, lambda line: print(line, flush=True)) if phases else None
     duration = args.duration if args.duration is not None or plan is None else plan.end_s
     said: list[str] = []  # the faults already printed

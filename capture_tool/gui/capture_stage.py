@@ -28,6 +28,7 @@ from effortface.capture_tool.gui.phases import PHASE_TITLES, QtPhasePanel, catal
 from effortface.capture_tool.gui.preflight import QtPreflight
 from effortface.capture_tool.monitor import MonitorStats
 from effortface.capture_tool.session import Event
+from effortface.capture_tool.strap_status import StrapView, plain_link_error
 
 __all__ = ["CaptureSession", "QtCaptureStage"]
 
@@ -51,6 +52,10 @@ _BANNER_STYLE = {"warn": "background:#fff3cd; color:#664d03; border:1px solid #e
                  "info": "background:#e7f1ff; color:#084298; border:1px solid #9ec5fe;",
                  "error": "background:#f8d7da; color:#842029; border:1px solid #e0a0a8;",
                  "none": "background: transparent; border: 1px solid transparent;"}
+
+
+#: how the model says that watching the strap before Record failed
+WATCH_ERROR = "Live heart rate: "
 
 
 def tanaka_hr_max(age: float) -> float:
@@ -96,6 +101,8 @@ class QtCaptureStage(QtWidgets.QWidget):
         super().__init__(parent)
         self.session = session
         self._banner_reason = ""
+        self._strap_banner = ""  # the strap's banner shown now (it goes when its cause does)
+        self._plot_is_monitor = False  # the HR plot shows the strap watched before Record (not a recording)
         self._contact_lost = 0
         self._contact_ok = True
         self._pending_note = ""  # a marker note logged at Stop, said in the summary
@@ -156,6 +163,8 @@ class QtCaptureStage(QtWidgets.QWidget):
         self.recovery_bar = _RecoveryBar()
         self.live = QtLiveView()
         self.phases = QtPhasePanel()
+        self.phases.set_speed_unit(str(settings.value("capture/speed_unit", "m/s")))
+        self.phases.speed_unit.currentTextChanged.connect(lambda unit: settings.setValue("capture/speed_unit", unit))
         self.addActions(self.phases.hotkeys)
         self._hotkey_filter = _HotkeyFilter(self.phases.hotkeys, self.window)
         self.flash = QtWidgets.QWidget(self)
@@ -206,9 +215,11 @@ class QtCaptureStage(QtWidgets.QWidget):
         self.correct_button.clicked.connect(self.correct_selected_phase)
         self.notes.textChanged.connect(lambda: self.session.set_notes(self.notes.toPlainText()))
         self.form.changed.connect(self._update_zones)
+        self.form.changed.connect(self._clear_refusal)
         self.recovery_bar.recover.connect(self.session.recover_in_background)
         self.preflight.camera_frame.connect(self._show_camera_check)
         self.preflight.strap_ready.connect(self._watch_strap)
+        self.preflight.strap_changed.connect(self._show_strap)
         s = self.session
         s.state_changed.connect(self._show_state)
         s.recording_changed.connect(self._show_recording)
@@ -226,6 +237,11 @@ class QtCaptureStage(QtWidgets.QWidget):
             caption = "camera check: first frame (live video starts with Record)" if frame is not None else ""
             self.live.set_frame(frame, caption)
 
+    def _clear_refusal(self) -> None:
+        """A 'Record refused' banner goes once its cause does (the form says what is still needed)."""
+        if self.banner_text().startswith("Record refused") and not self.form.validate():
+            self.clear_banner()
+
     def _watch_strap(self, port: str, protocol: str) -> None:
         """The pre-flight found the strap's port: show its live heart rate (not while recording);
         '' (no port, or it does not open): stop showing the previous one."""
@@ -237,7 +253,7 @@ class QtCaptureStage(QtWidgets.QWidget):
     def refresh_participants(self) -> None:
         """Offer the lab registry's participants in the form (a bad registry is said in the banner)."""
         try:
-            self.form.set_known(self.session.known_participants())
+            self.form.set_known(*self.session.participant_records())
         except UserError as exc:
             self.show_banner(str(exc), "error")
 
@@ -268,19 +284,27 @@ class QtCaptureStage(QtWidgets.QWidget):
             True if a start was requested.
         """
         if self.form.validate():
-            self.show_banner("Record refused: " + self.form.message.text(), "error")
+            conflicts = self.form.conflicts()
+            if conflicts:  # the form shows the record and each difference; the banner says what to do
+                fields = ", ".join(f for f, _, _ in conflicts).replace("_", " ")
+                self.show_banner(f"Record refused: participant {self.form.code.text().strip()} differs from the "
+                                 f"lab's record ({fields}): choose 'Use the record' or 'Change the record' in "
+                                 f"the form", "error")
+            else:
+                self.show_banner("Record refused: " + self.form.message.text(), "error")
             return False
         choice = self._confirm_devices(self.preflight.choice())
         if choice is None:
             return False
         participant, label = self.form.participant(), self.form.session_label()
+        update = self.form.update_record
         try:
-            self.session.resolve_participant(participant)
+            self.session.resolve_participant(participant, update=update)
         except UserError as exc:
             self.show_banner(f"Record refused: {exc}", "error")
             return False
         self.preflight.remember()
-        self.session.start_in_background(participant, choice, label, self.lsl_box.isChecked())
+        self.session.start_in_background(participant, choice, label, self.lsl_box.isChecked(), update)
         return True
 
     def _confirm_devices(self, choice: DeviceChoice) -> DeviceChoice | None:
@@ -300,13 +324,26 @@ class QtCaptureStage(QtWidgets.QWidget):
             choice = DeviceChoice(choice.port, choice.protocol, None)
         return choice
 
-    def stop_recording(self) -> None:
-        """Stop in the background; a marker note typed but not sent is logged first (and said)."""
+    def stop_recording(self) -> bool:
+        """Stop in the background; a marker note typed but not sent is logged first (and said).
+
+        Video recorded without a sync test asks first (No: the recording goes on, for F8). Returns
+        True if the stop was requested.
+        """
+        if self.session.needs_sync_reminder() and not _ask(
+                self, "No sync test",
+                "No sync test (F8) was done while the camera recorded: the video-to-heart-rate offset of "
+                "this session will be unknown. Stop anyway?\n\nNo: go on recording, press F8 with the "
+                "camera seeing the screen, then Stop."):
+            self.show_banner("Still recording: press F8 (sync test) with the camera seeing the screen, "
+                             "then Stop.", "warn")
+            return False
         note = self.phases.take_marker_text()
         if note and self.session.recording:
             self._guarded(self.session.mark, "marker", note)
             self._pending_note = note
         self.session.stop_in_background()
+        return True
 
     def stop_now(self) -> Path:
         """Stop and wait (used when the application closes)."""
@@ -413,15 +450,41 @@ class QtCaptureStage(QtWidgets.QWidget):
             "dropped": status.dropped_frames, "size": format_bytes(status.bytes_on_disk)})
         self._update_banner(status.link_state, update.camera_ended, self._contact_ok, status.fault)
 
+    def _show_strap(self, view: StrapView) -> None:
+        """Before Record, the strap's one status: its banner (cleared when its cause goes) and HR readout."""
+        if self.session.recording or self._busy:
+            return
+        if view.banner:
+            self._strap_banner = view.banner
+            self.show_banner(view.banner, "error" if view.state in ("busy", "missing", "failed") else "warn")
+        elif self._strap_banner:
+            if self.banner_text() == self._strap_banner:
+                self.clear_banner()
+            self._strap_banner = ""
+        if view.hr_bpm is None:
+            self.live.set_current(None, None)
+
     def _show_monitor(self, stats: MonitorStats | None) -> None:
-        """Before Record: the chosen strap's live heart rate and stream figures."""
+        """Before Record: the chosen strap's live heart rate and stream figures (through the strap's one
+        status, so that the Strap line, banner and HR readout agree)."""
         if self.session.recording:
             return
+        self.preflight.strap.watched(stats)
+        view = self.preflight.render_strap()
         if stats is None:
+            if self._plot_is_monitor:  # the next strap watched starts its own plot
+                self.live.clear()
+                self._plot_is_monitor = False
             self.live.set_current(None, None)
             self.live.set_counters({"link": "not watched", "rate": "-", "last": "-", "contact": "-"})
             return
-        self.live.set_current(stats.hr_bpm, stats.rr_ms)
+        self.live.set_current(view.hr_bpm, stats.rr_ms if view.hr_bpm is not None else None)
+        if stats.new:  # the stream drawn before Record, as LabRecorder and OpenSignals do
+            if not self._plot_is_monitor:  # the last recording's plot gives way to the live stream
+                self.live.clear()
+                self._plot_is_monitor = True
+            self.live.add_samples(np.array([t for t, _ in stats.new]),
+                                  np.array([np.nan if hr is None else hr for _, hr in stats.new]))
         self.live.set_counters({
             "link": f"{stats.link_state} (not recording)",
             "rate": "-" if stats.rate_hz is None else f"{stats.rate_hz:.2f} Hz",
@@ -457,7 +520,8 @@ class QtCaptureStage(QtWidgets.QWidget):
 
     def _event_text(self, event: Event) -> str:
         corrected = self.session.corrected_label(event) if event.kind == "phase_start" else None
-        what = f"{event.kind} {event.label}" + (f" = {event.value}" if event.value else "")
+        value = plain_link_error(event.value) if event.kind == "device_gap" and event.value else event.value
+        what = f"{event.kind} {event.label}" + (f" = {value}" if value else "")
         if corrected:
             what = f"{event.kind} {event.label} \u2192 corrected: {corrected}"
         return f"{format_elapsed(event.t_s)}  {what}"
@@ -510,8 +574,12 @@ class QtCaptureStage(QtWidgets.QWidget):
         return self.banner.text()
 
     def _show_status(self, text: str, is_error: bool) -> None:
+        if is_error and text.startswith(WATCH_ERROR) and not self.session.recording:
+            self.preflight.strap.failed(text[len(WATCH_ERROR):])  # the strap's one status says it
+            self.preflight.render_strap()
+            return
         note = self._pending_note
-        if note and not is_error and text.startswith("Saved"):
+        if note and not is_error and "Saved, complete" in text:
             text += f". The marker note typed but not sent was logged at Stop: {note!r}"
             self._pending_note = ""
         warn = not is_error and "No sync test" in text
@@ -529,6 +597,7 @@ class QtCaptureStage(QtWidgets.QWidget):
             self._contact_ok = True
             self._contact_marked_s = -CONTACT_MARK_S
             self._last_row_s = None
+            self._plot_is_monitor = False
             self.live.clear()
             self.event_list.clear()
             self.clear_banner()
@@ -538,6 +607,9 @@ class QtCaptureStage(QtWidgets.QWidget):
             self.session_label.setText(f"Recording into<br><b>{path}</b>")
             return
         self._banner_reason = ""
+        # the next recording starts empty: the note was saved in this session, the marker note logged
+        self.notes.clear()
+        self.phases.marker_text.clear()
         self.live.set_current(None, None)
         self.live.set_counters({"link": "stopped"})
         self.live.preview_caption.setText("last frame recorded (stopped)")

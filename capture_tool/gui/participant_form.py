@@ -5,6 +5,12 @@ until a participant of the lab's registry (``participants.tsv``) is picked by co
 never set is never written (None in ``session.json``). Sex, age, height, mass and training level
 must be confirmed before Record (:data:`REQUIRED`); the form says which are.
 
+One truth per participant: a code the lab knows (its registry, or its sessions) shows the lab's
+record beside the code. Typed values that differ from it are kept and shown in red, field by field,
+and Record is refused until the operator picks "Use the record" (the form takes the record) or
+"Change the record" (after a confirmation: the record changes on purpose, the old one kept, dated,
+in ``participants_history.tsv``).
+
 The form keeps only widget state; :meth:`QtParticipantForm.participant` builds the session module's
 validated ``Participant`` and shows any problem inside the form (STYLE.md E4).
 """
@@ -19,13 +25,15 @@ from PySide6 import QtCore, QtWidgets
 
 from effortface.core.errors import UserError
 from effortface.core.participant import LIMITS, Limit
-from effortface.capture_tool.participants import REQUIRED
+from effortface.capture_tool.participants import HISTORY_TSV, REQUIRED, conflict_message, differences
 from effortface.capture_tool.session import CODE_RULE, SEXES, Participant, make_session_id
 
 #: what the sex box shows before a choice
 CHOOSE = "- choose -"
 #: the registry box's first entry
 NEW_PARTICIPANT = "(new participant)"
+#: what a refused Record tells the operator to do
+CONFLICT_HINT = "choose 'Use the record' or 'Change the record'"
 #: field -> row title
 TITLES = {"sex": "Sex", "age": "Age", "height_m": "Height", "mass_kg": "Mass", "training_level": "Training level",
           "hr_rest_bpm": "Resting HR", "hr_max_bpm": "Max HR"}
@@ -54,6 +62,9 @@ class QtParticipantForm(QtWidgets.QGroupBox):
     def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__("Participant", parent)
         self.known: dict[str, Participant] = {}
+        self.sources: dict[str, str] = {}
+        #: the operator confirmed changing the lab's record of the code (reset for each recording)
+        self.update_record = False
         self._from_registry = False
         self._build()
         self._preview_timer = QtCore.QTimer(self, interval=1000)
@@ -70,6 +81,18 @@ class QtParticipantForm(QtWidgets.QGroupBox):
                                  "(demographics are entered once)")
         self.code = QtWidgets.QLineEdit(placeholderText="P01", maxLength=16)
         self.code.setToolTip(f"Participant code: {CODE_RULE}")
+        self.record = QtWidgets.QLabel(wordWrap=True, textFormat=QtCore.Qt.TextFormat.RichText)
+        self.record.setToolTip("The lab's record of this code (participants.tsv, or its latest session)")
+        self.use_record = QtWidgets.QPushButton("Use the record")
+        self.use_record.setToolTip("Fill the form with the lab's record of this code")
+        self.change_record = QtWidgets.QPushButton("Change the record...")
+        self.change_record.setToolTip(f"Record with the values typed and make them the lab's record (after a "
+                                      f"confirmation; the old record is kept, dated, in {HISTORY_TSV})")
+        self.record_buttons = QtWidgets.QWidget()
+        buttons = QtWidgets.QHBoxLayout(self.record_buttons)
+        buttons.setContentsMargins(0, 0, 0, 0)
+        buttons.addWidget(self.use_record)
+        buttons.addWidget(self.change_record)
         self.sex = QtWidgets.QComboBox()
         self.sex.addItems([CHOOSE, *SEXES])
         self.age = _optional_spin("age")
@@ -91,6 +114,8 @@ class QtParticipantForm(QtWidgets.QGroupBox):
         self._row_labels: dict[str, QtWidgets.QLabel] = {}
         form.addRow("Registered", self.registry)
         form.addRow("Code", self.code)
+        form.addRow("Lab record", self.record)
+        form.addRow("", self.record_buttons)
         for field, widget in self.fields.items():
             self._row_labels[field] = QtWidgets.QLabel(TITLES[field])
             form.addRow(self._row_labels[field], widget)
@@ -100,15 +125,19 @@ class QtParticipantForm(QtWidgets.QGroupBox):
         form.addRow(self.message)
         self.registry.currentTextChanged.connect(self._on_registry_pick)
         self.code.textChanged.connect(self._on_code_changed)
+        self.use_record.clicked.connect(self.take_record)
+        self.change_record.clicked.connect(self.ask_change_record)
         self.label.textChanged.connect(self._on_changed)
         self.sex.currentIndexChanged.connect(self._on_changed)
         for spin in (self.age, self.height_m, self.mass, self.training_level, self.hr_rest, self.hr_max):
             spin.valueChanged.connect(self._on_changed)
 
     # ---------------------------------------------------------------------------- registry
-    def set_known(self, known: dict[str, Participant]) -> None:
-        """Offer the registry's participants (code -> Participant) in the 'Registered' box."""
+    def set_known(self, known: dict[str, Participant], sources: dict[str, str] | None = None) -> None:
+        """Offer the lab's participants (code -> Participant) in the 'Registered' box; ``sources``:
+        code -> the file its record comes from (named when a Record is refused)."""
         self.known = dict(known)
+        self.sources = dict(sources or {})
         current = self.registry.currentText()
         self.registry.blockSignals(True)
         self.registry.clear()
@@ -124,10 +153,13 @@ class QtParticipantForm(QtWidgets.QGroupBox):
             self.code.clear()
 
     def _on_code_changed(self, *_: object) -> None:
-        """A registered code fills (and locks) the body fields from the registry; leaving it clears them."""
+        """A registered code fills (and locks) the body fields from the registry, unless values typed
+        before differ from its record (then both are shown); leaving it clears them."""
         person = self.known.get(self.code.text().strip())
+        self.update_record = False
         if person is not None:
-            self.fill(person)
+            if self._from_registry or not self.conflicts(person):
+                self.fill(person)
         elif self._from_registry:
             self.clear_fields()
         self.registry.blockSignals(True)
@@ -141,6 +173,78 @@ class QtParticipantForm(QtWidgets.QGroupBox):
         for field, widget in self.fields.items():
             _set_field(widget, getattr(person, field))
             widget.setEnabled(getattr(person, field) is None)  # a field the registry lacks can be entered
+
+    def conflicts(self, person: Participant | None = None) -> list[tuple[str, object, object]]:
+        """The fields whose value differs from the lab's record of the code: (field, record, form).
+
+        Empty for an unknown code and once the operator chose to change the record.
+        """
+        person = person or self.known.get(self.code.text().strip())
+        if person is None or (self.update_record and person.code == self.code.text().strip()):
+            return []
+        return differences(person, self.values())
+
+    def take_record(self) -> None:
+        """'Use the record': the form takes the lab's record of the code."""
+        person = self.known.get(self.code.text().strip())
+        if person is not None:
+            self.update_record = False
+            self.fill(person)
+            self._on_changed()
+
+    def ask_change_record(self) -> bool:
+        """'Change the record': after a confirmation, the values typed become the lab's record at Record.
+
+        Returns
+        -------
+        bool
+            True if the operator confirmed.
+        """
+        code = self.code.text().strip()
+        person = self.known.get(code)
+        if person is None:
+            return False
+        diff = differences(person, self.values())
+        change = ("from " + ", ".join(f"{f} {_text(r)} to {_text(g)}" for f, r, g in diff)) if diff else \
+            "(edit the fields, which are unlocked)"
+        answer = QtWidgets.QMessageBox.question(
+            self, "Change the lab's record",
+            f"Change the lab's record of {code} {change}? Sessions recorded before keep their values; "
+            f"the old record is kept, dated, in {HISTORY_TSV}.",
+            QtWidgets.QMessageBox.StandardButton.Yes | QtWidgets.QMessageBox.StandardButton.No,
+            QtWidgets.QMessageBox.StandardButton.No)
+        if answer != QtWidgets.QMessageBox.StandardButton.Yes:
+            return False
+        self.update_record = True
+        self._from_registry = False
+        for widget in self.fields.values():
+            widget.setEnabled(True)
+        self._on_changed()
+        return True
+
+    def _show_record(self) -> None:
+        """The lab's record beside the code, what differs from it in red, and the two choices."""
+        person = self.known.get(self.code.text().strip())
+        self.record.setVisible(person is not None)
+        self.record_buttons.setVisible(person is not None)
+        if person is None:
+            self.record.clear()
+            return
+        shown = ", ".join(f"{TITLES[f].lower()} {_text(getattr(person, f))}" for f in TITLES
+                          if getattr(person, f) is not None)
+        diff = self.conflicts(person)
+        text = shown
+        if diff:
+            text += ("<br><span style='color:#b00020; font-weight:bold;'>Differs: " + ", ".join(
+                f"{TITLES[f].lower()} {_text(g)} (record {_text(r)})" for f, r, g in diff) + "</span>")
+        elif self.update_record:
+            text += "<br><span style='color:#806000;'>The record changes to the values below at Record.</span>"
+        self.record.setText(text)
+        for field, label in self._row_labels.items():
+            if any(f == field for f, _, _ in diff):
+                label.setStyleSheet("color: #b00020; font-weight: bold;")
+        self.use_record.setEnabled(bool(diff) or self.update_record)
+        self.change_record.setEnabled(not self.update_record)
 
     def clear_fields(self) -> None:
         """Every body field back to '-' (not confirmed), editable."""
@@ -170,6 +274,9 @@ class QtParticipantForm(QtWidgets.QGroupBox):
         missing = self.missing()
         self.confirmed.setText(f"All required fields confirmed{source}." if not missing else
                                "To confirm before Record: " + ", ".join(TITLES[f].lower() for f in missing))
+        if self.conflicts():
+            self.confirmed.setText("The fields differ from the lab's record: use it, or change it.")
+        self._show_record()
 
     def missing(self) -> list[str]:
         """The required fields not confirmed yet."""
@@ -218,6 +325,10 @@ class QtParticipantForm(QtWidgets.QGroupBox):
             self.participant()
         except UserError as exc:
             return str(exc)
+        diff = self.conflicts()
+        if diff:
+            code = self.code.text().strip()
+            return conflict_message(code, self.sources.get(code, "the lab"), diff, CONFLICT_HINT)
         missing = self.missing()
         if missing:
             return (f"participant {', '.join(TITLES[f].lower() for f in missing)}: expected a confirmed value "
@@ -234,6 +345,11 @@ class QtParticipantForm(QtWidgets.QGroupBox):
             If a field is invalid (the message names it).
         """
         return Participant(**self.values())
+
+
+def _text(value: object) -> str:
+    """A record value as shown: numbers without a useless '.0'."""
+    return f"{value:g}" if isinstance(value, float) else str(value)
 
 
 def _optional_spin(field: str) -> QtWidgets.QSpinBox:

@@ -41,6 +41,13 @@ MODEL_PARAMETERS = {
     "lift": ("machine_kg", "left_kg", "right_kg", "back_kg", "rom_m", "cadence_per_min"),
 }
 Parameters = tuple[tuple[str, float], ...]
+#: the speed units the operator may type in -> (m/s per unit, highest, step, decimals); logged in m/s
+SPEED_UNITS = {"m/s": (1.0, 10.0, 0.1, 2), "km/h": (1 / 3.6, 36.0, 0.5, 1)}
+
+
+def speed_m_s(value: float, unit: str) -> float:
+    """A speed typed in ``unit`` (:data:`SPEED_UNITS`) in m/s, to the millimetre per second."""
+    return round(value * SPEED_UNITS[unit][0], 3)
 
 
 def catalog_models() -> dict[str, str]:
@@ -87,9 +94,15 @@ class QtPhasePanel(QtWidgets.QGroupBox):
         self.exercise.setToolTip("Exercise id of the catalog (effortface/core/data/exercise_catalog.csv): "
                                  "what `effortface work` estimates the work from")
         self.exercise.currentTextChanged.connect(lambda _: self._show_parameters())
+        self.speed_unit = QtWidgets.QComboBox()
+        self.speed_unit.addItems(list(SPEED_UNITS))
+        self.speed_unit.setToolTip("The unit the speed is typed in (the log is always in m/s)")
+        self.speed_unit.currentTextChanged.connect(self.set_speed_unit)
         row = QtWidgets.QHBoxLayout()
         row.addWidget(QtWidgets.QLabel("Exercise"))
         row.addWidget(self.exercise, 1)
+        row.addWidget(QtWidgets.QLabel("speed in"))
+        row.addWidget(self.speed_unit)
         grid.addLayout(row, 0, 0, 1, 4)
         self._params = QtWidgets.QGridLayout()
         self._params.setHorizontalSpacing(6)
@@ -100,6 +113,7 @@ class QtPhasePanel(QtWidgets.QGroupBox):
             spin.setValue(spin.minimum())
             spin.setToolTip(f"{text} ({unit}); '-' = not logged")
             self.spins[column], self._labels[column] = spin, QtWidgets.QLabel(text)
+        self._speed_factor = 1.0  # m/s per unit of the speed box
         grid.addLayout(self._params, 1, 0, 1, 4)
         buttons = (
             (f"Rest  [{PHASE_KEYS[REST]}]", PHASE_KEYS[REST], lambda: self.request_phase(REST)),
@@ -161,15 +175,39 @@ class QtPhasePanel(QtWidgets.QGroupBox):
 
     # ---------------------------------------------------------------------------- values
     def parameters(self) -> Parameters:
-        """The parameters shown and set (not '-') as ``(column, value)`` pairs."""
-        return tuple((column, round(self.spins[column].value(), self.spins[column].decimals()))
-                     for column in self.shown if self.spins[column].value() > self.spins[column].minimum())
+        """The parameters shown and set (not '-') as ``(column, value)`` pairs; the speed in m/s
+        whatever unit it was typed in."""
+        out = []
+        for column in self.shown:
+            spin = self.spins[column]
+            if spin.value() > spin.minimum():
+                value = (speed_m_s(spin.value(), self.speed_unit.currentText()) if column == "speed_m_s"
+                         else round(spin.value(), spin.decimals()))
+                out.append((column, value))
+        return tuple(out)
+
+    def set_speed_unit(self, unit: str) -> None:
+        """Type the speed in ``unit`` (``m/s`` or ``km/h``); a speed already set is converted."""
+        if self.speed_unit.currentText() != unit:
+            self.speed_unit.setCurrentText(unit)  # comes back here through the signal
+            return
+        spin = self.spins["speed_m_s"]
+        was = None if spin.value() <= spin.minimum() else spin.value() * self._speed_factor
+        factor, hi, step, decimals = SPEED_UNITS[unit]
+        self._speed_factor = factor
+        spin.setDecimals(decimals)
+        spin.setSingleStep(step)
+        spin.setRange(-step, hi)
+        spin.setSuffix(f" {unit}")
+        spin.setToolTip(f"Speed ({unit}, logged in m/s); '-' = not logged")
+        spin.setValue(spin.minimum() if was is None else was / factor)
 
     def pick(self, exercise: str, **values: float) -> None:
-        """Pick ``exercise`` and set some parameters (tests, scripts): ``pick('squats', back_kg=10)``."""
+        """Pick ``exercise`` and set some parameters (tests, scripts): ``pick('squats', back_kg=10)``;
+        ``speed_m_s`` is given in m/s whatever unit the speed is shown in."""
         self.exercise.setCurrentText(exercise)
         for column, value in values.items():
-            self.spins[column].setValue(value)
+            self.spins[column].setValue(value / self._speed_factor if column == "speed_m_s" else value)
 
     # --------------------------------------------------------------------------- requests
     def request_phase(self, exercise: str) -> None:

@@ -17,6 +17,7 @@ from effortface.capture_tool.capture_session import DeviceChoice
 from effortface.capture_tool.gui.detect import detect_protocol, read_first_bytes
 from effortface.core.jobs import JobResult, Jobs
 from effortface.capture_tool.protocols import PROTOCOLS
+from effortface.capture_tool.strap_status import StrapStatus, StrapView
 
 __all__ = ["DeviceChoice", "QtPreflight"]
 
@@ -91,6 +92,8 @@ class QtPreflight(QtWidgets.QGroupBox):
     camera_frame = QtCore.Signal(object)
     #: the chosen strap port opens: (port, protocol), to watch its live heart rate ('' : none opens)
     strap_ready = QtCore.Signal(str, str)
+    #: the strap's one status changed (:class:`~effortface.capture_tool.strap_status.StrapView`)
+    strap_changed = QtCore.Signal(object)
 
     def __init__(self, settings: QtCore.QSettings, parent: QtWidgets.QWidget | None = None,
                  strap_in_use: Callable[[str], bool] | None = None,
@@ -103,6 +106,8 @@ class QtPreflight(QtWidgets.QGroupBox):
         self.release_strap = release_strap or (lambda: (lambda: None))
         self.jobs = Jobs(name="preflight")
         self.state = {"strap": MISSING, "camera": MISSING}
+        #: the strap's one state: the Strap line, the stage's banner and HR readout all draw it
+        self.strap = StrapStatus()
         self.detect_seconds = 2.5  # how long Detect listens to the port
         self._build()
         self._timer = QtCore.QTimer(self, interval=100)
@@ -289,15 +294,14 @@ class QtPreflight(QtWidgets.QGroupBox):
         self.detect_button.setText("Detect")
         if result.error is not None:
             self._show("strap", MISSING, f"detection failed: {result.error}")
-        elif result.value is None:
-            self._show("strap", self.state["strap"], "protocol not recognised from its bytes "
-                                                     "(polled straps such as HRMI cannot be detected)")
         else:
-            self.protocol.blockSignals(True)  # no re-check: it would replace the message
-            self.protocol.setCurrentText(result.value)
-            self.protocol.blockSignals(False)
-            self.settings.setValue("capture/protocol", result.value)
-            self._show("strap", self.state["strap"], f"detected protocol: {result.value}")
+            if result.value is not None:
+                self.protocol.blockSignals(True)  # no re-check: it would replace the message
+                self.protocol.setCurrentText(result.value)
+                self.protocol.blockSignals(False)
+                self.settings.setValue("capture/protocol", result.value)
+            self.strap.detected(result.value)
+            self.render_strap()
         if self.state["strap"] == READY:  # watch the live heart rate again, with the protocol found
             choice = self.choice()
             self.strap_ready.emit(choice.port, choice.protocol)
@@ -309,11 +313,38 @@ class QtPreflight(QtWidgets.QGroupBox):
             self._show(name, MISSING, str(result.error).splitlines()[0])
 
     def _show(self, name: str, state: str, note: str) -> None:
+        if name == "strap":
+            self._feed_strap(state, note)
+            return
         self.state[name] = state
         label = self.strap_status if name == "strap" else self.camera_status
         colour = {READY: "#1b7f3b", MISSING: "#b00020", OFF: "#505050"}.get(state, "#806000")
         mark = {READY: "\u2714", MISSING: "\u2716", OFF: "\u25CB"}.get(state, "\u2026")
         label.setText(f"<span style='color:{colour}'><b>{mark} {state}</b></span> {note}")
+
+    def _feed_strap(self, state: str, note: str) -> None:
+        """A check's result goes into the strap's one state, which is then drawn."""
+        choice = self.choice()
+        self.strap.choose(choice.port, choice.protocol)
+        if state == CHECKING:
+            self.strap.checking()
+        elif state == READY:
+            self.strap.opened()
+        elif choice.port:
+            self.strap.failed(note)
+        self.render_strap()
+
+    def render_strap(self) -> StrapView:
+        """Draw the Strap line from :attr:`strap` and say it (``strap_changed``); return the view."""
+        view = self.strap.view()
+        self.state["strap"] = (READY if view.state in ("opens", "live", "no_contact") else
+                               CHECKING if view.state == "checking" else MISSING)
+        colour = "#806000" if view.ok is None else ("#1b7f3b" if view.ok else "#b00020")
+        mark = "\u2026" if view.ok is None else ("\u2714" if view.ok else "\u2716")
+        head, _, rest = view.line.partition(": ")
+        self.strap_status.setText(f"<span style='color:{colour}'><b>{mark} {head}</b></span> {rest}")
+        self.strap_changed.emit(view)
+        return view
 
     def _browse(self) -> None:
         path, _ = QtWidgets.QFileDialog.getOpenFileName(self, "Video file played as the camera",

@@ -6,7 +6,9 @@ Writes ``<name>_<w>x<h>.png`` at 1280x800 and 1920x1080 into this folder (or ``-
 the previous ones (that is what the script is for; each path is printed). Groups (``--only``, default
 all): ``app`` (the main window as it opens), ``capture`` (``before``, ``during``, ``strap_lost``: P01's
 ANT+ serial log replayed on a pseudo-terminal, the session video played as the camera, recorded into
-an empty lab), ``annotate`` (``keyframes``, ``blind_round``, ``reliability``), ``train`` (``fig2``,
+an empty lab), ``participant`` (``capture_participant_refused``: P01 typed as a man of 45 with
+training level 8 on the sample lab, whose P01 is a woman of 23 with 2.5, Record refused;
+``capture_participant_record``: the code P01 alone, the lab's record taken), ``annotate`` (``keyframes``, ``blind_round``, ``reliability``), ``train`` (``fig2``,
 ``fig3``, ``runlog`` after training in the stage; ``compare`` of two bundles made by
 ``effortface train``), ``synth`` (``rule``, ``trained``), ``machine`` (``annotate_machine_guide``:
 R1's keys over the machine rater's dashed curves and the no-face shading, 330-470 s; ``annotate_machine_accept``:
@@ -43,7 +45,7 @@ from effortface.core.fileio import atomic_write  # noqa: E402
 OUT = Path(__file__).resolve().parent
 SAMPLES = ROOT / "sample_sessions"
 SIZES = ((1280, 800), (1920, 1080))
-GROUPS = ("app", "capture", "annotate", "train", "synth", "machine")
+GROUPS = ("app", "capture", "participant", "annotate", "train", "synth", "machine")
 #: the fixed states of the pictures
 SESSION = "P01_20260112-093000_cardio"
 KEYFRAME_T_S = 400.0            # P01's 3.4 m/s run
@@ -173,6 +175,30 @@ def shoot_capture(tmp: Path, out: Path) -> None:
         replay.stop()
         thread.join(5)
         replay.close()
+
+
+def shoot_participant(lab: Path, tmp: Path, out: Path) -> None:
+    """One truth per participant: P01 typed with other demographics is refused; the code alone takes the
+    lab's record (the sample lab's registry, or its sessions when it has none)."""
+    with main_window(lab, tmp) as window:
+        stage = window.stages["capture"]
+        stage.preflight.set_choice(port="loop://", protocol="ant")
+        stage.preflight.camera.setCurrentText("No video")
+        _settle(window)
+        form = stage.form
+        form.sex.setCurrentText("male")
+        form.age.setValue(45)
+        form.height_m.setValue(1.66)
+        form.mass.setValue(58.0)
+        form.training_level.setValue(8)
+        form.code.setText("P01")
+        stage.start_recording()  # refused: the form and the banner say why
+        grab(window, "capture_participant_refused", out)
+        form.clear_fields()
+        form.code.clear()
+        form.code.setText("P01")
+        stage.clear_banner()
+        grab(window, "capture_participant_record", out)
 
 
 def _choose_devices(stage: QtWidgets.QWidget, port: str, video: Path) -> None:
@@ -335,6 +361,8 @@ def main(argv: list[str] | None = None) -> int:
             shoot_app(lab, tmp, args.out)
         if "capture" in args.only:
             shoot_capture(tmp, args.out)
+        if "participant" in args.only:
+            shoot_participant(lab, tmp, args.out)
         if "annotate" in args.only:
             shoot_annotate(lab, tmp, args.out)
         if "train" in args.only:

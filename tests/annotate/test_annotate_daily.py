@@ -237,3 +237,115 @@ def test_the_report_fits_1280x800(qtbot, stage: QtAnnotateStage) -> None:
     lines = [i for i in panel.ba_plot.getPlotItem().items if i.__class__.__name__ == "InfiniteLine"]
     assert lines and legend.zValue() > max(i.zValue() for i in lines) and legend.opts["brush"].color().alpha() > 200
     assert panel.image.height() > 112 or panel.image.width() > 150
+
+
+def test_moving_keys_at_either_end_of_the_track_refuses_and_says_why(stage: QtAnnotateStage) -> None:
+    """Issue 25 item 4: a selection holding the last (or first) frame cannot move past it: nothing
+    moves, the status line says which key and why; the keys keep their shape."""
+    editor = _open(stage, "R9")
+    m, view, tl = editor.session, editor.video_view, editor.timeline
+    last = m.n_frames - 1
+    for frame in (last - 63, last - 33, last):
+        m.set_frame(frame)
+        _press(view, Key.Key_5)
+    _press(view, Key.Key_A, Mod.ControlModifier)
+    _press(view, Key.Key_Right, Mod.AltModifier)
+    assert [k.frame for k in m.track.keys] == [last - 63, last - 33, last]
+    assert f"found key {last} within 1 frame of the last frame ({last}): nothing moved" in stage.status.text()
+    _press(view, Key.Key_Left, Mod.AltModifier)  # the other way every key moves
+    assert [k.frame for k in m.track.keys] == [last - 64, last - 34, last - 1]
+    for k in list(m.track.keys):
+        m.track.delete(k.frame)
+    for frame in (0, 30, 63):
+        m.set_frame(frame)
+        _press(view, Key.Key_5)
+    tl.set_selection([0, 30, 63])
+    _press(view, Key.Key_Left, Mod.AltModifier)
+    assert [k.frame for k in m.track.keys] == [0, 30, 63]
+    assert "found key 0 within 1 frame of the first frame (0): nothing moved" in stage.status.text()
+
+
+def test_the_curve_editor_is_tall_with_small_keys_at_1280x800(qtbot, lab: Path, tmp_path: Path) -> None:
+    """Issue 25 item 6: the curve editor was about 110 px tall at 1280x800 and 266 keys hid the curve
+    under 11 px dots; it now gets three quarters of the timeline, and dense tracks get smaller dots."""
+    from effortface.annotate.gui.timeline import key_size
+    from effortface.app import MainWindow
+
+    settings = QtCore.QSettings(str(tmp_path / "s.ini"), QtCore.QSettings.Format.IniFormat)
+    win = MainWindow(lab, settings)
+    qtbot.addWidget(win)
+    win.resize(1280, 800)
+    win.show()
+    qtbot.waitExposed(win)
+    stage = win.show_stage("annotate")
+    editor = _open(stage, "R1")
+    qtbot.wait(50)
+    timeline = editor.timeline
+    assert timeline.curve_plot.vb.height() >= 150 > 110
+    assert timeline.curve_plot.vb.height() > 2 * timeline.hr_plot.vb.height()
+    n = len(editor.session.track.keys)
+    assert n > 120 and timeline.keys.opts["size"] == key_size(n) == 4  # R1 on P01 cardio: 266 keys
+    assert key_size(10) == 8 and key_size(266) == 4
+    win.shutdown()
+
+
+def test_bland_altman_draws_one_pair_at_a_time(qtbot, stage: QtAnnotateStage) -> None:
+    """Issue 25 item 6: the plot overlaid every rater pair under its legend; it now draws the pair
+    chosen (first by default, a row of the pairs table picks one), all pairs on request."""
+    from effortface.annotate.gui.reliability_panel import ALL_PAIRS
+
+    stage.rater.setText("R1")
+    stage.tabs.setCurrentIndex(1)
+    panel = stage.reliability
+    qtbot.waitUntil(lambda: panel.report is not None and panel.per_shape.isVisible())
+
+    def drawn() -> list[str]:
+        return [i.name() for i in panel.ba_plot.getPlotItem().listDataItems() if i.name()]
+
+    pairs = [panel.pairs.item(r, 0).text() for r in range(panel.pairs.rowCount())]
+    assert len(pairs) == 3 and [panel.ba_pair.itemText(i) for i in range(panel.ba_pair.count())] == [ALL_PAIRS, *pairs]
+    assert drawn() == [pairs[0]] and pairs[0] in panel.ba_plot.getPlotItem().titleLabel.text
+    panel.pairs.setCurrentCell(2, 0)
+    assert panel.ba_pair.currentText() == pairs[2] and drawn() == [pairs[2]]
+    lines = [i for i in panel.ba_plot.getPlotItem().items if i.__class__.__name__ == "InfiniteLine"]
+    assert len(lines) == 3  # that pair's bias and limits only
+    panel.ba_pair.setCurrentText(ALL_PAIRS)
+    assert sorted(drawn()) == sorted(pairs)
+    panel.threshold.setValue(panel.threshold.value() + 1)  # a refreshed report keeps the choice
+    assert panel.ba_pair.currentText() == ALL_PAIRS
+
+
+def test_sync_flashes_and_reps_are_on_the_timeline(qtbot, tmp_path: Path) -> None:
+    """Issue 25 item 6: the squats' repetitions and a sync flash logged while recording are drawn on
+    the timeline's heart-rate plot (the real P02 strength session, one flash row appended)."""
+    from effortface.capture_tool.session import read_events
+
+    name = "P02_20260112-113700_strength"
+    lab = tmp_path / "lab"
+    shutil.copytree(SAMPLES / name, lab / name, ignore=shutil.ignore_patterns("serial", "work.csv"))
+    with (lab / name / "events.csv").open("a") as fh:
+        fh.write("12.5000,sync,flash,\n")
+    widget = QtAnnotateStage(lab, cache_frames=32)
+    qtbot.addWidget(widget)
+    widget.rater.setText("R9")
+    editor = widget.open_session(lab / name, "R9")
+    assert editor is not None
+    timeline = editor.timeline
+    reps = [e.t_s for e in read_events(lab / name / "events.csv") if e.kind == "reps"]
+    assert len(reps) == 34 and list(timeline.rep_marks.data["x"]) == reps
+    assert [line.value() for line in timeline.sync_lines] == [12.5]
+    assert timeline.rep_marks in timeline.hr_plot.items and timeline.sync_lines[0] in timeline.hr_plot.items
+    widget.shutdown()
+
+
+def test_the_session_list_can_be_hidden_for_a_wider_timeline(qtbot, stage: QtAnnotateStage) -> None:
+    """Issue 25 item 6: the session list hides (button or Ctrl+B) and the editor takes its width."""
+    editor = _open(stage, "R1")
+    qtbot.wait(50)
+    wide = editor.timeline.width()
+    assert stage.side.isVisible()
+    qtbot.mouseClick(stage.side_button, Left)
+    qtbot.waitUntil(lambda: editor.timeline.width() > wide + 100)
+    assert not stage.side.isVisible() and stage.side_button.text().endswith("Sessions")
+    _press(editor.video_view, Key.Key_B, Mod.ControlModifier)
+    assert stage.side.isVisible()

@@ -3,6 +3,7 @@ never overwriting another file; the blind round; the exports. No Qt, no sleeps."
 
 from __future__ import annotations
 
+import re
 import shutil
 from pathlib import Path
 
@@ -216,3 +217,28 @@ def test_blind_round_refuses_unrated_as_a_rating(tmp_path: Path) -> None:
     with pytest.raises(UserError, match="unrated is not a rating"):
         blind.set_rating(pose, "mouth_open", None)
     assert blind.rating(pose, "mouth_open") is None and not blind.path.exists()
+
+
+@pytest.mark.parametrize(("frames", "d_frames", "edge"), [
+    ("last3", 1, "last frame"), ("first3", -1, "first frame (0)"), ("last3", 10, "last frame")],
+    ids=["last key one right", "first key one left", "ten right"])
+def test_a_move_that_cannot_move_every_key_moves_none_and_says_why(session: Path, frames: str, d_frames: int,
+                                                                 edge: str) -> None:
+    """Issue 25 item 4: keys 0, 30 and the last frame moved right used to become 1, 31, last."""
+    m = AnnotateSession(session, "R9", autosave=False)
+    last = m.n_frames - 1
+    chosen = [last - 63, last - 33, last] if frames == "last3" else [0, 30, 63]
+    for f in chosen:
+        m.set_key(0.5, f)
+    before = [(k.frame, k.weight) for k in m.track.keys]
+    n_history = len(m.history[0])
+    stuck = str(last) if frames == "last3" else "0"
+    expected = re.escape(f"move keys: expected every selected key to move by {d_frames:+d} frames, found key "
+                         f"{stuck} within {abs(d_frames)} frame") + r"s? of the " + re.escape(edge) + r".*: nothing moved"
+    with pytest.raises(UserError, match=expected):
+        m.shift_keys(chosen, d_frames=d_frames)
+    assert [(k.frame, k.weight) for k in m.track.keys] == before and len(m.history[0]) == n_history
+    # away from the edge every key moves, and the history says so
+    back = m.shift_keys(chosen, d_frames=-d_frames)
+    assert back == [f - d_frames for f in chosen]
+    assert m.history[0][-1].endswith(f"move 3 mouth_stretch keys by {-d_frames:+d} frames")

@@ -277,8 +277,11 @@ def test_detect_button_sets_the_protocol(qtbot, window, shared_data) -> None:
     assert "detected protocol: hxm" in stage.preflight.strap_status.text()
 
 
-def test_lost_camera_shows_banner_and_recording_goes_on(qtbot, window, tmp_path) -> None:
+def test_lost_camera_shows_banner_and_recording_goes_on(qtbot, window, tmp_path, monkeypatch) -> None:
     """A camera that stops delivering frames (here a 2 s file) raises a banner; HR recording continues."""
+    asked: list[str] = []
+    monkeypatch.setattr(QtWidgets.QMessageBox, "question",  # Stop without a sync test asks (issue 25)
+                        lambda parent, title, *a: (asked.append(title), QtWidgets.QMessageBox.StandardButton.Yes)[1])
     stage = window.stages["capture"]
     short = make_numbered_video(tmp_path / "short.avi", n_frames=24, fps=12.0)
     _fill_form(stage, "P04")
@@ -289,6 +292,7 @@ def test_lost_camera_shows_banner_and_recording_goes_on(qtbot, window, tmp_path)
     assert stage.session.recording
     _key(qtbot, window, QtCore.Qt.Key.Key_F1)
     _stop(qtbot, stage)
+    assert asked == ["No sync test"]
     assert ("phase_start", "rest") in [(e.kind, e.label) for e in read_events(path / "events.csv")]
     assert len(read_video_frames(path / "video_frames.csv")) == index_video(path / "video.avi") == 24
     assert window.settings.value("capture/port") == "loop://"

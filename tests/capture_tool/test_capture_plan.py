@@ -164,8 +164,8 @@ REGISTRY_HEADER = "participant_id\tsex\tage\theight_m\tmass_kg\ttraining_level\t
      r"{registry}: line 3: participant P01: expected one row per participant \(or identical rows\), found "
      r"mass_kg 64 here and 60 on line 2"),
     ("P01\tfemale\t30\t1.68\t60\t4\tn/a\tn/a\n", ["--mass", "65"],
-     r"--mass 65: expected 60 as in {registry} for P01 \(demographics are entered once; edit the registry to "
-     r"change them\)"),
+     r"participant P01: expected the lab's record \(mass_kg 60 in {registry}\), found mass_kg 65; pass "
+     r"--update-participant to change the record \(earlier sessions keep theirs\)"),
     ("P01\tfemale\tthirty\t1.68\t60\t4\tn/a\tn/a\n", [],
      r"{registry}: line 2: column age: expected a number or n/a, found 'thirty'"),
 ], ids=["conflicting rows", "option against the registry", "not a number"])

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from PySide6 import QtCore, QtWidgets
+from PySide6 import QtCore, QtGui, QtWidgets
 
 from effortface.train.curves_io import LIVELINK_BLENDSHAPES
 from effortface.train.gui.synth_stage import QtSynthStage
@@ -407,3 +407,42 @@ def test_mapping_button_maps_an_unknown_skeleton(qtbot, stage: QtSynthStage, tmp
     stage.session.wait(60)
     assert stage.session.curves and len(stage.session.curves["t_s"]) == stage.session.n_frames
     assert np.isfinite(stage.session.curves["w_per_kg"]).all()
+
+
+def test_the_last_trained_model_is_offered(qtbot, bundle: Path, tmp_path: Path) -> None:
+    """Issue 25 item 6: the model Train exported last is offered in Synthesize, now and after a restart."""
+    from effortface.app import LAST_MODEL_KEY, MainWindow
+
+    settings = QtCore.QSettings(str(tmp_path / "settings.ini"), QtCore.QSettings.Format.IniFormat)
+    (tmp_path / "lab").mkdir()
+    win = MainWindow(tmp_path / "lab", settings)
+    qtbot.addWidget(win)
+    synth = win.show_stage("synthesize")
+    assert not synth.last_model_button.isVisibleTo(synth)        # nothing trained yet
+    win.show_stage("train").session.export_changed.emit(bundle)  # what Train's export says when done
+    assert settings.value(LAST_MODEL_KEY) == str(bundle)
+    assert synth.last_model_button.isVisibleTo(synth) and synth.last_model_button.text() == "Last trained: model"
+    qtbot.mouseClick(synth.last_model_button, LEFT)
+    synth.session.wait(30)
+    assert synth.session.model.name == str(bundle) or Path(synth.session.model.name) == bundle
+    win.shutdown()
+    again = MainWindow(tmp_path / "lab", settings)               # the next start offers it too
+    qtbot.addWidget(again)
+    assert again.show_stage("synthesize").last_model_button.toolTip() == str(bundle)
+    again.shutdown()
+
+
+def test_the_face_can_be_drawn_larger_so_small_weights_show(qtbot, stage: QtSynthStage) -> None:
+    """Issue 25 item 6: weights of 0.1-0.25 left the drawn face neutral; "Face drawn at x4" draws the
+    weights times 4 (clipped) while the weights shown stay true."""
+    from effortface.annotate.face import render_face
+
+    face = stage.face
+    assert face.gain == 1.0
+    stage.face_gain.setCurrentText("x4")
+    face.show_weights(np.full(4, 0.2))
+    w, h = face.face_size()
+    shown = face.pixmap().toImage().convertToFormat(QtGui.QImage.Format.Format_RGB888)
+    pixels = np.frombuffer(shown.constBits(), np.uint8).reshape(h, shown.bytesPerLine())[:, :3 * w].reshape(h, w, 3)
+    np.testing.assert_array_equal(pixels, render_face(np.full(4, 0.8), (w, h))[:, :, ::-1])
+    assert not np.array_equal(pixels, render_face(np.full(4, 0.2), (w, h))[:, :, ::-1])

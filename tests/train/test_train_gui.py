@@ -110,7 +110,8 @@ def test_training_without_data_shows_the_error(qtbot, stage: QtTrainStage) -> No
 
 
 def test_unannotated_session_is_reported(qtbot, tmp_path: Path) -> None:
-    """A session without annotations cannot train: the dataset error appears in the stage."""
+    """A session without annotations cannot be ticked (issue 25): greyed with the reason, Use shown
+    leaves it out, so Train stays off instead of failing at 0 %."""
     import shutil
 
     src = SAMPLE / CARDIO[0]
@@ -122,8 +123,9 @@ def test_unannotated_session_is_reported(qtbot, tmp_path: Path) -> None:
     view.picker.annotation.setCurrentText("not annotated")
     assert [e.session_id for e in view.picker.shown()] == [CARDIO[0]]
     view.picker.select_shown_button.click()
-    _train(qtbot, view)
-    assert "annotations" in view.status.text() and "failed" in view.status.text()
+    assert session.selected == set() and not view.train_button.isEnabled()
+    assert view.picker.table.item(0, 0).text() == "no annotations"
+    assert "no annotations" in view.status.text()
     view.shutdown()
 
 

@@ -269,6 +269,10 @@ class QtSkeletonView(pg.PlotWidget):
         self.joints.setData(h, pose_m[:, 2])
 
 
+#: the face drawing's gains offered (display only)
+FACE_GAINS = {"x1 (true weights)": 1.0, "x2": 2.0, "x4": 4.0}
+
+
 class QtFacePreview(QtWidgets.QLabel):
     """The parametric face for a weight vector, as large as the label allows (4:3, at least FACE_SIZE)."""
 
@@ -278,7 +282,14 @@ class QtFacePreview(QtWidgets.QLabel):
         self.setSizePolicy(QtWidgets.QSizePolicy.Policy.Expanding, QtWidgets.QSizePolicy.Policy.Expanding)
         self.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
         self._weights = np.zeros(4)
+        #: the drawing's gain: small weights (0.1-0.25) look neutral at x1; the weights shown stay true
+        self.gain = 1.0
         self.show_weights(self._weights)  # the rest face until a clip plays
+
+    def set_gain(self, gain: float) -> None:
+        """Draw the face with the weights times ``gain`` (clipped to 1); the plots and numbers stay true."""
+        self.gain = float(gain)
+        self.show_weights(self._weights)
 
     def face_size(self) -> tuple[int, int]:
         """The rendered face's (width, height): the largest 4:3 box in the label, at least FACE_SIZE."""
@@ -289,7 +300,8 @@ class QtFacePreview(QtWidgets.QLabel):
         """Render the face (BGR) at :meth:`face_size` and show it."""
         self._weights = np.asarray(weights, float)
         w, h = self.face_size()
-        rgb = np.ascontiguousarray(render_face(self._weights, (w, h))[:, :, ::-1])
+        drawn = np.clip(self._weights * self.gain, 0.0, 1.0)
+        rgb = np.ascontiguousarray(render_face(drawn, (w, h))[:, :, ::-1])
         image = QtGui.QImage(rgb.data, w, h, 3 * w, QtGui.QImage.Format.Format_RGB888).copy()
         self.setPixmap(QtGui.QPixmap.fromImage(image))
 
@@ -451,7 +463,18 @@ class QtSynthStage(QtWidgets.QWidget):
         face_widget = QtWidgets.QWidget()
         face_box = QtWidgets.QVBoxLayout(face_widget)
         face_box.setContentsMargins(0, 0, 0, 0)
+        self.face_gain = QtWidgets.QComboBox()
+        self.face_gain.addItems(list(FACE_GAINS))
+        self.face_gain.setToolTip("Draw the face with the weights multiplied (clipped to 1), so that weights "
+                                  "of 0.1-0.25 show; the plots, numbers and exports keep the true weights")
+        self.face_gain.currentTextChanged.connect(lambda text: self.face.set_gain(FACE_GAINS[text]))
+        gain_row = QtWidgets.QHBoxLayout()
+        gain_row.addStretch(1)
+        gain_row.addWidget(QtWidgets.QLabel("Face drawn at"))
+        gain_row.addWidget(self.face_gain)
+        gain_row.addStretch(1)
         face_box.addWidget(self.face, 1)
+        face_box.addLayout(gain_row)
         face_box.addWidget(self.weights_label)
         views = QtWidgets.QSplitter(QtCore.Qt.Orientation.Horizontal)
         views.addWidget(self.skeleton)
@@ -541,6 +564,9 @@ class QtSynthStage(QtWidgets.QWidget):
         self.open_model_button.clicked.connect(self._ask_model)
         self.default_model_button = QtWidgets.QPushButton("Built-in rule model")
         self.default_model_button.clicked.connect(lambda: self.load_model("default"))
+        self.last_model_button = QtWidgets.QPushButton("Last trained model")
+        self.last_model_button.clicked.connect(lambda: self.load_model(self.last_model_button.toolTip()))
+        self.last_model_button.hide()
         self.model_label = QtElidedLabel()
         self.export_csv_button = QtWidgets.QPushButton("Export CSV...")
         self.export_csv_button.clicked.connect(lambda: self._ask_export("csv"))
@@ -550,7 +576,8 @@ class QtSynthStage(QtWidgets.QWidget):
         for w, stretch in ((self.open_clip_button, 0), (self.clip_combo, 0), (self.clip_label, 1),
                            (self.mapping_button, 0),
                            (QtWidgets.QLabel("Model:"), 0), (self.model_label, 1),
-                           (self.open_model_button, 0), (self.default_model_button, 0)):
+                           (self.last_model_button, 0), (self.open_model_button, 0),
+                           (self.default_model_button, 0)):
             bar.addWidget(w, stretch)     # the two names share the room left (elided if short of it)
         return bar
 
@@ -623,6 +650,12 @@ class QtSynthStage(QtWidgets.QWidget):
     def load_clip(self, path: str | Path) -> bool:
         """Load a clip (errors shown in the stage)."""
         return self._guard(lambda: self.session.load_motion(path))
+
+    def offer_model(self, path: str | Path) -> None:
+        """Offer the model Train exported last: a button that loads it (its folder in the tooltip)."""
+        self.last_model_button.setText(f"Last trained: {Path(path).name}")
+        self.last_model_button.setToolTip(str(path))
+        self.last_model_button.show()
 
     def load_model(self, path: str | Path) -> bool:
         """Load a bundle folder or ``"default"`` (errors shown in the stage)."""

@@ -39,7 +39,10 @@ _ANNOTATION_CHOICES = {"any annotation status": None, "annotated": True, "not an
 
 
 def _fmt(value: Any) -> str:
-    return f"{value:.3g}" if isinstance(value, (float, np.floating)) else str(value)
+    """A table cell: numbers to 3 significant digits, 'n/a' for a value that is not a number (never 'nan')."""
+    if isinstance(value, (float, np.floating)):
+        return f"{value:.3g}" if np.isfinite(value) else "n/a"
+    return str(value)
 
 
 #: a column narrowed to fit its table keeps at least this width (its text wraps)
@@ -208,17 +211,27 @@ class QtDataPicker(QtWidgets.QGroupBox):
         self.table.setRowCount(len(shown))
         for r, e in enumerate(shown):
             use = QtWidgets.QTableWidgetItem()
-            use.setFlags(use.flags() | QtCore.Qt.ItemFlag.ItemIsUserCheckable)
-            use.setCheckState(QtCore.Qt.CheckState.Checked if e.session_id in self.session.selected
-                              else QtCore.Qt.CheckState.Unchecked)
             use.setData(QtCore.Qt.ItemDataRole.UserRole, e.session_id)
+            why = e.unusable
+            if why:  # greyed, never ticked, the reason on the row
+                use.setText(why.split(":")[0])
+                use.setFlags(use.flags() & ~QtCore.Qt.ItemFlag.ItemIsUserCheckable
+                             & ~QtCore.Qt.ItemFlag.ItemIsEnabled)
+                use.setToolTip(f"not trained on: {why}")
+            else:
+                use.setFlags(use.flags() | QtCore.Qt.ItemFlag.ItemIsUserCheckable)
+                use.setCheckState(QtCore.Qt.CheckState.Checked if e.session_id in self.session.selected
+                                  else QtCore.Qt.CheckState.Unchecked)
             self.table.setItem(r, 0, use)
-            for c, v in enumerate((e.session_id, e.participant, f"{e.training_level:g}", e.exercise,
+            for c, v in enumerate((e.session_id, e.participant, _fmt(e.training_level), e.exercise,
                                    ", ".join(e.raters) or "none", "yes" if e.complete else "NO",
                                    e.tracks or "none"), 1):
                 cell = QtWidgets.QTableWidgetItem(v)
                 if c == len(_SESSION_COLUMNS) - 1:
                     cell.setToolTip("each rater's complete tracks / tracks: " + COMPLETENESS_RULE)
+                if why:
+                    cell.setFlags(cell.flags() & ~QtCore.Qt.ItemFlag.ItemIsEnabled)
+                    cell.setToolTip(f"not trained on: {why}")
                 self.table.setItem(r, c, cell)
         hidden = _redundant_columns(shown)
         for c, name in enumerate(_SESSION_COLUMNS):
@@ -242,6 +255,8 @@ class QtDataPicker(QtWidgets.QGroupBox):
             self.session.set_selected([item.data(QtCore.Qt.ItemDataRole.UserRole)], checked)
 
     def _select_shown(self, selected: bool) -> None:
+        """Tick (or untick) the shown sessions that can be trained on; the model leaves the others out
+        (greyed) and says why."""
         self.session.set_selected([e.session_id for e in self.shown()], selected)
 
     def _ask_table(self) -> None:
@@ -495,6 +510,16 @@ class QtRunLog(QtWidgets.QWidget):
         self.text = QtWidgets.QPlainTextEdit(readOnly=True)
         self.text.setPlaceholderText("Train to see the run's steps, folds and timings here.")
         self.folds, self.grid = QtFrameTable(), QtFrameTable()
+        self.edge_note = QtWidgets.QLabel(wordWrap=True)
+        self.edge_note.setStyleSheet("color: #664d03; background: #fff3cd; padding: 3px;")
+        self.wider_button = QtWidgets.QPushButton("Use the wider grid")
+        self.wider_button.setToolTip("Choose the next wider SVR grid for the next training (Train again to use it)")
+        self.edge_bar = QtWidgets.QWidget()
+        edge = QtWidgets.QHBoxLayout(self.edge_bar)
+        edge.setContentsMargins(0, 0, 0, 0)
+        edge.addWidget(self.edge_note, 1)
+        edge.addWidget(self.wider_button)
+        self.edge_bar.hide()
         self.scatter = self._plot("Held out: predicted vs key-framed", "key-framed weight", "predicted weight")
         self.residuals = self._plot("Residuals", "predicted weight", "predicted - key-framed")
         tables = QtWidgets.QTabWidget()
@@ -514,6 +539,7 @@ class QtRunLog(QtWidgets.QWidget):
         split.setSizes([450, 450])
         layout = QtWidgets.QVBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
+        layout.addWidget(self.edge_bar)
         layout.addWidget(split)
         session.log_changed.connect(self._on_line)
         session.results_changed.connect(self.show_results)
@@ -544,6 +570,11 @@ class QtRunLog(QtWidgets.QWidget):
         assert o is not None
         self.folds.show_frame(self.session.fold_table)
         self.grid.show_frame(self.session.grid_results)
+        edges, wider = self.session.grid_edges, self.session.wider_grid()
+        self.edge_bar.setVisible(bool(edges))
+        self.edge_note.setText("Chosen at the grid's edge (the best may lie outside it): " + "; ".join(edges))
+        self.wider_button.setVisible(bool(wider))
+        self.wider_button.setText(f"Use the wider grid ({wider})")
         pairs = held_out_pairs(o)
         for w in (self.scatter, self.residuals):
             w.clear()
@@ -751,6 +782,7 @@ class QtTrainStage(QtWidgets.QWidget):
         self.face_results = QtFaceResults(session)
         self.comparison = QtCompare(session, self.show_status)
         self.run_log = QtRunLog(session)
+        self.run_log.wider_button.clicked.connect(self.use_wider_grid)
         self.tabs = QtWidgets.QTabWidget()
         self.tabs.addTab(self.hr_results, "Heart rate (Fig. 2)")
         self.tabs.addTab(self.face_results, "Face (Fig. 3)")
@@ -761,6 +793,15 @@ class QtTrainStage(QtWidgets.QWidget):
         self.timer = QtCore.QTimer(self, interval=POLL_MS)
         self.timer.timeout.connect(session.poll)
         self.timer.start()
+
+    def use_wider_grid(self) -> str:
+        """One click after a grid-edge warning: the next wider grid for the next training; return it."""
+        wider = self.session.wider_grid()
+        if wider:
+            self.settings_panel.grid.setCurrentText(wider)
+            self.show_status(f"SVR grid: {wider} for the next training (Train again to use it)", False)
+            self.run_log.wider_button.hide()
+        return wider
 
     def _build(self) -> None:
         self.train_button = QtWidgets.QPushButton("Train")
