@@ -141,6 +141,8 @@ def test_pip_install_dot_in_a_fresh_venv_works_from_any_folder(sources, tmp_path
     assert {f.split("/")[0] for f in files if not f.startswith("..")} == {"effortface",
                                                                           f"effortface-{__version__}.dist-info"}
     assert "effortface/samplelab/data/cmu_13_29_squats_120fps.bvh" in files  # the lab builds anywhere
+    assert {"effortface/samplelab/data/faces/astronaut.jpg", "effortface/samplelab/data/faces/astronaut_landmarks.npy",
+            "effortface/samplelab/data/faces/PROVENANCE.md"} <= set(files)  # its real faces too
     assert {"effortface/docs/DESIGN.md", "effortface/docs/SCIENCE.md"} <= set(files)  # what --help cites
     work = _user_folder(tmp_path)
     got = _runtime_check(bin_ / "python", work)

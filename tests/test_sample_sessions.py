@@ -35,7 +35,8 @@ TRUTH = LAB / "_ground_truth"
 GENERATE = LAB / "generate.py"
 SESSIONS = list_sessions(LAB) if LAB.is_dir() else []
 RATERS = ("R1", "R2", "R3")
-MAX_BYTES = 25 * 1024 * 1024
+#: issue 23: real faces (200x150 JPEG frames of warped photographs) need more bytes than cartoons
+MAX_BYTES = 45 * 1024 * 1024
 
 
 def _lab_truth() -> dict:
@@ -234,15 +235,30 @@ def test_video_shows_the_true_mouth_opening() -> None:
     order = np.argsort(truth[:, 1])
     video = read_session(session).video_path
 
-    def dark_mouth_px(k: int) -> int:
-        img = read_frame(video, int(frames[k])).astype(int)
-        lower = img[int(0.6 * img.shape[0]):]
-        return int((np.abs(lower - np.array([40, 30, 110])).max(axis=2) <= 35).sum())
+    from effortface.samplelab.simlab.facewarp import MOUTH_BGR
+
+    def dark_mouth_px(k: int) -> int:  # the mouth's interior colour around the mouth (real photos
+        img = read_frame(video, int(frames[k])).astype(int)  # hold dark suits and hair elsewhere)
+        h, w = img.shape[:2]
+        mouth = img[int(0.55 * h):int(0.85 * h), int(0.3 * w):int(0.7 * w)]
+        return int((np.abs(mouth - np.array(MOUTH_BGR)).max(axis=2) <= 20).sum())
 
     low = [dark_mouth_px(k) for k in order[:15]]
     high = [dark_mouth_px(k) for k in order[-15:]]
     assert truth[order[-15:], 1].min() > 0.3
     assert np.mean(high) > 3 * max(np.mean(low), 1.0) and np.mean(high) - np.mean(low) > 30
+
+
+def test_participants_tsv_holds_every_participant_as_their_sessions_record_them() -> None:
+    """Issue 25: the lab ships its registry, read by the capture's own reader; one row per
+    participant, equal to the participant of each of their session.json files."""
+    from effortface.capture_tool.participants import REGISTRY_TSV, read_registry
+
+    registry = read_registry(LAB / REGISTRY_TSV)
+    assert sorted(registry) == sorted({s.name.split("_")[0] for s in SESSIONS})
+    for session in SESSIONS:
+        recorded = read_session(session).participant
+        assert registry[recorded.code] == recorded, session.name
 
 
 # ------------------------------------------------------------------------- annotations
@@ -268,23 +284,28 @@ def test_raters_match_the_truth_within_the_designed_error() -> None:
 
 
 def test_raters_drift_through_a_session_as_designed() -> None:
-    """Each rater's bias drifts by ``drift_per_10min`` (issue 18 item 8): the signed error of the last
-    third of the sessions minus the first third follows the designed drift (pooled over sessions,
-    within 0.015: the lag, the noise of the keys and the clipping at 0 leave about 0.01; measured
-    worst: R1 mouth_open, 0.001 for 0.015)."""
+    """Each rater's bias drifts by ``drift_per_10min`` (issue 18 item 8). The signed error at every
+    frame (truth in 0.15-0.85) is regressed on session time with the truth's slope as a covariate
+    (the reaction lag makes the error about ``-lag x slope``: with the strength sets' mouth opening,
+    issue 23, rising edges cluster in the later sets and a plain late-minus-early comparison of
+    thirds mistook lag for drift); the drift over two thirds of a session follows the design within
+    0.015 (measured worst: R3 mouth_open, 0.014; the thirds' comparison gave 0.018)."""
     design = _lab_truth()["raters"]
+    span_10min = 2 / 3 * np.mean([read_session(s).frame_times_s[-1] for s in SESSIONS]) / 600
     for rater in RATERS:
-        early: list[np.ndarray] = []
-        late: list[np.ndarray] = []
+        rows: list[list[np.ndarray]] = [[] for _ in range(4)]
+        errors: list[list[np.ndarray]] = [[] for _ in range(4)]
         for session in SESSIONS:
             frames, truth = _true_weights(session)
+            t_s = np.asarray(read_session(session).frame_times_s, dtype=float)[frames.astype(int)]
             w = read_annotations(session / "annotations" / f"{rater}.json").weights(frames)
-            inside = (truth > 0.15) & (truth < 0.85)
-            third = len(frames) // 3
-            early.append(np.where(inside, w - truth, np.nan)[:third])
-            late.append(np.where(inside, w - truth, np.nan)[-third:])
-        span_10min = 2 / 3 * np.mean([read_session(s).frame_times_s[-1] for s in SESSIONS]) / 600
-        change = np.nanmean(np.vstack(late), axis=0) - np.nanmean(np.vstack(early), axis=0)
+            slope = np.gradient(truth, t_s, axis=0)
+            for j in range(4):
+                inside = (truth[:, j] > 0.15) & (truth[:, j] < 0.85)
+                rows[j].append(np.column_stack([np.ones(inside.sum()), t_s[inside] / 600, slope[inside, j]]))
+                errors[j].append((w - truth)[inside, j])
+        change = np.array([np.linalg.lstsq(np.vstack(rows[j]), np.concatenate(errors[j]), rcond=None)[0][1]
+                           for j in range(4)]) * span_10min
         expected = np.array(design[rater]["drift_per_10min"]) * span_10min
         print(rater, np.round(change, 3), np.round(expected, 3))
         np.testing.assert_allclose(change, expected, atol=0.015)
@@ -338,7 +359,7 @@ def test_training_stage_builds_its_table_from_the_lab() -> None:
 
 
 # ------------------------------------------------------------------------- size, regeneration
-def test_committed_size_is_at_most_25_mb() -> None:
+def test_committed_size_is_at_most_45_mb() -> None:
     size = sum(p.stat().st_size for p in LAB.rglob("*") if p.is_file() and "__pycache__" not in p.parts)
     print(f"sample_sessions: {size / 1e6:.1f} MB")
     assert size <= MAX_BYTES

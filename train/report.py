@@ -20,6 +20,7 @@ from effortface.train.export import hr_warnings
 from effortface.train.face_fit import PAPER_FACE_TRAINING_RMSE_PCT, FaceModelFit, training_scores
 from effortface.train.game_score import MODEL_MEANINGS, headline
 from effortface.train.hr_fit import HELD_OUT_MODELS, PAPER_HR, HrEvaluation, HrSeries
+from effortface.train.physiology import PAPER_REGRESSION
 
 REPORT_MD = "report.md"
 FIG2_PNG = "fig2_nhr.png"
@@ -164,7 +165,9 @@ def _report_lines(evaluation: HrEvaluation, fit: FaceModelFit, held_out: pd.Data
     """The Markdown body."""
     coef = pd.DataFrame([{"participant": p, "training_level": evaluation.fit.training_levels[p],
                           **c.as_dict()} for p, c in evaluation.fit.per_participant.items()])
-    reg = pd.DataFrame([{"coefficient": k, **v} for k, v in evaluation.fit.tl_regression.as_dict().items()])
+    reg = pd.DataFrame([{"coefficient": k, **v, "paper intercept": getattr(PAPER_REGRESSION, k)[0],
+                         "paper slope": getattr(PAPER_REGRESSION, k)[1]}
+                        for k, v in evaluation.fit.tl_regression.as_dict().items()])
     best = pd.DataFrame([{"blendshape": b, **s.best, "cv_mse": s.cv_mse, "cv_r": s.cv_r}
                          for b, s in fit.search.items()])
     mean_scores = held_out.groupby("model", sort=False)[["r", "rmse_pct_range", "rmse_pct_unit"]].mean()
@@ -184,7 +187,8 @@ def _report_lines(evaluation: HrEvaluation, fit: FaceModelFit, held_out: pd.Data
         "is fitted without the scored participant.", "",
         markdown_table(_hr_table(evaluation)), "", *hr_warnings(evaluation.summary()), "",
         "Per-participant trees (fitted on all their sessions):", "", markdown_table(coef), "",
-        "Regressions on training level (value = intercept + slope x TL):", "", markdown_table(reg), "",
+        "Regressions on training level (value = intercept + slope x TL), beside the paper's "
+        "(Boukhalfi et al. 2015; t_root in W/kg, c_inc and c_dec per second):", "", markdown_table(reg), "",
         f"![Fig. 2]({FIG2_PNG})", "",
         f"## Face ({SCIENCE} section 5)", "",
         f"Hyper-parameters by {fit.config.cv} cross-validation over C {fit.config.grid['C']}, "

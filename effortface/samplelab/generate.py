@@ -14,6 +14,8 @@ run does. Writes, under ``--out``:
   squats clip, assembled to the set's length, with ``motion.json`` as ``effortface motion attach``
   writes it). No ``work.csv``: ``effortface work`` derives it, as in a real lab;
 - ``reliability/poses.csv`` + ``ratings.csv``: 18 poses rated blind by the three raters;
+- ``participants.tsv``: the lab's participant registry (:mod:`effortface.capture_tool.participants`),
+  one row per participant with the values of their ``session.json``;
 - ``_ground_truth/``: what the stages must recover (true curves, heart parameters, rater errors).
 
 An existing output is never overwritten unless ``--force`` (which replaces only what this run writes).
@@ -31,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from effortface.annotate.reliability import Pose, write_poses, write_ratings
+from effortface.capture_tool.participants import REGISTRY_TSV, register
 from effortface.capture_tool.protocols import get_decoder
 from effortface.capture_tool.recorder import decode_serlog
 from effortface.capture_tool.serlog import DATA, SerlogWriter, read_serlog
@@ -60,10 +63,6 @@ EXTENDED_ANT_SESSION_INDEX = 4
 POSE_SESSION_INDICES = range(6)
 SQUATS_CLIP = "cmu_13_29_squats_120fps.bvh"
 MOTION_DECIMATE = 4  # 120 Hz -> 30 Hz keeps the clip small; w is frame-rate invariant (SCIENCE 2)
-SKINS_BGR = ((150, 180, 225), (120, 150, 200), (110, 140, 185), (160, 190, 230), (95, 120, 165),
-             (140, 170, 215))
-#: per participant (PEOPLE order); P01's dark brown is kept clear of the open mouth's dark red
-HAIRS_BGR = ((30, 40, 55), (30, 30, 35), (150, 150, 155), (60, 110, 170), (20, 25, 30), (35, 70, 110))
 
 
 def _rngs(seed: int, index: int, n: int = 6) -> list[np.random.Generator]:
@@ -208,8 +207,7 @@ def write_frames_and_video(folder: Path, plan: SessionPlan, grid_t: np.ndarray, 
     writer.close()
     poses = video.head_motion(times, work_at(plan, times), rng)
     who = PEOPLE.index(plan.person)  # the same face in both of a participant's sessions
-    video.write_video(folder / VIDEO_AVI, truth, poses, video.lighting(times, rng),
-                      SKINS_BGR[who % len(SKINS_BGR)], HAIRS_BGR[who % len(HAIRS_BGR)], rng)
+    video.write_video(folder / VIDEO_AVI, truth, poses, video.lighting(times, rng), who, rng)
     return np.round(times, 4), truth
 
 
@@ -249,6 +247,20 @@ def write_motion(folder: Path, plan: SessionPlan, shared_motion: Path) -> dict |
     return meta
 
 
+def _participant(person: Person) -> Participant:
+    """The participant record a capture writes (session.json and participants.tsv alike)."""
+    return Participant(person.code, person.sex, person.age, person.height_m, person.mass_kg,
+                       person.training_level)
+
+
+def write_participants(out: Path, plans: Sequence[SessionPlan]) -> Path:
+    """``participants.tsv``: one registry row per participant, in code order, as captures register them."""
+    path = out / REGISTRY_TSV
+    for person in sorted({p.person.code: p.person for p in plans}.values(), key=lambda q: q.code):
+        register(path, _participant(person))
+    return path
+
+
 def _session_info(plan: SessionPlan, seed: int) -> SessionInfo:
     """``session.json`` as the recorder writes it, marked as simulated (complete once all is written)."""
     p = plan.person
@@ -257,7 +269,7 @@ def _session_info(plan: SessionPlan, seed: int) -> SessionInfo:
               "codec": "MJPG"}
     return SessionInfo(
         session_id=plan.session_id,
-        participant=Participant(p.code, p.sex, p.age, p.height_m, p.mass_kg, p.training_level),
+        participant=_participant(p),
         devices={"heart_rate": _serial_header(plan), "camera": camera},
         complete=False, created_utc=created,
         software={"name": "effortface", "version": __version__},
@@ -361,7 +373,7 @@ def _targets(out: Path, plans: Sequence[SessionPlan], only: str | None) -> list[
     """What this run writes (and what --force may replace)."""
     paths = [out / p.session_id for p in plans] + [out / GROUND_TRUTH / p.session_id for p in plans]
     if only is None:
-        paths += [out / RELIABILITY, out / GROUND_TRUTH]
+        paths += [out / RELIABILITY, out / GROUND_TRUTH, out / REGISTRY_TSV]
     return paths
 
 
@@ -404,6 +416,7 @@ def build_lab(out: Path, plans: Sequence[SessionPlan] | None = None, seed: int =
         made[plan.session_id] = generate_session(out, plan, seed, shared_motion)
         say(f"{plan.session_id}: {plan.duration_s:.0f} s, {plan.protocol}")
     if whole:
+        write_participants(out, plans)
         write_lab_truth(out, plans, seed)
         pct = write_reliability(out, made, seed)
         say(f"reliability: 18 poses, mean disagreement {pct:.1f} % of the weight range")
@@ -428,13 +441,16 @@ def main(argv: Sequence[str] | None = None, default_out: Path | None = None) -> 
             ids = ", ".join(p.session_id for p in build_plans())
             print(f"generate.py: error: --only: expected one of {ids}, found {args.only!r}", file=sys.stderr)
             return 2
-    existing = [p for p in _targets(args.out, plans, args.only) if p.exists() and any(p.iterdir())]
+    existing = [p for p in _targets(args.out, plans, args.only)
+                if p.is_file() or (p.is_dir() and any(p.iterdir()))]
     if existing and not args.force:
         print(f"generate.py: error: {existing[0]}: output exists; refusing to overwrite (use --force)",
               file=sys.stderr)
         return 2
     for p in existing:
-        if p.exists():  # a session's truth goes with _ground_truth/ when that is replaced
+        if p.is_file():
+            p.unlink()
+        elif p.exists():  # a session's truth goes with _ground_truth/ when that is replaced
             shutil.rmtree(p)
     build_lab(args.out, None if args.only is None else plans, args.seed, args.shared_motion,
               say=lambda line: print(line, flush=True))

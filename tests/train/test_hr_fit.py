@@ -165,14 +165,16 @@ def test_tl_model_beats_pooled_on_held_out_sample_lab_participants():
     """The paper's finding on the sample lab (whose heart is NOT the paper's recursion): every
     participant did a cardio and a strength session, so their fitted thresholds follow their
     fitness, not the exercise; on held-out participants the training-level model beats the pooled
-    one by a clear margin (measured: 9.2 % vs 13.0 % RMSE, r 0.92 vs 0.89).
+    one (measured with the heart of issue 28, %HRR = %VO2R with published kinetics: 9.7 % vs 11.8 %
+    RMSE, r 0.922 vs 0.917; the earlier heart: 9.2 % vs 13.0 %, r 0.92 vs 0.89).
 
-    Where fitness shows: in the regenerated lab (10-minute sessions of work derived from the exercise
-    log, as ``effortface work`` does) every bout above standing raises everyone's heart rate at first,
-    so each participant's threshold lands just above standing (measured 0.11-0.16 W/kg, no trend with
-    TL: slope -0.0007, r -0.09); fitness shows in the rates instead, as the generator made it
-    (capacity and recovery grow with TL): fitter -> slower rise (c_inc slope < 0, measured r -0.87;
-    paper: -0.00043 per TL) and faster recovery (c_dec slope > 0, measured +0.11 per TL)."""
+    Where fitness shows: every bout above standing raises everyone's heart rate at first, so each
+    participant's threshold lands between standing (0.1 W/kg) and the lightest bout (walking at
+    1.2 m/s, 3.4 W/kg): measured 0.90-2.45 W/kg, no trend with TL (slope +0.018, r 0.07; the earlier
+    heart: 0.11-0.16); fitness shows in the rates instead, as the generator made it (VO2max and
+    recovery grow with TL): fitter -> slower rise in NHR (c_inc = 0.0032 - 0.00022 TL, r -0.95;
+    paper: 0.0056 - 0.00043 TL) and faster recovery (c_dec = 0.010 + 0.0014 TL; paper 0.0009 +
+    0.00025 TL; the earlier heart +0.11 per TL)."""
     from pathlib import Path
 
     from effortface.train.dataset import hr_series, prepare, sessions_table
@@ -186,10 +188,10 @@ def test_tl_model_beats_pooled_on_held_out_sample_lab_participants():
     ev = evaluate_hr_models(series)
     summary = ev.summary()
     print({k: (round(v["r"], 3), round(v["rmse_pct"], 1)) for k, v in summary.items()})
-    assert summary["tl_regression"]["rmse_pct"] < 0.8 * summary["pooled_threshold"]["rmse_pct"]
+    assert summary["tl_regression"]["rmse_pct"] < 0.85 * summary["pooled_threshold"]["rmse_pct"]
     assert summary["tl_regression"]["r"] > summary["pooled_threshold"]["r"]
     roots = [c.t_root_w_per_kg for c in ev.fit.per_participant.values()]
-    assert all(0.1 <= r < 1.0 for r in roots)  # above standing (0.1 W/kg), below any exercise bout
+    assert all(0.1 <= r < 3.3 for r in roots)  # above standing (0.1 W/kg), below the lightest bout (3.4)
     assert ev.fit.tl_regression.c_inc.slope < 0 and ev.fit.tl_regression.c_inc.r < -0.8  # fitter -> slower rise
     assert ev.fit.tl_regression.c_dec.slope > 0  # fitter -> faster recovery
     assert summary["per_participant"]["r"] > 0.85

@@ -17,7 +17,9 @@ the heart's ``w_scale`` on that day, unknown to the trainer) and on the repetiti
   rate (14-45 /min);
 - ``mouth_stretch``: exertion and fatigue;
 - ``mouth_open``: closed until ventilation passes about 45 %, then opens with the breathing rhythm
-  and fatigue; quick expirations and gulps at rates growing with fatigue and breathing rate;
+  and fatigue; quick expirations and gulps at rates growing with fatigue and breathing rate; during
+  a strength set the mouth opens to breathe out on each repetition's effort (the set's strain
+  through a lag of 2 s up and 6 s down, rippling with the repetitions);
 - ``eye_squint``: exertion up to a fatigue level, then relaxes with fatigue to a residual;
 - ``brow_lower``: down with exertion, up with fatigue.
 """
@@ -108,9 +110,11 @@ def true_curves(d: dict[str, np.ndarray], expressiveness: tuple[float, ...],
     opens = 1.0 / (1.0 + np.exp(-(ve - 0.45) / 0.07))  # closed early, opens with ventilation
     expirations = _bursts(fa * breaths_per_s / 8.0, 0.6, rng)  # up to one in 8 breaths when spent
     gulps = _bursts(fa * breaths_per_s / 20.0, 0.4, rng)
+    set_breath = _asymmetric_lag(np.clip(3.0 * d["strain"], 0.0, 1.0), 2.0, 6.0)
     raw = np.column_stack([
         0.7 * ex + 0.35 * fa,
-        opens * (0.45 + 0.35 * fa) * (0.7 + 0.3 * breathing) * (1.0 - 0.6 * gulps) + 0.35 * expirations,
+        opens * (0.45 + 0.35 * fa) * (0.7 + 0.3 * breathing) * (1.0 - 0.6 * gulps) + 0.35 * expirations
+        + 0.45 * set_breath * (0.6 + 0.4 * breathing),
         ex * (1.0 - 0.55 * fa) + 0.15 * fa,
         0.9 * ex * (1.0 - 0.5 * fa),
     ])
