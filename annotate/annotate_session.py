@@ -15,7 +15,7 @@ once with an atomic write (:meth:`RaterAnnotations.save`: temp file + rename), s
 when a pass over the video is done, ``history_changed`` when the undo or redo list changes (a menu
 binds its Undo/Redo items to :attr:`can_undo`, :attr:`undo_text`... there), ``status_changed(text,
 is_error)`` for what an edit, undo or redo did); widgets connect to them in ``__init__`` and write back only
-through the methods (STYLE.md L3).
+through the methods (the rule: a view writes back only through model methods and keeps widget state only).
 """
 
 from __future__ import annotations

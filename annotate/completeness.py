@@ -31,7 +31,7 @@ from effortface.annotate.keyframes import KeyframeTrack, RaterAnnotations, read_
 #: longest stretch of session time without a key (and from the video's ends to the nearest key)
 #: that a complete track may have, in seconds (choice: the sample raters key every 2.5-6.5 s)
 MAX_KEY_GAP_S = 30.0
-#: the rule in one line, for the README, the status lines and the model card
+#: the rule in one line, for the guide, the status lines and the model card
 RULE_TEXT = (f"a track is complete when its keys cover the video with no gap over {MAX_KEY_GAP_S:g} s "
              "(first and last keys within that of the video's ends) and the rater finished the pass "
              "(files without passes_done: coverage only); incomplete tracks are left out of training")

@@ -34,6 +34,7 @@ except ImportError:  # pragma: no cover - not POSIX: no file-size limit to watch
 
 from effortface.core.errors import DeviceError, DeviceErrorReason, UserError
 from effortface.capture_tool.avi_writer import MjpgAviWriter
+from effortface.core.opencv import avi_header_frames, index_video  # noqa: F401  (the session format counts frames too)
 from effortface.capture_tool.session import FrameTimeWriter
 
 FOURCC = "MJPG"
@@ -319,53 +320,6 @@ def open_avi_writer(path: str | os.PathLike, fps: float, size: tuple[int, int]) 
         raise FileExistsError(f"{path}: exists; refusing to overwrite") from None
     except OSError as exc:
         raise UserError(f"{path}: expected a writable MJPG video file, found {exc.strerror or exc}") from None
-
-
-def avi_header_frames(path: str | os.PathLike) -> int:
-    """The frame count an AVI's header and index claim (quick: nothing is decoded; 0 if unreadable).
-
-    A finished or recovered capture's header is exact, so a frame table of another length means the
-    table or the video is not this session's; :func:`index_video` decodes the frames instead.
-
-    Parameters
-    ----------
-    path : path-like
-        The video file.
-
-    Returns
-    -------
-    int
-    """
-    cv2 = _cv2()
-    cap = cv2.VideoCapture(str(path))
-    try:
-        return int(cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0) if cap.isOpened() else 0
-    finally:
-        cap.release()
-
-
-def index_video(path: str | os.PathLike) -> int:
-    """Count the frames of a video by decoding it to the end (headers of a crashed AVI lie).
-
-    Parameters
-    ----------
-    path : path-like
-        The video file.
-
-    Returns
-    -------
-    int
-        Frames that decode.
-    """
-    cv2 = _cv2()
-    cap = cv2.VideoCapture(str(path))
-    n = 0
-    try:
-        while cap.grab():
-            n += 1
-    finally:
-        cap.release()
-    return n
 
 
 def rewrite_video(src: str | os.PathLike, dst: str | os.PathLike, max_frames: int | None = None) -> int:

@@ -4,8 +4,7 @@
 (:class:`~effortface.capture_tool.gui.capture_stage.QtCaptureStage`) calls its methods, listens to
 its ``<thing>_changed`` emitters, and its QTimer calls :meth:`CaptureSession.poll`, which delivers
 the background jobs (start, stop, recovery: they open devices, join threads and re-index files) and
-the new rows of the live recording. Nothing here blocks the GUI thread or touches a widget (STYLE.md
-L3, L5). What the live view plots is read back from the session files as they grow
+the new rows of the live recording. Nothing here blocks the GUI thread or touches a widget (the rule: a view writes back only through model methods and keeps widget state only; worker threads hand their results to the GUI thread, which drains them on a timer; no thread touches a widget). What the live view plots is read back from the session files as they grow
 (:class:`CsvTail`), so the screen shows exactly what is on disk.
 """
 

@@ -28,6 +28,7 @@ import os
 import struct
 from pathlib import Path
 
+from effortface.core.bounds import is_number
 from effortface.core.errors import SessionFormatError, UserError, not_text_error
 from effortface.core.fileio import not_a_file
 from effortface.capture_tool.serlog import MAGIC as SERLOG_MAGIC
@@ -148,7 +149,7 @@ def _read_raw(path: Path) -> list[Chunk]:
     if not rows:
         raise SessionFormatError(f"{timing}: expected the arrival times of {path.name}'s bytes, found an "
                                  "empty file (move it away to decode without times)")
-    if not _is_number(rows[0][0]):
+    if not is_number(rows[0][0]):
         return _chunks_from_starts(blob, rows, _offset_column(rows[0], path, timing), timing)
     return _chunks_from_ends(blob, rows, timing)
 
@@ -174,13 +175,6 @@ def _read_timing_rows(timing: Path) -> list[list[str]]:
     except (UnicodeDecodeError, csv.Error) as exc:
         raise not_text_error(timing, exc) from None
 
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
 
 
 def _offset_column(header: list[str], path: Path, timing: Path) -> int:

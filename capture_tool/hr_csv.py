@@ -15,7 +15,7 @@ from pathlib import Path
 from effortface.core import bounds
 from effortface.core.errors import SessionFormatError, not_text_error
 from effortface.core.fileio import check_regular_file
-from effortface.capture_tool.protocols import HrSample
+from effortface.core.hr_sample import HrSample
 
 HR_CSV_COLUMNS = ("t_s", "hr_bpm", "rr_ms", "beat_count", "device", "valid")
 HR_CSV_HEADER = ",".join(HR_CSV_COLUMNS)

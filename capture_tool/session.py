@@ -33,7 +33,7 @@ from effortface.core.participant import (CODE_PATTERN, CODE_RULE, LIMITS, SEX_AL
                                          SEXES, Participant, check_participant_code)
 from effortface.core.locks import FileLock, LockedError, acquire_lock, describe_owner, lock_owner
 from effortface.capture_tool.hr_csv import HR_CSV_HEADER, format_hr_row, read_hr_csv
-from effortface.capture_tool.protocols import HrSample
+from effortface.core.hr_sample import HrSample
 
 SCHEMA_VERSION = 1
 SESSION_JSON = "session.json"
@@ -560,7 +560,7 @@ def video_problems(folder: str | os.PathLike, n_rows: int) -> list[str]:
         Empty when they match.
     """
     folder = Path(folder)
-    from effortface.capture_tool.camera import index_video
+    from effortface.core.opencv import index_video
 
     n_decoded = index_video(folder / VIDEO_AVI)
     if n_decoded == n_rows:
@@ -607,7 +607,7 @@ def _video_problems(s: Session) -> list[str]:
     """A line if the video's frame count differs from the frame table's rows."""
     if s.video_path is None or not s.frame_times_s:
         return []
-    from effortface.capture_tool.camera import avi_header_frames  # lazy: cv2 loads slowly
+    from effortface.core.opencv import avi_header_frames  # lazy: cv2 loads slowly
 
     n_video = avi_header_frames(s.video_path)
     if n_video != len(s.frame_times_s):

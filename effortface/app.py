@@ -7,7 +7,7 @@ model, for a stage that has one; View: the four stages, Ctrl+1..4; Help: the key
 shipped documents, About), a status bar naming the stage and the folder, and remembers its geometry
 and the stages' splitter positions in QSettings.
 Unexpected errors anywhere (GUI thread or worker threads) are logged and shown in a dialog
-(STYLE.md E4); expected ones are shown inside the stage that raised them.
+(the rule: expected errors are shown inside the window and the previous state is kept); expected ones are shown inside the stage that raised them.
 """
 
 from __future__ import annotations
@@ -31,6 +31,7 @@ from effortface.core.docs import DESIGN, SCIENCE, doc_path
 from effortface.core.errors import UserError
 from effortface.core.fileio import check_new_png
 from effortface.core.gui.gui_gc import collect_in_gui_thread
+from effortface.core.gui.qt_messages import install_message_filter
 
 log = logging.getLogger("effortface.app")
 
@@ -56,7 +57,7 @@ WINDOW_KEYS = (
     ("Ctrl+O", "open a lab folder"),
     ("Ctrl+Q", "quit"),
 )
-#: keys of the Annotate stage (README "Annotate")
+#: keys of the Annotate stage (the guide, docs/guide/annotate.md)
 ANNOTATE_KEYS = (
     ("Left / Right", "previous / next frame"),
     ("Shift+Left / Shift+Right", "ten frames back / on"),
@@ -702,6 +703,7 @@ def main(args: argparse.Namespace) -> int:
                         "(use --screenshot PATH to render a stage offscreen)")
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     app = QtWidgets.QApplication.instance() or QtWidgets.QApplication([sys.argv[0]])
+    install_message_filter()  # Qt's propagateSizeHints() noise
     app.setOrganizationName(ORGANIZATION)
     app.setApplicationName(APPLICATION)
     with collect_in_gui_thread():

@@ -1,4 +1,4 @@
-"""The ``effortface`` command line (a contract: see docs/DESIGN.md and the README).
+"""The ``effortface`` command line (a contract: see docs/DESIGN.md and the guide, docs/guide/).
 
 Each sub-command lives in its own module exposing ``add_arguments(parser)`` and ``run(args) -> int``;
 only the chosen one is imported, so ``effortface decode`` never pays for Qt or scikit-learn. A module's
@@ -50,7 +50,8 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
-def _top_parser() -> argparse.ArgumentParser:
+def top_parser() -> argparse.ArgumentParser:
+    """The parser of ``effortface`` itself (``--help``, ``--version``); the guide's command-line reference uses it."""
     epilog = "\n".join(f"  {name:<10} {text}" for name, (_, text) in COMMANDS.items())
     parser = _Parser(
         prog="effortface",
@@ -60,6 +61,27 @@ def _top_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version=_version())
+    return parser
+
+
+def command_parser(command: str) -> argparse.ArgumentParser:
+    """The parser of ``effortface COMMAND`` (its module imported; the guide's command-line reference uses it).
+
+    Parameters
+    ----------
+    command : str
+        One of :data:`COMMANDS`.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        With the command's options, its one-line description and the documents it cites.
+    """
+    module = importlib.import_module(COMMANDS[command][0])
+    parser = _Parser(prog=f"effortface {command}", description=COMMANDS[command][1],
+                     epilog=docs_epilog(getattr(module, "HELP_DOCS", ())) or None,
+                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    module.add_arguments(parser)
     return parser
 
 
@@ -84,7 +106,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``effortface`` command line; return the exit status."""
     args = list(sys.argv[1:] if argv is None else argv)
     if args and args[0] in ("-h", "--help", "--version"):
-        _top_parser().parse_args(args)
+        top_parser().parse_args(args)
         return 0
     if args and args[0] not in COMMANDS and not args[0].startswith("-") and not Path(args[0]).is_dir():
         found = f"{args[0]!r}" + (" (a file)" if Path(args[0]).exists() else "")
@@ -94,11 +116,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     command = args[0] if args and args[0] in COMMANDS else "app"
     rest = args[1:] if args and args[0] in COMMANDS else args
     module = importlib.import_module(COMMANDS[command][0])
-    parser = _Parser(prog=f"effortface {command}", description=COMMANDS[command][1],
-                     epilog=docs_epilog(getattr(module, "HELP_DOCS", ())) or None,
-                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    module.add_arguments(parser)
-    ns = parser.parse_args(rest)
+    ns = command_parser(command).parse_args(rest)
     try:
         return int(module.run(ns) or 0)
     except UserError as exc:

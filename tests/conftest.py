@@ -14,6 +14,31 @@ ROOT = Path(__file__).resolve().parents[1]
 #: repository (tests/data, about 3 MB, with its licences and provenance), so that a fresh clone runs
 #: every test without ../shared. tests/test_test_data.py checks the copy against its SHA256SUMS.
 SHARED_DATA = ROOT / "tests" / "data"
+#: the design card's top-level stage folders (real code before tools/restructure.py, pointers after)
+STAGE_FOLDERS = ("capture_tool", "annotate", "train")
+
+
+def product_sources() -> list[Path]:
+    """The product's Python files, each once, in either layout (links are not followed).
+
+    Before ``tools/restructure.py`` the stages are top-level folders reached through links in
+    ``effortface/``; after it they are real folders of ``effortface/``. ``os.walk`` does not follow
+    links, so no file is listed twice.
+    """
+    out: list[Path] = []
+    for top in ("effortface", *STAGE_FOLDERS):
+        for folder, dirs, files in os.walk(ROOT / top):
+            dirs[:] = sorted(d for d in dirs if d != "__pycache__")
+            out += [Path(folder) / f for f in files if f.endswith(".py")]
+    return sorted(out)
+
+
+def module_name(path: Path) -> str:
+    """The dotted module name of a product file in either layout (``train/x.py`` -> ``effortface.train.x``)."""
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    if parts[0] in STAGE_FOLDERS:
+        parts.insert(0, "effortface")
+    return ".".join(parts).removesuffix(".__init__")
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:

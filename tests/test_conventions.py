@@ -16,6 +16,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.conftest import product_sources
+
 ROOT = Path(__file__).resolve().parents[1]
 #: stage -> (its model's file, class)
 STAGE_MODELS = {"capture": ("capture_tool/capture_session.py", "CaptureSession"),
@@ -28,11 +30,8 @@ THREAD_MODULES = {"threading", "concurrent.futures", "queue", "multiprocessing"}
 
 
 def _sources() -> list[Path]:
-    """Source files, each once (the links effortface/capture_tool etc. are not followed twice)."""
-    out = [p for folder in ("capture_tool", "annotate", "train") for p in (ROOT / folder).rglob("*.py")]
-    out += [p for p in (ROOT / "effortface").rglob("*.py")
-            if p.relative_to(ROOT / "effortface").parts[0] not in ("capture_tool", "annotate", "train")]
-    return sorted(out)
+    """Source files, each once (in either layout: tests/conftest.py)."""
+    return product_sources()
 
 
 def _rel(path: Path) -> str:

@@ -22,16 +22,15 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-#: folder in the repository -> the layer's module prefix
-FOLDERS = {"effortface/core": "effortface.core", "capture_tool": "effortface.capture_tool",
-           "annotate": "effortface.annotate", "train": "effortface.train", "effortface": "effortface"}
-#: layer -> the layers it may import (its own included)
-LAYERS = ["effortface.core", "effortface.capture_tool", "effortface.annotate", "effortface.train", "effortface"]
+from tests.conftest import ROOT, module_name, product_sources
+
+#: the layers, lowest first: a module may import its own layer and those before it
+LAYERS = ["effortface.core", "effortface.capture_tool", "effortface.annotate", "effortface.synth", "effortface.train",
+          "effortface.interop", "effortface"]
 QT = {"PySide6", "pyqtgraph", "shiboken6", "PyQt5", "PyQt6"}
 OLD_TOP_LEVEL = {"capture_tool", "annotate", "train"}
 #: a command module: effortface.commands.X or effortface.<stage>.commands.X (or the package itself)
-COMMAND_MODULE = re.compile(r"^effortface(\.(capture_tool|annotate|train))?\.commands(\.|$)")
+COMMAND_MODULE = re.compile(r"^effortface(\.(capture_tool|annotate|synth|train|interop))?\.commands(\.|$)")
 
 
 def _imports(path: Path) -> set[str]:
@@ -48,16 +47,12 @@ def _imports(path: Path) -> set[str]:
 
 
 def _layer_of(path: Path) -> str:
-    rel = path.relative_to(ROOT).as_posix()
-    return next(layer for folder, layer in FOLDERS.items() if rel.startswith(folder + "/"))
+    return LAYERS[_layer_index(module_name(path)) or 0]
 
 
 def _sources() -> list[Path]:
-    """Source files, each once (the links effortface/capture_tool etc. are not followed twice)."""
-    out = [p for folder in ("capture_tool", "annotate", "train") for p in (ROOT / folder).rglob("*.py")]
-    out += [p for p in (ROOT / "effortface").rglob("*.py")
-            if p.relative_to(ROOT / "effortface").parts[0] not in OLD_TOP_LEVEL]
-    return sorted(out)
+    """Source files, each once (in either layout: tests/conftest.py)."""
+    return product_sources()
 
 
 def _layer_index(module: str) -> int | None:
@@ -118,7 +113,8 @@ def test_runtime_imports_numpy_scipy_only(tmp_path: Path) -> None:
 
 def test_import_linter_contracts() -> None:
     """import-linter checks the layer and runtime contracts in pyproject.toml (indirect imports too)."""
-    lint = subprocess.run(["lint-imports", "--no-cache"], cwd=ROOT, capture_output=True, text=True)
+    lint = subprocess.run([sys.executable, "-c", "import sys; from importlinter.cli import lint_imports_command; "
+                          "sys.exit(lint_imports_command())", "--no-cache"], cwd=ROOT, capture_output=True, text=True)
     assert lint.returncode == 0, lint.stdout + lint.stderr
 
 
@@ -128,11 +124,8 @@ def _command_modules_imported(path: Path) -> list[str]:
 
 
 def _module_name(path: Path) -> str:
-    """The dotted module name of a source file (its layer prefix and its path below it)."""
-    rel = path.relative_to(ROOT).as_posix()
-    folder = next(f for f in FOLDERS if rel.startswith(f + "/"))
-    parts = rel[len(folder) + 1:].removesuffix(".py").split("/")
-    return ".".join([FOLDERS[folder], *parts]).removesuffix(".__init__")
+    """The dotted module name of a source file."""
+    return module_name(path)
 
 
 @pytest.mark.parametrize("path", _sources() + sorted((ROOT / "benchmarks").glob("*.py"))
@@ -157,5 +150,6 @@ def test_the_command_module_rule_catches_an_import(tmp_path: Path) -> None:
                    "def f():\n    import effortface.commands.demo\n")
     assert _command_modules_imported(lib) == ["effortface.commands.demo", "effortface.train.commands.synth",
                                               "effortface.train.commands.synth.run"]
-    assert _module_name(ROOT / "train" / "commands" / "synth.py") == "effortface.train.commands.synth"
+    assert _module_name(ROOT / "train" / "commands" / "train.py") == "effortface.train.commands.train"
+    assert _module_name(ROOT / "effortface" / "train" / "commands" / "train.py") == "effortface.train.commands.train"
     assert _module_name(ROOT / "effortface" / "commands" / "__init__.py") == "effortface.commands"

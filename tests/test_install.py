@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import site
 import subprocess
 import sys
 import time
@@ -23,7 +24,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 #: what a distribution is built from (the stage folders are reached through effortface/'s links)
-SOURCES = ("pyproject.toml", "README.md", "effortface", "capture_tool", "annotate", "train", "docs",
+SOURCES = ("pyproject.toml", "setup.py", "README.md", "effortface", "capture_tool", "annotate", "train", "docs",
            "runtime-dist")
 HEAVY = ("PySide6", "cv2", "pandas", "sklearn", "onnxruntime", "matplotlib")
 CLIP = ROOT / "tests" / "data" / "motion" / "cmu_13_29_squats_120fps.bvh"
@@ -60,6 +61,8 @@ def sources(tmp_path_factory) -> Path:
     ignore = shutil.ignore_patterns("__pycache__", "*.egg-info", "build", "dist")
     for name in SOURCES:
         src = ROOT / name
+        if not src.exists():
+            continue
         if src.is_dir():
             shutil.copytree(src, out / name, symlinks=True, ignore=ignore)
         else:
@@ -70,7 +73,15 @@ def sources(tmp_path_factory) -> Path:
 def _venv(folder: Path, system_site_packages: bool) -> Path:
     """A fresh venv with pip; returns its ``bin`` folder."""
     venv.EnvBuilder(with_pip=True, system_site_packages=system_site_packages, clear=True).create(folder)
-    return folder / ("Scripts" if sys.platform == "win32" else "bin")
+    bin_ = folder / ("Scripts" if sys.platform == "win32" else "bin")
+    if system_site_packages and sys.prefix != sys.base_prefix:
+        # the tests run in a venv (as a newcomer runs them): the inner venv sees the base interpreter's
+        # packages, not this venv's, so a .pth file adds this venv's site-packages (pandas & co)
+        inner = _run([bin_ / "python", "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+                     folder).stdout.strip()
+        outer = [p for p in site.getsitepackages() if Path(p).is_dir()]
+        (Path(inner) / "_outer_venv.pth").write_text("\n".join(outer) + "\n")
+    return bin_
 
 
 def _user_folder(tmp_path: Path) -> Path:

@@ -15,7 +15,7 @@ from __future__ import annotations
 import csv
 import io
 import json
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +25,7 @@ from effortface.core.errors import UserError
 from effortface.core.fileio import atomic_write_text
 from effortface.train.runtime import FaceModel
 
-#: the file formats of :func:`write_curves`
+#: the file formats of :func:`write_curves` out of the box (:func:`curve_formats` adds registered ones)
 CURVE_FORMATS = ("csv", "livelink")
 #: significant digits of the per-frame CSV's values
 CSV_DIGITS = 10
@@ -187,6 +187,39 @@ def write_output(path: Path, text: str, force: bool) -> None:
         raise UserError(f"--out {path}: expected a writable file, found {exc.strerror or exc}") from None
 
 
+#: a curve format: (curves, model, digits) -> the file's text
+CurveFormat = Callable[[Mapping[str, np.ndarray], FaceModel, int], str]
+_FORMATS: dict[str, CurveFormat] = {}
+
+
+def register_curve_format(name: str, to_text: CurveFormat) -> None:
+    """Make :func:`write_curves` (``fmt=name``) write another file format.
+
+    Parameters
+    ----------
+    name : str
+        The format's name (lower case, no spaces), e.g. ``"json"``; registering a name again
+        replaces its writer.
+    to_text : callable
+        ``to_text(curves, model, digits) -> str``: ``curves`` maps each column of
+        ``model.columns`` (``t_s``, work, power, heart rate..., then the blendshapes) to one
+        value per frame.
+
+    Raises
+    ------
+    ValueError
+        If ``name`` is empty or holds anything but lower-case letters, digits, ``_`` and ``-``.
+    """
+    if not (isinstance(name, str) and name and all(c.islower() or c.isdigit() or c in "_-" for c in name)):
+        raise ValueError(f"name: expected a lower-case format name such as 'json', found {name!r}")
+    _FORMATS[name] = to_text
+
+
+def curve_formats() -> tuple[str, ...]:
+    """The formats :func:`write_curves` writes now: :data:`CURVE_FORMATS` and the registered ones."""
+    return tuple(_FORMATS)
+
+
 def curves_text(curves: Mapping[str, np.ndarray], model: FaceModel, fmt: str = "csv",
                 digits: int = CSV_DIGITS, every_frame: bool = False) -> str:
     """The curves of ``model`` as the text of a ``fmt`` file.
@@ -197,8 +230,9 @@ def curves_text(curves: Mapping[str, np.ndarray], model: FaceModel, fmt: str = "
         From :meth:`FaceModel.synthesize` or :meth:`FaceModel.curves_from_work`.
     model : FaceModel
         The model that made them (its columns and blendshapes).
-    fmt : {"csv", "livelink"}
-        The per-frame CSV or a Live Link Face CSV.
+    fmt : str
+        One of :func:`curve_formats`: ``"csv"`` (the per-frame CSV), ``"livelink"`` (a Live Link
+        Face CSV) or a registered one.
     digits : int
         Significant digits of the per-frame CSV.
     every_frame : bool
@@ -213,11 +247,12 @@ def curves_text(curves: Mapping[str, np.ndarray], model: FaceModel, fmt: str = "
     UserError
         An unknown format, or a blendshape whose ARKit names Live Link does not know.
     """
-    if fmt not in CURVE_FORMATS:
-        raise UserError(f"format: expected one of {', '.join(CURVE_FORMATS)}, found {fmt!r}")
-    if fmt == "livelink":
-        return livelink_csv(curves, model.blendshapes, every_frame)
-    return curves_csv(curves, model.columns, digits)
+    to_text = _FORMATS.get(fmt)
+    if to_text is None:
+        raise UserError(f"format: expected one of {', '.join(curve_formats())}, found {fmt!r}")
+    if fmt == "livelink" and every_frame:
+        return livelink_csv(curves, model.blendshapes, every_frame=True)
+    return to_text(curves, model, digits)
 
 
 def write_curves(path: str | Path, curves: Mapping[str, np.ndarray], model: FaceModel, *,
@@ -254,3 +289,7 @@ def write_curves(path: str | Path, curves: Mapping[str, np.ndarray], model: Face
     if fmt == "csv":
         write_output(units_path(out), units_json(model.columns, provenance), force=True)  # checked with ``out``
     return out
+
+
+register_curve_format("csv", lambda curves, model, digits: curves_csv(curves, model.columns, digits))
+register_curve_format("livelink", lambda curves, model, digits: livelink_csv(curves, model.blendshapes))

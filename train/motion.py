@@ -14,7 +14,7 @@ import dataclasses
 import itertools
 import math
 import zipfile
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any, NoReturn, TextIO
 
@@ -22,6 +22,7 @@ import numpy as np
 
 from effortface.core import bounds
 from effortface.core.bounds import BOUNDS
+from effortface.core.bounds import is_number
 from effortface.core.errors import UserError
 from effortface.core.fileio import check_regular_file
 from effortface.train.npzio import load_npz
@@ -276,12 +277,43 @@ def motion_from_positions(
     return Motion(names, par, pos, None, float(fps), source)
 
 
-#: motion file suffixes :func:`read_motion` reads
+#: motion file suffixes :func:`read_motion` reads out of the box (:func:`motion_suffixes` adds registered ones)
 MOTION_SUFFIXES = (".bvh", ".npz", ".c3d", ".csv")
+#: a motion reader: (path, unit_m) -> Motion; ``unit_m`` is the caller's length unit (None: the file's own)
+MotionReader = Callable[[Path, float | None], Motion]
+_READERS: dict[str, MotionReader] = {}
+
+
+def register_motion_reader(suffix: str, reader: MotionReader) -> None:
+    """Make :func:`read_motion` (and so ``effortface synth``, the runtime, the Synthesize stage) read a format.
+
+    Parameters
+    ----------
+    suffix : str
+        The file suffix, with its dot (``".trc"``); compared without case. A suffix registered
+        again gets the new reader.
+    reader : callable
+        ``reader(path, unit_m) -> Motion``: raise :class:`MotionFormatError` naming the file, what
+        was expected and what was found for a file it cannot read (:func:`motion_from_positions`
+        builds a checked Motion from joint positions).
+
+    Raises
+    ------
+    ValueError
+        If ``suffix`` is not a dot and at least one character.
+    """
+    if not (isinstance(suffix, str) and suffix.startswith(".") and len(suffix) > 1 and suffix.strip() == suffix):
+        raise ValueError(f"suffix: expected a file suffix such as '.trc', found {suffix!r}")
+    _READERS[suffix.lower()] = reader
+
+
+def motion_suffixes() -> tuple[str, ...]:
+    """The suffixes :func:`read_motion` reads now: :data:`MOTION_SUFFIXES` and the registered ones."""
+    return tuple(_READERS)
 
 
 def read_motion(path: str | Path, *, unit_m: float | None = None) -> Motion:
-    """Read a motion file, choosing the reader by suffix (:data:`MOTION_SUFFIXES`).
+    """Read a motion file, choosing the reader by suffix (:func:`motion_suffixes`, :func:`register_motion_reader`).
 
     ``.bvh`` (:func:`read_bvh`), ``.npz`` (:func:`read_npz_motion`), ``.csv`` joint positions in
     either dialect (``<joint>_x_m`` or ``<joint>_x`` columns:
@@ -310,20 +342,35 @@ def read_motion(path: str | Path, *, unit_m: float | None = None) -> Motion:
     """
     path = Path(path)
     suffix = path.suffix.lower()
-    if suffix in MOTION_SUFFIXES and path.exists():  # a FIFO or device would block or read forever
+    reader = _READERS.get(suffix)
+    if reader is None:
+        raise MotionFormatError(f"{path}: expected a motion file ending in {', '.join(motion_suffixes())}, "
+                                f"got suffix {suffix!r}")
+    if path.exists():  # a FIFO or device would block or read forever
         check_regular_file(path, f"a motion file ({suffix})", MotionFormatError)
-    if suffix == ".bvh":
-        return read_bvh(path, unit_m=unit_m)
-    if suffix == ".npz":
-        return read_npz_motion(path)
-    if suffix == ".csv":
-        return read_positions_csv(path)
-    if suffix == ".c3d":
-        from effortface.train.interop.c3d_motion import read_c3d  # imports the c3d package when called
+    return reader(path, unit_m)
 
-        return read_c3d(path)
-    raise MotionFormatError(f"{path}: expected a motion file ending in {', '.join(MOTION_SUFFIXES)}, "
-                            f"got suffix {suffix!r}")
+
+def _read_bvh(path: Path, unit_m: float | None) -> Motion:
+    return read_bvh(path, unit_m=unit_m)
+
+
+def _read_npz(path: Path, unit_m: float | None) -> Motion:
+    return read_npz_motion(path)
+
+
+def _read_csv(path: Path, unit_m: float | None) -> Motion:
+    return read_positions_csv(path)
+
+
+def _read_c3d(path: Path, unit_m: float | None) -> Motion:
+    from effortface.train.interop.c3d_motion import read_c3d  # imports the c3d package when called
+
+    return read_c3d(path)
+
+
+for _suffix, _reader in zip(MOTION_SUFFIXES, (_read_bvh, _read_npz, _read_c3d, _read_csv)):
+    register_motion_reader(_suffix, _reader)
 
 
 def read_positions_csv(path: str | Path) -> Motion:
@@ -656,7 +703,7 @@ def _raise_bad_frame(path: Path, rows: list[str], first: int, n_channels: int) -
         try:
             [float(f) for f in fields]
         except ValueError:
-            bad = next(f for f in fields if not _is_number(f))
+            bad = next(f for f in fields if not is_number(f))
             raise MotionFormatError(
                 f"{path}: line {first + k + 1}: expected {n_channels} numbers, found {bad!r}"
             ) from None
@@ -666,14 +713,6 @@ def _raise_bad_frame(path: Path, rows: list[str], first: int, n_channels: int) -
             )
     raise MotionFormatError(f"{path}: expected {n_channels} numbers per frame")  # pragma: no cover
 
-
-def _is_number(text: str) -> bool:
-    """True if ``text`` parses as a float."""
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
 
 
 #: the pair of columns a rotation about each axis mixes: (R @ R_axis(a))[:, i] = c R[:, i] + s R[:, k]

@@ -3,7 +3,7 @@
 :class:`SynthSession` follows the stage-model convention of :mod:`effortface.core`: the widgets of
 :mod:`effortface.train.gui.synth_stage` call its methods and connect to its ``<thing>_changed``
 emitters; a QTimer calls :meth:`SynthSession.advance` with the wall time elapsed, so the play head
-moves in real time whatever the frame rate of the display (STYLE.md L3).
+moves in real time whatever the frame rate of the display (the rule: a view writes back only through model methods and keeps widget state only).
 
 Curves are recomputed for the whole clip whenever the character or the model changes, at once or,
 for the GUI, in the core :class:`~effortface.core.jobs.Jobs`, whose newest result

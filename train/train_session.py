@@ -4,7 +4,7 @@
 :mod:`effortface.train.gui.train_stage` call its methods and connect to its ``<thing>_changed``
 emitters; its background work (training, export, comparison) runs in the core
 :class:`~effortface.core.jobs.Jobs`, which a QTimer drains through :meth:`TrainSession.poll` on the
-GUI thread (STYLE.md L3, L5). The training and the export are the command line's own
+GUI thread (the rule: a view writes back only through model methods and keeps widget state only; worker threads hand their results to the GUI thread, which drains them on a timer; no thread touches a widget). The training and the export are the command line's own
 (:func:`effortface.train.pipeline.train_models`, which reports progress and can be cancelled between
 cross-validation folds, and :func:`effortface.train.pipeline.export_outcome`).
 """

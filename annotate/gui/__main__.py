@@ -13,6 +13,7 @@ from pathlib import Path
 from PySide6 import QtWidgets
 
 from effortface.annotate.gui.annotate_stage import QtAnnotateStage
+from effortface.core.gui.qt_messages import install_message_filter
 
 SIZE = (1400, 900)
 
@@ -41,6 +42,7 @@ def main(argv: list[str] | None = None) -> int:
     """Run the stage window; return the exit status."""
     args = _parser().parse_args(argv)
     app = QtWidgets.QApplication.instance() or QtWidgets.QApplication(sys.argv[:1])
+    install_message_filter()  # Qt's propagateSizeHints() noise
     stage = QtAnnotateStage(Path(args.dir))
     stage.rater.setText(args.rater)
     stage.resize(*args.size)

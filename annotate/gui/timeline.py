@@ -17,7 +17,7 @@
 - zoom: :meth:`QtTimeline.zoom` (the editor binds + and -) about the cursor, :meth:`frame_all` (F);
 - a cursor line at the current frame's time in both plots; dragging it scrubs the video.
 
-Everything is written back through the model's methods (STYLE.md L3); the widget keeps only the
+Everything is written back through the model's methods (the rule: a view writes back only through model methods and keeps widget state only); the widget keeps only the
 selection and the drag preview.
 """
 

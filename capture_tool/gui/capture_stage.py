@@ -5,7 +5,7 @@
 its ``<thing>_changed`` emitters in ``__init__``, and its QTimer calls
 :meth:`~effortface.capture_tool.capture_session.CaptureSession.poll`, which delivers the background
 start, stop, recovery and strap-monitor jobs and the live rows; the GUI thread never waits
-(STYLE.md L3, L5). The hotkeys F1-F8 are QActions (:attr:`QtCaptureStage.hotkeys`) that the main
+(the rule: a view writes back only through model methods and keeps widget state only; worker threads hand their results to the GUI thread, which drains them on a timer; no thread touches a widget). The hotkeys F1-F8 are QActions (:attr:`QtCaptureStage.hotkeys`) that the main
 window adds too, so they work from every stage while recording.
 """
 

@@ -1,7 +1,7 @@
 """The live view: camera preview, HR plot with zones, large HR/RR figures and the recording counters.
 
 The view holds only what it draws. The capture stage drains the recorder's queues on a QTimer and
-calls :meth:`QtLiveView.add_samples`, :meth:`set_frame` and :meth:`set_status` (STYLE.md L5).
+calls :meth:`QtLiveView.add_samples`, :meth:`set_frame` and :meth:`set_status` (the rule: worker threads hand their results to the GUI thread, which drains them on a timer; no thread touches a widget).
 """
 
 from __future__ import annotations

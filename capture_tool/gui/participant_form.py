@@ -12,7 +12,7 @@ and Record is refused until the operator picks "Use the record" (the form takes 
 in ``participants_history.tsv``).
 
 The form keeps only widget state; :meth:`QtParticipantForm.participant` builds the session module's
-validated ``Participant`` and shows any problem inside the form (STYLE.md E4).
+validated ``Participant`` and shows any problem inside the form (the rule: expected errors are shown inside the window and the previous state is kept).
 """
 
 from __future__ import annotations

@@ -15,6 +15,7 @@ from collections.abc import Iterable, Mapping
 from typing import ClassVar
 
 from effortface.core.errors import SessionFormatError, UserError
+from effortface.core.hr_sample import HrSample  # noqa: F401  (defined below the stages: the session format uses it)
 from effortface.core.physio_limits import hr_plausible, rr_plausible
 
 #: protocol name -> module in this package that defines ``DECODER`` (a Decoder subclass)
@@ -24,34 +25,6 @@ PROTOCOLS: dict[str, str] = {
     "hrmi": "effortface.capture_tool.protocols.hrmi",
     "lines": "effortface.capture_tool.protocols.lines",
 }
-
-
-@dataclasses.dataclass(frozen=True)
-class HrSample:
-    """One decoded heart-rate observation, one row of ``heart_rate.csv``.
-
-    Attributes
-    ----------
-    t_s : float
-        Host arrival time of the bytes that completed this sample (session seconds).
-    hr_bpm : float or None
-        Heart rate; None when the strap reports no contact (then ``valid`` is False).
-    rr_ms : tuple of float
-        R-R intervals first observed in this sample, oldest first (may be empty).
-    beat_count : int or None
-        The strap's own beat counter (ANT beat count, HxM heartbeat number), if it has one.
-    device : str
-        Device identifier (e.g. ``"ant:3425"``, ``"hxm"``).
-    valid : bool
-        False on contact loss or an invalid (0) HR; such rows are kept, never written as 0 bpm.
-    """
-
-    t_s: float
-    hr_bpm: float | None
-    rr_ms: tuple[float, ...] = ()
-    beat_count: int | None = None
-    device: str = ""
-    valid: bool = True
 
 
 @dataclasses.dataclass(frozen=True)

@@ -120,3 +120,22 @@ def _as_float(value: object) -> float:
         return float(value)
     except OverflowError:  # an int beyond float range
         return -math.inf if str(value).startswith("-") else math.inf
+
+
+def is_number(text: str) -> bool:
+    """True if ``text`` parses as a float (``"1e3"``, ``"nan"`` and ``"-0.5"`` do; ``"12a"`` does not).
+
+    Parameters
+    ----------
+    text : str
+        A field of a file being read.
+
+    Returns
+    -------
+    bool
+    """
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True

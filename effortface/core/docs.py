@@ -2,16 +2,18 @@
 
 ``--help`` texts, the training report and the main window's Help menu cite these documents by their
 repository path (``docs/DESIGN.md``); :func:`doc_path` finds the file wherever effortface runs from
-(the repository's ``effortface/docs`` is a link to ``../docs``; a wheel carries the files as package
-data). A test checks that every path cited exists in the repository and in a built wheel.
+(a checkout or an editable install reads the repository's ``docs/``; a wheel carries the files as package
+data in ``effortface/docs/``, copied there at build time by ``setup.py``). A test checks that every
+path cited exists in the repository and in a built wheel.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-#: the folder of the shipped documents (a link to the repository's docs/, or the installed copy)
-DOCS_DIR = Path(__file__).resolve().parents[1] / "docs"
+_PACKAGED = Path(__file__).resolve().parents[1] / "docs"
+#: the folder of the shipped documents: the installed copy (a wheel), else the repository's docs/
+DOCS_DIR = _PACKAGED if _PACKAGED.is_dir() else Path(__file__).resolve().parents[2] / "docs"
 #: session folder, long table, exercise log, model bundle, command line and architecture
 DESIGN = "docs/DESIGN.md"
 #: the science the product implements (the paper's model and our marked choices)

@@ -3,7 +3,7 @@
 A stage model (``CaptureSession``, ``AnnotateSession``, ``TrainSession``, ``SynthSession``; the
 convention is in :mod:`effortface.core`) owns one :class:`Emitter` per thing that changes, named
 ``<thing>_changed``; its Qt view connects to them in ``__init__`` and writes back only through model
-methods (STYLE.md L3).
+methods (the rule: a view writes back only through model methods and keeps widget state only).
 """
 
 from __future__ import annotations

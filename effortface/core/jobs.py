@@ -1,6 +1,6 @@
 """Background work for every stage: run blocking work off the GUI thread, deliver it on a QTimer.
 
-Qt-free on purpose (STYLE.md L5): a stage model (or a view with no model, such as the device
+Qt-free on purpose (the rule: worker threads hand their results to the GUI thread, which drains them on a timer; no thread touches a widget): a stage model (or a view with no model, such as the device
 pre-flight) calls :meth:`Jobs.submit` with an explicit ``done`` callback (and ``progress`` callback
 when the work reports), and the stage's QTimer calls :meth:`Jobs.drain`, which calls them on the GUI
 thread without ever waiting. A job that reports progress or can be cancelled takes its :class:`Job`

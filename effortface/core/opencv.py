@@ -34,3 +34,50 @@ def import_cv2() -> ModuleType:
             cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
         _quieted = True
     return cv2
+
+
+def avi_header_frames(path: str | os.PathLike[str]) -> int:
+    """The frame count an AVI's header and index claim (quick: nothing is decoded; 0 if unreadable).
+
+    A finished or recovered capture's header is exact, so a frame table of another length means the
+    table or the video is not this session's; :func:`index_video` decodes the frames instead.
+
+    Parameters
+    ----------
+    path : path-like
+        The video file.
+
+    Returns
+    -------
+    int
+    """
+    cv2 = import_cv2()
+    cap = cv2.VideoCapture(str(path))
+    try:
+        return int(cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0) if cap.isOpened() else 0
+    finally:
+        cap.release()
+
+
+def index_video(path: str | os.PathLike[str]) -> int:
+    """Count the frames of a video by decoding it to the end (headers of a crashed AVI lie).
+
+    Parameters
+    ----------
+    path : path-like
+        The video file.
+
+    Returns
+    -------
+    int
+        Frames that decode.
+    """
+    cv2 = import_cv2()
+    cap = cv2.VideoCapture(str(path))
+    n = 0
+    try:
+        while cap.grab():
+            n += 1
+    finally:
+        cap.release()
+    return n

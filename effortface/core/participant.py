@@ -5,7 +5,7 @@ Every place that takes a person's body data reads :data:`LIMITS`: the Capture fo
 (``effortface.train.dataset.check_participants``) and the runtime's ``Character``. A value inside
 the limits is accepted by all of them, a value outside is refused by all of them.
 
-The limits (choice, documented in the README, section "Capturing, replaying and recovering"):
+The limits (choice, documented in the guide, docs/guide/capture.md, "Capturing, replaying and recovering"):
 
 ============== ================ ===================================================================
 field          range            why

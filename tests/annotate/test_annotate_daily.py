@@ -4,7 +4,6 @@ the expert editing basics, the blind round's unrated state and the reliability r
 
 from __future__ import annotations
 
-import shutil
 import time
 from pathlib import Path
 
@@ -25,23 +24,8 @@ Mod = QtCore.Qt.KeyboardModifier
 Left = QtCore.Qt.MouseButton.LeftButton
 
 
-@pytest.fixture
-def lab(tmp_path: Path) -> Path:
-    dst = tmp_path / "lab"
-    shutil.copytree(SAMPLES / SESSION, dst / SESSION, ignore=shutil.ignore_patterns("serial", "work.csv"))
-    shutil.copytree(SAMPLES / "reliability", dst / "reliability")
-    return dst
-
-
-@pytest.fixture
-def stage(qtbot, lab: Path) -> QtAnnotateStage:
-    widget = QtAnnotateStage(lab, cache_frames=64)
-    qtbot.addWidget(widget)
-    widget.resize(1280, 800)
-    widget.show()
-    qtbot.waitExposed(widget)
-    yield widget
-    widget.shutdown()
+#: the stage's window size in these tests
+STAGE_SIZE = (1280, 800)
 
 
 def _open(stage: QtAnnotateStage, rater: str):

@@ -32,26 +32,6 @@ Key = QtCore.Qt.Key
 Left = QtCore.Qt.MouseButton.LeftButton
 
 
-@pytest.fixture
-def lab(tmp_path: Path) -> Path:
-    """A copy of one sample session (with the three sample raters' files) and the reliability round."""
-    dst = tmp_path / "lab"
-    shutil.copytree(SAMPLES / SESSION, dst / SESSION, ignore=shutil.ignore_patterns("serial", "work.csv"))
-    shutil.copytree(SAMPLES / "reliability", dst / "reliability")
-    return dst
-
-
-@pytest.fixture
-def stage(qtbot, lab: Path) -> QtAnnotateStage:
-    widget = QtAnnotateStage(lab, cache_frames=64)
-    qtbot.addWidget(widget)
-    widget.resize(1400, 900)
-    widget.show()
-    qtbot.waitExposed(widget)
-    yield widget
-    widget.shutdown()
-
-
 def _open_by_mouse(qtbot, stage: QtAnnotateStage, rater: str):
     rect = stage.sessions.visualItemRect(stage.sessions.item(0))
     QTest.mouseClick(stage.sessions.viewport(), Left, pos=rect.center())

@@ -44,27 +44,6 @@ SPEED = 5.0  # replay speed-up: 60 s of the real strap recording plays in 12 s
 
 # --------------------------------------------------------------------------------- fixtures
 @pytest.fixture
-def settings(tmp_path: Path) -> QtCore.QSettings:
-    return QtCore.QSettings(str(tmp_path / "settings.ini"), QtCore.QSettings.Format.IniFormat)
-
-
-@pytest.fixture
-def window(qtbot, tmp_path: Path, settings: QtCore.QSettings) -> MainWindow:
-    win = MainWindow(tmp_path / "sessions", settings)
-    win.show()
-    qtbot.waitExposed(win)
-    win.activateWindow()
-    stage = win.show_stage("capture")
-    qtbot.waitUntil(stage.settled, timeout=10_000)
-    yield win
-    # closed here, not by qtbot: a test that failed mid-recording must not leave a question open
-    if stage.session.recording:
-        stage.stop_now()
-    win.close()
-    win.deleteLater()
-
-
-@pytest.fixture
 def camera_file(tmp_path: Path) -> Path:
     """A 25 s numbered MJPG clip at 12 fps (160x120) played as the camera."""
     return make_numbered_video(tmp_path / "camera.avi", n_frames=300, fps=12.0)

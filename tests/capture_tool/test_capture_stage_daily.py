@@ -29,27 +29,6 @@ pytestmark = pytest.mark.qt_log_ignore("This plugin does not support propagateSi
 ROOT = Path(__file__).resolve().parents[2]
 
 
-@pytest.fixture
-def settings(tmp_path: Path) -> QtCore.QSettings:
-    return QtCore.QSettings(str(tmp_path / "settings.ini"), QtCore.QSettings.Format.IniFormat)
-
-
-@pytest.fixture
-def window(qtbot, tmp_path: Path, settings: QtCore.QSettings) -> MainWindow:
-    win = MainWindow(tmp_path / "sessions", settings)
-    win.show()
-    qtbot.waitExposed(win)
-    win.activateWindow()
-    stage = win.show_stage("capture")
-    qtbot.waitUntil(stage.settled, timeout=10_000)
-    yield win
-    if stage.session.recording:
-        stage.stop_now()
-    win.shutdown()
-    win.hide()
-    win.deleteLater()
-
-
 def _strap(seconds: float, hr_bpm: int = 72, rate_hz: float = 4.0) -> PtyReplay:
     """A 'lines' strap on a pseudo-terminal: ``HR:<bpm>`` at ``rate_hz`` for ``seconds``."""
     n = int(seconds * rate_hz)

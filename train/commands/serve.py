@@ -11,19 +11,20 @@ import signal
 import socket
 import sys
 import threading
+from typing import Any
 
 from effortface.core import bounds
 from effortface.core.errors import UserError
 from effortface.train.character_options import add_character_arguments, character_from_args
 from effortface.train.interop.serve import (EFFORT_WORK_TYPE, MOCAP_TYPE, FaceProcessor, LslInput, OscInput,
-                                            Outputs, parse_host_port, serve)
+                                            Outputs, input_names, make_input, output_names, parse_host_port, serve)
 from effortface.train.runtime import load_model
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Model, input, outputs, character options."""
     parser.add_argument("model_dir", metavar="MODEL", help="model bundle folder, or 'default'")
-    parser.add_argument("--input", choices=("lsl", "osc"), default="lsl", help="where frames come from")
+    parser.add_argument("--input", choices=input_names(), default="lsl", help="where frames come from")
     parser.add_argument("--input-type", choices=(EFFORT_WORK_TYPE, MOCAP_TYPE), default=EFFORT_WORK_TYPE,
                         help="LSL stream type (default EffortWork: w_per_kg, p_per_kg)")
     parser.add_argument("--input-name", default=None, help="LSL stream name (default: the first of its type)")
@@ -32,7 +33,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mapping", default=None, metavar="JSON",
                         help="joint-to-segment mapping for the --skeleton joints (default: built-in conventions)")
     parser.add_argument("--osc-in-port", type=int, default=9000, metavar="PORT", help="OSC input port (default 9000)")
-    parser.add_argument("--output", action="append", choices=("lsl", "osc", "livelink"),
+    parser.add_argument("--output", action="append", choices=output_names(),
                         help="where weights go (repeatable; default lsl)")
     parser.add_argument("--name", default="effortface face", help="output stream / subject name")
     parser.add_argument("--osc-out", default=None, metavar="HOST:PORT", help="OSC output address")
@@ -87,14 +88,14 @@ def run(args: argparse.Namespace) -> int:
                               mapping=args.mapping)
     outputs = Outputs(model, args.output or ["lsl"], name=args.name, osc_to=addresses["osc_to"],
                       livelink_to=addresses["livelink_to"], rate_hz=args.fps)
-    source: LslInput | OscInput
+    source: Any
     if args.input == "lsl":
         widths = (3 * processor.n_joints,) if processor.n_joints else (2, 3)
         source = LslInput(args.input_type, args.input_name, widths)
         where = args.input_type
     else:
-        source = OscInput(args.osc_in_port)
-        where = f"port {source.port}"
+        source = OscInput(args.osc_in_port) if args.input == "osc" else make_input(args.input, args)
+        where = f"port {source.port}" if args.input == "osc" else "(registered)"
         outputs.open_lsl(processor.columns, 0.0)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from effortface.core.errors import UserError
+from effortface.core.gui.qt_messages import install_message_filter
 
 if TYPE_CHECKING:
     from PySide6 import QtCore
@@ -109,6 +110,7 @@ def main(argv: list[str] | None = None) -> int:
     from PySide6 import QtWidgets
 
     app = QtWidgets.QApplication.instance() or QtWidgets.QApplication(sys.argv[:1])
+    install_message_filter()  # Qt's propagateSizeHints() noise
     try:
         # a QtSynthStage or QtTrainStage, typed object so that the stage modules load lazily
         stage = _synth(args) if args.stage == "synth" else _train(args, app)

@@ -2,7 +2,7 @@
 
 :class:`QtSynthStage` views a :class:`~effortface.train.synth_session.SynthSession`: the controls call its
 methods, its callbacks redraw the views, and a QTimer moves its play head with the wall time
-(STYLE.md L3). Views: a stick figure of the skeleton (front or side projection), the parametric
+(the rule: a view writes back only through model methods and keeps widget state only). Views: a stick figure of the skeleton (front or side projection), the parametric
 face (:func:`effortface.annotate.face.render_face`) driven by the weights at the play head, and plots of w and
 p, NHR and HR, EPOC and the blendshape weights with a moving time cursor.
 """

@@ -3,7 +3,7 @@ results as the paper shows them, export the bundle, compare two bundles.
 
 :class:`QtTrainStage` views a :class:`~effortface.train.train_session.TrainSession`: the controls call its
 methods, its callbacks update the views, and a QTimer calls :meth:`TrainSession.poll` to bring the
-worker thread's progress and results to the GUI thread (STYLE.md L3, L5).
+worker thread's progress and results to the GUI thread (the rule: a view writes back only through model methods and keeps widget state only; worker threads hand their results to the GUI thread, which drains them on a timer; no thread touches a widget).
 """
 
 from __future__ import annotations

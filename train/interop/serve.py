@@ -77,6 +77,83 @@ MAX_DATAGRAMS_PER_PULL = 1024
 _LSL_STRING_FORMAT = 3
 
 
+#: the outputs and inputs built in (:func:`output_names` and :func:`input_names` add registered ones)
+BUILTIN_OUTPUTS = ("lsl", "osc", "livelink")
+BUILTIN_INPUTS = ("lsl", "osc")
+#: an output: factory(model, name) -> an object with ``send(row: list[float], stamp: float)``
+OutputFactory = Callable[[FaceModel, str], Any]
+#: an input: factory(options) -> an object with ``pull(stats)`` (``(values, stamps)``, or None while
+#: disconnected) and ``srate_hz``; ``options`` is the command's parsed options
+InputFactory = Callable[[Any], Any]
+_OUTPUTS: dict[str, OutputFactory] = {}
+_INPUTS: dict[str, InputFactory] = {}
+
+
+def _check_name(kind: str, name: str, builtin: Sequence[str]) -> None:
+    if not (isinstance(name, str) and name.isidentifier() and name.islower()) or name in builtin:
+        raise ValueError(f"{kind} name: expected a new lower-case name (not {', '.join(builtin)}), found {name!r}")
+
+
+def register_output(name: str, factory: OutputFactory) -> None:
+    """Add a live output to ``effortface serve --output NAME`` and :class:`Outputs`.
+
+    Parameters
+    ----------
+    name : str
+        A lower-case identifier other than the built-in ones (:data:`BUILTIN_OUTPUTS`).
+    factory : callable
+        ``factory(model, name) -> sink``, called once per server; the server calls
+        ``sink.send(row, stamp)`` for every output row (the blendshape weights in the model's
+        order, then ``nhr`` and ``hr_bpm``; ``stamp`` is the input sample's time stamp).
+
+    Raises
+    ------
+    ValueError
+        A name that is not a lower-case identifier, or a built-in one.
+    """
+    _check_name("output", name, BUILTIN_OUTPUTS)
+    _OUTPUTS[name] = factory
+
+
+def register_input(name: str, factory: InputFactory) -> None:
+    """Add a live input to ``effortface serve --input NAME`` (one per server).
+
+    Parameters
+    ----------
+    name : str
+        A lower-case identifier other than the built-in ones (:data:`BUILTIN_INPUTS`).
+    factory : callable
+        ``factory(options) -> source``; :func:`serve` calls ``source.pull(stats)``, which returns
+        the frames received now as ``(values, stamps)`` (each value ``[w_per_kg, p_per_kg]``, or
+        ``[w_per_kg, p_per_kg, dt_s]``, or the 3 J joint coordinates of MoCap input), or None while
+        the source is disconnected. ``source.srate_hz`` is its nominal rate (0 if none).
+
+    Raises
+    ------
+    ValueError
+        A name that is not a lower-case identifier, or a built-in one.
+    """
+    _check_name("input", name, BUILTIN_INPUTS)
+    _INPUTS[name] = factory
+
+
+def output_names() -> tuple[str, ...]:
+    """Every output ``--output`` accepts: the built-in ones, then the registered ones."""
+    return BUILTIN_OUTPUTS + tuple(_OUTPUTS)
+
+
+def input_names() -> tuple[str, ...]:
+    """Every input ``--input`` accepts: the built-in ones, then the registered ones."""
+    return BUILTIN_INPUTS + tuple(_INPUTS)
+
+
+def make_input(name: str, options: Any) -> Any:
+    """A registered input's source, made from the command's options (see :func:`register_input`)."""
+    if name not in _INPUTS:
+        raise UserError(f"--input: expected one of {', '.join(input_names())}, found {name!r}")
+    return _INPUTS[name](options)
+
+
 @dataclasses.dataclass
 class ServeStats:
     """Counters of a running server (read by the rate printer and the tests)."""
@@ -293,6 +370,10 @@ class Outputs:
         self._sock: socket.socket | None = None
         self._livelink_to = livelink_to
         self._frame = 0
+        unknown = [k for k in self.kinds if k not in output_names()]
+        if unknown:
+            raise UserError(f"--output: expected one of {', '.join(output_names())}, found {unknown[0]!r}")
+        self._sinks = [_OUTPUTS[k](model, name) for k in self.kinds if k in _OUTPUTS]
         if "osc" in self.kinds:
             from pythonosc.udp_client import SimpleUDPClient
 
@@ -338,6 +419,8 @@ class Outputs:
                 packet = livelink_packet(self.name, self.device_id, frame, num, arkit_curves(self.model, row),
                                          sub_frame=sub, denominator=den)
                 self._sock.sendto(packet, self._livelink_to)
+            for sink in self._sinks:
+                sink.send(row, stamp)
         except OSError as exc:  # a receiver that went (connection refused), a network down: keep serving
             self.send_failures += 1
             if self.send_failures == 1:

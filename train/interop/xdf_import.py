@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from effortface.capture_tool.protocols import HrSample
+from effortface.core.hr_sample import HrSample
 from effortface.capture_tool.session import (EVENTS_CSV, HEART_RATE_CSV, VIDEO_AVI, VIDEO_FRAMES_CSV, Event,
                                              EventWriter, FrameTimeWriter, HrWriter, Participant, SessionInfo,
                                              create_session, make_session_id, utc_now_iso)

@@ -1,0 +1,81 @@
+"""Old import paths of moved modules keep working for one release, with a DeprecationWarning.
+
+restructure: keep old names (``tools/restructure.py`` fills :data:`MOVED` and leaves this file's names alone)
+
+``import effortface.train.energy`` (the old path) returns the very module object
+``effortface.synth.energy`` is, so ``isinstance`` and monkeypatching see one module. The product
+itself never uses an old path (``tests/test_layout.py`` checks the sources).
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.abc
+import importlib.machinery
+import sys
+import warnings
+from collections.abc import Sequence
+from types import ModuleType
+
+#: old dotted name -> new one; a moved package maps its submodules too (written by tools/restructure.py)
+MOVED: dict[str, str] = {
+    # BEGIN MOVED
+    # END MOVED
+}
+
+
+def new_name(old: str) -> str | None:
+    """The current name of a module imported by its old name (``None`` if it did not move).
+
+    Parameters
+    ----------
+    old : str
+        A dotted module name, e.g. ``"effortface.train.energy"``.
+
+    Returns
+    -------
+    str or None
+        E.g. ``"effortface.synth.energy"``.
+    """
+    parts = old.split(".")
+    for k in range(len(parts), 1, -1):
+        prefix = ".".join(parts[:k])
+        if prefix in MOVED:
+            return MOVED[prefix] + old[len(prefix):]
+    return None
+
+
+class _AliasLoader(importlib.abc.Loader):
+    """Loads an old name as the module object of its new name."""
+
+    def __init__(self, new: str) -> None:
+        self.new = new
+        self.real_spec: importlib.machinery.ModuleSpec | None = None
+
+    def create_module(self, spec: importlib.machinery.ModuleSpec) -> ModuleType:
+        module = importlib.import_module(self.new)
+        self.real_spec = module.__spec__
+        return module
+
+    def exec_module(self, module: ModuleType) -> None:
+        # the import system stamped the old name's spec on the shared module object: give its own back
+        module.__spec__ = self.real_spec
+
+
+class _AliasFinder(importlib.abc.MetaPathFinder):
+    """Finds old names (first on ``sys.meta_path``), warning once per name."""
+
+    def find_spec(self, fullname: str, path: Sequence[str] | None = None,
+                  target: ModuleType | None = None) -> importlib.machinery.ModuleSpec | None:
+        new = new_name(fullname)
+        if new is None:
+            return None
+        warnings.warn(f"{fullname} moved to {new}: import it from there (the old path goes in the next release)",
+                      DeprecationWarning, stacklevel=2)
+        return importlib.machinery.ModuleSpec(fullname, _AliasLoader(new))
+
+
+def install() -> None:
+    """Put the finder first on ``sys.meta_path`` (once)."""
+    if MOVED and not any(isinstance(f, _AliasFinder) for f in sys.meta_path):
+        sys.meta_path.insert(0, _AliasFinder())
