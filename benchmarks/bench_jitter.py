@@ -5,13 +5,13 @@ heart rate and fatigue build up), with an SVR bundle trained here on the sample 
 train sample_sessions``, in a temporary folder; or ``--model DIR``) and with the built-in rule model:
 
 1. **Jitter**: the median over frames of the largest frame-to-frame step of any blendshape
-   weight (:func:`effortface.train.face.jitter`), raw (``filter_tau_s=0``) and filtered (the
+   weight (:func:`effortface.synth.face.jitter`), raw (``filter_tau_s=0``) and filtered (the
    model's time constant, 0.15 s by default); also each weight's mean, to show the face keeps
    its level. Ratio raw / filtered.
-2. **Cost per frame**: one :class:`~effortface.train.face.WeightFilter` step, against a baseline
+2. **Cost per frame**: one :class:`~effortface.synth.face.WeightFilter` step, against a baseline
    measured in the same process: one step of the live stream the filter sits in
    (``model.stream(...).step``: energies, physiology, face model and filter). Also the whole-clip
-   filter (:func:`~effortface.train.face.filter_weights`) against the whole-clip synthesis.
+   filter (:func:`~effortface.synth.face.filter_weights`) against the whole-clip synthesis.
 
 Run: ``python benchmarks/bench_jitter.py [--model DIR] [--loops 10]``
 """
@@ -38,11 +38,11 @@ sys.path.insert(0, str(ROOT))
 
 from scipy.interpolate import CubicSpline  # noqa: E402
 
-from effortface.train.energy import G_M_PER_S2, EnergyStream, work_and_power  # noqa: E402
-from effortface.train.face import WeightFilter, filter_weights, jitter  # noqa: E402
-from effortface.train.motion import Motion, motion_from_positions, read_motion  # noqa: E402
-from effortface.train.segments import BodyModel, build_body  # noqa: E402
-from effortface.train.runtime import Character, FaceModel, load_model  # noqa: E402
+from effortface.synth.energy import G_M_PER_S2, EnergyStream, work_and_power  # noqa: E402
+from effortface.synth.face import WeightFilter, filter_weights, jitter  # noqa: E402
+from effortface.synth.motion import Motion, motion_from_positions, read_motion  # noqa: E402
+from effortface.synth.segments import BodyModel, build_body  # noqa: E402
+from effortface.synth.runtime import Character, FaceModel, load_model  # noqa: E402
 
 CLIP = ROOT / "tests" / "data" / "motion" / "cmu_13_29_jumping_jacks_120fps.bvh"
 REAL_CLIPS = ("amp_humanoid_walk.npz", "amp_humanoid_run.npz", "cmu_13_29_jumping_jacks_120fps.bvh")

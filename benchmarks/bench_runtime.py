@@ -39,11 +39,11 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 from bench_data import DATA  # noqa: E402
 
 from effortface.core.blendshapes import DEFAULT_SET  # noqa: E402
-from effortface.train.bundle import ModelBundle, write_bundle  # noqa: E402
-from effortface.train.face import SvrModel  # noqa: E402
-from effortface.train.motion import Motion, read_motion  # noqa: E402
-from effortface.train.physiology import NhrParams, NhrRegression  # noqa: E402
-from effortface.train.runtime import Character, FaceModel, load_model  # noqa: E402
+from effortface.synth.bundle import ModelBundle, write_bundle  # noqa: E402
+from effortface.synth.face import SvrModel  # noqa: E402
+from effortface.synth.motion import Motion, read_motion  # noqa: E402
+from effortface.synth.physiology import NhrParams, NhrRegression  # noqa: E402
+from effortface.synth.runtime import Character, FaceModel, load_model  # noqa: E402
 
 CLIP = DATA / "motion" / "cmu_13_29_jumping_jacks_120fps.bvh"
 

@@ -100,7 +100,7 @@ def one_training(n_participants: int, workers: int, legacy: bool) -> dict:
     from effortface.core.blendshapes import DEFAULT_SET
     from effortface.train.dataset import prepare, synthetic_table
     from effortface.train.face_fit import FaceFitConfig, fit_face_models, held_out_scores, protocol_scores
-    from effortface.train.parallel import ComputeSettings, compute_backend
+    from effortface.synth.parallel import ComputeSettings, compute_backend
 
     table = prepare(synthetic_table(n_participants=n_participants, seconds=1800, seed=1))
     config = FaceFitConfig(max_rows_per_participant=300, max_total_rows=2000) if legacy else FaceFitConfig()
@@ -156,9 +156,9 @@ def bench_training(sizes: list[int], workers_list: list[int], repeat: int) -> No
 
 
 def bench_synth(n_clips: int) -> None:
-    from effortface.train.batch_synth import SynthOptions, synth_batch
-    from effortface.train.parallel import ComputeSettings
-    from effortface.train.runtime import Character
+    from effortface.synth.batch_synth import SynthOptions, synth_batch
+    from effortface.synth.parallel import ComputeSettings
+    from effortface.synth.runtime import Character
 
     print(f"2. batch synthesis: {n_clips} real clips (squats and jumping jacks, 120 Hz), default model")
     tmp = Path(tempfile.mkdtemp())
@@ -204,7 +204,7 @@ def tiled_bvh(minutes: float, folder: Path) -> Path:
 
 def one_read(path: str, whole: bool) -> dict:
     """Read one BVH (this process): seconds, peak RSS above the start, dtype."""
-    from effortface.train import motion as mo
+    from effortface.synth import motion as mo
 
     if whole:
         mo.BVH_CHUNK_FRAMES = 10**9
@@ -270,9 +270,9 @@ def bench_crowd(n_chars: int, frames: int) -> None:
     from bench_runtime import fit_svrs, svr_model_dir
     from threadpoolctl import threadpool_limits
 
-    from effortface.train.face import SINGLE_PRECISION_ERROR_PER_ALPHA, SURROGATE_MAX_ERROR
-    from effortface.train.motion import read_motion
-    from effortface.train.runtime import Character, load_model
+    from effortface.synth.face import SINGLE_PRECISION_ERROR_PER_ALPHA, SURROGATE_MAX_ERROR
+    from effortface.synth.motion import read_motion
+    from effortface.synth.runtime import Character, load_model
 
     svrs, scaler = fit_svrs(2000)
     model = load_model(svr_model_dir(svrs, scaler, Path(tempfile.mkdtemp()) / "m"))

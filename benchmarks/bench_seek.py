@@ -34,7 +34,7 @@ os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 from effortface.annotate.face import render_face  # noqa: E402
 from effortface.annotate.video_index import VideoIndex  # noqa: E402
 from effortface.capture_tool.camera import open_avi_writer, read_frame  # noqa: E402
-from effortface.capture_tool.session import FrameTimeWriter, Participant, SessionInfo, create_session  # noqa: E402
+from effortface.core.session.folder import FrameTimeWriter, Participant, SessionInfo, create_session  # noqa: E402
 
 SIZE = (640, 480)
 FPS = 30.0
@@ -71,7 +71,7 @@ def bench_random_seek(folder: Path, n_seeks: int) -> dict[str, tuple[float, floa
     """Median and p95 latency (ms) of random exact seeks, VideoIndex vs baselines."""
     import cv2
 
-    from effortface.capture_tool.session import read_video_frames
+    from effortface.core.session.folder import read_video_frames
 
     video_path = folder / "video.avi"
     frame_times = read_video_frames(folder / "video_frames.csv")

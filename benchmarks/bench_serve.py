@@ -39,8 +39,8 @@ import pylsl
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from effortface.train.interop.serve import FaceProcessor  # noqa: E402
-from effortface.train.runtime import Character, load_model  # noqa: E402
+from effortface.interop.serve import FaceProcessor  # noqa: E402
+from effortface.synth.runtime import Character, load_model  # noqa: E402
 
 
 def _baseline_s(n: int) -> np.ndarray:

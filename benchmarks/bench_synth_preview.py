@@ -1,6 +1,6 @@
 """Frames per second the Synthesize preview holds on a 120 Hz clip, and where a frame's time goes.
 
-Runs the real :class:`effortface.train.gui.synth_stage.QtSynthStage` offscreen at the documentation size
+Runs the real :class:`effortface.synth.gui.synth_stage.QtSynthStage` offscreen at the documentation size
 (1400 x 900) on the CMU jumping-jacks clip (120 Hz, repeated 30 times = 110 s of curves), with the
 built-in rule model and with an SVR bundle trained here on the sample lab (small grid, in a
 temporary folder).
@@ -42,8 +42,8 @@ sys.path.insert(0, str(ROOT))
 
 from PySide6 import QtCore, QtWidgets  # noqa: E402
 
-from effortface.train.gui.synth_stage import QtSynthStage  # noqa: E402
-from effortface.train.synth_session import SynthSession  # noqa: E402
+from effortface.synth.gui.synth_stage import QtSynthStage  # noqa: E402
+from effortface.synth.synth_session import SynthSession  # noqa: E402
 from effortface.train.train_session import TrainSession  # noqa: E402
 
 from bench_data import DATA  # noqa: E402  (../shared/data, else tests/data)

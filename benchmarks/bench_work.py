@@ -32,10 +32,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from effortface.capture_tool.protocols import HrSample  # noqa: E402
-from effortface.capture_tool.session import (Event, EventWriter, FrameTimeWriter, HrWriter, Participant,  # noqa: E402
+from effortface.core.session.folder import (Event, EventWriter, FrameTimeWriter, HrWriter, Participant,  # noqa: E402
                                              SessionInfo, create_session, read_session)
-from effortface.train.attach import attach_clip  # noqa: E402
-from effortface.train.work import write_works  # noqa: E402
+from effortface.synth.attach import attach_clip  # noqa: E402
+from effortface.synth.work import write_works  # noqa: E402
 
 HOUR_S = 3600.0
 CLIP = ROOT / "tests" / "data" / "motion" / "cmu_13_29_full_30fps.bvh"

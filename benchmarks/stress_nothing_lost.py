@@ -38,7 +38,7 @@ sys.path.insert(0, str(ROOT))
 from effortface.capture_tool.camera import index_video, read_frame  # noqa: E402
 from effortface.capture_tool.recorder import decode_serlog  # noqa: E402
 from effortface.capture_tool.serlog import read_serlog  # noqa: E402
-from effortface.capture_tool.session import read_session, validate_session  # noqa: E402
+from effortface.core.session.folder import read_session, validate_session  # noqa: E402
 from tests.capture_tool.capture_helpers import (  # noqa: E402
     HXM_DAT,
     content,

@@ -20,6 +20,36 @@ from types import ModuleType
 #: old dotted name -> new one; a moved package maps its submodules too (written by tools/restructure.py)
 MOVED: dict[str, str] = {
     # BEGIN MOVED
+    "effortface.capture_tool.hr_csv": "effortface.core.session.hr_csv",
+    "effortface.capture_tool.session": "effortface.core.session.folder",
+    "effortface.train.attach": "effortface.synth.attach",
+    "effortface.train.batch_synth": "effortface.synth.batch_synth",
+    "effortface.train.bundle": "effortface.synth.bundle",
+    "effortface.train.catalog": "effortface.synth.catalog",
+    "effortface.train.character_options": "effortface.synth.character_options",
+    "effortface.train.commands.export_data": "effortface.interop.commands.export_data",
+    "effortface.train.commands.import_data": "effortface.interop.commands.import_data",
+    "effortface.train.commands.motion": "effortface.synth.commands.motion",
+    "effortface.train.commands.serve": "effortface.interop.commands.serve",
+    "effortface.train.commands.synth": "effortface.synth.commands.synth",
+    "effortface.train.commands.work": "effortface.synth.commands.work",
+    "effortface.train.curves_io": "effortface.synth.curves_io",
+    "effortface.train.energy": "effortface.synth.energy",
+    "effortface.train.exercise_log": "effortface.synth.exercise_log",
+    "effortface.train.face": "effortface.synth.face",
+    "effortface.train.gui.synth_stage": "effortface.synth.gui.synth_stage",
+    "effortface.train.iir": "effortface.synth.iir",
+    "effortface.train.interop": "effortface.interop",
+    "effortface.train.interop.c3d_motion": "effortface.synth.c3d_motion",
+    "effortface.train.motion": "effortface.synth.motion",
+    "effortface.train.motion_csv": "effortface.synth.motion_csv",
+    "effortface.train.npzio": "effortface.synth.npzio",
+    "effortface.train.parallel": "effortface.synth.parallel",
+    "effortface.train.physiology": "effortface.synth.physiology",
+    "effortface.train.runtime": "effortface.synth.runtime",
+    "effortface.train.segments": "effortface.synth.segments",
+    "effortface.train.synth_session": "effortface.synth.synth_session",
+    "effortface.train.work": "effortface.synth.work",
     # END MOVED
 }
 

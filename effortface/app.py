@@ -155,7 +155,7 @@ def folder_note(sessions_dir: Path) -> str:
 
 def describe_sessions(sessions_dir: Path) -> list[str]:
     """One line per session in ``sessions_dir`` (id, participant, complete or not)."""
-    from effortface.capture_tool.session import list_sessions, read_session_info
+    from effortface.core.session.folder import list_sessions, read_session_info
 
     if not sessions_dir.is_dir():
         return [f"(no folder {sessions_dir} yet: Capture creates it with the first recording)"]
@@ -194,8 +194,8 @@ def make_stage(key: str, sessions_dir: Path, settings: QtCore.QSettings) -> QtWi
         from effortface.train.train_session import TrainSession
 
         return QtTrainStage(TrainSession(sessions_dir))
-    from effortface.train.gui.synth_stage import QtSynthStage
-    from effortface.train.synth_session import SynthSession
+    from effortface.synth.gui.synth_stage import QtSynthStage
+    from effortface.synth.synth_session import SynthSession
 
     return QtSynthStage(SynthSession(background=True), motion_dir=sessions_dir)
 
@@ -332,7 +332,7 @@ class MainWindow(QtWidgets.QMainWindow):
         capture += [(EXERCISE_KEY, "phase: the exercise picked, with its parameters"), (END_KEY, "end the phase"),
                     (REP_KEY, "one repetition"), (MARKER_KEY, "marker"), (LOAD_KEY, "load / speed change"),
                     (SYNC_KEY, "sync test (a white flash)")]
-        from effortface.train.gui.synth_stage import PLAYER_KEYS
+        from effortface.synth.gui.synth_stage import PLAYER_KEYS
 
         sections = (("Everywhere", WINDOW_KEYS), ("Capture", capture), ("Annotate", ANNOTATE_KEYS),
                     ("Synthesize", PLAYER_KEYS))

@@ -33,12 +33,12 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "preannotate": ("effortface.annotate.commands.preannotate", "the machine rater (MediaPipe Face Landmarker) on every frame"),
     "train": ("effortface.train.commands.train", "fit the heart-rate and face models, export a bundle"),
     "evaluate": ("effortface.train.commands.evaluate", "re-score a model bundle on sessions or a table"),
-    "synth": ("effortface.train.commands.synth", "synthesize face curves from a motion clip"),
-    "work": ("effortface.train.commands.work", "work.csv (w, p per second) from motion/ and the exercise log"),
-    "motion": ("effortface.train.commands.motion", "motion attach SESSION CLIP: align a mocap clip to a session"),
-    "import": ("effortface.train.commands.import_data", "import xdf FILE: a LabRecorder recording -> a session"),
-    "export": ("effortface.train.commands.export_data", "export bids SESSIONS: sessions -> a BIDS dataset"),
-    "serve": ("effortface.train.commands.serve", "live face from an LSL or OSC stream to LSL, OSC or Live Link"),
+    "synth": ("effortface.synth.commands.synth", "synthesize face curves from a motion clip"),
+    "work": ("effortface.synth.commands.work", "work.csv (w, p per second) from motion/ and the exercise log"),
+    "motion": ("effortface.synth.commands.motion", "motion attach SESSION CLIP: align a mocap clip to a session"),
+    "import": ("effortface.interop.commands.import_data", "import xdf FILE: a LabRecorder recording -> a session"),
+    "export": ("effortface.interop.commands.export_data", "export bids SESSIONS: sessions -> a BIDS dataset"),
+    "serve": ("effortface.interop.commands.serve", "live face from an LSL or OSC stream to LSL, OSC or Live Link"),
     "demo": ("effortface.commands.demo", "the whole pipeline on the sample lab"),
 }
 

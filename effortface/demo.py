@@ -7,11 +7,11 @@
    heart-rate CSV;
 3. **work** (:func:`work_step`): the lab's sessions are copied into ``DIR/lab/`` and
    ``effortface work`` derives each one's ``work.csv`` from its exercise log and motion clips, as in
-   a real lab (the sample lab records no work: :func:`effortface.train.work.derive_work`);
+   a real lab (the sample lab records no work: :func:`effortface.synth.work.derive_work`);
 4. **train**: :func:`effortface.train.pipeline.run_training`, the one training run, on ``DIR/lab/``;
 5. **evaluate**: :func:`effortface.train.evaluation.evaluate_bundle`, the one evaluation;
 6. **synthesize** (:func:`synth_step`): a clip's face curves with the trained bundle, written by
-   :func:`effortface.train.curves_io.write_curves`.
+   :func:`effortface.synth.curves_io.write_curves`.
 
 The output folder's rules are :func:`demo_out_dir`'s and :func:`replace_out`'s.
 """
@@ -130,7 +130,7 @@ def capture_step(session: Path, out: Path, seconds: float) -> Path:
     UserError
         No recording, or the replay or the capture failed (with its last error line).
     """
-    from effortface.capture_tool.session import read_session
+    from effortface.core.session.folder import read_session
 
     s = read_session(session)
     logs = s.serlog_paths()
@@ -180,7 +180,7 @@ def decode_step(captured: Path, out: Path) -> tuple[int, int]:
     decoded, recorded : int
         Heart-rate rows decoded from the raw bytes, and rows the capture recorded live.
     """
-    from effortface.capture_tool.session import read_session
+    from effortface.core.session.folder import read_session
 
     s = read_session(captured)
     log = s.serlog_paths()[0]
@@ -223,9 +223,9 @@ def work_step(lab: Path, out: Path) -> tuple[Path, list[str]]:
     UserError
         If ``effortface work`` fails (with its error line).
     """
-    from effortface.capture_tool.session import list_sessions
+    from effortface.core.session.folder import list_sessions
 
-    from effortface.train.work import WORK_CSV
+    from effortface.synth.work import WORK_CSV
 
     copy = out / LAB_COPY
     copy.mkdir()
@@ -261,10 +261,10 @@ def synth_step(model_dir: Path, lab: Path, out: Path) -> Path:
     Path
         The CSV written.
     """
-    from effortface.capture_tool.session import list_sessions, read_session
-    from effortface.train.curves_io import write_curves
-    from effortface.train.runtime import Character, load_model
-    from effortface.train.work import WORK_CSV, derive_work
+    from effortface.core.session.folder import list_sessions, read_session
+    from effortface.synth.curves_io import write_curves
+    from effortface.synth.runtime import Character, load_model
+    from effortface.synth.work import WORK_CSV, derive_work
 
     model = load_model(model_dir)
     sessions = list_sessions(lab)

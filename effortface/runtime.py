@@ -10,11 +10,11 @@
 
 Importing this module loads no Qt, OpenCV, pandas or scikit-learn (checked by
 ``tests/test_import_rules.py`` in a fresh interpreter). The implementation lives in
-:mod:`effortface.train.runtime` and the modules it imports.
+:mod:`effortface.synth.runtime` and the modules it imports.
 """
 
-from effortface.train.motion import Motion, motion_from_positions, read_motion
-from effortface.train.runtime import CURVE_COLUMNS, Character, FaceModel, load_model
+from effortface.synth.motion import Motion, motion_from_positions, read_motion
+from effortface.synth.runtime import CURVE_COLUMNS, Character, FaceModel, load_model
 
 __all__ = ["CURVE_COLUMNS", "Character", "FaceModel", "Motion", "load_model", "motion_from_positions",
            "read_motion"]

@@ -19,9 +19,7 @@ from setuptools.command.build_py import build_py
 ROOT = Path(__file__).resolve().parent.parent
 #: the packages the runtime may use -> their folders, relative to this file
 PACKAGE_DIR = {"effortface": "../effortface", "effortface.core": "../effortface/core",
-               "effortface.train": "../train",
-               # read_motion reads .c3d through these (the c3d package is imported only then)
-               "effortface.train.interop": "../train/interop"}
+               "effortface.synth": "../effortface/synth"}
 
 ENTRY = "effortface.runtime"
 
@@ -94,6 +92,6 @@ setup(
     version=_version(),
     packages=list(PACKAGE_DIR),
     package_dir=PACKAGE_DIR,
-    package_data={"effortface.train": ["data/*.csv"]},
+    package_data={"effortface.synth": ["data/*.csv"]},
     cmdclass={"build_py": RuntimeOnlyBuild},
 )

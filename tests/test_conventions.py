@@ -20,12 +20,12 @@ from tests.conftest import product_sources
 
 ROOT = Path(__file__).resolve().parents[1]
 #: stage -> (its model's file, class)
-STAGE_MODELS = {"capture": ("capture_tool/capture_session.py", "CaptureSession"),
-                "annotate": ("annotate/annotate_session.py", "AnnotateSession"),
-                "train": ("train/train_session.py", "TrainSession"),
-                "synth": ("train/synth_session.py", "SynthSession")}
+STAGE_MODELS = {"capture": ("effortface/capture_tool/capture_session.py", "CaptureSession"),
+                "annotate": ("effortface/annotate/annotate_session.py", "AnnotateSession"),
+                "train": ("effortface/train/train_session.py", "TrainSession"),
+                "synth": ("effortface/synth/synth_session.py", "SynthSession")}
 #: modules that may run threads of their own: device readers and players, the job pool, the app's hooks
-THREADS_ALLOWED = {"effortface/core/jobs.py", "effortface/app.py", "annotate/video_index.py"}
+THREADS_ALLOWED = {"effortface/core/jobs.py", "effortface/app.py", "effortface/annotate/video_index.py"}
 THREAD_MODULES = {"threading", "concurrent.futures", "queue", "multiprocessing"}
 
 

@@ -27,15 +27,15 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from effortface.annotate.keyframes import read_annotations
-from effortface.capture_tool.hr_csv import read_hr_csv
+from effortface.core.session.hr_csv import read_hr_csv
 from effortface.capture_tool.protocols import PROTOCOLS, get_decoder
 from effortface.capture_tool.protocols.encode import encode_line
 from effortface.capture_tool.serlog import DATA, read_serlog
-from effortface.capture_tool.session import read_events, read_session_info, read_video_frames
+from effortface.core.session.folder import read_events, read_session_info, read_video_frames
 from effortface.core.errors import UserError
-from effortface.train.bundle import read_bundle, write_bundle
-from effortface.train.work import read_motion_index
-from effortface.train.motion import read_motion
+from effortface.synth.bundle import read_bundle, write_bundle
+from effortface.synth.work import read_motion_index
+from effortface.synth.motion import read_motion
 
 pytestmark = pytest.mark.fuzz
 

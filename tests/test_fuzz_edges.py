@@ -27,8 +27,8 @@ from hypothesis import strategies as st
 from effortface.capture_tool.serlog import MAGIC, read_serlog
 from effortface.core.bounds import BOUNDS
 from effortface.core.errors import UserError
-from effortface.train.interop.serve import FaceProcessor, ServeStats, check_sample, parse_work_datagram
-from effortface.train.motion import read_bvh
+from effortface.interop.serve import FaceProcessor, ServeStats, check_sample, parse_work_datagram
+from effortface.synth.motion import read_bvh
 
 from tests.test_fuzz import _no_hang, _only_user_errors, mutated
 
@@ -83,7 +83,7 @@ def test_any_osc_datagram_is_parsed_or_counted(data: st.DataObject) -> None:
 
 @pytest.fixture(scope="module")
 def processor() -> FaceProcessor:
-    from effortface.train.runtime import Character, load_model
+    from effortface.synth.runtime import Character, load_model
 
     return FaceProcessor(load_model("default"), Character(), fps=120)
 
@@ -172,8 +172,8 @@ XDF_SEED = _seed_xdf()
 @FUZZ
 @given(data=st.data())
 def test_a_mutated_xdf_imports_or_is_refused_leaving_no_half_session(data: st.DataObject, tmp_path_factory) -> None:
-    from effortface.capture_tool.session import Participant
-    from effortface.train.interop.xdf_import import import_xdf
+    from effortface.core.session.folder import Participant
+    from effortface.interop.xdf_import import import_xdf
 
     tmp = tmp_path_factory.mktemp("xdf")
     (tmp / "r.xdf").write_bytes(data.draw(mutated(XDF_SEED), label="xdf"))

@@ -146,10 +146,10 @@ def test_only_the_cli_imports_command_modules(path: Path) -> None:
 def test_the_command_module_rule_catches_an_import(tmp_path: Path) -> None:
     """The rule above sees both import forms and lets a module name its own package."""
     lib = tmp_path / "lib.py"
-    lib.write_text("from effortface.train.commands.synth import run\n"
+    lib.write_text("from effortface.synth.commands.synth import run\n"
                    "def f():\n    import effortface.commands.demo\n")
-    assert _command_modules_imported(lib) == ["effortface.commands.demo", "effortface.train.commands.synth",
-                                              "effortface.train.commands.synth.run"]
+    assert _command_modules_imported(lib) == ["effortface.commands.demo", "effortface.synth.commands.synth",
+                                              "effortface.synth.commands.synth.run"]
     assert _module_name(ROOT / "train" / "commands" / "train.py") == "effortface.train.commands.train"
     assert _module_name(ROOT / "effortface" / "train" / "commands" / "train.py") == "effortface.train.commands.train"
     assert _module_name(ROOT / "effortface" / "commands" / "__init__.py") == "effortface.commands"

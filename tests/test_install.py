@@ -164,7 +164,7 @@ def test_pip_install_dot_in_a_fresh_venv_works_from_any_folder(sources, tmp_path
     _run([bin_ / "python", "-m", "pip", "install", "-q", "--no-deps", *others], tmp_path)
     # theirs are installed at top level (found, not run: the PyPI ones need their own dependencies)
     tops = _run([bin_ / "python", "-c", "import importlib.util as u, effortface.annotate.agreement, "
-                 "effortface.train.runtime; print(u.find_spec('annotate').origin, u.find_spec('train').origin)"],
+                 "effortface.synth.runtime; print(u.find_spec('annotate').origin, u.find_spec('train').origin)"],
                 tmp_path).stdout.split()
     assert [Path(t).relative_to(tmp_path / "venv").parts[-2:] for t in tops] == [
         ("annotate", "__init__.py"), ("train", "__init__.py")]

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import pytest
 
-from effortface.capture_tool.session import read_session
-from effortface.train.exercise_log import read_exercise_log
+from effortface.core.session.folder import read_session
+from effortface.synth.exercise_log import read_exercise_log
 
 from .capture_tool.capture_helpers import effortface, start_replay
 

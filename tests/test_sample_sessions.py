@@ -21,11 +21,11 @@ import pytest
 
 from effortface.annotate.keyframes import read_annotations
 from effortface.annotate.reliability import mean_abs_disagreement_pct, read_poses, read_ratings
-from effortface.capture_tool.hr_csv import format_hr_row, read_hr_csv
+from effortface.core.session.hr_csv import format_hr_row, read_hr_csv
 from effortface.capture_tool.protocols import get_decoder
 from effortface.capture_tool.recorder import decode_serlog
 from effortface.capture_tool.serlog import read_serlog
-from effortface.capture_tool.session import list_sessions, read_session, validate_session
+from effortface.core.session.folder import list_sessions, read_session, validate_session
 
 from .capture_tool.capture_helpers import BODY, content, effortface, start_replay
 
@@ -100,7 +100,7 @@ def test_events_are_an_exercise_log_without_ground_truth(session: Path) -> None:
     """events.csv holds what an operator and the recorder log: catalog ids with no value on phases,
     treadmill speed / grade, back loads, repetition counts; never a true work rate (the old lab wrote
     the true W/kg on every phase_start)."""
-    from effortface.train.catalog import default_catalog
+    from effortface.synth.catalog import default_catalog
 
     s = read_session(session)
     catalog = default_catalog()
@@ -122,7 +122,7 @@ def test_effortface_work_derives_every_second_and_follows_the_true_work(session:
     on the simulator, and reads the pace from the logged repetitions, so a phase's mean differs from
     the truth (measured: treadmill -3.1 to +1.4 %, squats -11.8 to +4.2 % (the clip's set), jumping
     jacks +0.5 %)."""
-    from effortface.train.work import derive_work
+    from effortface.synth.work import derive_work
 
     table = derive_work(session)
     assert all(src.startswith(("log:", "motion:")) for src in table.source)
@@ -136,8 +136,8 @@ def test_motion_clip_opens_in_the_motion_reader_and_drives_the_derived_work() ->
     """The assembled squats clip sits in its squat set; derive_work takes that set's seconds from the
     clip (with the participant's mass and the log's back load), and its w agrees with the true w of
     the set within 25 %."""
-    from effortface.train.motion import read_motion
-    from effortface.train.work import derive_work
+    from effortface.synth.motion import read_motion
+    from effortface.synth.work import derive_work
 
     with_motion = [s for s in SESSIONS if (s / "motion").is_dir()]
     assert with_motion, "expected one strength session with motion/"

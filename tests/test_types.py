@@ -15,8 +15,8 @@ from tests.conftest import ROOT
 #: Strict-mode flags set globally in [tool.mypy] rather than per module.
 GLOBAL_FLAGS = {"warn_redundant_casts", "warn_unused_ignores"}
 #: Numeric modules checked strictly but for warn_return_any (numpy types ndarray arithmetic as Any).
-NUMERIC_MODULES = {"effortface.train.energy", "effortface.train.face", "effortface.train.physiology",
-                   "effortface.train.segments"}
+NUMERIC_MODULES = {"effortface.synth.energy", "effortface.synth.face", "effortface.synth.physiology",
+                   "effortface.synth.segments"}
 
 
 def test_mypy_passes() -> None:

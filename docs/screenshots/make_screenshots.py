@@ -147,7 +147,7 @@ def shoot_capture(tmp: Path, out: Path) -> None:
     """Capture before, during and after a strap loss: P01's strap replayed, recorded into an empty lab."""
     from effortface.capture_tool.participants import register
     from effortface.capture_tool.replay import PtyReplay, load_timed_chunks, start_replay_thread
-    from effortface.capture_tool.session import read_session_info
+    from effortface.core.session.folder import read_session_info
 
     session = SAMPLES / SESSION
     lab = tmp / "capture_lab"

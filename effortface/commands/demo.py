@@ -58,7 +58,7 @@ def _say(step: str, text: str) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Entry point of ``effortface demo``."""
-    from effortface.capture_tool.session import list_sessions
+    from effortface.core.session.folder import list_sessions
     from effortface.core.blendshapes import DEFAULT_SET
     from effortface.train.evaluation import evaluate_bundle, write_evaluation
     from effortface.train.pipeline import TrainSettings, run_training, training_table

@@ -8,9 +8,9 @@ The stage convention (one for Capture, Annotate, Train and Synthesize; ``tests/t
 checks it):
 
 1. **Model.** A stage's model is Qt-free and lives at the stage package root, named
-   ``<stage>_session.py`` with the class ``<Stage>Session``: ``capture_tool/capture_session.py``
-   ``CaptureSession``, ``annotate/annotate_session.py`` ``AnnotateSession``,
-   ``train/train_session.py`` ``TrainSession``, ``train/synth_session.py`` ``SynthSession``. Its view
+   ``<stage>_session.py`` with the class ``<Stage>Session``: ``effortface/capture_tool/capture_session.py``
+   ``CaptureSession``, ``effortface/annotate/annotate_session.py`` ``AnnotateSession``,
+   ``effortface/train/train_session.py`` ``TrainSession``, ``effortface/synth/synth_session.py`` ``SynthSession``. Its view
    is ``Qt<Stage>Stage`` in the stage's ``gui/`` folder.
 2. **Change notification.** The model owns one :class:`effortface.core.events.Emitter` per thing
    that changes, named ``<thing>_changed`` (``frame_changed``, ``status_changed(text, is_error)``...).

@@ -2,7 +2,7 @@
 
 Capture logs and plans exercises by these ids and train estimates their work, so the catalog file
 (``data/exercise_catalog.csv``) lives in the core below both, as the blendshape set does. This module
-only reads its rows and ids (stdlib only); the work models are :mod:`effortface.train.catalog`.
+only reads its rows and ids (stdlib only); the work models are :mod:`effortface.synth.catalog`.
 """
 
 from __future__ import annotations

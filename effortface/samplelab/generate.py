@@ -37,7 +37,7 @@ from effortface.capture_tool.participants import REGISTRY_TSV, register
 from effortface.capture_tool.protocols import get_decoder
 from effortface.capture_tool.recorder import decode_serlog
 from effortface.capture_tool.serlog import DATA, SerlogWriter, read_serlog
-from effortface.capture_tool.session import (
+from effortface.core.session.folder import (
     EVENTS_CSV, HEART_RATE_CSV, SERIAL_DIR, VIDEO_AVI, VIDEO_FRAMES_CSV, Event, EventWriter,
     FrameTimeWriter, HrWriter, Participant, SessionInfo, create_session, write_json_atomic,
 )

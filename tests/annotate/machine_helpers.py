@@ -9,7 +9,7 @@ import numpy as np
 
 from effortface.annotate.keyframes import read_annotations
 from effortface.annotate.machine.track import ARKIT_NAMES, FOUR, MachineTrack, write_machine_track
-from effortface.capture_tool.session import read_session
+from effortface.core.session.folder import read_session
 
 #: fraction of frames in each of the two stretches without a face
 NO_FACE_FRACTION = 0.05

@@ -14,7 +14,7 @@ from effortface.annotate import agreement as ag
 from effortface.annotate.keyframes import read_annotations
 from effortface.annotate.reliability import Rating, mean_abs_disagreement_pct, read_poses, read_ratings
 from effortface.core.errors import UserError
-from effortface.capture_tool.session import read_session
+from effortface.core.session.folder import read_session
 
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLES = ROOT / "sample_sessions"

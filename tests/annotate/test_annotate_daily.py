@@ -302,7 +302,7 @@ def test_bland_altman_draws_one_pair_at_a_time(qtbot, stage: QtAnnotateStage) ->
 def test_sync_flashes_and_reps_are_on_the_timeline(qtbot, tmp_path: Path) -> None:
     """Issue 25 item 6: the squats' repetitions and a sync flash logged while recording are drawn on
     the timeline's heart-rate plot (the real P02 strength session, one flash row appended)."""
-    from effortface.capture_tool.session import read_events
+    from effortface.core.session.folder import read_events
 
     name = "P02_20260112-113700_strength"
     lab = tmp_path / "lab"

@@ -26,7 +26,7 @@ from effortface.annotate.machine.mapping import default_mapping, map_scores
 from effortface.annotate.machine.preannotate import frame_times_ms, preannotate_session
 from effortface.annotate.machine.track import (CSV_NAME, FOUR, MACHINE_DIR, SIDECAR_NAME, read_machine_track,
                                                write_machine_track)
-from effortface.capture_tool.session import read_session
+from effortface.core.session.folder import read_session
 from effortface.cli import main
 from effortface.core.errors import SessionFormatError, UserError
 from effortface.core.jobs import Cancelled
@@ -380,7 +380,7 @@ def test_a_video_damaged_after_its_first_frames_is_one_line_and_writes_nothing(r
 
 
 def test_a_session_being_recorded_is_refused(recorded: Path, tmp_path: Path, capfd) -> None:
-    from effortface.capture_tool.session import RECORDING_LOCK
+    from effortface.core.session.folder import RECORDING_LOCK
     from effortface.core.locks import acquire_lock
 
     session = _copy(recorded, tmp_path)

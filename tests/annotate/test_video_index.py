@@ -12,7 +12,7 @@ import pytest
 from effortface.annotate.video_index import FrameTimes, VideoIndex
 from effortface.capture_tool.camera import open_avi_writer
 from effortface.core.errors import UserError
-from effortface.capture_tool.session import read_video_frames
+from effortface.core.session.folder import read_video_frames
 
 ROOT = Path(__file__).resolve().parents[2]
 P01 = ROOT / "sample_sessions" / "P01_20260112-093000_cardio"

@@ -12,10 +12,10 @@ import pytest
 from effortface.capture_tool.camera import open_capture
 from effortface.capture_tool.captures import find_timing_file, read_timed_capture
 from effortface.core.errors import SessionFormatError, UserError
-from effortface.capture_tool.hr_csv import HR_CSV_HEADER, read_hr_csv
+from effortface.core.session.hr_csv import HR_CSV_HEADER, read_hr_csv
 from effortface.capture_tool.recorder import decode_serlog
 from effortface.capture_tool.serlog import EVENT, SerlogWriter, _REC, read_serlog
-from effortface.capture_tool.session import EVENTS_HEADER, Participant, SessionInfo, read_events, read_session_info
+from effortface.core.session.folder import EVENTS_HEADER, Participant, SessionInfo, read_events, read_session_info
 from effortface.cli import main
 
 from .capture_helpers import BODY

@@ -8,7 +8,7 @@ import pytest
 
 from effortface.capture_tool.camera import CameraSource, index_video, read_frame, rewrite_video
 from effortface.core.errors import UserError
-from effortface.capture_tool.session import read_video_frames
+from effortface.core.session.folder import read_video_frames
 
 from .capture_helpers import frame_number, make_numbered_video
 

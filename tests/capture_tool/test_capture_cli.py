@@ -14,7 +14,7 @@ import serial
 
 from effortface.capture_tool.camera import index_video, read_frame
 from effortface.capture_tool.replay import PtyReplay
-from effortface.capture_tool.session import read_session, validate_session
+from effortface.core.session.folder import read_session, validate_session
 
 from .capture_helpers import (
     BODY,

@@ -20,9 +20,9 @@ from effortface.capture_tool.capture_session import CaptureSession, CsvTail, mea
 from effortface.capture_tool.gui.detect import detect_protocol
 from effortface.capture_tool.gui.live_view import hr_zones
 from effortface.capture_tool.sync import flash_offset_s
-from effortface.capture_tool.hr_csv import read_hr_csv
+from effortface.core.session.hr_csv import read_hr_csv
 from effortface.capture_tool.replay import PtyReplay, TimedChunk, start_replay_thread
-from effortface.capture_tool.session import (
+from effortface.core.session.folder import (
     Event,
     EventWriter,
     Participant,

@@ -17,7 +17,7 @@ import pytest
 
 
 from effortface.capture_tool.lsl import hr_source_id
-from effortface.capture_tool.session import read_session
+from effortface.core.session.folder import read_session
 
 from .capture_helpers import BODY, decode, effortface, hxm_chunks, start_replay, write_serlog
 

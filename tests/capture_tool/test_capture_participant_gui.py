@@ -13,7 +13,7 @@ from PySide6 import QtCore, QtWidgets
 
 from effortface.app import MainWindow
 from effortface.capture_tool.participants import REGISTRY_TSV, read_history, read_registry
-from effortface.capture_tool.session import Participant
+from effortface.core.session.folder import Participant
 
 from .test_capture_stage_daily import _choose, _end, _record, _stop, _strap
 from .test_participant_truth import LAB_P01, copy_sample_lab

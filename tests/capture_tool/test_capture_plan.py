@@ -10,7 +10,7 @@ import pytest
 
 from effortface.capture_tool.participants import REGISTRY_TSV, read_registry
 from effortface.capture_tool.plan import PlannedPhase, PlanRunner, read_plan
-from effortface.capture_tool.session import read_events, read_session
+from effortface.core.session.folder import read_events, read_session
 from effortface.cli import main
 
 from .capture_helpers import BODY, effortface, hxm_chunks, start_replay, write_serlog
@@ -110,7 +110,7 @@ def test_captures_registering_together_lose_no_row(tmp_path: Path) -> None:
     import threading
 
     from effortface.capture_tool.participants import register
-    from effortface.capture_tool.session import Participant
+    from effortface.core.session.folder import Participant
 
     path = tmp_path / REGISTRY_TSV
     people = [Participant(f"P{i:02d}", "male", 30, 1.8, 80, 5) for i in range(8)]

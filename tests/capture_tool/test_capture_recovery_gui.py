@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from PySide6 import QtCore
 
-from effortface.capture_tool.session import (
+from effortface.core.session.folder import (
     EventWriter,
     Participant,
     SessionInfo,

@@ -11,7 +11,7 @@ import pytest
 from PySide6 import QtCore
 
 from effortface.capture_tool.replay import PtyReplay, TimedChunk, start_replay_thread
-from effortface.capture_tool.session import read_session_info
+from effortface.core.session.folder import read_session_info
 
 from .capture_helpers import hxm_chunks
 from .test_capture_stage_daily import _choose, _confirm, _end, _record, _stop, _strap, settings, window  # noqa: F401
@@ -49,7 +49,7 @@ def test_note_marker_and_plan_start_empty_for_the_next_recording(qtbot, window, 
     _end(replay, thread)
     info = read_session_info(second)
     assert "notes" not in info.extra
-    from effortface.capture_tool.session import read_events
+    from effortface.core.session.folder import read_events
     assert [e for e in read_events(second / "events.csv") if e.kind in ("marker", "phase_start")] == []
 
 

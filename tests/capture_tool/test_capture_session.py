@@ -9,7 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from effortface.capture_tool.capture_session import CaptureSession, DeviceChoice
-from effortface.capture_tool.session import Participant, SessionInfo, create_session
+from effortface.core.session.folder import Participant, SessionInfo, create_session
 
 TIMEOUT_S = 30
 

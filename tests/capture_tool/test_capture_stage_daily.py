@@ -21,7 +21,7 @@ from effortface.capture_tool.gui.capture_stage import describe_sync
 from effortface.capture_tool.gui.live_view import QtLiveView
 from effortface.capture_tool.participants import read_registry
 from effortface.capture_tool.replay import PtyReplay, TimedChunk, start_replay_thread
-from effortface.capture_tool.session import Event, Participant, read_events, read_session_info
+from effortface.core.session.folder import Event, Participant, read_events, read_session_info
 from effortface.core.participant import LIMITS
 from effortface.train.train_session import scan_sessions
 

@@ -13,7 +13,7 @@ import pytest
 from effortface.capture_tool.captures import read_timed_capture
 from effortface.capture_tool.commands import decode as cmd
 from effortface.core.errors import SessionFormatError
-from effortface.capture_tool.hr_csv import HR_CSV_COLUMNS, format_hr_row, read_hr_csv
+from effortface.core.session.hr_csv import HR_CSV_COLUMNS, format_hr_row, read_hr_csv
 from effortface.capture_tool.protocols import HrSample
 from effortface.capture_tool.serlog import SerlogWriter, read_serlog
 from effortface.cli import main

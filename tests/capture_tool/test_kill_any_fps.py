@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from effortface.capture_tool.camera import index_video, read_frame
-from effortface.capture_tool.session import read_session
+from effortface.core.session.folder import read_session
 
 from .capture_helpers import BODY, effortface, frame_number, hxm_chunks, make_numbered_video, start_replay, write_serlog
 

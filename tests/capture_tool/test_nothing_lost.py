@@ -34,7 +34,7 @@ from effortface.capture_tool.recorder import DAMAGED_HR_CSV, Recorder, decode_se
 from effortface.capture_tool.replay import PtyReplay, TimedChunk, start_replay_thread
 from effortface.capture_tool.serial_link import SerialLink
 from effortface.capture_tool.serlog import read_serlog
-from effortface.capture_tool.session import (
+from effortface.core.session.folder import (
     RECORDING_LOCK,
     Participant,
     list_sessions,
@@ -145,7 +145,7 @@ import json, resource, sys, time
 from effortface.capture_tool import camera
 camera.CameraSource._room_problem = lambda self: None  # as before issue 17: nothing stops it in time
 from effortface.capture_tool.recorder import Recorder
-from effortface.capture_tool.session import Participant
+from effortface.core.session.folder import Participant
 resource.setrlimit(resource.RLIMIT_FSIZE, (150_000, 150_000))
 rec = Recorder(sys.argv[1], Participant("P01"), "loop://", "lines", video=sys.argv[2])
 path = rec.start()

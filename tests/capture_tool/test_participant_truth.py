@@ -19,7 +19,7 @@ import pytest
 from effortface.capture_tool.participants import (HISTORY_TSV, REGISTRY_TSV, ParticipantConflict, lab_registry,
                                                   read_history, read_registry, resolve_participant,
                                                   save_participant)
-from effortface.capture_tool.session import Participant, read_session
+from effortface.core.session.folder import Participant, read_session
 
 from .capture_helpers import effortface, hxm_chunks, start_replay, write_serlog
 

@@ -8,7 +8,7 @@ import pytest
 from effortface.annotate.annotate_session import check_rater
 from effortface.capture_tool.protocols import get_decoder
 from effortface.capture_tool.protocols.encode import encode_ant_broadcast, encode_hxm_packet, encode_line
-from effortface.capture_tool.session import check_participant_code, make_session_id, parse_session_id
+from effortface.core.session.folder import check_participant_code, make_session_id, parse_session_id
 from effortface.core.errors import UserError
 from effortface.core.physio_limits import HR_BPM, RR_MS, hr_plausible, rr_plausible
 

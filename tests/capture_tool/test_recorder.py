@@ -12,7 +12,7 @@ from effortface.core.errors import DeviceError
 from effortface.capture_tool.protocols.encode import hxm_stream
 from effortface.capture_tool.recorder import Recorder
 from effortface.capture_tool.serlog import read_serlog
-from effortface.capture_tool.session import Participant, read_session, validate_session
+from effortface.core.session.folder import Participant, read_session, validate_session
 
 from .capture_helpers import content, decode, frame_number, hxm_chunks, make_numbered_video, write_serlog
 

@@ -14,10 +14,10 @@ import pytest
 
 from effortface.capture_tool.camera import index_video, read_frame
 from effortface.core.errors import SessionFormatError
-from effortface.capture_tool.hr_csv import read_hr_csv
+from effortface.core.session.hr_csv import read_hr_csv
 from effortface.capture_tool.recorder import decode_serlog, recover_session
 from effortface.capture_tool.serlog import read_serlog
-from effortface.capture_tool.session import read_session, validate_session
+from effortface.core.session.folder import read_session, validate_session
 
 from .capture_helpers import BODY, content, effortface, frame_number, hxm_chunks, make_numbered_video, start_replay, write_serlog
 
@@ -88,7 +88,7 @@ def test_recover_completes_the_session(killed_session) -> None:
 def test_recover_drops_torn_lines_and_restores_rows(tmp_path, shared_data) -> None:
     """A session cut mid-write, built by hand: torn CSV lines, rows missing, AVI truncated."""
     from effortface.capture_tool.recorder import Recorder
-    from effortface.capture_tool.session import Participant
+    from effortface.core.session.folder import Participant
 
     chunks = hxm_chunks(shared_data, 0, 20)
     log = write_serlog(tmp_path / "in.serlog", chunks)

@@ -22,7 +22,7 @@ from effortface.capture_tool.recorder import (
     decode_serlog,
     recover_session,
 )
-from effortface.capture_tool.session import (
+from effortface.core.session.folder import (
     EventWriter,
     FrameTimeWriter,
     HrWriter,

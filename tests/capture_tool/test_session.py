@@ -9,7 +9,7 @@ import pytest
 
 from effortface.core.errors import SessionFormatError, UserError
 from effortface.capture_tool.protocols import HrSample
-from effortface.capture_tool.session import (
+from effortface.core.session.folder import (
     Event,
     EventWriter,
     FrameTimeWriter,

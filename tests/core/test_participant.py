@@ -11,11 +11,11 @@ import pandas as pd
 import pytest
 
 from effortface.capture_tool.gui.participant_form import QtParticipantForm
-from effortface.capture_tool.session import SessionInfo, read_session_info
+from effortface.core.session.folder import SessionInfo, read_session_info
 from effortface.core.errors import SessionFormatError, UserError
 from effortface.core.participant import LIMITS, Participant
 from effortface.train.dataset import DatasetError, read_table, synthetic_table, write_table
-from effortface.train.runtime import Character
+from effortface.synth.runtime import Character
 
 #: The documented limits (README "Capturing...", effortface/core/participant.py) and,
 #: per field, a step just outside them that the form's spin boxes can show (their resolution).

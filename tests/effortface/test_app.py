@@ -13,7 +13,7 @@ import pytest
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from effortface.core.errors import UserError
-from effortface.capture_tool.session import Participant, SessionInfo, create_session
+from effortface.core.session.folder import Participant, SessionInfo, create_session
 import effortface.app as app_module
 from effortface.app import STAGES, MainWindow, QtPlaceholderStage, install_exception_hooks, main
 

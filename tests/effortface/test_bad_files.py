@@ -20,17 +20,17 @@ import pandas as pd
 import pytest
 
 from effortface.annotate.keyframes import AnnotationFormatError, read_annotations
-from effortface.capture_tool.session import check_session, read_session, read_session_info
+from effortface.core.session.folder import check_session, read_session, read_session_info
 from effortface.cli import main
 from effortface.core import bounds
 from effortface.core.errors import SessionFormatError, UserError
-from effortface.train import npzio
-from effortface.train.bundle import BundleFormatError, read_bundle, write_bundle
+from effortface.synth import npzio
+from effortface.synth.bundle import BundleFormatError, read_bundle, write_bundle
 from effortface.train.dataset import DatasetError, session_table
-from effortface.train.work import write_work
-from effortface.train.work import WorkError, read_motion_index
-from effortface.train.physiology import PhysiologyParams
-from effortface.train.runtime import Character
+from effortface.synth.work import write_work
+from effortface.synth.work import WorkError, read_motion_index
+from effortface.synth.physiology import PhysiologyParams
+from effortface.synth.runtime import Character
 from tests.train.test_bundle import make_bundle
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -139,7 +139,7 @@ def test_force_refuses_a_file(lab, tmp_path, capsys):
 
 
 def test_force_never_replaces_the_lab_or_the_current_directory(tmp_path, monkeypatch, capsys):
-    from effortface.capture_tool.session import Participant, SessionInfo, create_session
+    from effortface.core.session.folder import Participant, SessionInfo, create_session
     from effortface.demo import MARKER
 
     fake_lab = tmp_path / "lab"

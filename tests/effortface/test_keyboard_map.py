@@ -28,7 +28,7 @@ def _listed(keys) -> set[str]:
 
 def test_the_map_lists_every_annotate_and_synthesize_key(qtbot, tmp_path: Path) -> None:
     from effortface.annotate.gui.annotate_stage import QtAnnotateStage
-    from effortface.train.gui.synth_stage import PLAYER_KEYS
+    from effortface.synth.gui.synth_stage import PLAYER_KEYS
 
     lab = tmp_path / "lab"
     session = "P01_20260112-093000_cardio"

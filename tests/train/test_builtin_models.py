@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from effortface.train.energy import looped, work_and_power
-from effortface.train.motion import read_motion
-from effortface.train.physiology import (COMPENDIUM_METS, VO2_REST_ML_PER_KG_MIN, MetCurve,
+from effortface.synth.energy import looped, work_and_power
+from effortface.synth.motion import read_motion
+from effortface.synth.physiology import (COMPENDIUM_METS, VO2_REST_ML_PER_KG_MIN, MetCurve,
                                          PhysiologyParams, fit_met_curve, simulate)
-from effortface.train.runtime import BUILT_IN_MODELS, Character, load_model
+from effortface.synth.runtime import BUILT_IN_MODELS, Character, load_model
 
 #: The reference clips (tests/data/motion) with the stretch of each that shows the activity.
 CLIPS = {
@@ -160,7 +160,7 @@ def _within_repetition_swing(shared_data: Path, params: "object | None" = None) 
     weight, over the last 60 s."""
     import dataclasses
 
-    from effortface.train.face import RuleFaceModel
+    from effortface.synth.face import RuleFaceModel
 
     clip = read_motion(shared_data / "motion" / "cmu_13_29_jumping_jacks_120fps.bvh")
     order = np.r_[np.arange(clip.n_frames), np.arange(clip.n_frames)[::-1]]
@@ -191,7 +191,7 @@ def test_built_in_face_does_not_pulse_with_each_repetition(shared_data: Path) ->
     With exertion on the power p (0.25 s) the squint swung 0.17 (0.48 of its mean) and the brow
     0.10 (0.66); the work rate w (1 s, the sustained effort) gives 0.04 (0.10) and 0.03 (0.20).
     """
-    from effortface.train.face import RuleParams
+    from effortface.synth.face import RuleParams
 
     now = _within_repetition_swing(shared_data)
     before = _within_repetition_swing(shared_data, RuleParams(exertion_from_work=False))

@@ -12,9 +12,9 @@ from sklearn.svm import SVR
 
 from effortface.core.blendshapes import DEFAULT_SET
 from effortface.core.errors import UserError
-from effortface.train.bundle import BundleFormatError, ModelBundle, read_bundle, write_bundle
-from effortface.train.face import DEFAULT_FILTER_TAU_S, SvrModel
-from effortface.train.physiology import NhrParams, NhrRegression
+from effortface.synth.bundle import BundleFormatError, ModelBundle, read_bundle, write_bundle
+from effortface.synth.face import DEFAULT_FILTER_TAU_S, SvrModel
+from effortface.synth.physiology import NhrParams, NhrRegression
 
 
 def make_bundle(seed: int = 0, n: int = 200) -> ModelBundle:

@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from effortface.train.motion import read_motion
-from effortface.train.segments import SegmentMappingError, map_skeleton
+from effortface.synth.motion import read_motion
+from effortface.synth.segments import SegmentMappingError, map_skeleton
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "bvh"
 

@@ -7,11 +7,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from effortface.train.catalog import CATALOG_CSV, CatalogError, default_catalog, read_catalog
-from effortface.train.energy import work_and_power
-from effortface.train.exercise_log import PhaseState
-from effortface.train.motion import read_motion
-from effortface.train.segments import Loads, build_body
+from effortface.synth.catalog import CATALOG_CSV, CatalogError, default_catalog, read_catalog
+from effortface.synth.energy import work_and_power
+from effortface.synth.exercise_log import PhaseState
+from effortface.synth.motion import read_motion
+from effortface.synth.segments import Loads, build_body
 
 MASS_KG = 72.0
 #: SCIENCE.md section 2 (W/kg), and the condition each reference clip shows
@@ -65,7 +65,7 @@ CLIPS = {  # exercise -> clip, steady part (as tests/train/test_energy.py), logg
 
 @pytest.mark.parametrize("case", CLIPS)
 def test_catalog_against_the_clips_with_loads(shared_data: Path, case: str) -> None:
-    """The catalog's estimate (with its load factors) against effortface.train.energy on the real clip."""
+    """The catalog's estimate (with its load factors) against effortface.synth.energy on the real clip."""
     exercise, clip, start, stop, state, loads = CLIPS[case]
     measured = _clip_w(shared_data, clip, start, stop, loads)
     assert default_catalog().work_per_kg(exercise, state, MASS_KG) == pytest.approx(measured, rel=0.10)

@@ -11,12 +11,12 @@ from sklearn.preprocessing import StandardScaler
 from sklearn.svm import SVR
 
 from effortface.core.blendshapes import DEFAULT_SET
-from effortface.train.bundle import ModelBundle, write_bundle
-from effortface.train.face import (SINGLE_PRECISION_ERROR_PER_ALPHA, SURROGATE_MAX_ERROR, SvrModel,
+from effortface.synth.bundle import ModelBundle, write_bundle
+from effortface.synth.face import (SINGLE_PRECISION_ERROR_PER_ALPHA, SURROGATE_MAX_ERROR, SvrModel,
                                    SvrSurrogate, _grid)
-from effortface.train.motion import Motion, read_motion
-from effortface.train.physiology import NhrParams, NhrRegression
-from effortface.train.runtime import Character, FaceModel, load_model
+from effortface.synth.motion import Motion, read_motion
+from effortface.synth.physiology import NhrParams, NhrRegression
+from effortface.synth.runtime import Character, FaceModel, load_model
 from tests.train.test_bundle import make_bundle
 from tests.train.test_face import _fit_random
 

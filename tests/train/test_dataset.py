@@ -14,11 +14,11 @@ from effortface.core.blendshapes import DEFAULT_SET
 from effortface.annotate.keyframes import KeyframeTrack, RaterAnnotations
 from effortface.core.errors import UserError
 from effortface.capture_tool.protocols import HrSample
-from effortface.capture_tool.session import (FrameTimeWriter, HrWriter, Participant, SessionInfo, create_session,
+from effortface.core.session.folder import (FrameTimeWriter, HrWriter, Participant, SessionInfo, create_session,
                                   make_session_id)
 from effortface.train.dataset import (TABLE_COLUMNS, DatasetError, hr_series, prepare, read_table,
                            session_table, sessions_table, synthetic_table, write_table)
-from effortface.train.physiology import hr_max_bpm, hr_rest_bpm
+from effortface.synth.physiology import hr_max_bpm, hr_rest_bpm
 
 FPS = 10.0
 
@@ -190,14 +190,14 @@ def test_missing_folder_is_a_user_error(tmp_path):
 
 def test_work_from_a_motion_clip_when_there_is_no_work_log(tmp_path):
     """The sample lab's loaded-squat set ships as real CMU mocap: without work.csv, w comes from
-    the clip through effortface.train.energy and agrees with the exercise log within 25 % (SCIENCE.md 2)."""
+    the clip through effortface.synth.energy and agrees with the exercise log within 25 % (SCIENCE.md 2)."""
     import shutil
 
     lab = Path(__file__).resolve().parents[2] / "sample_sessions"
     src = next((p.parent.parent for p in lab.glob("*/motion/motion.json")), None)
     if src is None:
         pytest.skip("sample_sessions/ has no session with motion/ yet")
-    from effortface.train.work import derive_work
+    from effortface.synth.work import derive_work
 
     folder = Path(shutil.copytree(src, tmp_path / src.name))
     assert not (folder / "work.csv").exists()  # the sample lab records none, as a capture

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from effortface.core.errors import UserError
-from effortface.train.energy import G_M_PER_S2, EnergyCrowd, EnergyStream, looped, segment_energies, work_and_power
-from effortface.train.motion import Motion, axis_rotations, motion_from_positions, read_motion
-from effortface.train.segments import BodyModel, Loads, build_body
+from effortface.synth.energy import G_M_PER_S2, EnergyCrowd, EnergyStream, looped, segment_energies, work_and_power
+from effortface.synth.motion import Motion, axis_rotations, motion_from_positions, read_motion
+from effortface.synth.segments import BodyModel, Loads, build_body
 
 FPS = 120.0
 

@@ -19,9 +19,9 @@ import numpy as np
 import pytest
 from scipy.interpolate import CubicSpline
 
-from effortface.train.energy import G_M_PER_S2, EnergyCrowd, EnergyStream, work_and_power
-from effortface.train.motion import Motion, motion_from_positions, read_motion
-from effortface.train.segments import BodyModel, build_body
+from effortface.synth.energy import G_M_PER_S2, EnergyCrowd, EnergyStream, work_and_power
+from effortface.synth.motion import Motion, motion_from_positions, read_motion
+from effortface.synth.segments import BodyModel, build_body
 
 JITTER = 0.3
 CLIPS = ["amp_humanoid_walk.npz", "amp_humanoid_run.npz", "cmu_13_29_jumping_jacks_120fps.bvh"]

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from effortface.train.interop.engine_reference import VECTORS_NAME, state_vectors, write_vectors
+from effortface.interop.engine_reference import VECTORS_NAME, state_vectors, write_vectors
 
 DOCS = Path(__file__).resolve().parents[2] / "docs"
 

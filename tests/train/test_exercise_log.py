@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from effortface.capture_tool.session import EVENTS_HEADER
+from effortface.core.session.folder import EVENTS_HEADER
 from effortface.core.errors import SessionFormatError
-from effortface.train.exercise_log import exercise_id, read_exercise_log
+from effortface.synth.exercise_log import exercise_id, read_exercise_log
 
 SAMPLES = Path(__file__).resolve().parents[2] / "sample_sessions"
 

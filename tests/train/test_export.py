@@ -16,13 +16,13 @@ import pytest
 from effortface.core.blendshapes import DEFAULT_SET
 from effortface.core.errors import UserError
 from effortface.train import export
-from effortface.train.bundle import read_bundle
+from effortface.synth.bundle import read_bundle
 from effortface.train.dataset import hr_series, prepare, synthetic_table
 from effortface.train.export import (FACE_F64_ONNX, FACE_ONNX, MODEL_CARD, STANDARD_OPS, ExportError, build_bundle, export_model,
                           parity_features, run_onnx)
 from effortface.train.face_fit import FaceFitConfig, fit_face_models
 from effortface.train.hr_fit import fit_hr_model
-from effortface.train.runtime import Character, load_model
+from effortface.synth.runtime import Character, load_model
 
 
 @pytest.fixture(scope="module")

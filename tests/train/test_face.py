@@ -9,7 +9,7 @@ from sklearn.svm import SVR
 
 from effortface.core.blendshapes import DEFAULT_SET, Blendshape, BlendshapeSet
 from effortface.core.errors import UserError
-from effortface.train.face import FEATURE_NAMES, RuleFaceModel, RuleParams, SvrModel, apply_expressiveness
+from effortface.synth.face import FEATURE_NAMES, RuleFaceModel, RuleParams, SvrModel, apply_expressiveness
 
 
 def _random_features(rng: np.random.Generator, n: int) -> np.ndarray:

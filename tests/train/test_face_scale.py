@@ -18,7 +18,7 @@ from effortface.core.blendshapes import DEFAULT_SET
 from effortface.train.dataset import prepare, synthetic_table, write_table
 from effortface.train.face_fit import (EXACT_MAX_ROWS, N_LANDMARKS, FaceFitConfig, LandmarkRegressor,
                                        fit_face_models, fit_landmark_models, held_out_scores)
-from effortface.train.runtime import load_model
+from effortface.synth.runtime import load_model
 
 ROOT = Path(__file__).resolve().parents[2]
 #: a local Dask cluster starts in a few seconds; a run that hangs fails instead of blocking CI

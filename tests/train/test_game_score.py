@@ -9,7 +9,7 @@ import pytest
 from effortface.train.dataset import hr_series, prepare, synthetic_table
 from effortface.train.face_fit import FaceFitConfig, fit_face_models
 from effortface.train.game_score import GamePredictions, game_predictions, game_scores, simulated_features
-from effortface.train.physiology import PAPER_REGRESSION
+from effortface.synth.physiology import PAPER_REGRESSION
 
 NAMES = ("mouth_stretch", "eye_squint")
 SCORED = "P01"

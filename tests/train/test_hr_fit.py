@@ -21,7 +21,7 @@ from effortface.train.hr_fit import (
     simulate_series,
     step_samples,
 )
-from effortface.train.physiology import PAPER_REGRESSION, NhrParams
+from effortface.synth.physiology import PAPER_REGRESSION, NhrParams
 
 
 def _true(tl: float) -> HrCoefficients:

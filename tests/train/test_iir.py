@@ -1,4 +1,4 @@
-"""The numpy IIR filters (effortface.train.iir) against scipy.signal, which they replace at run time."""
+"""The numpy IIR filters (effortface.synth.iir) against scipy.signal, which they replace at run time."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from effortface.train import iir
-from effortface.train.energy import butterworth_sos, filter_frames
+from effortface.synth import iir
+from effortface.synth.energy import butterworth_sos, filter_frames
 
 
 @pytest.mark.parametrize("order", [1, 2, 3, 4, 5, 6])

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from effortface.capture_tool.session import read_session_info
+from effortface.core.session.folder import read_session_info
 from effortface.cli import main
 from effortface.core.errors import SessionFormatError
 
@@ -54,7 +54,7 @@ def test_absurd_session_numbers_are_refused_naming_the_field(tmp_path, capsys, e
 
 
 def test_an_svr_npz_linked_to_a_text_file_is_not_called_pickled(tmp_path) -> None:
-    from effortface.train.bundle import read_bundle, write_bundle
+    from effortface.synth.bundle import read_bundle, write_bundle
     from tests.train.test_bundle import make_bundle
 
     model = write_bundle(make_bundle(), tmp_path / "model")

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from effortface.train.motion import (
+from effortface.synth.motion import (
     Motion,
     CMU_UNIT_M,
     MotionFormatError,

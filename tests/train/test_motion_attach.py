@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from effortface.cli import main
-from effortface.train.motion import read_motion, read_positions_csv
-from effortface.train.work import derive_work
+from effortface.synth.motion import read_motion, read_positions_csv
+from effortface.synth.work import derive_work
 
 SAMPLES = Path(__file__).resolve().parents[2] / "sample_sessions"
 SESSION = "P01_20260119-140000_strength"  # 215 s of heart rate and video, no motion/

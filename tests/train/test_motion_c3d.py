@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from effortface.cli import main
-from effortface.train.energy import work_and_power
-from effortface.train.motion import Motion, MotionFormatError, read_motion
-from effortface.train.segments import build_body
+from effortface.synth.energy import work_and_power
+from effortface.synth.motion import Motion, MotionFormatError, read_motion
+from effortface.synth.segments import build_body
 
 c3d = pytest.importorskip("c3d")
 
@@ -75,7 +75,7 @@ def test_an_occluded_point_is_filled_or_named(shared_data: Path, tmp_path: Path)
 
 
 # --------------------------------------------------------------------------------------------
-# the one C3D reader (effortface.train.interop.c3d_motion): labelled points and Plug-in Gait alike
+# the one C3D reader (effortface.synth.c3d_motion): labelled points and Plug-in Gait alike
 
 
 def _write_points(path: Path, labels: list[str], xyz: np.ndarray, units: str = "mm", fps: float = 100.0) -> Path:
@@ -101,7 +101,7 @@ def _walk_xyz(n_frames: int = 20) -> np.ndarray:
 
 
 def test_read_c3d_is_the_one_api_for_labelled_points_with_its_units_and_up_axis(tmp_path: Path) -> None:
-    from effortface.train.interop.c3d_motion import read_c3d
+    from effortface.synth.c3d_motion import read_c3d
 
     path = _write_points(tmp_path / "in.c3d", ["Hips", "LeftFoot"], _walk_xyz(), units="in")
     motion = read_c3d(path)
@@ -127,7 +127,7 @@ def test_an_all_zero_point_is_missing_in_labelled_points_too(tmp_path: Path) -> 
 
 def test_without_the_c3d_package_reading_and_writing_say_what_to_install(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from effortface.train.interop.c3d_motion import write_c3d_markers
+    from effortface.synth.c3d_motion import write_c3d_markers
 
     path = _write_points(tmp_path / "clip.c3d", ["Hips", "LeftFoot"], _walk_xyz())
     monkeypatch.setitem(sys.modules, "c3d", None)  # `import c3d` raises ImportError, as in the runtime's venv
@@ -142,7 +142,7 @@ def test_without_the_c3d_package_reading_and_writing_say_what_to_install(
 
 def test_a_bad_up_axis_is_named(tmp_path: Path) -> None:
     from effortface.core.errors import UserError
-    from effortface.train.interop.c3d_motion import read_c3d
+    from effortface.synth.c3d_motion import read_c3d
 
     with pytest.raises(UserError, match=r"up_axis: expected 'z' or 'y', found 'x'"):
         read_c3d(tmp_path / "none.c3d", up_axis="x")

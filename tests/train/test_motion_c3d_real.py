@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from effortface.train.interop.c3d_motion import (HEAD_MARKERS, MAX_GAP_S, QUALISYS_SPORTS, fill_gaps, head_centre,
+from effortface.synth.c3d_motion import (HEAD_MARKERS, MAX_GAP_S, QUALISYS_SPORTS, fill_gaps, head_centre,
                                                  read_c3d, read_c3d_points, units_per_point)
-from effortface.train.motion import MotionFormatError
+from effortface.synth.motion import MotionFormatError
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "c3d"
 FULL = DATA / "PiG_Calibration-FlatFoot-Full.c3d"

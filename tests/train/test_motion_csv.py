@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from effortface.train.motion import MotionFormatError, read_motion
-from effortface.train.motion_csv import is_positions_csv, read_positions_csv, write_positions_csv
-from effortface.train.synth_session import find_clips
+from effortface.synth.motion import MotionFormatError, read_motion
+from effortface.synth.motion_csv import is_positions_csv, read_positions_csv, write_positions_csv
+from effortface.synth.synth_session import find_clips
 
 #: the two dialects' axis suffixes
 DIALECTS = {"metres": ("_x_m", "_y_m", "_z_m"), "plain": ("_x", "_y", "_z")}
@@ -128,7 +128,7 @@ def test_the_clip_list_offers_both_dialects(shared_data: Path, tmp_path: Path) -
 def test_a_fifo_is_refused_not_read_forever(tmp_path: Path, suffix: str) -> None:
     fifo = tmp_path / f"clip{suffix}"
     os.mkfifo(fifo)
-    code = ("from effortface.train.motion import read_motion, MotionFormatError\n"
+    code = ("from effortface.synth.motion import read_motion, MotionFormatError\n"
             f"try:\n    read_motion({str(fifo)!r})\nexcept MotionFormatError as exc:\n    print(exc)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.stdout.strip() == f"{fifo}: expected a motion file ({suffix}), found a special file (FIFO, device or socket)", out.stderr

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from effortface.cli import main
-from effortface.train.motion import MAX_BVH_DEPTH, MotionFormatError, read_motion
+from effortface.synth.motion import MAX_BVH_DEPTH, MotionFormatError, read_motion
 
 SQUATS = "motion/cmu_13_29_squats_120fps.bvh"
 
@@ -84,7 +84,7 @@ def _header_bvh(shared_data: Path, tmp_path: Path, frames: str | None = None, fr
 
 def _first_byte_200_c3d(shared_data: Path, tmp_path: Path) -> Path:
     pytest.importorskip("c3d")
-    from effortface.train.interop.c3d_motion import write_c3d_markers
+    from effortface.synth.c3d_motion import write_c3d_markers
 
     bvh = read_motion(shared_data / SQUATS).slice_s(0, 0.5)
     markers = {name: bvh.positions_m[:, j] for j, name in enumerate(bvh.joint_names[:6])}

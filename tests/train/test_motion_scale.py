@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from effortface.train import motion as motion_module
-from effortface.train.motion import MotionFormatError, read_bvh
-from effortface.train.runtime import Character, load_model
+from effortface.synth import motion as motion_module
+from effortface.synth.motion import MotionFormatError, read_bvh
+from effortface.synth.runtime import Character, load_model
 
 JJ = "motion/cmu_13_29_jumping_jacks_120fps.bvh"
 

@@ -2,7 +2,7 @@
 (:func:`effortface.train.pipeline.train_models`), its export and report
 (:func:`~effortface.train.pipeline.export_outcome`), the evaluation
 (:func:`effortface.train.evaluation.evaluate_bundle`) and the curve writer
-(:func:`effortface.train.curves_io.write_curves`) each exist once, and both paths call them.
+(:func:`effortface.synth.curves_io.write_curves`) each exist once, and both paths call them.
 
 Each function is replaced, wherever a loaded ``effortface`` module holds it, by a spy that counts
 the call and runs the real function; the CLI commands and the GUI models (``TrainSession``,
@@ -29,11 +29,11 @@ from effortface.train.dataset import synthetic_table, write_table
 
 #: module -> the one function of a job
 JOBS = {"train_models": "effortface.train.pipeline", "export_outcome": "effortface.train.pipeline",
-        "evaluate_bundle": "effortface.train.evaluation", "write_curves": "effortface.train.curves_io"}
+        "evaluate_bundle": "effortface.train.evaluation", "write_curves": "effortface.synth.curves_io"}
 #: the callers: the command modules and the GUI models (imported before the spies go in)
 CALLERS = ("effortface.train.commands.train", "effortface.train.commands.evaluate",
-           "effortface.train.commands.synth", "effortface.commands.demo",
-           "effortface.train.train_session", "effortface.train.synth_session")
+           "effortface.synth.commands.synth", "effortface.commands.demo",
+           "effortface.train.train_session", "effortface.synth.synth_session")
 CLIP = "motion/cmu_13_29_jumping_jacks_120fps.bvh"
 
 
@@ -101,7 +101,7 @@ def test_cli_and_train_stage_run_the_same_training_and_export(table_csv: Path, t
 
 def test_synth_cli_and_synthesize_stage_write_with_the_same_writer(shared_data: Path, tmp_path: Path,
                                                                   monkeypatch: pytest.MonkeyPatch) -> None:
-    from effortface.train.synth_session import SynthSession
+    from effortface.synth.synth_session import SynthSession
 
     calls = spy_on_jobs(monkeypatch)
     for fmt in ("csv", "livelink"):

@@ -1,4 +1,4 @@
-"""Training on a local Dask cluster (train/parallel.py): the training data goes to the workers once,
+"""Training on a local Dask cluster (effortface/synth/parallel.py): the training data goes to the workers once,
 a task carries only fold indices and hyper-parameters, the results are the serial run's, abandoned
 tasks are cancelled, the workers start warm and keep their freed memory, and the data arrives
 aligned. A real two-worker cluster in this process; the Client's own ``scatter`` and ``submit`` are
@@ -21,7 +21,7 @@ from effortface.core.blendshapes import DEFAULT_SET
 from effortface.train.dataset import prepare, synthetic_table
 from effortface.train.face_fit import (PROTOCOLS, FaceData, FaceFitConfig, _protocol_folds, cv_folds, face_data,
                                        fit_face_models, held_out_scores, protocol_scores)
-from effortface.train.parallel import (FORKSERVER_PRELOAD, TASKS_PER_THREAD, ComputeSettings, compute_backend,
+from effortface.synth.parallel import (FORKSERVER_PRELOAD, TASKS_PER_THREAD, ComputeSettings, compute_backend,
                                        _chunks, map_ordered, single_threaded)
 
 #: a task may carry its fold's row indices, never the training data: at most this share of its bytes

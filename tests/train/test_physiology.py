@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from effortface.core.errors import UserError
-from effortface.train import physiology as ph
+from effortface.synth import physiology as ph
 
 
 @dataclasses.dataclass

@@ -16,10 +16,10 @@ import pytest
 
 from effortface.core.blendshapes import DEFAULT_SET
 from effortface.core.errors import UserError
-from effortface.train.face import REST_FEATURES, RestAnchor, rest_anchor
-from effortface.train.motion import motion_from_positions, read_motion
+from effortface.synth.face import REST_FEATURES, RestAnchor, rest_anchor
+from effortface.synth.motion import motion_from_positions, read_motion
 from effortface.train.pipeline import TrainSettings, export_outcome, train_models, training_table
-from effortface.train.runtime import Character, load_model
+from effortface.synth.runtime import Character, load_model
 
 LAB = Path(__file__).resolve().parents[2] / "sample_sessions"
 #: the issue's bound on every weight of a still character (the raters' rest level on the sample lab)

@@ -10,10 +10,10 @@ import pytest
 
 from effortface.core.errors import UserError
 from tests.train.test_bundle import make_bundle
-from effortface.train.bundle import write_bundle
-from effortface.train.motion import motion_from_positions, read_motion
-from effortface.train.face import DEFAULT_FILTER_TAU_S, WeightFilter, filter_weights, jitter
-from effortface.train.runtime import CURVE_COLUMNS, Character, load_model
+from effortface.synth.bundle import write_bundle
+from effortface.synth.motion import motion_from_positions, read_motion
+from effortface.synth.face import DEFAULT_FILTER_TAU_S, WeightFilter, filter_weights, jitter
+from effortface.synth.runtime import CURVE_COLUMNS, Character, load_model
 
 ROOT = Path(__file__).resolve().parents[2]
 JJ = "motion/cmu_13_29_jumping_jacks_120fps.bvh"
@@ -230,7 +230,7 @@ def test_character_stream_work_does_not_depend_on_the_game_frame_rate(jumping_ja
 def test_synthesize_stage_curves_use_the_output_filter(jumping_jacks) -> None:
     """The Synthesize stage's session (what its plots, preview and Live Link export show) gets the
     model's filtered weights: the same as synthesize(), with less jitter than the raw weights."""
-    from effortface.train.synth_session import SynthSession
+    from effortface.synth.synth_session import SynthSession
 
     session = SynthSession("default")
     session.load_motion(jumping_jacks)

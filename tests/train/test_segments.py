@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from effortface.core.errors import UserError
-from effortface.train.motion import Motion, read_motion
-from effortface.train.segments import (
+from effortface.synth.motion import Motion, read_motion
+from effortface.synth.segments import (
     REQUIRED_SEGMENTS,
     Loads,
     SegmentMappingError,

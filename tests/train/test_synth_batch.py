@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from effortface.cli import main
-from effortface.train.curves_io import LIVELINK_BLENDSHAPES
+from effortface.synth.curves_io import LIVELINK_BLENDSHAPES
 
 ROOT = Path(__file__).resolve().parents[2]
 CLIPS = ("motion/cmu_13_29_jumping_jacks_120fps.bvh", "motion/amp_humanoid_walk.npz")
@@ -95,8 +95,8 @@ def test_an_existing_units_sidecar_is_not_replaced_silently(clips_dir: Path, tmp
 
 def test_one_list_of_motion_suffixes() -> None:
     """Batch synth, the Synthesize stage and motion attach take exactly what read_motion reads."""
-    from effortface.train import attach, batch_synth, synth_session
-    from effortface.train.motion import MOTION_SUFFIXES
+    from effortface.synth import attach, batch_synth, synth_session
+    from effortface.synth.motion import MOTION_SUFFIXES
 
     assert batch_synth.CLIP_SUFFIXES is MOTION_SUFFIXES
     assert synth_session.MOTION_SUFFIXES is MOTION_SUFFIXES

@@ -14,9 +14,9 @@ import pytest
 
 from effortface.cli import main
 from tests.train.test_bundle import make_bundle
-from effortface.train.bundle import write_bundle
-from effortface.train.curves_io import LIVELINK_BLENDSHAPES, livelink_timecode
-from effortface.train.face import jitter
+from effortface.synth.bundle import write_bundle
+from effortface.synth.curves_io import LIVELINK_BLENDSHAPES, livelink_timecode
+from effortface.synth.face import jitter
 from effortface.core.blendshapes import DEFAULT_SET
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -209,7 +209,7 @@ def test_user_mapping_file_maps_unknown_joints(shared_data: Path, tmp_path: Path
     """The renamed skeleton that fails above works with a mapping file, giving the same curves."""
     import json
 
-    from effortface.train.segments import CONVENTIONS
+    from effortface.synth.segments import CONVENTIONS
 
     renamed = {"LeftUpLeg": "Bone_leftupleg_x", "LeftLeg": "Bone_leftleg_x",
                "LeftFoot": "Bone_leftfoot_x"}
@@ -355,7 +355,7 @@ def test_synth_filters_the_weights_by_default(shared_data: Path, tmp_path: Path)
 
 
 #: what one clip's ``effortface synth`` must not import: scipy (scipy.signal alone costs 0.7 s of
-#: start-up: the filters are effortface.train.iir's), the training, video and GUI libraries, and
+#: start-up: the filters are effortface.synth.iir's), the training, video and GUI libraries, and
 #: what only a folder of clips needs (tqdm, dask)
 SYNTH_NEVER_IMPORTS = ("scipy", "sklearn", "pandas", "cv2", "PySide6", "pyqtgraph", "matplotlib",
                        "onnx", "onnxruntime", "tqdm", "dask", "distributed")

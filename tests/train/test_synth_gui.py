@@ -1,9 +1,9 @@
 """The Synthesize stage offscreen: a trained bundle drives the face while a real clip plays.
 
 Trains a small bundle on the sample lab (into tmp_path), loads it in
-:class:`effortface.train.gui.synth_stage.QtSynthStage`, plays the 120 Hz jumping-jacks clip and changes the
+:class:`effortface.synth.gui.synth_stage.QtSynthStage`, plays the 120 Hz jumping-jacks clip and changes the
 character through the controls while it plays; asserts on the model
-(:class:`effortface.train.synth_session.SynthSession`) and on what the views show.
+(:class:`effortface.synth.synth_session.SynthSession`) and on what the views show.
 """
 
 from __future__ import annotations
@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 from PySide6 import QtCore, QtGui, QtWidgets
 
-from effortface.train.curves_io import LIVELINK_BLENDSHAPES
-from effortface.train.gui.synth_stage import QtSynthStage
-from effortface.train.runtime import load_model
-from effortface.train.synth_session import SynthSession
+from effortface.synth.curves_io import LIVELINK_BLENDSHAPES
+from effortface.synth.gui.synth_stage import QtSynthStage
+from effortface.synth.runtime import load_model
+from effortface.synth.synth_session import SynthSession
 from effortface.train.train_session import TrainSession
 
 SAMPLE = Path(__file__).resolve().parents[2] / "sample_sessions"
@@ -244,7 +244,7 @@ def test_clip_combo_shows_the_loaded_clip(qtbot, stage: QtSynthStage, shared_dat
 
 def test_clip_combo_elides_a_long_path_in_the_middle(qtbot, stage: QtSynthStage, shared_data: Path) -> None:
     """A clip in a session's motion folder: the box keeps the file name in view (not 'P02_2026...')."""
-    from effortface.train.gui.synth_stage import QtSynthStage as Stage, SynthSession as Session
+    from effortface.synth.gui.synth_stage import QtSynthStage as Stage, SynthSession as Session
 
     view = Stage(Session(background=True), motion_dir=SAMPLE)  # clips under <session>/motion/
     qtbot.addWidget(view)
@@ -340,7 +340,7 @@ def test_export_suggests_a_file_name(stage: QtSynthStage, bundle: Path, shared_d
 
 
 def test_epoc_axis_and_aligned_time_axes(stage: QtSynthStage) -> None:
-    from effortface.train.gui.synth_stage import EPOC_MIN_TOP_ML_PER_KG, epoc_axis_top
+    from effortface.synth.gui.synth_stage import EPOC_MIN_TOP_ML_PER_KG, epoc_axis_top
 
     assert epoc_axis_top(np.full(10, 0.0007)) == EPOC_MIN_TOP_ML_PER_KG   # not 0-0.0008
     assert epoc_axis_top(np.array([0.0, 20.0])) == pytest.approx(21.0)

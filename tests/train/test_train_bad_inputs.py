@@ -181,7 +181,7 @@ def test_session_without_mass_names_the_session(table, tmp_path, capsys):
 
 def test_physiology_refuses_unknown_sex_and_missing_body_values():
     from effortface.core.errors import UserError
-    from effortface.train.physiology import hr_rest_bpm, vo2max_ml_per_kg_min
+    from effortface.synth.physiology import hr_rest_bpm, vo2max_ml_per_kg_min
 
     with pytest.raises(UserError, match=r"sex: expected one of female, male .*found 'x'"):
         hr_rest_bpm(30, "x", 2.0)

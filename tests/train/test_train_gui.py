@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from PySide6 import QtCore
 
-from effortface.train.bundle import read_bundle
+from effortface.synth.bundle import read_bundle
 from effortface.train.gui.train_stage import QtTrainStage
-from effortface.train.runtime import load_model
+from effortface.synth.runtime import load_model
 from effortface.train.train_session import TrainSession, filter_entries
 
 SAMPLE = Path(__file__).resolve().parents[2] / "sample_sessions"

@@ -48,7 +48,7 @@ import numpy as np
 from effortface.samplelab.simlab.lab import (
     JUMPING_JACK_REF_PER_MIN, Person, SessionPlan, work_at,
 )
-from effortface.train.physiology import hr_max_bpm, hr_rest_bpm
+from effortface.synth.physiology import hr_max_bpm, hr_rest_bpm
 
 DT_S = 0.1  # integration step
 #: capacity: ``w_scale = W_SCALE_W_PER_KG + W_SCALE_PER_TL * TL`` (W/kg of demand), see above

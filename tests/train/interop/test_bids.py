@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from effortface.capture_tool.session import list_sessions, read_session
-from effortface.train.interop.bids import bids_label, export_bids
+from effortface.core.session.folder import list_sessions, read_session
+from effortface.interop.bids import bids_label, export_bids
 
 ROOT = Path(__file__).resolve().parents[3]
 SAMPLE = ROOT / "sample_sessions"
@@ -187,7 +187,7 @@ def test_lab_after_work_exports_with_no_validator_error(worked_lab, tmp_path):
     assert {c["units"] for c in channels} == {"m"} and {c["type"] for c in channels} == {"POS"}
     assert abs(len(table) / sidecar["SamplingFrequency"] - sidecar["RecordingDuration"]) < 1e-3
     # the work written by `effortface work` is what is exported (1 Hz, the source column dropped)
-    from effortface.train.work import read_work_csv
+    from effortface.synth.work import read_work_csv
 
     session = next(worked_lab.glob("P06_20260114-120500_strength"))
     saved = read_work_csv(session / "work.csv")

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from effortface.capture_tool.session import EventWriter, Event
+from effortface.core.session.folder import EventWriter, Event
 from effortface.cli import main
-from effortface.train.interop.bids import bids_text
+from effortface.interop.bids import bids_text
 
 ROOT = Path(__file__).resolve().parents[3]
 SAMPLE = ROOT / "sample_sessions"

@@ -10,12 +10,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from effortface.train.interop.c3d_motion import (MarkerSetOptions, hip_centres, read_c3d,
+from effortface.synth.c3d_motion import (MarkerSetOptions, hip_centres, read_c3d,
                                                  write_c3d_markers)
-from effortface.train.motion import Motion, MotionFormatError, read_motion
-from effortface.train.motion_csv import read_positions_csv, write_positions_csv
-from effortface.train.runtime import Character, load_model
-from effortface.train.synth_session import find_clips
+from effortface.synth.motion import Motion, MotionFormatError, read_motion
+from effortface.synth.motion_csv import read_positions_csv, write_positions_csv
+from effortface.synth.runtime import Character, load_model
+from effortface.synth.synth_session import find_clips
 
 SQUATS = "motion/cmu_13_29_squats_120fps.bvh"
 JJ = "motion/cmu_13_29_jumping_jacks_120fps.bvh"

@@ -18,9 +18,9 @@ import pylsl
 import pytest
 
 from effortface.core.blendshapes import DEFAULT_SET
-from effortface.train.interop.serve import (FaceProcessor, Outputs, OscInput, ServeStats, livelink_packet,
+from effortface.interop.serve import (FaceProcessor, Outputs, OscInput, ServeStats, livelink_packet,
                                             parse_host_port, serve)
-from effortface.train.runtime import Character, load_model
+from effortface.synth.runtime import Character, load_model
 
 from .lsl_helpers import WorkSender, pull_for, unique
 
@@ -132,7 +132,7 @@ def test_osc_in_to_osc_and_livelink_out():
 
 
 def test_livelink_packet_puts_weights_under_arkit_names():
-    from effortface.train.curves_io import LIVELINK_BLENDSHAPES
+    from effortface.synth.curves_io import LIVELINK_BLENDSHAPES
 
     packet = livelink_packet("s", "d", 7, 60, {"JawOpen": 0.5, "BrowDownLeft": 0.25})
     floats = struct.unpack(">61f", packet[-61 * 4:])
@@ -157,7 +157,7 @@ def test_mocap_frames_give_the_runtime_stream_weights(shared_data, tmp_path):
     """MoCap input: joint positions + a skeleton file give what model.stream gives."""
     import json
 
-    from effortface.train.motion import read_motion
+    from effortface.synth.motion import read_motion
 
     clip = read_motion(shared_data / "motion/cmu_13_29_squats_120fps.bvh").slice_s(0, 2)
     skeleton = tmp_path / "cmu.skeleton.json"

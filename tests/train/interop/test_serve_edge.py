@@ -21,9 +21,9 @@ import pylsl
 import pytest
 from pythonosc.osc_message_builder import OscMessageBuilder
 
-from effortface.train.interop.serve import (FaceProcessor, LslInput, OscInput, Outputs, ServeStats, check_sample,
+from effortface.interop.serve import (FaceProcessor, LslInput, OscInput, Outputs, ServeStats, check_sample,
                                             serve, xpath_literal)
-from effortface.train.runtime import Character, load_model
+from effortface.synth.runtime import Character, load_model
 
 from .lsl_helpers import unique
 
@@ -104,7 +104,7 @@ class _Frames:
 
 
 def test_nan_mocap_frames_never_poison_the_state(shared_data, tmp_path) -> None:
-    from effortface.train.motion import read_motion
+    from effortface.synth.motion import read_motion
 
     clip = read_motion(shared_data / "motion/cmu_13_29_squats_120fps.bvh").slice_s(0, 1)
     skeleton = tmp_path / "cmu.skeleton.json"

@@ -16,11 +16,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from effortface.train.work import derive_work, write_work
+from effortface.synth.work import derive_work, write_work
 
 from effortface.annotate.keyframes import read_annotations
 
-from effortface.capture_tool.session import read_session
+from effortface.core.session.folder import read_session
 from effortface.train.dataset import session_table
 
 from .xdf_writer import XdfStream, write_xdf
@@ -152,7 +152,7 @@ def test_not_an_xdf_file(tmp_path):
 
 
 def test_mocap_stream_becomes_motion_csv(tmp_path, shared_data):
-    from effortface.train.motion import read_motion
+    from effortface.synth.motion import read_motion
 
     clip = read_motion(shared_data / "motion/cmu_13_29_squats_120fps.bvh").slice_s(0, 1)
     labels = [(f"{j}_{a}", "m") for j in clip.joint_names for a in "xyz"]

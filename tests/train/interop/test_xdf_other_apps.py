@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from effortface.train.interop.xdf_import import HR_RANGE_BPM, load_xdf, marker_events
+from effortface.interop.xdf_import import HR_RANGE_BPM, load_xdf, marker_events
 
 from .xdf_writer import XdfStream, write_xdf
 

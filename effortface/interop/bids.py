@@ -1,0 +1,346 @@
+"""BIDS out: session folders -> a BIDS-style dataset (``effortface export bids``).
+
+Layout (BIDS 1.9, behavioural data with physiological recordings, attached mocap as motion)::
+
+    dataset_description.json  participants.tsv  participants.json  README
+    sub-<code>/ses-<YYYYmmddHHMMSS>/beh/
+        sub-<code>_ses-<...>_task-<label>_recording-heartrate_physio.tsv.gz (+ .json)
+        sub-<code>_ses-<...>_task-<label>_recording-work_physio.tsv.gz (+ .json, with work.csv)
+        sub-<code>_ses-<...>_task-<label>_events.tsv (+ .json)
+    sub-<code>/ses-<YYYYmmddHHMMSS>/motion/   (sessions with clips in motion/motion.json)
+        sub-<code>_ses-<...>_task-<label>_tracksys-mocap[_run-<n>]_motion.tsv (+ .json, _channels.tsv)
+
+Labels are sanitised to letters and digits (BIDS labels are alphanumeric): ``LAB2-07`` becomes
+``LAB207`` (two codes that collide are an error), the task is the session label (``cardio``) or
+``effort``. BIDS physiological files need a constant rate: heart rate is linearly interpolated
+from the valid strap samples at :data:`HR_RATE_HZ` (``n/a`` across gaps longer than
+``effortface.train.dataset.MAX_HR_GAP_S``), work and power are written at their own 1 Hz. Each
+physio sidecar has ``SamplingFrequency``, ``StartTime`` (seconds from the session's time 0, which is
+also the events' onset origin) and ``Columns``, with units per column, ``PhysioType`` and
+``TaskName``.
+
+The lab's own description: an optional ``dataset_description.json`` in the sessions folder, edited by
+the user, gives the BIDS keys of the output's ``dataset_description.json`` (``Name``, ``Authors``,
+``License``, ``Funding``...) and, under the key ``"effortface"``, what BIDS wants elsewhere:
+``{"README": "text", "Tasks": {"cardio": {"TaskName": "cardio", "TaskDescription": "..."}},
+"Sidecars": {"InstitutionName": "..."}, "PhysioType": "generic"}``: ``Tasks`` gives the keys of the
+sidecars of each session label (``TaskName`` defaults to the label), ``Sidecars`` the keys of every
+sidecar
+(:data:`LAB_DESCRIPTION`, :func:`read_lab_description`). A failed export removes what it wrote.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import gzip
+import io
+import json
+import os
+import re
+import secrets
+import shutil
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from effortface.core.session.hr_csv import read_hr_csv
+from effortface.core.session.folder import EVENTS_CSV, HEART_RATE_CSV, list_sessions, parse_session_id, read_session
+from effortface.core.errors import UserError
+from effortface.core.fileio import atomic_write, atomic_write_text, check_apart, fsync_folder, read_json, write_json_atomic
+from effortface.core.version import __version__
+from effortface.train.dataset import MAX_HR_GAP_S, WORK_CSV
+
+BIDS_VERSION = "1.9.0"
+HR_RATE_HZ = 4.0
+DATATYPE = "beh"
+#: attached mocap clips go to the BIDS motion datatype, tracking system ``mocap``
+MOTION_DATATYPE, MOTION_TRACKSYS = "motion", "mocap"
+#: the lab-level description the user edits, in the sessions folder
+LAB_DESCRIPTION = "dataset_description.json"
+#: keys of the lab description's ``"effortface"`` object
+LAB_KEYS = ("README", "Tasks", "Sidecars", "PhysioType")
+#: the physio types BIDS 1.10 defines
+PHYSIO_TYPES = ("generic", "eyetrack")
+DEFAULT_README = ("Exported by effortface: heart rate, mechanical work and events of exercise sessions "
+                  "(see the effortface README).\n")
+
+
+@dataclasses.dataclass(frozen=True)
+class LabDescription:
+    """What the lab's own ``dataset_description.json`` says.
+
+    Attributes
+    ----------
+    bids : dict
+        BIDS keys for the output's ``dataset_description.json`` (``Name``, ``Authors``...).
+    readme : str
+        The README text.
+    tasks : dict
+        Session label (``cardio``) -> keys of its sidecars (``TaskName``, ``TaskDescription``...).
+    sidecars : dict
+        Keys of every sidecar (``InstitutionName``...).
+    physio_type : str
+        ``PhysioType`` of the physio sidecars.
+    """
+
+    bids: dict
+    readme: str
+    tasks: dict
+    sidecars: dict
+    physio_type: str
+
+    def sidecar_keys(self, label: str) -> dict:
+        """The keys a sidecar of session label ``label`` gets: ``TaskName`` (the label by default)
+        and the lab's."""
+        return {"TaskName": label, **self.sidecars, **self.tasks.get(label, {})}
+
+
+def read_lab_description(sessions_dir: str | os.PathLike) -> LabDescription:
+    """The lab's description (:data:`LAB_DESCRIPTION` in ``sessions_dir``), or the defaults without one.
+
+    Raises
+    ------
+    UserError
+        A file that is not a JSON object, an ``"effortface"`` object with other keys or values of the
+        wrong type, in one line naming the file.
+    """
+    path = Path(sessions_dir) / LAB_DESCRIPTION
+    if not path.exists():
+        return LabDescription({}, DEFAULT_README, {}, {}, "generic")
+    doc = read_json(path, "a JSON object (the lab's BIDS dataset description)")
+    if not isinstance(doc, dict):
+        raise UserError(f"{path}: expected a JSON object, found {type(doc).__name__}")
+    own = doc.get("effortface", {})
+    if not isinstance(own, dict) or set(own) - set(LAB_KEYS):
+        raise UserError(f"{path}: \"effortface\": expected an object with keys among {', '.join(LAB_KEYS)}, "
+                        f"found {sorted(own) if isinstance(own, dict) else type(own).__name__}")
+    readme, physio = own.get("README", DEFAULT_README), own.get("PhysioType", "generic")
+    tasks, sidecars = own.get("Tasks", {}), own.get("Sidecars", {})
+    if not isinstance(readme, str) or not readme.strip():
+        raise UserError(f"{path}: \"effortface\".README: expected text, found {readme!r}")
+    if not isinstance(tasks, dict) or not all(isinstance(v, dict) for v in tasks.values()):
+        raise UserError(f"{path}: \"effortface\".Tasks: expected an object session label -> sidecar keys, "
+                        f"found {tasks!r}")
+    if not isinstance(sidecars, dict):
+        raise UserError(f"{path}: \"effortface\".Sidecars: expected an object of sidecar keys, found {sidecars!r}")
+    if physio not in PHYSIO_TYPES:
+        raise UserError(f"{path}: \"effortface\".PhysioType: expected one of {', '.join(PHYSIO_TYPES)}, found {physio!r}")
+    bids = {k: v for k, v in doc.items() if k != "effortface"}
+    return LabDescription(bids, readme if readme.endswith("\n") else readme + "\n", tasks, sidecars, physio)
+
+
+def bids_label(text: str) -> str:
+    """A BIDS label: letters and digits only (``LAB2-07`` -> ``LAB207``)."""
+    label = re.sub(r"[^A-Za-z0-9]", "", text)
+    if not label:
+        raise UserError(f"BIDS label: expected letters or digits in {text!r}, found none")
+    return label
+
+
+#: characters a BIDS TSV cell cannot hold (tab, line breaks, NUL and the other C0 controls, DEL)
+_NOT_IN_A_CELL = re.compile(r"[\x00-\x1f\x7f]+")
+
+
+def bids_text(text: str) -> str:
+    """``text`` as one BIDS TSV cell: each run of tabs, line breaks, NUL or other control characters
+    becomes one space (a marker from ``import xdf`` may hold any of them), ``n/a`` if nothing is left."""
+    return _NOT_IN_A_CELL.sub(" ", text).strip() or "n/a"
+
+
+def _tsv(rows: Sequence[Sequence[object]], header: Sequence[str] | None) -> str:
+    buf = io.StringIO()
+    writer = csv.writer(buf, delimiter="\t", lineterminator="\n")
+    if header is not None:
+        writer.writerow(header)
+    writer.writerows(rows)
+    return buf.getvalue()
+
+
+def _value(v: float) -> str:
+    return "n/a" if not np.isfinite(v) else f"{v:.6g}"
+
+
+def hr_grid(folder: Path) -> tuple[np.ndarray, np.ndarray]:
+    """Heart rate at :data:`HR_RATE_HZ` from the valid samples (NaN across long gaps)."""
+    samples = [s for s in read_hr_csv(folder / HEART_RATE_CSV) if s.valid and s.hr_bpm is not None]
+    if len(samples) < 2:
+        return np.array([]), np.array([])
+    t = np.array([s.t_s for s in samples])
+    hr = np.array([float(s.hr_bpm) for s in samples])  # type: ignore[arg-type]
+    grid = np.arange(np.ceil(t[0] * HR_RATE_HZ), np.floor(t[-1] * HR_RATE_HZ) + 1) / HR_RATE_HZ
+    values = np.interp(grid, t, hr)
+    gap_after = np.searchsorted(t, grid, side="right")
+    gap_s = t[np.minimum(gap_after, len(t) - 1)] - t[np.maximum(gap_after - 1, 0)]
+    values[gap_s > MAX_HR_GAP_S] = np.nan
+    return grid, values
+
+
+def _write_physio(stem: Path, columns: dict[str, str], t_s: np.ndarray, table: np.ndarray, rate_hz: float,
+                  description: str, extra: dict) -> None:
+    text = _tsv([[_value(v) for v in row] for row in table], None)
+    atomic_write(stem.with_name(stem.name + "_physio.tsv.gz"),
+                 lambda fh: fh.write(gzip.compress(text.encode(), mtime=0)))
+    write_json_atomic(stem.with_name(stem.name + "_physio.json"), {
+        "SamplingFrequency": rate_hz, "StartTime": float(t_s[0]) if len(t_s) else 0.0,
+        "Columns": list(columns), "Description": description, **extra,
+        **{name: {"Units": unit} for name, unit in columns.items()}})
+
+
+def _events(folder: Path) -> list[list[str]]:
+    """``onset, duration, trial_type, value`` rows of events.csv (phases get their duration)."""
+    with open(folder / EVENTS_CSV, newline="", encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    out = []
+    for i, r in enumerate(rows):
+        duration = "n/a"
+        if r["kind"] == "phase_start":
+            end = next((float(e["t_s"]) for e in rows[i + 1:] if e["kind"] in ("phase_end", "phase_start")), None)
+            duration = f"{end - float(r['t_s']):.4f}" if end is not None else "n/a"
+        label = _NOT_IN_A_CELL.sub(" ", r["label"]).strip()
+        trial = f"{r['kind']}:{label}" if label else r["kind"]
+        out.append([f"{float(r['t_s']):.4f}", duration, bids_text(trial), bids_text(r["value"] or "")])
+    return out
+
+
+def export_session(folder: Path, out: Path, sub: str, lab: LabDescription | None = None) -> Path:
+    """Write one session's files under ``out/sub-<sub>/ses-<...>/beh``; return that folder."""
+    lab = lab or LabDescription({}, DEFAULT_README, {}, {}, "generic")
+    _, start, label = parse_session_id(folder.name)
+    ses, task = start.strftime("%Y%m%d%H%M%S"), bids_label(label or "effort")
+    task_keys = lab.sidecar_keys(label or "effort")
+    physio_keys = {"PhysioType": lab.physio_type, **task_keys}
+    target = out / f"sub-{sub}" / f"ses-{ses}" / DATATYPE
+    target.mkdir(parents=True, exist_ok=False)
+    stem = target / f"sub-{sub}_ses-{ses}_task-{task}"
+    grid, hr = hr_grid(folder)
+    _write_physio(Path(f"{stem}_recording-heartrate"), {"hr_bpm": "bpm"}, grid, hr[:, None], HR_RATE_HZ,
+                  "heart rate from the chest strap, linearly interpolated from its valid samples", physio_keys)
+    work = _work_rows(folder)
+    if work is not None:
+        rate = 1.0 / float(np.median(np.diff(work[:, 0]))) if len(work) > 1 else 1.0
+        _write_physio(Path(f"{stem}_recording-work"), {"w_per_kg": "W/kg", "p_per_kg": "W/kg"}, work[:, 0],
+                      work[:, 1:3], rate, "mechanical work over the last 1 s (w) and 0.25 s (p), per kg", physio_keys)
+    _write_motion(folder, out / f"sub-{sub}" / f"ses-{ses}" / MOTION_DATATYPE,
+                  f"sub-{sub}_ses-{ses}_task-{task}", task_keys)
+    if (folder / EVENTS_CSV).is_file():
+        atomic_write_text(Path(f"{stem}_events.tsv"), _tsv(_events(folder), ("onset", "duration", "trial_type", "value")))
+        write_json_atomic(Path(f"{stem}_events.json"), {
+            **task_keys,
+            "onset": {"Units": "s", "Description": "session time of the event"},
+            "trial_type": {"Description": "kind[:label] from events.csv (phase_start:rest, marker, sync...)"},
+            "value": {"Description": "events.csv value (load, speed, sync offset...)"}})
+    return target
+
+
+def _write_motion(folder: Path, target: Path, stem: str, task_keys: dict) -> None:
+    """Each clip of ``motion/motion.json`` as the BIDS ``motion`` datatype: joint positions in metres
+    (``tracksys-mocap``, ``run-<n>`` in the index's order), ``channels.tsv`` naming each column."""
+    from effortface.synth.motion import read_motion
+    from effortface.synth.work import MOTION_DIR, MOTION_JSON, read_motion_index
+
+    index = folder / MOTION_DIR / MOTION_JSON
+    if not index.is_file():
+        return
+    entries = read_motion_index(index)
+    target.mkdir(parents=True, exist_ok=True)
+    for run, entry in enumerate(entries, start=1):
+        clip = read_motion(index.parent / str(entry["path"]))
+        name = f"{stem}_tracksys-{MOTION_TRACKSYS}" + (f"_run-{run}" if len(entries) > 1 else "")
+        table = clip.positions_m.reshape(clip.n_frames, -1)
+        text = _tsv([[_value(v) for v in row] for row in table], None)
+        atomic_write_text(target / f"{name}_motion.tsv", text)
+        channels = [[f"{joint}_{axis}", axis, "POS", joint, "m"] for joint in clip.joint_names for axis in "xyz"]
+        atomic_write_text(target / f"{name}_channels.tsv",
+                          _tsv(channels, ("name", "component", "type", "tracked_point", "units")))
+        write_json_atomic(target / f"{name}_motion.json", {
+            **task_keys, "SamplingFrequency": float(clip.fps), "TrackingSystemName": MOTION_TRACKSYS,
+            "MotionChannelCount": 3 * len(clip.joint_names), "POSChannelCount": 3 * len(clip.joint_names),
+            "RecordingDuration": round(clip.n_frames / clip.fps, 4), "SpatialAxes": "FLU",
+            "TrackedPointsCount": len(clip.joint_names), "SamplingFrequencyEffective": float(clip.fps),
+            "MissingValues": "n/a", "SubjectArtefactDescription": "n/a",
+            **{f"{kind}ChannelCount": 0 for kind in ("ACCEL", "ANGACCEL", "GYRO", "JNTANG", "LATENCY", "MAGN",
+                                                     "MISC", "ORNT", "VEL")},
+            "Description": f"joint positions of {entry['path']} (metres, Z up, as effortface reads it); "
+                          f"its first frame is at session time {float(entry.get('offset_s', 0.0)):g} s"})
+
+
+def export_bids(sessions_dir: str | os.PathLike, out_dir: str | os.PathLike, *, name: str | None = None
+                ) -> Path:
+    """Export every session folder of ``sessions_dir`` as a BIDS dataset in ``out_dir`` (new or empty).
+
+    ``name`` (the dataset ``Name``) overrides the lab description's; without either it is
+    ``"effortface sessions"``.
+    The dataset is written into a hidden folder beside ``out_dir`` and renamed into place at the end,
+    so a failed export (a bad session, a full disk) leaves nothing that looks like a dataset.
+
+    Raises
+    ------
+    UserError
+        No sessions, ``out_dir`` inside an input (the sessions folder or a session), a non-empty
+        ``out_dir``, colliding participant labels.
+    """
+    folders = list_sessions(sessions_dir)
+    if not folders:
+        raise UserError(f"{sessions_dir}: expected session folders (with session.json), found none")
+    check_apart("--out", out_dir, [sessions_dir, *folders], "a dataset folder")
+    out = Path(out_dir)
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        raise UserError(f"--out {out}: expected a new or empty folder, found {'a file' if not out.is_dir() else 'a folder with files'}")
+    participants: dict[str, object] = {}
+    for folder in folders:
+        p = read_session(folder).participant
+        sub = bids_label(p.code)
+        if sub in participants and getattr(participants[sub], "code") != p.code:
+            raise UserError(f"{folder}: participant {p.code!r} becomes BIDS label {sub!r}, as does "
+                            f"{getattr(participants[sub], 'code')!r}: rename one")
+        participants[sub] = p
+    lab = read_lab_description(sessions_dir)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    staging = out.with_name(f".{out.name}.{secrets.token_hex(6)}.tmp")
+    staging.mkdir()
+    try:
+        for folder in folders:
+            export_session(folder, staging, bids_label(read_session(folder).participant.code), lab)
+        _write_top(staging, participants, name, lab)
+        if out.is_dir():
+            out.rmdir()  # the empty folder given (checked above)
+        os.rename(staging, out)
+        fsync_folder(out.parent)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return out
+
+
+def _write_top(out: Path, participants: dict[str, object], name: str | None, lab: LabDescription) -> None:
+    write_json_atomic(out / "dataset_description.json", {
+        **lab.bids, "Name": name or lab.bids.get("Name") or "effortface sessions", "BIDSVersion": BIDS_VERSION, "DatasetType": "raw",
+        "GeneratedBy": [{"Name": "effortface", "Version": __version__}]})
+    cols = ("participant_id", "sex", "age", "height", "weight", "training_level")
+    rows = [[f"sub-{sub}", *(("n/a" if v is None else v) for v in (getattr(p, "sex"), getattr(p, "age"),
+             getattr(p, "height_m"), getattr(p, "mass_kg"), getattr(p, "training_level")))]
+            for sub, p in sorted(participants.items())]
+    atomic_write_text(out / "participants.tsv", _tsv(rows, cols))
+    write_json_atomic(out / "participants.json", {
+        "sex": {"Description": "sex", "Levels": {"female": "female", "male": "male"}},
+        "age": {"Units": "year"}, "height": {"Units": "m"}, "weight": {"Units": "kg"},
+        "training_level": {"Description": "training level, 0 (sedentary) to 10"}})
+    atomic_write_text(out / "README", lab.readme)
+
+
+def _work_rows(folder: Path) -> np.ndarray | None:
+    """``t_s, w_per_kg, p_per_kg`` rows: work.csv, else derived as ``effortface work`` does (None if
+    the session has neither motion nor an exercise log to derive it from)."""
+    from effortface.synth.work import derive_work, read_work_csv
+
+    if (folder / WORK_CSV).is_file():
+        saved = read_work_csv(folder / WORK_CSV)
+        return np.column_stack([saved.t_s, saved.w_per_kg, saved.p_per_kg])
+
+    try:
+        table = derive_work(folder)
+    except UserError:
+        return None
+    rows = np.column_stack([table.t_s, table.w_per_kg, table.p_per_kg])
+    return rows[np.isfinite(rows).all(axis=1)]

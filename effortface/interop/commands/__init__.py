@@ -1,0 +1,1 @@
+"""``effortface serve``, ``effortface import``, ``effortface export``."""

@@ -1,0 +1,526 @@
+"""XDF in: a LabRecorder recording -> a session folder (``effortface import xdf``).
+
+Streams are chosen by type or name (:func:`pick_stream`): the heart-rate stream (default: the one
+stream whose name, type, a channel label or a channel unit says heart rate or R-R intervals, as other
+apps write them: ``HeartRate`` typed ``ExciteOMeter``, a channel ``HR`` in ``bpm``, an ``RR`` stream
+in ``ms``; :func:`heart_rate_streams`). Its channels (:func:`hr_channels`): heart rate by label or
+unit ``bpm``, R-R intervals by label or unit ``ms``/``s``; a stream of R-R intervals only becomes
+heart rate (60000 / RR ms) with its R-R kept. Units are checked: a unit that is neither bpm nor a
+time is refused, and so is a stream whose values are mostly outside :data:`HR_RANGE_BPM` (an EEG
+named as heart rate); a single value outside that range is never a valid sample. Samples sharing a
+time stamp form one ``heart_rate.csv`` row, as ``capture --lsl`` publishes them. Every marker stream
+(type ``Markers`` or ``StringMarker``; effortface's JSON markers keep their kind, label and value,
+other strings become ``marker`` events, with every channel of a multi-channel marker kept), an optional ``EffortWork`` stream (-> ``work.csv``), an optional
+mocap stream (channels ``<joint>_x``, ``_y``, ``_z`` -> ``motion/mocap.csv``, a joint-positions CSV),
+and a video file given beside it with its frame times: a stream with one sample per frame
+(``--video-stream``), or the LSL time of its first frame (``--video-offset``) and its frame rate.
+
+Session time 0 is the earliest time stamp of the imported streams; ``session.json`` keeps
+``lsl.clock_offset_s`` (``lsl_time = t_s + clock_offset_s``) as a capture with ``--lsl`` does.
+
+Every stream is checked before anything is written (issue 29): time stamps finite and spanning at
+most ``BOUNDS["t_s"]``; a heart-rate stream with samples and at least one numeric channel (a rate
+outside :data:`effortface.core.physio_limits.HR_BPM` is written as not valid); a work stream with
+two finite channels within ``BOUNDS["w_per_kg"]``; ``--video-offset`` finite. Each refusal is one
+line naming the file, the stream and the sample. The session is written into a hidden folder
+beside its place and renamed into place at the end, so a failed import leaves no session.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import logging
+import math
+import os
+import re
+import secrets
+import shutil
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from effortface.core.hr_sample import HrSample
+from effortface.core.session.folder import (EVENTS_CSV, HEART_RATE_CSV, VIDEO_AVI, VIDEO_FRAMES_CSV, Event,
+                                             EventWriter, FrameTimeWriter, HrWriter, Participant, SessionInfo,
+                                             create_session, make_session_id, utc_now_iso)
+from effortface.core.bounds import BOUNDS
+from effortface.core.errors import UserError
+from effortface.core.opencv import import_cv2
+from effortface.core.fileio import atomic_write_text, fsync_folder
+from effortface.core.version import __version__
+
+XdfStream = dict[str, Any]
+
+#: the heart rates a sample may have to be valid (bpm), as the strap readers keep them
+HR_RANGE_BPM = (25.0, 250.0)
+#: names, types and channel labels (lower case, letters and digits only) that say heart rate
+HR_KEYS = frozenset({"heartrate", "hr", "hrbpm", "bpm", "pulse", "pulserate"})
+#: ... and R-R (inter-beat) intervals
+RR_KEYS = frozenset({"rr", "rrms", "rrinterval", "rrintervals", "rrintervalms", "ibi", "interbeatinterval", "nn"})
+BPM_UNITS = frozenset({"bpm", "beatsmin", "beatsperminute", "1min", "min", "min1", "countmin"})
+MS_UNITS = frozenset({"ms", "msec", "millisecond", "milliseconds"})
+S_UNITS = frozenset({"s", "sec", "second", "seconds"})
+#: stream types taken as markers by default
+MARKER_TYPES = frozenset({"markers", "marker", "stringmarker", "events"})
+
+
+class XdfImportError(UserError):
+    """A stream is missing or ambiguous, or a file cannot be read; the message names it."""
+
+
+def load_xdf(path: str | os.PathLike) -> list[XdfStream]:
+    """The streams of an XDF file (pyxdf, clock offsets applied)."""
+    import pyxdf  # lazy: only the importer needs it
+
+    path = Path(path)
+    if not path.is_file():
+        raise XdfImportError(f"{path}: expected an XDF file, found {'a folder' if path.is_dir() else 'no such file'}")
+    log = logging.getLogger("pyxdf")
+    level = log.level
+    log.setLevel(logging.CRITICAL + 1)  # its notes and logged tracebacks would break the one-line error rule
+    try:
+        streams, _ = pyxdf.load_xdf(str(path), dejitter_timestamps=False)
+    except (Exception, MemoryError) as exc:  # pyxdf raises bare Exceptions on a damaged file;
+        # a chunk claiming 2^40 samples fails its allocation
+        raise XdfImportError(f"{path}: expected an XDF file, found {type(exc).__name__}: {str(exc)[:200]}") from None
+    finally:
+        log.setLevel(level)
+    return streams
+
+
+def _field(stream: XdfStream, key: str) -> str:
+    return str((stream["info"].get(key) or [""])[0])
+
+
+def describe(streams: Sequence[XdfStream]) -> str:
+    """``name (type), ...`` of the streams, for messages."""
+    return ", ".join(f"{_field(s, 'name')!r} ({_field(s, 'type')})" for s in streams) or "no streams"
+
+
+def find_stream(path: Path, streams: Sequence[XdfStream], wanted: str | None, default_type: str,
+                option: str) -> XdfStream | None:
+    """The one stream whose name or type is ``wanted`` (default: of type ``default_type``), or None.
+
+    Raises
+    ------
+    XdfImportError
+        Several match (naming them and the option that chooses).
+    """
+    key = wanted or default_type
+    found = [s for s in streams if key in (_field(s, "name"), _field(s, "type"))] if wanted else \
+        [s for s in streams if _field(s, "type") == default_type]
+    if len(found) > 1:
+        raise XdfImportError(f"{path}: expected one stream named or typed {key!r}, found {len(found)}: "
+                             f"{describe(found)} (choose one by name with {option})")
+    return found[0] if found else None
+
+
+def pick_stream(path: Path, streams: Sequence[XdfStream], wanted: str | None, default_type: str,
+                option: str) -> XdfStream:
+    """Like :func:`find_stream`, but none found is an error naming the streams there are."""
+    found = find_stream(path, streams, wanted, default_type, option)
+    if found is None:
+        raise XdfImportError(f"{path}: expected a stream named or typed {wanted or default_type!r} ({option}), "
+                             f"found {describe(streams)}")
+    return found
+
+
+def channel_labels(stream: XdfStream) -> list[str]:
+    """Channel labels from the stream description (empty strings where none)."""
+    n = int(_field(stream, "channel_count") or 0)
+    try:
+        chans = stream["info"]["desc"][0]["channels"][0]["channel"]
+        labels = [str((c.get("label") or [""])[0]) for c in chans]
+    except (KeyError, IndexError, TypeError):
+        labels = []
+    return labels if len(labels) == n else [""] * n
+
+
+def _samples(stream: XdfStream) -> tuple[np.ndarray, Any]:
+    return np.asarray(stream["time_stamps"], dtype=float), stream["time_series"]
+
+
+def _numeric(path: Path, stream: XdfStream, what: str, min_channels: int) -> np.ndarray:
+    """A stream's samples as a (T, C) float array, or one line: no samples, too few channels, not numbers."""
+    stamps, values = _samples(stream)
+    name = _field(stream, "name") or _field(stream, "type")
+    if len(stamps) == 0:
+        raise XdfImportError(f"{path}: stream {name!r}: expected {what} samples, found none")
+    try:
+        array = np.asarray(values, dtype=float).reshape(len(stamps), -1)
+    except (ValueError, TypeError):
+        raise XdfImportError(f"{path}: stream {name!r}: expected numeric {what} channels, found "
+                             f"{type(values).__name__} of {np.asarray(values).dtype} values") from None
+    if array.shape[1] < min_channels:
+        raise XdfImportError(f"{path}: stream {name!r}: expected at least {min_channels} {what} channel(s), "
+                             f"found {array.shape[1]}")
+    return array
+
+
+def _key(text: str) -> str:
+    """Lower case, letters and digits only: ``Heart Rate`` -> ``heartrate``, ``beats/min`` -> ``beatsmin``."""
+    return re.sub(r"[^a-z0-9]", "", text.lower())
+
+
+def channel_units(stream: XdfStream) -> list[str]:
+    """Channel units from the stream description (``unit`` or ``units``; empty strings where none)."""
+    n = int(_field(stream, "channel_count") or 0)
+    try:
+        chans = stream["info"]["desc"][0]["channels"][0]["channel"]
+        units = [str(((c.get("unit") or c.get("units")) or [""])[0]) for c in chans]
+    except (KeyError, IndexError, TypeError):
+        units = []
+    return units if len(units) == n else [""] * n
+
+
+def _says(stream: XdfStream) -> tuple[bool, bool]:
+    """(says heart rate, says R-R intervals) from the name, type, channel labels and units."""
+    if _field(stream, "channel_format") == "string":
+        return False, False
+    names = {_key(_field(stream, "name")), _key(_field(stream, "type"))}
+    labels = {_key(lab) for lab in channel_labels(stream)}
+    units = {_key(u) for u in channel_units(stream)}
+    hr = bool((names | labels) & HR_KEYS or units & BPM_UNITS)
+    rr = bool((names | labels) & RR_KEYS)
+    return hr, rr
+
+
+def heart_rate_streams(streams: Sequence[XdfStream]) -> list[XdfStream]:
+    """The streams that say heart rate (by name, type, channel label or unit ``bpm``); else those that
+    say R-R intervals."""
+    hr = [s for s in streams if _says(s)[0]]
+    return hr or [s for s in streams if _says(s)[1]]
+
+
+def pick_hr_stream(path: Path, streams: Sequence[XdfStream], wanted: str | None) -> XdfStream:
+    """The heart-rate stream: ``wanted`` by name or type, else the one :func:`heart_rate_streams` finds.
+
+    Raises
+    ------
+    XdfImportError
+        None or several found (naming the streams and ``--hr-stream``).
+    """
+    if wanted:
+        return pick_stream(path, streams, wanted, "HeartRate", "--hr-stream")
+    typed = [s for s in streams if _field(s, "type") == "HeartRate"]
+    found = typed or heart_rate_streams(streams)
+    if not found:
+        raise XdfImportError(f"{path}: expected a heart-rate stream (named or typed HeartRate, HR or RR, or a "
+                             f"channel labelled so or in bpm; or name one with --hr-stream), found {describe(streams)}")
+    if len(found) > 1:
+        raise XdfImportError(f"{path}: expected one heart-rate stream, found {len(found)}: {describe(found)} "
+                             "(choose one by name with --hr-stream)")
+    return found[0]
+
+
+def hr_channels(path: Path, stream: XdfStream) -> tuple[int | None, int | None, float]:
+    """Which channels hold heart rate (bpm) and R-R intervals, and the factor to milliseconds of the latter.
+
+    Returns
+    -------
+    hr_col, rr_col : int or None
+        Column of the heart rate in bpm, of the R-R intervals (at least one is given).
+    rr_to_ms : float
+        1 for a channel in ms, 1000 for one in s.
+
+    Raises
+    ------
+    XdfImportError
+        A unit that is neither bpm nor a time, or several channels none of which says what it holds.
+    """
+    labels, units = channel_labels(stream), channel_units(stream)
+    keys, ukeys = [_key(lab) for lab in labels], [_key(u) for u in units]
+    name = f"{path}: stream {_field(stream, 'name')!r} ({_field(stream, 'type')})"
+    hr_col = next((i for i, (k, u) in enumerate(zip(keys, ukeys)) if k in HR_KEYS or u in BPM_UNITS), None)
+    rr_col = next((i for i, (k, u) in enumerate(zip(keys, ukeys))
+                   if i != hr_col and (k in RR_KEYS or (u in MS_UNITS | S_UNITS and k not in HR_KEYS))), None)
+    if hr_col is None and rr_col is None:
+        if len(labels) != 1:
+            raise XdfImportError(f"{name}: expected a channel labelled hr_bpm, HeartRate or HR (or in bpm) or rr_ms, "
+                                 f"RR or IBI (in ms), found labels {labels}")
+        says_hr, says_rr = _says(stream)
+        if ukeys[0] in MS_UNITS | S_UNITS or (says_rr and not says_hr):
+            rr_col = 0
+        else:
+            hr_col = 0
+    for col, allowed, what in ((hr_col, BPM_UNITS, "bpm"), (rr_col, MS_UNITS | S_UNITS, "ms or s")):
+        if col is not None and ukeys[col] and ukeys[col] not in allowed:
+            raise XdfImportError(f"{name}: channel {labels[col] or col!r}: expected a unit of {what}, found "
+                                 f"{units[col]!r}: not imported as heart rate (convert it, or choose another "
+                                 "stream with --hr-stream)")
+    return hr_col, rr_col, 1000.0 if rr_col is not None and ukeys[rr_col] in S_UNITS else 1.0
+
+
+def _check_hr_range(path: Path, stream: XdfStream, hr_bpm: np.ndarray, what: str) -> None:
+    """XdfImportError unless most finite values are heart rates within :data:`HR_RANGE_BPM`."""
+    name = f"{path}: stream {_field(stream, 'name')!r} ({_field(stream, 'type')})"
+    finite = hr_bpm[np.isfinite(hr_bpm)]
+    if finite.size == 0:
+        raise XdfImportError(f"{name}: expected heart-rate samples, found no finite value")
+    low, high = HR_RANGE_BPM
+    inside = np.count_nonzero((finite >= low) & (finite <= high))
+    if inside * 2 < finite.size:
+        raise XdfImportError(f"{name}: expected heart rates of {low:g}-{high:g} bpm ({what}), found "
+                             f"{finite.size - inside} of {finite.size} values outside (median "
+                             f"{float(np.median(finite)):.4g} bpm): not imported as heart rate "
+                             "(choose another stream with --hr-stream)")
+
+
+def hr_rows(path: Path, stream: XdfStream, t0: float) -> list[HrSample]:
+    """``heart_rate.csv`` rows: samples sharing a time stamp make one row (their R-R intervals).
+
+    A stream of R-R intervals only gives heart rate 60000 / RR (ms) of the row's last interval; a
+    heart rate outside :data:`HR_RANGE_BPM` is never valid.
+
+    Raises
+    ------
+    XdfImportError
+        An empty stream, a unit that is not bpm or a time, values that are not heart rates (one line).
+    """
+    stamps, values = _samples(stream)
+    device = _field(stream, "name") or "xdf"
+    if len(stamps) == 0:
+        raise XdfImportError(f"{path}: stream {device!r}: expected heart-rate samples, found an empty stream")
+    hr_col, rr_col, rr_to_ms = hr_channels(path, stream)
+    values = _numeric(path, stream, "heart-rate", 1)
+    rr_ms = values[:, rr_col] * rr_to_ms if rr_col is not None else None
+    with np.errstate(divide="ignore", invalid="ignore"):
+        hr_all: np.ndarray = values[:, hr_col] if hr_col is not None else 60000.0 / np.asarray(rr_ms)
+    what = "its channel in bpm" if hr_col is not None else "60000 / its R-R intervals in ms"
+    _check_hr_range(path, stream, hr_all, what)
+    low, high = HR_RANGE_BPM
+    rows: list[HrSample] = []
+    order = np.argsort(stamps, kind="stable")  # sorted once and split: linear in samples
+    unique, starts = np.unique(stamps[order], return_index=True)
+    hr_groups = np.split(hr_all[order], starts[1:])
+    rr_groups = np.split(np.asarray(rr_ms)[order], starts[1:]) if rr_ms is not None else [()] * len(unique)
+    for stamp, hr_group, rr_group in zip(unique, hr_groups, rr_groups):
+        hr = float(hr_group[-1] if hr_col is None else hr_group[0])
+        rr = tuple(float(v) for v in rr_group if math.isfinite(v))
+        ok = math.isfinite(hr) and low <= hr <= high
+        rows.append(HrSample(round(float(stamp) - t0, 4), hr if ok else None, rr, None, device, ok))
+    return rows
+
+
+def check_stamps(path: Path, streams: Sequence[XdfStream], extra: np.ndarray | None = None) -> float:
+    """Session time 0 (the earliest stamp) after checking every stream's stamps; one line naming the bad one.
+
+    Raises
+    ------
+    XdfImportError
+        A stamp that is not finite, or stamps spanning more than ``BOUNDS["t_s"]`` allows (a marker
+        at +-1e15 s).
+    """
+    named = [(_field(s, "name") or _field(s, "type"), _samples(s)[0]) for s in streams]
+    if extra is not None:
+        named.append(("--video frames", np.asarray(extra, float)))
+    for name, stamps in named:
+        bad = np.flatnonzero(~np.isfinite(stamps))
+        if bad.size:
+            raise XdfImportError(f"{path}: stream {name!r}: expected finite time stamps, found {stamps[bad[0]]} "
+                                 f"at sample {int(bad[0])}")
+    starts = [float(st.min()) for _, st in named if len(st)]
+    if not starts:
+        raise XdfImportError(f"{path}: expected time-stamped samples in the imported streams, found none")
+    t0 = min(starts)
+    bound = BOUNDS["t_s"]
+    for name, stamps in named:
+        if len(stamps) and not bound.contains(float(stamps.max()) - t0):
+            raise XdfImportError(f"{path}: stream {name!r}: expected time stamps within {bound.high:g} s of the "
+                                 f"first, found {float(stamps.max()) - t0:g} s after it")
+    return t0
+
+
+def marker_events(stream: XdfStream, t0: float) -> list[Event]:
+    """Events of a marker stream (effortface JSON markers keep kind, label, value; the channels after the
+    first of a multi-channel marker become the value, joined by `` | ``)."""
+    stamps, values = _samples(stream)
+    out = []
+    for stamp, sample in zip(stamps, values):
+        text = str(sample[0]) if len(sample) else ""
+        rest = " | ".join(str(v) for v in list(sample)[1:])
+        try:
+            doc = json.loads(text)
+            event = Event(stamp - t0, str(doc["kind"]), str(doc.get("label", "")),
+                          str(doc.get("value", "")) + (f" | {rest}" if rest else ""))
+        except (ValueError, KeyError, TypeError, AttributeError, RecursionError):  # a deeply nested marker
+            event = Event(stamp - t0, "marker", text, rest)
+        out.append(event)
+    return out
+
+
+def _write_work(path: Path, folder: Path, stream: XdfStream, t0: float) -> None:
+    labels = channel_labels(stream)
+    stamps = _samples(stream)[0]
+    values = _numeric(path, stream, "work", 2)
+    cols = [labels.index(c) if c in labels else i for i, c in enumerate(("w_per_kg", "p_per_kg"))]
+    for col, field in zip(cols, ("w_per_kg", "p_per_kg")):
+        bound = BOUNDS[field]
+        with np.errstate(invalid="ignore"):
+            bad = np.flatnonzero(~((values[:, col] >= bound.low) & (values[:, col] <= bound.high)))
+        if bad.size:
+            raise XdfImportError(f"{path}: stream {_field(stream, 'name')!r}: {field}: expected "
+                                 f"{bound.describe()}, found {values[bad[0], col]:g} at sample {int(bad[0])}")
+    lines = ["t_s,w_per_kg,p_per_kg"] + [f"{t - t0:.4f},{v[cols[0]]:.6g},{v[cols[1]]:.6g}"
+                                         for t, v in zip(stamps, values)]
+    atomic_write_text(folder / "work.csv", "\n".join(lines) + "\n")
+
+
+def _write_mocap(path: Path, folder: Path, stream: XdfStream, t0: float) -> None:
+    from effortface.synth.motion_csv import csv_header
+
+    labels = channel_labels(stream)
+    joints = [lab[:-2] for lab in labels[::3]]
+    if not joints or any(labels[3 * i:3 * i + 3] != [f"{j}_x", f"{j}_y", f"{j}_z"] for i, j in enumerate(joints)):
+        raise XdfImportError(f"{path}: mocap stream {_field(stream, 'name')!r}: expected channel labels "
+                             f"<joint>_x, <joint>_y, <joint>_z, found {labels[:6]}")
+    stamps, values = _samples(stream)
+    (folder / "motion").mkdir(exist_ok=True)
+    rows = [",".join(csv_header(joints))] + [",".join(f"{x:.9g}" for x in [t - t0, *v])
+                                             for t, v in zip(stamps, np.asarray(values, float))]
+    atomic_write_text(folder / "motion" / "mocap.csv", "\n".join(rows) + "\n")
+
+
+def _frame_times(path: Path, streams: Sequence[XdfStream], video: Path, video_stream: str | None,
+                 video_offset_s: float | None) -> np.ndarray:
+    """LSL times of the video's frames: from a stream (one sample per frame) or an offset + fps."""
+    cv2 = import_cv2()  # lazy: only with a video (OpenCV log silenced)
+
+    cap = cv2.VideoCapture(str(video))
+    n_frames, fps = int(cap.get(cv2.CAP_PROP_FRAME_COUNT)), float(cap.get(cv2.CAP_PROP_FPS))
+    cap.release()
+    if n_frames <= 0:
+        raise XdfImportError(f"--video {video}: expected a readable video, found no frames")
+    if video_stream is not None:
+        stream = pick_stream(path, streams, video_stream, "VideoFrames", "--video-stream")
+        stamps = _samples(stream)[0]
+        if len(stamps) < n_frames:
+            raise XdfImportError(f"--video-stream {video_stream}: expected one sample per frame ({n_frames}), "
+                                 f"found {len(stamps)}")
+        return stamps[:n_frames]
+    if video_offset_s is None:
+        raise XdfImportError(f"--video {video}: expected its frame times, --video-stream NAME or "
+                             "--video-offset S, found neither")
+    if not (math.isfinite(fps) and fps > 0):
+        raise XdfImportError(f"--video {video}: expected a frame rate, found {fps:g}")
+    return video_offset_s + np.arange(n_frames) / fps
+
+
+def import_xdf(path: str | os.PathLike, out_dir: str | os.PathLike, participant: Participant, *,
+               hr_stream: str | None = None, marker_streams: Sequence[str] = (),
+               work_stream: str | None = None, mocap_stream: str | None = None,
+               video: str | os.PathLike | None = None, video_stream: str | None = None,
+               video_offset_s: float | None = None, label: str | None = None) -> Path:
+    """Turn an XDF recording into a new session folder in ``out_dir``; return it.
+
+    Parameters
+    ----------
+    path : path-like
+        The ``.xdf`` file.
+    out_dir : path-like
+        Folder that receives the session folder (never reused).
+    participant : Participant
+        Who was recorded.
+    hr_stream : str, optional
+        Name or type of the heart-rate stream (default: the one of type ``HeartRate``).
+    marker_streams : sequence of str
+        Names or types of marker streams (default: every stream of type ``Markers``).
+    work_stream, mocap_stream : str, optional
+        Name or type of an ``EffortWork`` stream (default: one of that type if present) and of a
+        mocap stream (none by default).
+    video : path-like, optional
+        The video recorded beside it; ``video_stream`` (one sample per frame) or ``video_offset_s``
+        (LSL time of frame 0) gives its frame times.
+    label : str, optional
+        Appended to the session id.
+
+    Raises
+    ------
+    XdfImportError
+        Missing or ambiguous streams, unreadable files (one line each).
+    """
+    path = Path(path)
+    if video_offset_s is not None and not (math.isfinite(video_offset_s) and abs(video_offset_s) <= 1e10):
+        raise XdfImportError(f"--video-offset: expected a finite LSL time in seconds (at most 1e10), "
+                             f"found {video_offset_s:g}")
+    streams = load_xdf(path)
+    hr = pick_hr_stream(path, streams, hr_stream)
+    markers = ([pick_stream(path, streams, m, "Markers", "--marker-stream") for m in marker_streams]
+               or [s for s in streams if _key(_field(s, "type")) in MARKER_TYPES])
+    work = (pick_stream if work_stream else find_stream)(path, streams, work_stream, "EffortWork", "--work-stream")
+    mocap = pick_stream(path, streams, mocap_stream, "MoCap", "--mocap-stream") if mocap_stream else None
+    video_path = Path(video) if video is not None else None
+    if video_path is not None and not video_path.is_file():
+        raise XdfImportError(f"--video {video_path}: expected a video file, found no such file")
+    frames = _frame_times(path, streams, video_path, video_stream, video_offset_s) if video_path else None
+    used = [s for s in (hr, *markers, work, mocap) if s is not None]
+    if len(_samples(hr)[0]) == 0:  # named before the stamps of all streams are checked
+        raise XdfImportError(f"{path}: stream {_field(hr, 'name') or 'xdf'!r}: expected heart-rate samples, "
+                             "found an empty stream")
+    t0 = check_stamps(path, used, frames)
+    hr_table = hr_rows(path, hr, t0)
+    events = sorted((e for m in markers for e in marker_events(m, t0)), key=lambda e: e.t_s)
+    info = SessionInfo(session_id=make_session_id(participant.code, _dt.datetime.now(), label),
+                       participant=participant, devices={"heart_rate": {"device": _field(hr, "name"),
+                                                                         "protocol": "lsl", "port": str(path)}},
+                       complete=False, created_utc=utc_now_iso(),
+                       software={"name": "effortface", "version": __version__},
+                       extra={"lsl": {"clock_offset_s": t0, "imported_from": path.name,
+                                      "streams": [_field(s, "name") for s in used]}})
+    final = Path(out_dir) / info.session_id
+    if final.exists():
+        raise FileExistsError(f"{final}: exists; a session folder is never reused")
+    staging = Path(out_dir) / f".import-{secrets.token_hex(6)}.tmp"
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    try:
+        folder = create_session(staging, info)
+        _write_rows(HrWriter(folder / HEART_RATE_CSV), hr_table)
+        _write_rows(EventWriter(folder / EVENTS_CSV), events)
+        if work is not None:
+            _write_work(path, folder, work, t0)
+        if mocap is not None:
+            _write_mocap(path, folder, mocap, t0)
+        if video_path is not None and frames is not None:
+            _copy_video(video_path, folder / VIDEO_AVI)
+            writer = FrameTimeWriter(folder / VIDEO_FRAMES_CSV)
+            for k, stamp in enumerate(frames):
+                writer.write(k, float(stamp - t0))
+            writer.close()
+        info.complete = True
+        info.save(folder, overwrite=True)
+        os.rename(folder, final)  # the session appears whole or not at all
+        fsync_folder(out_dir)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return final
+
+
+def _write_rows(writer: Any, rows: Sequence[Any]) -> None:
+    for row in rows:
+        writer.write(row)
+    writer.close()
+
+
+def _copy_video(src: Path, dst: Path) -> None:
+    """An AVI is copied as is; another container is re-encoded to MJPG AVI with OpenCV."""
+    if src.suffix.lower() == ".avi":
+        shutil.copyfile(src, dst)
+        return
+    cv2 = import_cv2()
+
+    cap = cv2.VideoCapture(str(src))
+    fps = cap.get(cv2.CAP_PROP_FPS) or 30.0
+    writer = None
+    while True:
+        ok, frame = cap.read()
+        if not ok:
+            break
+        if writer is None:
+            writer = cv2.VideoWriter(str(dst), cv2.VideoWriter.fourcc(*"MJPG"), fps, frame.shape[1::-1])
+        writer.write(frame)
+    cap.release()
+    if writer is not None:
+        writer.release()

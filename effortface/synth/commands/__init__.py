@@ -1,0 +1,1 @@
+"""``effortface synth``, ``effortface motion``, ``effortface work``."""

@@ -1,0 +1,128 @@
+"""``effortface synth``: a motion clip + a character -> per-frame face curves (CSV or Live Link Face).
+
+On success it prints one line on stdout: the file written, its frames and the clip's duration.
+
+``MODEL_DIR`` is a model bundle folder or ``default`` (the built-in rule model). The file formats
+(the per-frame CSV, ``--format livelink`` for the Live Link Face CSV) are
+:mod:`effortface.synth.curves_io`'s. An existing ``--out`` is never replaced without ``--force``.
+
+``MOTION`` may be a folder of clips: then ``--out`` is a folder and every clip gives one file
+(:mod:`effortface.synth.batch_synth`, on Dask with ``--workers N`` or ``--scheduler ADDRESS``), with
+a progress bar and a summary; exit status 1 when some clips failed (they are named and skipped).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from effortface.core import bounds
+from effortface.core.docs import DESIGN, SCIENCE
+from effortface.core.errors import UserError
+from effortface.core.fileio import check_apart
+from effortface.synth.character_options import add_character_arguments, character_from_args
+from effortface.synth.curves_io import CURVE_FORMATS, check_output, units_path, write_curves
+from effortface.synth.motion import read_motion
+from effortface.synth.parallel import ComputeSettings, add_compute_arguments
+from effortface.synth.runtime import load_model
+
+if TYPE_CHECKING:  # a folder of clips only: one clip does not pay for its imports
+    from effortface.synth.batch_synth import BatchSummary, SynthOptions
+
+#: the shipped documents ``--help`` cites (effortface.core.docs)
+HELP_DOCS = (DESIGN, SCIENCE)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of DESIGN.md's synth line."""
+    parser.add_argument("model_dir", metavar="MODEL_DIR", help="model bundle folder, or 'default'")
+    parser.add_argument("motion", metavar="MOTION|CLIPS_DIR",
+                        help="motion clip (.bvh, .npz, joint-positions .csv or .c3d), or a folder of clips")
+    parser.add_argument("--out", required=True, metavar="CSV|OUT_DIR",
+                        help="output CSV file (a folder, one file per clip, for a folder of clips)")
+    parser.add_argument("--format", choices=CURVE_FORMATS, default="csv",
+                        help="per-frame curves (default) or a Live Link Face CSV (one row per frame of its "
+                             "60 fps timecode)")
+    parser.add_argument("--every-frame", action="store_true",
+                        help="with --format livelink: one row per motion frame instead of resampling to 60 fps")
+    parser.add_argument("--force", action="store_true", help="replace an existing --out file")
+    add_character_arguments(parser)
+    parser.add_argument("--mapping", default=None, metavar="JSON",
+                        help="joint-to-segment mapping file (default: built-in conventions)")
+    parser.add_argument("--filter-tau-s", type=float, default=None, metavar="S",
+                        help="output filter time constant on the weights, seconds (default: the "
+                             "model's, 0.15; 0 writes the raw, unfiltered weights)")
+    parser.add_argument("--unit-m", type=float, default=None, metavar="M",
+                        help="BVH length unit in metres (default: detected from the rest pose; "
+                             "CMU cgspeed 0.05644)")
+    add_compute_arguments(parser, "a folder of clips")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Synthesize and write the curves; return 0 (1 when some clips of a folder failed)."""
+    out = Path(args.out)
+    batch = Path(args.motion).is_dir()
+    compute = ComputeSettings(args.workers, args.scheduler)
+    model_dir = None if args.model_dir == "default" else args.model_dir
+    check_apart("--out", out, [model_dir, args.motion, args.mapping])
+    if not batch:
+        check_output(out, args.force, args.format)  # fail before the work
+    model = load_model(args.model_dir)
+    character = character_from_args(args, model)
+    if args.unit_m is not None and not (math.isfinite(args.unit_m) and args.unit_m > 0):
+        raise UserError(f"--unit-m: expected a length in metres above 0, found {args.unit_m:g}")
+    if args.unit_m is not None:
+        bounds.check("unit_m", args.unit_m, "--unit-m")
+    try:
+        taus = model.filter_taus(args.filter_tau_s)
+    except UserError as exc:
+        raise UserError(f"--filter-tau-s: {exc}") from None
+    if batch:
+        from effortface.synth.batch_synth import SynthOptions
+
+        options = SynthOptions(args.model_dir, character, args.format, args.force, args.mapping,
+                               args.unit_m, taus)
+        return _run_batch(Path(args.motion), out, options, compute)
+    motion = read_motion(args.motion, unit_m=args.unit_m)
+    curves = model.synthesize(motion, character, mapping=args.mapping, filter_tau_s=taus)
+    write_curves(out, curves, model, fmt=args.format, force=args.force, provenance=motion.source,
+                 every_frame=args.every_frame)
+    print(written_line(out, curves["t_s"], args.format))
+    return 0
+
+
+def written_line(out: Path, t_s: np.ndarray, fmt: str) -> str:
+    """What ``synth`` wrote: the file, its frames and the clip's duration (and the units sidecar)."""
+    n_frames = len(t_s)
+    duration_s = float(t_s[-1] - t_s[0]) if n_frames else 0.0
+    units = f", units in {units_path(out)}" if fmt == "csv" else ""
+    return f"wrote {out}: {n_frames} frames, {duration_s:.2f} s of motion{units}"
+def _run_batch(clips_dir: Path, out: Path, options: SynthOptions, compute: ComputeSettings) -> int:
+    """A folder of clips with a progress bar on stderr and a summary; 1 when some failed."""
+    from tqdm import tqdm
+
+    from effortface.synth.batch_synth import list_clips, synth_batch
+
+    n_clips = len(list_clips(clips_dir))  # no clips: the one error line, before any bar
+    with tqdm(total=n_clips, desc="synth", unit="clip", file=sys.stderr) as bar:
+        summary = synth_batch(clips_dir, out, options, compute, on_result=lambda _: bar.update(1))
+    return _report(summary, out)
+
+
+def _report(summary: BatchSummary, out: Path) -> int:
+    """Print the summary (stdout) and the failures (stderr); the exit status."""
+    n, failed = len(summary.results), summary.failed
+    rate = summary.n_frames / summary.elapsed_s if summary.elapsed_s > 0 else float("nan")
+    print(f"synthesized {n - len(failed)} of {n} clips into {out} ({summary.n_frames} frames, "
+          f"{summary.elapsed_s:.1f} s, {rate:.0f} frames/s)")
+    for r in failed:
+        print(f"effortface synth: failed: {r.clip}: {r.error}", file=sys.stderr)
+    if failed:
+        print(f"effortface synth: {len(failed)} of {n} clips failed (skipped)", file=sys.stderr)
+        return 1
+    return 0

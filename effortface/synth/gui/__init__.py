@@ -1,0 +1,1 @@
+"""The Synthesize stage's Qt widgets."""

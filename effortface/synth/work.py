@@ -1,0 +1,335 @@
+"""Work and power per second of a session: from motion/ where clips cover the time, else from the log.
+
+``work.csv`` (``t_s,w_per_kg,p_per_kg,source`` at 1 Hz, t_s = 0, 1, 2, ... to the end of the heart
+rate or video) is what :func:`derive_work` computes and :func:`write_work` saves. ``source`` says
+where each second comes from: ``motion:<clip>``, ``log:<exercise id>``, or empty (no clip and no
+phase covers it: w and p are empty). The same function feeds training when a session has no
+work.csv (:mod:`effortface.train.dataset`), so a captured session trains with no extra step.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import math
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from effortface.core.errors import UserError
+from effortface.core import bounds
+from effortface.core.fileio import atomic_write_text, read_json
+from effortface.core.session.folder import SESSION_JSON, Session, list_sessions, read_session
+from effortface.synth.catalog import Catalog, CatalogError, default_catalog
+from effortface.synth.exercise_log import ExerciseLog, exercise_log
+
+if TYPE_CHECKING:  # the energies load scipy: imported only when a session has motion
+    from effortface.synth.energy import EnergyCurves
+    from effortface.synth.motion import Motion
+
+WORK_CSV = "work.csv"
+WORK_HEADER = "t_s,w_per_kg,p_per_kg,source"
+MOTION_DIR = "motion"
+MOTION_JSON = "motion.json"
+
+
+class WorkError(UserError):
+    """A session whose work cannot be derived; the message names the session or file."""
+
+
+@dataclasses.dataclass(frozen=True)
+class WorkTable:
+    """w and p per second of one session.
+
+    Attributes
+    ----------
+    t_s, w_per_kg, p_per_kg : ndarray
+        1 Hz; NaN where nothing covers the second.
+    source : list of str
+        Per second: ``motion:<clip>``, ``log:<exercise id>`` or ``""``.
+    """
+
+    t_s: np.ndarray
+    w_per_kg: np.ndarray
+    p_per_kg: np.ndarray
+    source: list[str]
+
+    def to_csv(self) -> str:
+        """The work.csv text."""
+        out = io.StringIO()
+        out.write(WORK_HEADER + "\n")
+        for t, w, p, src in zip(self.t_s, self.w_per_kg, self.p_per_kg, self.source):
+            out.write(f"{t:g},{_num(w)},{_num(p)},{src}\n")
+        return out.getvalue()
+
+
+def _num(x: float) -> str:
+    """A CSV cell: 4 decimals, empty for NaN."""
+    return "" if math.isnan(x) else f"{x:.4f}"
+
+
+def read_work_csv(path: str | os.PathLike) -> WorkTable:
+    """Read a ``work.csv`` (as :meth:`WorkTable.to_csv` writes it, or hand-made with the first three
+    columns): empty w/p cells become NaN, a missing ``source`` column becomes empty strings.
+
+    Raises
+    ------
+    WorkError
+        Missing columns or a cell that is not a number, in one line naming the file and row.
+    """
+    import csv
+
+    path = Path(path)
+    with open(path, newline="", encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    need = ("t_s", "w_per_kg", "p_per_kg")
+    if not rows or any(c not in rows[0] for c in need):
+        raise WorkError(f"{path}: expected rows with columns {','.join(need)}, "
+                        f"found {','.join(rows[0]) if rows else 'no rows'}")
+    cols: dict[str, list[float]] = {c: [] for c in need}
+    for i, row in enumerate(rows, start=2):
+        for c in need:
+            cell = (row[c] or "").strip()
+            try:
+                cols[c].append(float(cell) if cell else math.nan)
+            except ValueError:
+                raise WorkError(f"{path}: line {i}: {c}: expected a number, found {cell!r}") from None
+    t_s, w, p = (np.array(cols[c]) for c in need)
+    return WorkTable(t_s, w, p, [(r.get("source") or "") for r in rows])
+
+
+def session_seconds(s: Session) -> np.ndarray:
+    """t_s = 0, 1, ... to the last heart-rate sample or video frame (or the last logged event)."""
+    ends = [h.t_s for h in s.heart_rate[-1:]] + s.frame_times_s[-1:] + [e.t_s for e in s.events[-1:]]
+    return np.arange(0.0, math.floor(max(ends, default=0.0)) + 1.0)
+
+
+def derive_work(session: Session | str | os.PathLike, t_s: np.ndarray | None = None,
+                catalog: Catalog | None = None, mapping: str | os.PathLike | None = None) -> WorkTable:
+    """w and p per second from ``motion/`` where clips cover the time, else from the exercise log.
+
+    Parameters
+    ----------
+    session : Session or path-like
+        A read session or its folder.
+    t_s : ndarray, optional
+        The seconds wanted (default :func:`session_seconds`).
+    catalog : Catalog, optional
+        Default: the shipped catalog.
+    mapping : path-like, optional
+        Joint-to-segment mapping file for the clips of ``motion/`` whose motion.json entry has no
+        ``mapping`` of its own (default: the built-in conventions).
+
+    Returns
+    -------
+    WorkTable
+
+    Raises
+    ------
+    WorkError
+        If the session has neither a motion/ folder nor a phase in its exercise log, or a phase's
+        exercise or parameters cannot be estimated (names events.csv, its line and the catalog).
+    """
+    s = session if isinstance(session, Session) else read_session(session)
+    t = session_seconds(s) if t_s is None else np.asarray(t_s, dtype=float)
+    log = exercise_log(s.events, str(s.path / "events.csv"))
+    has_motion = (s.path / MOTION_DIR / MOTION_JSON).is_file()
+    if not has_motion and not log.phases:
+        raise WorkError(f"{s.path}: expected a motion/ folder (motion.json) or exercise phases "
+                        f"(phase_start rows in events.csv) to derive work, found neither")
+    w, p = np.full(len(t), np.nan), np.full(len(t), np.nan)
+    source = [""] * len(t)
+    _fill_from_log(log, s.participant.mass_kg, t, w, p, source, catalog or default_catalog())
+    if has_motion:
+        _fill_from_motion(s, log, t, w, p, source, mapping)
+    return WorkTable(t, w, p, source)
+
+
+def _fill_from_log(log: ExerciseLog, mass_kg: float | None, t: np.ndarray, w: np.ndarray, p: np.ndarray,
+                   source: list[str], catalog: Catalog) -> None:
+    """Write each phase's catalog estimate into the seconds it covers."""
+    if not log.phases:
+        return
+    if mass_kg is None:
+        raise WorkError(f"{log.source}: expected the participant's mass_kg in session.json to estimate work "
+                        f"from the exercise log, found none")
+    for phase in log.phases:
+        try:
+            pieces = log.states(phase, catalog.keys_for(phase.exercise))
+            for start, end, state in pieces:
+                inside = np.flatnonzero((t >= start - 1e-9) & (t < end - 1e-9))
+                value = catalog.work_per_kg(phase.exercise, state, mass_kg)
+                w[inside] = p[inside] = value
+                for i in inside:
+                    source[i] = f"log:{phase.exercise}"
+        except CatalogError as exc:
+            raise WorkError(f"{log.source}: line {phase.line}: {exc}") from None
+
+
+#: motion.json keys of a clip's loads, in the order of :class:`~effortface.synth.segments.Loads`
+ENTRY_LOAD_KEYS = ("load_left_kg", "load_right_kg", "load_back_kg")
+#: the exercise log's load labels in the same order
+LOG_LOAD_LABELS = ("left_kg", "right_kg", "back_kg")
+
+
+def _fill_from_motion(s: Session, log: ExerciseLog, t: np.ndarray, w: np.ndarray, p: np.ndarray,
+                      source: list[str], mapping: str | os.PathLike | None = None) -> None:
+    """Overwrite the seconds that a clip of ``motion/motion.json`` covers with its energies.
+
+    A clip's segments come from its entry's ``mapping`` (kept by ``motion attach --mapping``), else
+    ``mapping``, else the built-in conventions.
+
+    A clip's loads are its entry's ``load_*_kg`` keys when it has any (earlier releases), else the
+    exercise log's ``load`` rows in force at each second: one energy computation per distinct set.
+    """
+    from effortface.synth.motion import read_motion
+
+    index = s.path / MOTION_DIR / MOTION_JSON
+    part = s.participant
+    if part.mass_kg is None or part.sex is None:
+        raise WorkError(f"{s.path / 'session.json'}: expected the participant's mass_kg and sex to compute "
+                        f"work from motion/, found {part.mass_kg!r} and {part.sex!r}")
+    for entry in read_motion_index(index):
+        clip = read_motion(index.parent / str(entry["path"]))
+        offset_s = float(entry.get("offset_s", 0.0))
+        inside = np.flatnonzero((t >= offset_s) & (t <= offset_s + (clip.n_frames - 1) / clip.fps))
+        if any(k in entry for k in ENTRY_LOAD_KEYS):
+            loads = [tuple(float(entry.get(k, 0.0)) for k in ENTRY_LOAD_KEYS)] * len(inside)
+        else:
+            loads = [tuple(_log_load(log, label, t[i]) for label in LOG_LOAD_LABELS) for i in inside]
+        for load in sorted(set(loads)):
+            rows = inside[[k for k, x in enumerate(loads) if x == load]]
+            curves = _clip_curves(clip, part.mass_kg, part.sex, load, entry.get("mapping") or mapping)
+            w[rows] = np.interp(t[rows], curves.t_s + offset_s, curves.w_per_kg)
+            p[rows] = np.interp(t[rows], curves.t_s + offset_s, curves.p_per_kg)
+        for i in inside:
+            source[i] = f"motion:{entry['path']}"
+
+
+def _log_load(log: ExerciseLog, label: str, t_s: float) -> float:
+    """The load of ``label`` logged last at or before ``t_s`` (0 kg when none)."""
+    held = [c.value for c in log.loads.get(label, []) if c.t_s <= t_s + 1e-9]
+    return held[-1] if held else 0.0
+
+
+def _clip_curves(clip: Motion, mass_kg: float, sex: str, load: tuple[float, ...],
+                 mapping: dict | str | os.PathLike | None = None) -> EnergyCurves:
+    """Work and power of a clip for the participant's body carrying ``load`` (left, right, back kg);
+    ``mapping`` a segment mapping (dict or file) or None for the built-in conventions."""
+    from effortface.synth.energy import work_and_power
+    from effortface.synth.segments import Loads, build_body
+
+    segments = {k: (v[0], v[1]) for k, v in mapping.items()} if isinstance(mapping, dict) else \
+        None if mapping is None else Path(mapping)
+    body = build_body(clip.joint_names, clip.parents, mass_kg, sex, loads=Loads(*load), mapping=segments,
+                      reference_positions_m=clip.positions_m)
+    return work_and_power(clip, body)
+
+
+MOTION_ENTRY_NUMBERS = {"offset_s": ("offset_s", 0.0), "load_left_kg": ("load_kg", 0.0),
+                        "load_right_kg": ("load_kg", 0.0), "load_back_kg": ("load_kg", 0.0)}
+
+
+def read_motion_index(path: str | os.PathLike) -> list[dict]:
+    """The entries of a session's ``motion/motion.json``: ``{"files": [{path, offset_s, load_*_kg}]}``.
+
+    Returns
+    -------
+    list of dict
+        Each with ``path`` (str, relative to the file's folder), ``offset_s`` (default 0) and the
+        ``load_*_kg`` keys the entry gives (checked; absent ones stay absent, so that the exercise
+        log's loads apply), other keys as they are.
+
+    Raises
+    ------
+    WorkError
+        One line naming the file and the entry: not JSON, wrong shape, a value of the wrong type,
+        a number outside the bounds table (:mod:`effortface.core.bounds`).
+    """
+    path = Path(path)
+    doc = read_json(path, 'JSON {"files": [{path, offset_s}]}', WorkError)
+    files = doc.get("files") if isinstance(doc, dict) else None
+    if not isinstance(files, list):
+        raise WorkError(f'{path}: expected {{"files": [{{path, offset_s}}]}}, found {type(doc).__name__} '
+                        f"without a files list")
+    return [_motion_entry(path, i, e) for i, e in enumerate(files)]
+
+
+def _motion_entry(path: Path, i: int, entry: object) -> dict:
+    """One checked motion.json entry (see :func:`read_motion_index`)."""
+    where = f"{path}: files[{i}]"
+    if not isinstance(entry, dict) or not isinstance(entry.get("path"), str) or not entry["path"]:
+        raise WorkError(f"{where}: expected {{path: str, offset_s: number}}, found {entry!r:.60}")
+    out: dict = dict(entry)  # other keys (how the clip was aligned...) are kept as they are
+    for key, (bound, default) in MOTION_ENTRY_NUMBERS.items():
+        if key != "offset_s" and key not in entry:
+            continue  # no load given: the exercise log's loads apply (see _fill_from_motion)
+        try:
+            out[key] = bounds.check(bound, entry.get(key, default), f"{where}.{key}")
+        except UserError as exc:
+            raise WorkError(str(exc)) from None
+    return out
+
+
+def plan_work(folder: str | os.PathLike, *, force: bool = False,
+              mapping: str | os.PathLike | None = None) -> tuple[Path, WorkTable]:
+    """Derive a session's work without writing it: the work.csv path and the table.
+
+    Raises
+    ------
+    WorkError
+        If work.csv exists and ``force`` is False, or see :func:`derive_work`.
+    """
+    s = read_session(folder)
+    path = s.path / WORK_CSV
+    if path.exists() and not force:
+        raise WorkError(f"{path}: expected no work.csv (it may be hand-made), found one; "
+                        f"use --force to replace it")
+    return path, derive_work(s, mapping=mapping)
+
+
+def write_work(folder: str | os.PathLike, *, force: bool = False) -> tuple[Path, WorkTable]:
+    """Derive a session's work and save ``work.csv`` atomically.
+
+    Parameters
+    ----------
+    folder : path-like
+        The session folder.
+    force : bool
+        Replace an existing work.csv (which may be hand-made).
+
+    Returns
+    -------
+    (Path, WorkTable)
+
+    Raises
+    ------
+    WorkError
+        If work.csv exists and ``force`` is False (nothing is written), or see :func:`derive_work`.
+    """
+    return write_works([folder], force=force)[0]
+
+
+def work_folders(paths: Sequence[str | os.PathLike]) -> list[Path]:
+    """Session folders from session folders and folders of sessions (UserError if none)."""
+    out: list[Path] = []
+    for p in map(Path, paths):
+        out.extend([p] if (p / SESSION_JSON).is_file() or not p.is_dir() else list_sessions(p))
+    if not out:
+        raise UserError(f"{', '.join(map(str, paths))}: expected session folders, found none")
+    return out
+
+
+def write_works(folders: Sequence[str | os.PathLike], *, force: bool = False,
+                mapping: str | os.PathLike | None = None) -> list[tuple[Path, WorkTable]]:
+    """``effortface work``: derive every session's work first (so a refusal writes nothing), then
+    write each ``work.csv`` atomically; the paths and tables, in order (``mapping``: see
+    :func:`derive_work`)."""
+    planned = [plan_work(folder, force=force, mapping=mapping) for folder in folders]
+    for target, table in planned:
+        atomic_write_text(target, table.to_csv())
+    return planned

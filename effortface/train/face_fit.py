@@ -1,0 +1,806 @@
+"""Face models (SCIENCE.md section 5): expressiveness, four RBF epsilon-SVRs, evaluation like the paper.
+
+Input is the per-second training table of :mod:`effortface.train.dataset` (one row per participant-second with
+``participant, session, t_s, w_per_kg, p_per_kg, nhr, epoc_norm``, an optional ``exercise`` and one
+column per blendshape, NaN where not annotated).
+
+- **Expressiveness.** For each participant and blendshape, ``e_b`` = the maximal key-framed weight;
+  the SVR learns ``y / e_b``. A participant who never showed a blendshape (``e_b`` below
+  ``MIN_EXPRESSIVENESS``) keeps ``e_b = MIN_EXPRESSIVENESS`` so the division stays bounded (choice).
+- **Features.** ``[w, p, NHR, EPOC_norm]`` standardised by a scaler fitted on the training rows;
+  seconds without a measured heart rate (no NHR) are left out.
+- **Hyper-parameters.** A grid over C, gamma and epsilon, scored by mean squared error averaged over
+  the folds of leave-one-participant-out CV (the default; ``cv="kfold"`` random-frame folds exist only
+  to show how autocorrelated frames inflate the score). gamma is always a number, never ``"scale"``.
+- **Every annotated second (choice).** All rows are used by default (``max_rows_per_participant``
+  = 3,600, one hour at 1 Hz; ``--max-rows`` raises it; ``max_total_rows`` is an optional total cap).
+  Up to :data:`EXACT_MAX_ROWS` face rows the models are exact RBF epsilon-SVRs (libsvm, whose cost
+  grows with the square of the rows); above it, every fit of the run (grid search, final fit,
+  protocols) is a **Nystroem kernel approximation**: ``n_landmarks`` training rows drawn at random
+  (seeded) and kernel ridge regression restricted to them, ``f(z) = K(z, landmarks) @ coef + b``
+  minimising ``sum (y - f)^2 + (1 / C) f'K f`` (the squared-loss twin of the SVR's objective, so the
+  grid's C keeps its meaning; epsilon does not enter it). It is the same graph as an SVR (landmarks
+  as support vectors, ``coef`` as dual coefficients), so ``svr.npz``, the runtime and face.onnx
+  evaluate it unchanged. Its cost is linear in the rows (normal equations summed in chunks, memory
+  independent of the rows). ``tests/train/test_face_scale.py`` checks it against exact SVR.
+- **Speed (choices).** Leave-one-participant-out becomes participant-grouped ``max_folds``-fold CV for
+  large labs. For exact SVRs each fold's scaler and, per gamma, its RBF Gram matrices are computed
+  once and shared by every C, epsilon and blendshape (``SVR(kernel="precomputed")``). The folds and
+  the final fits (one per blendshape) run through :func:`effortface.synth.parallel.map_ordered` (in
+  this process, or on a Dask cluster with identical results: every fit single-threaded, so the
+  model does not depend on the machine's core count either). Held-out scores reuse the
+  hyper-parameters the same CV chose (not nested CV), which is slightly optimistic; the headline
+  score "as a game uses it" (:mod:`effortface.train.game_score`) nests the search and measures that.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+from collections.abc import Callable, Iterator, Sequence
+
+import numpy as np
+import pandas as pd
+from sklearn.linear_model import LinearRegression
+from sklearn.metrics.pairwise import rbf_kernel
+from sklearn.model_selection import GroupKFold, KFold, LeaveOneGroupOut
+from sklearn.preprocessing import StandardScaler
+from sklearn.svm import SVR
+
+from effortface.core.errors import UserError
+from effortface.synth.face import FEATURE_NAMES
+from effortface.synth.parallel import map_ordered
+
+#: the SVR inputs, in order (units: W/kg, W/kg, 1, 1): the runtime's own list
+FEATURES = FEATURE_NAMES
+#: floor of an expressiveness value (choice, see module docstring)
+MIN_EXPRESSIVENESS = 0.05
+#: hyper-parameter grids on standardised features. "paper" is wider (32 points, about 15x the
+#: time of "small"); it stops at C = 100 because one libsvm fit at C = 1000, gamma = 1 takes
+#: about 4 s on the sample lab (0.04 s at C = 1). The paper's C 1e3-1e6 and gamma 1e-5-1e-2 were
+#: on unstandardised features, so they do not transfer.
+GRIDS: dict[str, dict[str, list[float]]] = {
+    "small": {"C": [1.0, 10.0], "gamma": [0.1, 0.5], "epsilon": [0.05]},
+    "paper": {"C": [0.1, 1.0, 10.0, 100.0], "gamma": [0.01, 0.05, 0.2, 1.0], "epsilon": [0.02, 0.1]},
+}
+CV_CHOICES = ("lopo", "kfold")
+
+
+#: the fewest face-training rows per participant any fit accepts (train, demo and the Train stage check it)
+MIN_ROWS_PER_PARTICIPANT = 20
+#: The documented switch: exact RBF SVRs up to this many face rows, the Nystroem approximation above
+#: (an exact fit on 3,000 rows takes about 0.3 s; libsvm's cost grows with the square of the rows).
+EXACT_MAX_ROWS = 3000
+#: Landmarks of the Nystroem approximation (measured: held-out RMSE within 1 % of exact SVR).
+N_LANDMARKS = 300
+#: the two kinds of face model of a fit (model.json provenance ``face_fit.method``)
+METHODS = ("exact_svr", "nystroem")
+#: rows per chunk when the approximation sums its normal equations (bounds the memory)
+_CHUNK_ROWS = 16384
+
+
+@dataclasses.dataclass(frozen=True)
+class FaceFitConfig:
+    """Settings of a face fit (every choice a named parameter).
+
+    Parameters
+    ----------
+    grid : dict
+        Lists of ``C``, ``gamma`` and ``epsilon`` to search.
+    cv : {"lopo", "kfold"}
+        Leave-one-participant-out (default) or random-frame K-fold (inflated; for comparison only).
+    n_splits : int
+        Folds for ``cv="kfold"``.
+    max_rows_per_participant : int
+        Cap on training rows per participant (evenly spaced in time; 3,600 = one hour at 1 Hz).
+    max_total_rows : int or None
+        Optional cap on all training rows: the per-participant cap shrinks to ``max_total_rows / P``
+        (None, the default: no total cap).
+    max_folds : int
+        With more participants than this, ``cv="lopo"`` becomes participant-grouped K-fold
+        (``GroupKFold(max_folds)``), so the number of fits stops growing with the lab.
+    seed : int
+        Seed for the K-fold shuffle and the Nystroem landmarks.
+    exact_max_rows : int
+        Exact SVRs up to this many face rows, the Nystroem approximation above
+        (:data:`EXACT_MAX_ROWS`).
+    n_landmarks : int
+        Landmarks of the approximation (:data:`N_LANDMARKS`).
+    """
+
+    grid: dict = dataclasses.field(default_factory=lambda: dict(GRIDS["small"]))
+    cv: str = "lopo"
+    n_splits: int = 5
+    max_rows_per_participant: int = 3600
+    max_total_rows: int | None = None
+    max_folds: int = 8
+    seed: int = 0
+    exact_max_rows: int = EXACT_MAX_ROWS
+    n_landmarks: int = N_LANDMARKS
+
+    def rows_per_participant(self, n_participants: int) -> int:
+        """The effective per-participant cap for a lab of ``n_participants``."""
+        if self.max_total_rows is None:
+            return max(MIN_ROWS_PER_PARTICIPANT, self.max_rows_per_participant)
+        per_share = self.max_total_rows // max(n_participants, 1)
+        return max(MIN_ROWS_PER_PARTICIPANT, min(self.max_rows_per_participant, per_share))
+
+    def method(self, n_rows: int) -> str:
+        """``"exact_svr"`` for at most :attr:`exact_max_rows` face rows, else ``"nystroem"``."""
+        return METHODS[0] if n_rows <= self.exact_max_rows else METHODS[1]
+
+    def n_folds(self, n_participants: int) -> int:
+        """Cross-validation folds of a face fit on ``n_participants`` (the splits of :func:`cv_folds`)."""
+        return min(n_participants, self.max_folds) if self.cv == "lopo" else self.n_splits
+
+    def __post_init__(self) -> None:
+        if self.cv not in CV_CHOICES:
+            raise ValueError(f"cv: expected one of {CV_CHOICES}, found {self.cv!r}")
+        for key in ("C", "gamma", "epsilon"):
+            vals = self.grid.get(key)
+            if not vals or not all(isinstance(v, (int, float)) and v > 0 for v in vals):
+                raise ValueError(f"grid[{key!r}]: expected a list of positive numbers, found {vals!r}")
+
+
+# --------------------------------------------------------------------------- data preparation
+
+
+def expressiveness(table: pd.DataFrame, blendshapes: Sequence[str]) -> pd.DataFrame:
+    """Expressiveness vectors: the maximal key-framed weight per participant and blendshape.
+
+    Parameters
+    ----------
+    table : DataFrame
+        Training table with ``participant`` and the blendshape columns.
+    blendshapes : sequence of str
+        Blendshape column names.
+
+    Returns
+    -------
+    DataFrame
+        Index: participant; columns: blendshapes; values floored at ``MIN_EXPRESSIVENESS``.
+    """
+    e = table.groupby("participant", sort=False)[list(blendshapes)].max()
+    return e.fillna(MIN_EXPRESSIVENESS).clip(lower=MIN_EXPRESSIVENESS)
+
+
+def subsample(table: pd.DataFrame, max_rows_per_participant: int) -> pd.DataFrame:
+    """At most ``max_rows_per_participant`` rows per participant, evenly spaced in time."""
+    parts = []
+    for _, rows in table.groupby("participant", sort=False):
+        rows = rows.sort_values(["session", "t_s"])
+        if len(rows) > max_rows_per_participant:
+            idx = np.linspace(0, len(rows) - 1, max_rows_per_participant).round().astype(int)
+            rows = rows.iloc[np.unique(idx)]
+        parts.append(rows)
+    return pd.concat(parts).reset_index(drop=True)
+
+
+@dataclasses.dataclass
+class FaceData:
+    """Arrays for fitting: features, normalised targets (NaN = not annotated), groups, expressiveness."""
+
+    x: np.ndarray            # (n, 4) raw features
+    y_norm: np.ndarray       # (n, B) weight / e_b
+    e: np.ndarray            # (n, B) the row's participant expressiveness
+    groups: np.ndarray       # (n,) participant codes
+    exercise: np.ndarray     # (n,) exercise labels
+    t_s: np.ndarray
+    session: np.ndarray
+    blendshapes: tuple[str, ...]
+
+    def __setstate__(self, state: dict) -> None:
+        """Unpickle with every array aligned: a Dask worker may receive an array at any byte offset,
+        where numpy takes slower loops and a sum may group its terms differently."""
+        self.__dict__.update({key: value.copy(order="K")
+                              if isinstance(value, np.ndarray) and not value.flags.aligned else value
+                              for key, value in state.items()})
+
+
+def face_data(table: pd.DataFrame, blendshapes: Sequence[str],
+              e_table: pd.DataFrame | None = None) -> FaceData:
+    """Arrays from a training table; ``e_table`` defaults to the table's own expressiveness."""
+    blendshapes = tuple(blendshapes)
+    e_table = expressiveness(table, blendshapes) if e_table is None else e_table
+    e = e_table.loc[table["participant"], list(blendshapes)].to_numpy(float)
+    y = table[list(blendshapes)].to_numpy(float)
+    exercise = table["exercise"] if "exercise" in table else table["session"]
+    return FaceData(table[list(FEATURES)].to_numpy(float), np.clip(y / e, 0.0, 1.0), e,
+                    table["participant"].to_numpy(str), exercise.to_numpy(str),
+                    table["t_s"].to_numpy(float), table["session"].to_numpy(str), blendshapes)
+
+
+# --------------------------------------------------------------------------- folds and search
+
+
+def cv_folds(data: FaceData, cv: str = "lopo", n_splits: int = 5, seed: int = 0, max_folds: int = 8
+             ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Train/test index pairs: leave one participant out (participant-grouped ``max_folds``-fold
+    beyond ``max_folds`` participants), or shuffled random-frame K-fold."""
+    idx = np.arange(len(data.groups))
+    if cv == "lopo":
+        n_groups = len(np.unique(data.groups))
+        if n_groups < 2:
+            raise ValueError("cv: leave-one-participant-out needs >= 2 participants")
+        splitter = LeaveOneGroupOut() if n_groups <= max_folds else GroupKFold(max_folds)
+        return list(splitter.split(idx, groups=data.groups))
+    return list(KFold(n_splits, shuffle=True, random_state=seed).split(idx))
+
+
+def _fold_kernels(x: np.ndarray, train: np.ndarray, test: np.ndarray, gammas: Sequence[float]
+                  ) -> Iterator[tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+    """Per gamma: Gram matrices of the fold (scaler fitted on the training rows only)."""
+    scaler = StandardScaler().fit(x[train])
+    xs_tr, xs_te = scaler.transform(x[train]), scaler.transform(x[test])
+    for gamma in gammas:
+        yield gamma, rbf_kernel(xs_tr, xs_tr, gamma=gamma), rbf_kernel(xs_te, xs_tr, gamma=gamma), \
+            xs_tr, xs_te
+
+
+# --------------------------------------------------------------------------- the approximation
+
+
+class LandmarkRegressor:
+    """A fitted Nystroem kernel approximation: ``K(z, landmarks) @ coef + b`` (see the module docstring).
+
+    It has the attributes of a fitted scikit-learn ``SVR`` that the export reads
+    (``support_vectors_`` = the landmarks, ``dual_coef_`` (1, m), ``intercept_`` (1,), ``C``,
+    ``gamma``, ``epsilon``), so the bundle, the runtime and face.onnx take it as they take an SVR.
+    """
+
+    def __init__(self, landmarks: np.ndarray, coef: np.ndarray, intercept: float, C: float,
+                 gamma: float, epsilon: float) -> None:
+        self.support_vectors_ = np.asarray(landmarks, dtype=float)
+        self.dual_coef_ = np.asarray(coef, dtype=float).reshape(1, -1)
+        self.intercept_ = np.array([float(intercept)])
+        self.C, self.gamma, self.epsilon = float(C), float(gamma), float(epsilon)
+
+    def predict(self, xs: np.ndarray) -> np.ndarray:
+        """Predictions for standardised rows ``xs`` (n, F)."""
+        return _landmark_kernel(xs, self.support_vectors_, self.gamma) @ self.dual_coef_[0] \
+            + self.intercept_[0]
+
+
+def _landmark_kernel(xs: np.ndarray, landmarks: np.ndarray, gamma: float) -> np.ndarray:
+    """RBF kernel (n, m) of rows against landmarks."""
+    return rbf_kernel(xs, landmarks, gamma=gamma)
+
+
+def landmark_rows(n_rows: int, n_landmarks: int, seed: int) -> np.ndarray:
+    """Sorted indices of ``min(n_landmarks, n_rows)`` rows drawn without replacement (seeded)."""
+    m = min(n_landmarks, n_rows)
+    return np.sort(np.random.default_rng(seed).choice(n_rows, m, replace=False))
+
+
+def _normal_equations(xs: np.ndarray, y: np.ndarray, landmarks: np.ndarray, gamma: float
+                      ) -> dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Per distinct pattern of annotated rows: ``A'A``, ``A'Y`` and the columns of Y using it.
+
+    ``A = [K(xs, landmarks), 1]``; summed over chunks of rows, so the memory does not grow with
+    the rows. Blendshapes annotated on the same seconds share one ``A'A``.
+    """
+    finite = np.isfinite(y)
+    groups: dict[bytes, list[int]] = {}
+    for b in range(y.shape[1]):
+        groups.setdefault(np.packbits(finite[:, b]).tobytes(), []).append(b)
+    m = len(landmarks)
+    sums = {key: (np.zeros((m + 1, m + 1)), np.zeros((m + 1, len(cols)))) for key, cols in groups.items()}
+    for start in range(0, len(xs), _CHUNK_ROWS):
+        rows = slice(start, start + _CHUNK_ROWS)
+        a = np.empty((len(xs[rows]), m + 1))
+        a[:, :m] = _landmark_kernel(xs[rows], landmarks, gamma)
+        a[:, m] = 1.0
+        for key, cols in groups.items():
+            ok = finite[rows, cols[0]]
+            a_ok = a[ok]
+            ata, aty = sums[key]
+            ata += a_ok.T @ a_ok
+            aty += a_ok.T @ y[rows][ok][:, cols]
+    return {key: (*sums[key], np.array(cols)) for key, cols in groups.items()}
+
+
+def _solve_landmarks(ata: np.ndarray, aty: np.ndarray, k_mm: np.ndarray, c: float) -> np.ndarray:
+    """Coefficients (m + 1, k) (the last row: intercepts) of the ridge ``(A'A + K_mm / C) w = A'Y``."""
+    m = len(k_mm)
+    lhs = ata.copy()
+    lhs[:m, :m] += k_mm / c
+    lhs[np.diag_indices(m)] += 1e-10 * max(float(np.trace(ata)) / (m + 1), 1.0)  # jitter
+    try:
+        return np.linalg.solve(lhs, aty)
+    except np.linalg.LinAlgError:
+        return np.linalg.lstsq(lhs, aty, rcond=None)[0]
+
+
+def fit_landmark_models(xs: np.ndarray, y: np.ndarray, gamma: float, cs: Sequence[float],
+                        n_landmarks: int, seed: int) -> tuple[np.ndarray, dict[float, np.ndarray]]:
+    """Nystroem kernel ridge fits of every column of ``y`` (NaN = not annotated) for every C.
+
+    Parameters
+    ----------
+    xs : ndarray, shape (n, F)
+        Standardised features.
+    y : ndarray, shape (n, k)
+        Targets; each column is fitted on its finite rows.
+    gamma : float
+        RBF gamma.
+    cs : sequence of float
+        Values of C (the ridge penalty is 1 / C).
+    n_landmarks : int
+        Landmarks, drawn from the rows (seeded by ``seed``).
+    seed : int
+
+    Returns
+    -------
+    landmarks : ndarray, shape (m, F)
+    coefs : dict
+        C -> (m + 1, k) array: landmark coefficients, then the intercept in the last row (NaN for
+        a column with fewer than two annotated rows).
+    """
+    landmarks = xs[landmark_rows(len(xs), n_landmarks, seed)]
+    k_mm = _landmark_kernel(landmarks, landmarks, gamma)
+    coefs = {c: np.full((len(landmarks) + 1, y.shape[1]), np.nan) for c in cs}
+    for ata, aty, cols in _normal_equations(xs, y, landmarks, gamma).values():
+        if ata[-1, -1] < 2:
+            continue
+        for c in cs:
+            coefs[c][:, cols] = _solve_landmarks(ata, aty, k_mm, c)
+    return landmarks, coefs
+
+
+def fit_one(xs: np.ndarray, y: np.ndarray, params: dict[str, float], method: str, n_landmarks: int,
+            seed: int) -> SVR | LandmarkRegressor:
+    """One blendshape's model on standardised rows: an exact RBF SVR or its approximation."""
+    c, gamma, eps = float(params["C"]), float(params["gamma"]), float(params["epsilon"])
+    if method == METHODS[0]:
+        return SVR(kernel="rbf", C=c, gamma=gamma, epsilon=eps).fit(xs, y)
+    landmarks, coefs = fit_landmark_models(xs, y[:, None], gamma, [c], n_landmarks, seed)
+    return LandmarkRegressor(landmarks, coefs[c][:-1, 0], coefs[c][-1, 0], c, gamma, eps)
+
+
+# --------------------------------------------------------------------------- the search
+
+
+@dataclasses.dataclass
+class SearchResult:
+    """Grid-search outcome for one blendshape."""
+
+    best: dict[str, float]
+    cv_mse: float
+    cv_r: float
+    table: list[dict[str, float]]        # one row per grid point: C, gamma, epsilon, mse
+    oof: np.ndarray                      # out-of-fold normalised predictions at the best point
+    baselines: dict[str, np.ndarray]     # out-of-fold "mean" and "linear" predictions
+
+
+def grid_search(data: FaceData, config: FaceFitConfig,
+                progress: Callable[[int], object] | None = None) -> dict[str, SearchResult]:
+    """Grid search of every blendshape's model (exact SVR or the approximation, by the rows).
+
+    The folds run through :func:`effortface.synth.parallel.map_ordered` (this process or a Dask
+    cluster, same results; ``data`` goes to the workers once, a task carries its fold's indices).
+
+    Parameters
+    ----------
+    data : FaceData
+        Training arrays.
+    config : FaceFitConfig
+        Grid, CV scheme and the exact/approximate switch.
+    progress : callable, optional
+        Called with 1 after each fold (for a progress bar).
+
+    Returns
+    -------
+    dict
+        Blendshape name -> :class:`SearchResult`.
+    """
+    folds = cv_folds(data, config.cv, config.n_splits, config.seed, config.max_folds)
+    points = list(itertools.product(config.grid["C"], config.grid["gamma"], config.grid["epsilon"]))
+    n, nb = data.y_norm.shape
+    oof = {p: np.full((n, nb), np.nan) for p in points}
+    fold_mse = {p: np.zeros((len(folds), nb)) for p in points}
+    base = {k: np.full((n, nb), np.nan) for k in ("mean", "linear")}
+    method = config.method(n)
+    calls = ((train, test, config, method) for train, test in folds)
+    results = map_ordered(_search_fold, calls, shared=(data,))
+    for f, ((train, test), (preds, mses, baselines)) in enumerate(zip(folds, results)):
+        for p in points:
+            oof[p][test] = preds[p]
+            fold_mse[p][f] = mses[p]
+        for k, v in baselines.items():
+            base[k][test] = v
+        if progress:
+            progress(1)
+    return {name: _best(data, b, points, oof, fold_mse, base) for b, name in enumerate(data.blendshapes)}
+
+
+def _search_fold(data: FaceData, train: np.ndarray, test: np.ndarray, config: FaceFitConfig,
+                 method: str) -> tuple[dict, dict, dict]:
+    """One fold of the search: per grid point the test predictions (n_test, B) and MSEs (B,), and
+    the baselines' test predictions. A pure function of its arguments (runs anywhere)."""
+    points = list(itertools.product(config.grid["C"], config.grid["gamma"], config.grid["epsilon"]))
+    nb = data.y_norm.shape[1]
+    preds = {p: np.full((len(test), nb), np.nan) for p in points}
+    mses = {p: np.full(nb, np.nan) for p in points}
+    if method == METHODS[0]:
+        for gamma, k_tr, k_te, _, _ in _fold_kernels(data.x, train, test, config.grid["gamma"]):
+            for b in range(nb):
+                _fit_fold(data, b, train, test, k_tr, k_te, gamma, config, preds, mses)
+    else:
+        _search_fold_landmarks(data, train, test, config, preds, mses)
+    base = {k: np.full((len(test), nb), np.nan) for k in ("mean", "linear")}
+    _baseline_fold(data, train, test, base)
+    return preds, mses, base
+
+
+def _fit_fold(data: FaceData, b: int, train: np.ndarray, test: np.ndarray, k_tr: np.ndarray,
+              k_te: np.ndarray, gamma: float, config: FaceFitConfig, preds: dict, mses: dict) -> None:
+    """Fit blendshape b on one fold for every (C, epsilon) at this gamma; store predictions."""
+    y = data.y_norm[:, b]
+    tr, te = np.isfinite(y[train]), np.isfinite(y[test])
+    if tr.sum() < 2 or te.sum() == 0:
+        return
+    # slice the Gram matrices once for every (C, epsilon); skip the copy when nothing is missing
+    k_fit = k_tr if tr.all() else k_tr[np.ix_(tr, tr)]
+    k_pred = k_te if (tr.all() and te.all()) else k_te[np.ix_(te, tr)]
+    for c, eps in itertools.product(config.grid["C"], config.grid["epsilon"]):
+        svr = SVR(kernel="precomputed", C=c, epsilon=eps).fit(k_fit, y[train][tr])
+        pred = svr.predict(k_pred)
+        preds[(c, gamma, eps)][te, b] = pred
+        mses[(c, gamma, eps)][b] = float(np.mean((pred - y[test][te]) ** 2))
+
+
+def _search_fold_landmarks(data: FaceData, train: np.ndarray, test: np.ndarray, config: FaceFitConfig,
+                           preds: dict, mses: dict) -> None:
+    """The approximation's fold: per gamma one set of landmarks and normal equations, every C
+    solved from them (epsilon does not enter the approximation: its points share the result)."""
+    scaler = StandardScaler().fit(data.x[train])
+    xs_tr, xs_te = scaler.transform(data.x[train]), scaler.transform(data.x[test])
+    y_tr, y_te = data.y_norm[train], data.y_norm[test]
+    te_ok = np.isfinite(y_te)
+    for gamma in config.grid["gamma"]:
+        landmarks, coefs = fit_landmark_models(xs_tr, y_tr, gamma, config.grid["C"], config.n_landmarks,
+                                               config.seed)
+        k_te = _landmark_kernel(xs_te, landmarks, gamma)
+        for c, eps in itertools.product(config.grid["C"], config.grid["epsilon"]):
+            pred = k_te @ coefs[c][:-1] + coefs[c][-1]
+            pred[~te_ok] = np.nan
+            preds[(c, gamma, eps)][:] = pred
+            err = np.where(te_ok, pred - y_te, np.nan)
+            with np.errstate(invalid="ignore"):
+                mse = np.nanmean(err ** 2, axis=0) if te_ok.any() else np.full(len(mses[(c, gamma, eps)]), np.nan)
+            mses[(c, gamma, eps)][:] = np.where(te_ok.any(axis=0) & np.isfinite(coefs[c][-1]), mse, np.nan)
+
+
+def _baseline_fold(data: FaceData, train: np.ndarray, test: np.ndarray, base: dict) -> None:
+    """Mean and linear-regression baselines on one fold (standardised features); ``base`` holds
+    (n_test, B) arrays."""
+    scaler = StandardScaler().fit(data.x[train])
+    for b in range(data.y_norm.shape[1]):
+        y = data.y_norm[:, b]
+        tr, te = train[np.isfinite(y[train])], np.isfinite(y[test])
+        if len(tr) < 2 or not te.any():
+            continue
+        base["mean"][te, b] = y[tr].mean()
+        lin = LinearRegression().fit(scaler.transform(data.x[tr]), y[tr])
+        base["linear"][te, b] = lin.predict(scaler.transform(data.x[test[te]]))
+
+
+def _best(data: FaceData, b: int, points: list, oof: dict, fold_mse: dict, base: dict) -> SearchResult:
+    """The grid point with the lowest fold-averaged MSE for blendshape b."""
+    rows = [{"C": c, "gamma": g, "epsilon": e, "mse": float(np.nanmean(fold_mse[(c, g, e)][:, b]))}
+            for c, g, e in points]
+    best = min(rows, key=lambda r: r["mse"] if np.isfinite(r["mse"]) else np.inf)
+    key = (best["C"], best["gamma"], best["epsilon"])
+    y, pred = data.y_norm[:, b], oof[key][:, b]
+    ok = np.isfinite(y) & np.isfinite(pred)
+    r = float(np.corrcoef(y[ok], pred[ok])[0, 1]) if ok.sum() > 2 else float("nan")
+    return SearchResult({k: best[k] for k in ("C", "gamma", "epsilon")}, best["mse"], r, rows,
+                        pred, {k: v[:, b] for k, v in base.items()})
+
+
+# --------------------------------------------------------------------------- final fit
+
+
+@dataclasses.dataclass
+class FaceModelFit:
+    """The fitted face models and everything the export and the report need."""
+
+    blendshapes: tuple[str, ...]
+    scaler: StandardScaler
+    svrs: dict[str, SVR | LandmarkRegressor]
+    search: dict[str, SearchResult]
+    expressiveness: pd.DataFrame
+    data: FaceData
+    config: FaceFitConfig
+
+    @property
+    def method(self) -> str:
+        """``"exact_svr"`` or ``"nystroem"`` (chosen from the face rows, see :meth:`FaceFitConfig.method`)."""
+        return self.config.method(len(self.data.x))
+
+    def describe(self) -> dict[str, object]:
+        """The choice for model.json and the model card: method, face rows, landmarks, the switch."""
+        landmarks = [len(m.support_vectors_) for m in self.svrs.values()] \
+            if self.method == METHODS[1] else None
+        return {"method": self.method, "n_face_rows": int(len(self.data.x)),
+                "exact_max_rows": int(self.config.exact_max_rows), "n_landmarks": landmarks,
+                "max_rows_per_participant": int(self.config.max_rows_per_participant)}
+
+    def predict_norm(self, x: np.ndarray) -> np.ndarray:
+        """Normalised predictions (n, B) from raw features (n, 4), by scikit-learn."""
+        xs = self.scaler.transform(np.asarray(x, dtype=float))
+        return np.column_stack([self.svrs[b].predict(xs) for b in self.blendshapes])
+
+
+def check_face_table(table: pd.DataFrame, blendshapes: Sequence[str], source: str = "table",
+                     config: FaceFitConfig | None = None) -> None:
+    """Refuse a prepared table the face models cannot be fitted on, before any work starts.
+
+    Every blendshape needs key-framed weights on at least two of the seconds the fit uses (those
+    with work and heart rate, after the even subsampling of :func:`subsample`).
+
+    Parameters
+    ----------
+    table : DataFrame
+        Prepared training table (with ``nhr`` and ``epoc_norm``).
+    blendshapes : sequence of str
+        Blendshape columns to model.
+    source : str
+        The table or sessions, for the message.
+    config : FaceFitConfig, optional
+        The fit's settings (its subsampling).
+
+    Raises
+    ------
+    UserError
+        Naming ``source`` and the first blendshape without annotations.
+    """
+    config = config or FaceFitConfig()
+    usable = table.dropna(subset=list(FEATURES))
+    kept = subsample(usable, config.rows_per_participant(usable["participant"].nunique())) \
+        if len(usable) else usable
+    for name in blendshapes:
+        n_all, n_used = int(table[name].notna().sum()), int(kept[name].notna().sum())
+        if n_used < 2:
+            found = "none (the column is empty)" if n_all == 0 else \
+                f"{n_used} of its {n_all} annotated seconds"
+            raise UserError(f"{source}: blendshape {name}: expected key-framed weights on at least 2 "
+                            f"seconds with work and heart rate, found {found}")
+
+
+def fit_face_models(table: pd.DataFrame, blendshapes: Sequence[str],
+                    config: FaceFitConfig | None = None,
+                    progress: Callable[[int], object] | None = None) -> FaceModelFit:
+    """Search hyper-parameters by grouped CV, then fit one model per blendshape on all rows.
+
+    Exact RBF SVRs up to ``config.exact_max_rows`` face rows, the Nystroem approximation above
+    (module docstring).
+
+    Parameters
+    ----------
+    table : DataFrame
+        Training table (see the module docstring).
+    blendshapes : sequence of str
+        Blendshape columns to model.
+    config : FaceFitConfig, optional
+        Grid, CV scheme and subsampling.
+    progress : callable, optional
+        Called with 1 after each CV fold.
+
+    Returns
+    -------
+    FaceModelFit
+    """
+    config = config or FaceFitConfig()
+    table = table.dropna(subset=list(FEATURES))  # seconds without a heart rate carry no NHR
+    e_table = expressiveness(table, blendshapes)
+    per_participant = config.rows_per_participant(table["participant"].nunique())
+    data = face_data(subsample(table, per_participant), blendshapes, e_table)
+    search = grid_search(data, config, progress)
+    scaler = StandardScaler().fit(data.x)
+    method = config.method(len(data.x))
+    calls = ((scaler, b, search[name].best, method, config) for b, name in enumerate(data.blendshapes))
+    svrs = dict(zip(data.blendshapes, map_ordered(_final_fit, calls, shared=(data,))))
+    return FaceModelFit(tuple(blendshapes), scaler, svrs, search, e_table, data, config)
+
+
+def _final_fit(data: FaceData, scaler: StandardScaler, b: int, params: dict[str, float], method: str,
+               config: FaceFitConfig) -> SVR | LandmarkRegressor:
+    """Blendshape b's model on every annotated row (one task of :func:`fit_face_models`)."""
+    ok = np.isfinite(data.y_norm[:, b])
+    return fit_one(scaler.transform(data.x[ok]), data.y_norm[ok, b], params, method, config.n_landmarks,
+                   config.seed)
+
+
+# --------------------------------------------------------------------------- metrics
+
+
+def weight_metrics(y: np.ndarray, pred: np.ndarray) -> dict[str, float]:
+    """Pearson r and RMSE in % of the observed range and in % of [0, 1] (NaN rows skipped)."""
+    ok = np.isfinite(y) & np.isfinite(pred)
+    y, pred = y[ok], pred[ok]
+    if len(y) < 3:
+        return {"r": float("nan"), "rmse_pct_range": float("nan"), "rmse_pct_unit": float("nan"), "n": len(y)}
+    rmse = float(np.sqrt(np.mean((y - pred) ** 2)))
+    r = float(np.corrcoef(y, pred)[0, 1]) if np.std(y) > 0 and np.std(pred) > 0 else 0.0
+    span = float(np.ptp(y)) or 1.0
+    return {"r": r, "rmse_pct_range": 100 * rmse / span, "rmse_pct_unit": 100 * rmse, "n": int(len(y))}
+
+
+def training_expressiveness(data: FaceData, train: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """Expressiveness of ``rows`` estimated from the training rows only (no label of ``rows`` used).
+
+    A participant with annotated training rows gets the maximal key-framed weight of those rows; a
+    participant absent from the training rows (a held-out participant) gets the mean expressiveness
+    of the training participants. Floored at ``MIN_EXPRESSIVENESS``.
+
+    Parameters
+    ----------
+    data : FaceData
+    train, rows : ndarray of int
+        Indices of the training rows and of the rows to give an expressiveness to.
+
+    Returns
+    -------
+    ndarray, shape (len(rows), B)
+    """
+    weights = pd.DataFrame(data.y_norm[train] * data.e[train], columns=data.blendshapes)
+    own = weights.groupby(data.groups[train], sort=False).max()
+    own = own.fillna(MIN_EXPRESSIVENESS).clip(lower=MIN_EXPRESSIVENESS)
+    e = own.reindex(data.groups[rows]).to_numpy(float, copy=True)
+    unseen = np.isnan(e)
+    e[unseen] = np.broadcast_to(own.mean().to_numpy(float), e.shape)[unseen]
+    return e
+
+
+def held_out_predictions(fit: FaceModelFit, known_expressiveness: bool = False) -> np.ndarray:
+    """Out-of-fold SVR weights (n, B): normalised predictions x expressiveness, clipped to [0, 1].
+
+    By default each fold's expressiveness is estimated without the scored rows' labels
+    (:func:`training_expressiveness`: for a held-out participant, the training participants'
+    mean), so the prediction for a participant never depends on that participant's key-frames.
+    ``known_expressiveness=True`` multiplies by the participant's own maximal key-framed weight
+    instead (what a user who knows the actor's expressiveness gets; it borrows from the labels).
+    """
+    norm = np.column_stack([fit.search[b].oof for b in fit.blendshapes])
+    return np.clip(norm * _fold_expressiveness(fit, known_expressiveness), 0.0, 1.0)
+
+
+def _fold_expressiveness(fit: FaceModelFit, known: bool) -> np.ndarray:
+    """Per row, the expressiveness its out-of-fold prediction is multiplied by."""
+    d = fit.data
+    if known:
+        return d.e
+    e = np.full(d.e.shape, np.nan)
+    c = fit.config
+    for train, test in cv_folds(d, c.cv, c.n_splits, c.seed, c.max_folds):
+        e[test] = training_expressiveness(d, train, test)
+    return e
+
+
+#: Model labels of :func:`held_out_scores` (``svr`` is the headline; the last borrows from the labels).
+HELD_OUT_MODELS = ("svr", "mean", "linear", "svr_known_expressiveness")
+
+
+def held_out_scores(fit: FaceModelFit) -> pd.DataFrame:
+    """Per blendshape and model: out-of-fold metrics on the weight scale (the key-framed weights).
+
+    Models ``svr``, ``mean`` and ``linear`` multiply their normalised predictions by an
+    expressiveness estimated without the scored participant's labels (the training participants'
+    mean; at run time the user supplies it): the headline scores. ``svr_known_expressiveness``
+    multiplies the same SVR predictions by the participant's own maximal key-framed weight: the
+    score when the actor's expressiveness is known, which borrows from the test labels.
+    """
+    e_est, e_known = _fold_expressiveness(fit, False), _fold_expressiveness(fit, True)
+    rows = []
+    for b, name in enumerate(fit.blendshapes):
+        y = fit.data.y_norm[:, b] * fit.data.e[:, b]
+        s = fit.search[name]
+        for model, pred, e in (("svr", s.oof, e_est), ("mean", s.baselines["mean"], e_est),
+                               ("linear", s.baselines["linear"], e_est),
+                               ("svr_known_expressiveness", s.oof, e_known)):
+            rows.append({"blendshape": name, "model": model,
+                         **weight_metrics(y, np.clip(pred * e[:, b], 0, 1))})
+    return pd.DataFrame(rows)
+
+
+#: The paper's face figure: training (in-sample) RMSE of 17-26 % per blendshape.
+PAPER_FACE_TRAINING_RMSE_PCT = (17.0, 26.0)
+
+
+def training_scores(fit: FaceModelFit) -> pd.DataFrame:
+    """In-sample metrics of the final SVRs on their own training rows (the paper's "training RMSE").
+
+    Weight scale: normalised predictions x each participant's own expressiveness (in-sample, the
+    labels are the training labels), against the key-framed weights. Labelled ``svr_in_sample``.
+    """
+    pred = np.clip(fit.predict_norm(fit.data.x) * fit.data.e, 0.0, 1.0)
+    y = fit.data.y_norm * fit.data.e
+    return pd.DataFrame([{"blendshape": name, "model": "svr_in_sample", **weight_metrics(y[:, b], pred[:, b])}
+                         for b, name in enumerate(fit.blendshapes)])
+
+
+# --------------------------------------------------------------------------- the paper's Fig. 3 protocols
+
+PROTOCOLS = ("same_participant_exercise", "unseen_participant", "unseen_exercise")
+
+
+def _protocol_folds(data: FaceData, protocol: str, n_blocks: int = 5, max_folds: int = 8
+                    ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Folds for one protocol (see :func:`protocol_scores`)."""
+    idx = np.arange(len(data.groups))
+    if protocol == "unseen_participant":
+        return cv_folds(data, "lopo", max_folds=max_folds)
+    if protocol == "unseen_exercise":
+        if len(np.unique(data.exercise)) < 2:
+            return []
+        return list(LeaveOneGroupOut().split(idx, groups=data.exercise))
+    folds = []
+    for key in np.unique(np.char.add(np.char.add(data.groups, "|"), data.exercise)):
+        rows = idx[np.char.add(np.char.add(data.groups, "|"), data.exercise) == key]
+        rows = rows[np.argsort(data.t_s[rows], kind="stable")]
+        for block in np.array_split(rows, n_blocks):  # contiguous blocks of time
+            if len(block) and len(rows) - len(block) > 10:
+                folds.append((np.setdiff1d(rows, block), block))
+    return folds
+
+
+def protocol_scores(fit: FaceModelFit, protocols: Sequence[str] = PROTOCOLS) -> tuple[pd.DataFrame, dict]:
+    """The paper's Fig. 3 protocols with the chosen hyper-parameters.
+
+    - ``same_participant_exercise``: one model per participant and exercise, each contiguous fifth of
+      the time predicted from the other four fifths;
+    - ``unseen_participant``: trained on everyone else (leave one participant out);
+    - ``unseen_exercise``: trained on every other exercise, everyone pooled (leave one exercise out).
+
+    Returns
+    -------
+    scores : DataFrame
+        ``protocol, blendshape, r, rmse_pct_range, rmse_pct_unit, n`` (weight scale).
+    predictions : dict
+        protocol -> (n, B) array of predicted weights (NaN where not predicted), for the plots.
+    """
+    rows, preds = [], {}
+    for protocol in protocols:
+        pred = _predict_folds(fit, _protocol_folds(fit.data, protocol, max_folds=fit.config.max_folds))
+        preds[protocol] = pred
+        for b, name in enumerate(fit.blendshapes):
+            y = fit.data.y_norm[:, b] * fit.data.e[:, b]
+            rows.append({"protocol": protocol, "blendshape": name, **weight_metrics(y, pred[:, b])})
+    return pd.DataFrame(rows), preds
+
+
+def _predict_folds(fit: FaceModelFit, folds: list) -> np.ndarray:
+    """Out-of-fold predicted weights with each blendshape's chosen hyper-parameters.
+
+    No label of a fold's test rows is used: the training targets are normalised and the test
+    predictions scaled by expressiveness estimated from the training rows
+    (:func:`training_expressiveness`). Each fit is exact or approximate by the run's face rows
+    (the method of ``fit``); the folds run through :func:`~effortface.synth.parallel.map_ordered`.
+    """
+    out = np.full(fit.data.y_norm.shape, np.nan)
+    params = {name: fit.search[name].best for name in fit.blendshapes}
+    calls = ((train, test, params, fit.method, fit.config) for train, test in folds)
+    for (_, test), pred in zip(folds, map_ordered(_protocol_fold, calls, shared=(fit.data,))):
+        out[test] = np.where(np.isnan(pred), out[test], pred)
+    return out
+
+
+def _protocol_fold(d: FaceData, train: np.ndarray, test: np.ndarray, params: dict[str, dict[str, float]],
+                   method: str, config: FaceFitConfig) -> np.ndarray:
+    """Predicted weights (n_test, B) of one protocol fold (NaN for a blendshape not fitted)."""
+    out = np.full((len(test), len(d.blendshapes)), np.nan)
+    weights = d.y_norm * d.e
+    scaler = StandardScaler().fit(d.x[train])
+    e_train = training_expressiveness(d, train, train)
+    e_test = training_expressiveness(d, train, test)
+    xs_test = scaler.transform(d.x[test])
+    for b, name in enumerate(d.blendshapes):
+        ok = np.isfinite(d.y_norm[train, b])
+        if ok.sum() < 5:
+            continue
+        target = np.clip(weights[train[ok], b] / e_train[ok, b], 0.0, 1.0)
+        model = fit_one(scaler.transform(d.x[train[ok]]), target, params[name], method,
+                        config.n_landmarks, config.seed)
+        out[:, b] = np.clip(model.predict(xs_test) * e_test[:, b], 0, 1)
+    return out
