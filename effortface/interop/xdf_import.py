@@ -296,7 +296,8 @@ def hr_rows(path: Path, stream: XdfStream, t0: float) -> list[HrSample]:
     order = np.argsort(stamps, kind="stable")  # sorted once and split: linear in samples
     unique, starts = np.unique(stamps[order], return_index=True)
     hr_groups = np.split(hr_all[order], starts[1:])
-    rr_groups = np.split(np.asarray(rr_ms)[order], starts[1:]) if rr_ms is not None else [()] * len(unique)
+    no_rr: list[np.ndarray] = [np.empty(0)] * len(unique)
+    rr_groups = np.split(np.asarray(rr_ms)[order], starts[1:]) if rr_ms is not None else no_rr
     for stamp, hr_group, rr_group in zip(unique, hr_groups, rr_groups):
         hr = float(hr_group[-1] if hr_col is None else hr_group[0])
         rr = tuple(float(v) for v in rr_group if math.isfinite(v))
