@@ -16,10 +16,14 @@ column per blendshape, NaN where not annotated).
   = 3,600, one hour at 1 Hz; ``--max-rows`` raises it; ``max_total_rows`` is an optional total cap).
   Up to :data:`EXACT_MAX_ROWS` face rows the models are exact RBF epsilon-SVRs (libsvm, whose cost
   grows with the square of the rows); above it, every fit of the run (grid search, final fit,
-  protocols) is a **Nystroem kernel approximation**: ``n_landmarks`` training rows drawn at random
-  (seeded) and kernel ridge regression restricted to them, ``f(z) = K(z, landmarks) @ coef + b``
-  minimising ``sum (y - f)^2 + (1 / C) f'K f`` (the squared-loss twin of the SVR's objective, so the
-  grid's C keeps its meaning; epsilon does not enter it). It is the same graph as an SVR (landmarks
+  protocols) is a **Nystroem kernel approximation**: up to ``n_landmarks`` training rows picked by
+  randomly pivoted Cholesky (seeded; no near-duplicates, :func:`select_landmarks`) and kernel ridge
+  regression restricted to them, ``f(z) = K(z, landmarks) @ coef + b`` minimising
+  ``sum (y - f)^2 + (n / 3000) (1 / C) f'K f`` (the squared-loss twin of the SVR's objective; the
+  penalty grows with the rows n so that C keeps its meaning, the one it has for an exact SVR at the
+  3,000-row switch, and the coefficients stay small enough for a float32 graph, issue 26; epsilon
+  does not enter it). The ridge is solved in an orthonormal basis of the landmarks (``K_mm = L L'``,
+  features ``K(z, landmarks) L^-T``). It is the same graph as an SVR (landmarks
   as support vectors, ``coef`` as dual coefficients), so ``svr.npz``, the runtime and face.onnx
   evaluate it unchanged. Its cost is linear in the rows (normal equations summed in chunks, memory
   independent of the rows). ``tests/train/test_face_scale.py`` checks it against exact SVR.
@@ -41,6 +45,7 @@ from collections.abc import Callable, Iterator, Sequence
 
 import numpy as np
 import pandas as pd
+from scipy.linalg import solve_triangular
 from sklearn.linear_model import LinearRegression
 from sklearn.metrics.pairwise import rbf_kernel
 from sklearn.model_selection import GroupKFold, KFold, LeaveOneGroupOut
@@ -272,12 +277,82 @@ def landmark_rows(n_rows: int, n_landmarks: int, seed: int) -> np.ndarray:
     return np.sort(np.random.default_rng(seed).choice(n_rows, m, replace=False))
 
 
-def _normal_equations(xs: np.ndarray, y: np.ndarray, landmarks: np.ndarray, gamma: float
-                      ) -> dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+#: landmarks are picked from a seeded random pool of this many times ``n_landmarks`` rows
+LANDMARK_POOL_FACTOR = 10
+#: the landmark pick stops early when the kernel's unexplained variance per pool row falls below
+#: this (more landmarks would be near-duplicates of the chosen ones)
+LANDMARK_RESIDUAL_TOL = 1e-8
+#: C's meaning is kept as the rows grow: the ridge penalty is ``(n / PENALTY_REFERENCE_ROWS) / C``,
+#: i.e. the data term is the mean squared error per row times this many rows; at the exact/approximate
+#: switch the approximation solves the objective it always solved (issue 26)
+PENALTY_REFERENCE_ROWS = EXACT_MAX_ROWS
+
+
+def select_landmarks(xs: np.ndarray, n_landmarks: int, gamma: float, seed: int) -> np.ndarray:
+    """Indices of the landmark rows: randomly pivoted Cholesky on a seeded pool of rows.
+
+    Each next landmark is drawn with probability proportional to the RBF kernel's variance that
+    the chosen ones leave unexplained at a row (Chen, Epperly, Tropp & Webber 2023, "randomly
+    pivoted Cholesky"), so a row close to a chosen landmark is rarely chosen again: no
+    near-duplicates, a well-conditioned ``K_mm`` and small landmark coefficients. The pick stops
+    before ``n_landmarks`` once :data:`LANDMARK_RESIDUAL_TOL` is reached.
+
+    Parameters
+    ----------
+    xs : ndarray, shape (n, F)
+        Standardised rows.
+    n_landmarks : int
+        Landmarks wanted.
+    gamma : float
+        RBF gamma.
+    seed : int
+        Seeds the pool and the draws.
+
+    Returns
+    -------
+    ndarray of int
+        Sorted row indices into ``xs``.
+    """
+    pool = landmark_rows(len(xs), LANDMARK_POOL_FACTOR * n_landmarks, seed)
+    rows = xs[pool]
+    rng = np.random.default_rng(seed + 1)
+    chol = np.zeros((min(n_landmarks, len(pool)), len(pool)))      # the factor's columns as rows
+    residual = np.ones(len(pool))
+    picked: list[int] = []
+    for j in range(len(chol)):
+        cumulative = np.cumsum(residual)
+        if cumulative[-1] <= LANDMARK_RESIDUAL_TOL * len(pool):
+            break
+        i = min(int(np.searchsorted(cumulative, rng.random() * cumulative[-1], side="right")), len(pool) - 1)
+        column = np.exp(-gamma * ((rows - rows[i]) ** 2).sum(axis=1)) - chol[:j, i] @ chol[:j]
+        chol[j] = column / np.sqrt(residual[i])
+        residual = np.clip(residual - chol[j] ** 2, 0.0, None)
+        residual[i] = 0.0
+        picked.append(i)
+    return np.sort(pool[picked])
+
+
+def landmark_basis(landmarks: np.ndarray, gamma: float) -> np.ndarray:
+    """``L^-T`` of the Cholesky factor ``K_mm = L L'``: ``K(x, landmarks) @ basis`` are the
+    approximation's features in an orthonormal basis of the landmarks' span (the ridge penalty
+    ``coef' K_mm coef`` becomes the plain squared norm of the coefficients in that basis)."""
+    k_mm = _landmark_kernel(landmarks, landmarks, gamma)
+    jitter = 1e-12
+    while True:
+        try:
+            chol = np.linalg.cholesky(k_mm + jitter * np.eye(len(k_mm)))
+            break
+        except np.linalg.LinAlgError:
+            jitter *= 10.0
+    return solve_triangular(chol, np.eye(len(k_mm)), lower=True).T
+
+
+def _normal_equations(xs: np.ndarray, y: np.ndarray, landmarks: np.ndarray, gamma: float,
+                      basis: np.ndarray) -> dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Per distinct pattern of annotated rows: ``A'A``, ``A'Y`` and the columns of Y using it.
 
-    ``A = [K(xs, landmarks), 1]``; summed over chunks of rows, so the memory does not grow with
-    the rows. Blendshapes annotated on the same seconds share one ``A'A``.
+    ``A = [K(xs, landmarks) @ basis, 1]``; summed over chunks of rows, so the memory does not grow
+    with the rows. Blendshapes annotated on the same seconds share one ``A'A``.
     """
     finite = np.isfinite(y)
     groups: dict[bytes, list[int]] = {}
@@ -288,7 +363,7 @@ def _normal_equations(xs: np.ndarray, y: np.ndarray, landmarks: np.ndarray, gamm
     for start in range(0, len(xs), _CHUNK_ROWS):
         rows = slice(start, start + _CHUNK_ROWS)
         a = np.empty((len(xs[rows]), m + 1))
-        a[:, :m] = _landmark_kernel(xs[rows], landmarks, gamma)
+        a[:, :m] = _landmark_kernel(xs[rows], landmarks, gamma) @ basis
         a[:, m] = 1.0
         for key, cols in groups.items():
             ok = finite[rows, cols[0]]
@@ -299,11 +374,12 @@ def _normal_equations(xs: np.ndarray, y: np.ndarray, landmarks: np.ndarray, gamm
     return {key: (*sums[key], np.array(cols)) for key, cols in groups.items()}
 
 
-def _solve_landmarks(ata: np.ndarray, aty: np.ndarray, k_mm: np.ndarray, c: float) -> np.ndarray:
-    """Coefficients (m + 1, k) (the last row: intercepts) of the ridge ``(A'A + K_mm / C) w = A'Y``."""
-    m = len(k_mm)
+def _solve_landmarks(ata: np.ndarray, aty: np.ndarray, c: float) -> np.ndarray:
+    """Coefficients (m + 1, k) in the orthonormal basis (the last row: intercepts) of the ridge
+    ``(A'A + (n / PENALTY_REFERENCE_ROWS) / C I) w = A'Y``, n the rows (``A'A``'s last entry)."""
+    m = len(ata) - 1
     lhs = ata.copy()
-    lhs[:m, :m] += k_mm / c
+    lhs[np.diag_indices(m)] += float(ata[-1, -1]) / PENALTY_REFERENCE_ROWS / c
     lhs[np.diag_indices(m)] += 1e-10 * max(float(np.trace(ata)) / (m + 1), 1.0)  # jitter
     try:
         return np.linalg.solve(lhs, aty)
@@ -315,6 +391,11 @@ def fit_landmark_models(xs: np.ndarray, y: np.ndarray, gamma: float, cs: Sequenc
                         n_landmarks: int, seed: int) -> tuple[np.ndarray, dict[float, np.ndarray]]:
     """Nystroem kernel ridge fits of every column of ``y`` (NaN = not annotated) for every C.
 
+    Landmarks by :func:`select_landmarks`; the ridge is solved in the orthonormal basis of
+    :func:`landmark_basis` with the penalty ``(n / PENALTY_REFERENCE_ROWS) / C`` (issue 26: a
+    fixed ``1 / C`` weakened as the rows grew, and the landmark coefficients grew to sums near 1e4,
+    beyond what a float32 graph can add within 1e-4).
+
     Parameters
     ----------
     xs : ndarray, shape (n, F)
@@ -324,9 +405,9 @@ def fit_landmark_models(xs: np.ndarray, y: np.ndarray, gamma: float, cs: Sequenc
     gamma : float
         RBF gamma.
     cs : sequence of float
-        Values of C (the ridge penalty is 1 / C).
+        Values of C (the ridge penalty is ``(n / PENALTY_REFERENCE_ROWS) / C``).
     n_landmarks : int
-        Landmarks, drawn from the rows (seeded by ``seed``).
+        Landmarks, at most (seeded by ``seed``).
     seed : int
 
     Returns
@@ -336,14 +417,16 @@ def fit_landmark_models(xs: np.ndarray, y: np.ndarray, gamma: float, cs: Sequenc
         C -> (m + 1, k) array: landmark coefficients, then the intercept in the last row (NaN for
         a column with fewer than two annotated rows).
     """
-    landmarks = xs[landmark_rows(len(xs), n_landmarks, seed)]
-    k_mm = _landmark_kernel(landmarks, landmarks, gamma)
+    landmarks = xs[select_landmarks(xs, n_landmarks, gamma, seed)]
+    basis = landmark_basis(landmarks, gamma)
     coefs = {c: np.full((len(landmarks) + 1, y.shape[1]), np.nan) for c in cs}
-    for ata, aty, cols in _normal_equations(xs, y, landmarks, gamma).values():
+    for ata, aty, cols in _normal_equations(xs, y, landmarks, gamma, basis).values():
         if ata[-1, -1] < 2:
             continue
         for c in cs:
-            coefs[c][:, cols] = _solve_landmarks(ata, aty, k_mm, c)
+            w = _solve_landmarks(ata, aty, c)
+            coefs[c][:-1, cols] = basis @ w[:-1]
+            coefs[c][-1, cols] = w[-1]
     return landmarks, coefs
 
 
@@ -736,13 +819,21 @@ def _protocol_folds(data: FaceData, protocol: str, n_blocks: int = 5, max_folds:
             return []
         return list(LeaveOneGroupOut().split(idx, groups=data.exercise))
     folds = []
-    for key in np.unique(np.char.add(np.char.add(data.groups, "|"), data.exercise)):
-        rows = idx[np.char.add(np.char.add(data.groups, "|"), data.exercise) == key]
+    for rows in _rows_by_participant_exercise(data):
         rows = rows[np.argsort(data.t_s[rows], kind="stable")]
         for block in np.array_split(rows, n_blocks):  # contiguous blocks of time
             if len(block) and len(rows) - len(block) > 10:
                 folds.append((np.setdiff1d(rows, block), block))
     return folds
+
+
+def _rows_by_participant_exercise(data: FaceData) -> list[np.ndarray]:
+    """Row indices (ascending) of each participant-exercise pair, pairs in sorted order; one pass
+    over the rows (issue 26: a string comparison over all rows per pair grew as rows x pairs)."""
+    keys = np.char.add(np.char.add(data.groups.astype(str), "|"), data.exercise.astype(str))
+    _, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
+    order = np.argsort(inverse.ravel(), kind="stable")
+    return np.split(order, np.cumsum(counts)[:-1])
 
 
 def protocol_scores(fit: FaceModelFit, protocols: Sequence[str] = PROTOCOLS) -> tuple[pd.DataFrame, dict]:

@@ -550,18 +550,37 @@ def evaluate_hr_models(series: Sequence[HrSeries], smooth_s: int = DEFAULT_SMOOT
         preds[(name, key)] = pred
         scores.append(score_series(s, pred, name))
 
+    samples = [step_samples(s, smooth_s) for s in series]
     for code, own in groups.items():
-        held = fit_hr_model([s for s in series if s.participant != code], smooth_s)
+        pooled, tl_regression = _without_participant(fit, series, samples, code)
         for s in own:
             add("per_participant_in_sample", s, fit.per_participant[code], s.session)
-            add("pooled_threshold", s, held.pooled, s.session)
-            add("tl_regression", s, held.tl_regression.at(own[0].training_level), s.session)
+            add("pooled_threshold", s, pooled, s.session)
+            add("tl_regression", s, tl_regression.at(own[0].training_level), s.session)
         for block, coef in _held_out_time(own, smooth_s):
             if coef is not None:
                 add("per_participant", block, coef, f"{block.session}@{block.t_s[0]:g}")
         for s in own:  # whole-session curve for Fig. 2 (halves joined for a single session)
             preds[("per_participant", s.session)] = _joined(preds, s)
     return HrEvaluation(scores, preds, fit)
+
+
+def _without_participant(fit: HrModelFit, series: Sequence[HrSeries],
+                         samples: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], code: str
+                         ) -> tuple[HrCoefficients, TlRegression]:
+    """The pooled tree and the training-level regression fitted without participant ``code``.
+
+    The other participants' own trees (``fit.per_participant``) and every session's step samples
+    (``samples``, in ``series`` order) are reused: refitting them for each held-out participant
+    made the evaluation grow as the square of the lab (issue 26). Same models as
+    ``fit_hr_model`` on the other participants' sessions.
+    """
+    keep = [i for i, s in enumerate(series) if s.participant != code]
+    w, nhr, dnhr = (np.concatenate([samples[i][k] for i in keep]) for k in range(3))
+    pooled = fit_threshold_tree(w, nhr, dnhr)
+    others = [c for c in fit.per_participant if c != code]
+    return pooled, fit_tl_regression([fit.training_levels[c] for c in others],
+                                     [fit.per_participant[c] for c in others])
 
 
 def _joined(preds: dict[tuple[str, str], np.ndarray], s: HrSeries) -> np.ndarray:

@@ -83,6 +83,8 @@ class TrainSettings:
         Run the CV folds on a local Dask cluster of this many worker processes.
     scheduler : str or None
         Run the CV folds on the Dask scheduler at this address.
+    c_values, gamma_values : tuple of float, optional
+        Replace the grid's values of C or gamma (``--C``, ``--gamma``); every value positive.
     """
 
     rater_policy: str = "mean"
@@ -92,10 +94,16 @@ class TrainSettings:
     max_rows_per_participant: int = FaceFitConfig().max_rows_per_participant
     workers: int | None = None
     scheduler: str | None = None
+    c_values: tuple[float, ...] | None = None
+    gamma_values: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         if self.grid not in GRIDS:
             raise UserError(f"grid: expected one of {', '.join(GRIDS)}, found {self.grid!r}")
+        for option, values in (("--C", self.c_values), ("--gamma", self.gamma_values)):
+            if values is not None and not (values and all(math.isfinite(v) and v > 0 for v in values)):
+                raise UserError(f"{option}: expected one or more positive numbers, found "
+                                f"{' '.join(f'{v:g}' for v in values) or 'none'}")
         if self.max_rows_per_participant < MIN_ROWS_PER_PARTICIPANT:
             raise UserError(f"max rows per participant: expected at least {MIN_ROWS_PER_PARTICIPANT}, "
                             f"found {self.max_rows_per_participant}")
@@ -110,8 +118,17 @@ class TrainSettings:
 
     def config(self) -> FaceFitConfig:
         """The face-fit configuration of these settings."""
-        return FaceFitConfig(grid=dict(GRIDS[self.grid]), cv=self.cv,
+        return FaceFitConfig(grid=self.grid_values(), cv=self.cv,
                              max_rows_per_participant=self.max_rows_per_participant)
+
+    def grid_values(self) -> dict[str, list[float]]:
+        """The searched values: the named grid with ``c_values`` / ``gamma_values`` put in."""
+        grid = dict(GRIDS[self.grid])
+        if self.c_values is not None:
+            grid["C"] = [float(v) for v in self.c_values]
+        if self.gamma_values is not None:
+            grid["gamma"] = [float(v) for v in self.gamma_values]
+        return grid
 
 
 def training_table(sessions: Sequence[str | Path], table: str | Path | None, blendshapes: BlendshapeSet,
@@ -361,6 +378,21 @@ class ExportedModel:
     model_dir: Path
     report: Path
     metrics: dict[str, Any]
+    #: what was not written, one phrase each (the refused float32 face.onnx, a failed report);
+    #: empty when everything was written (:func:`partial_export_line`)
+    not_written: list[str] = dataclasses.field(default_factory=list)
+
+
+#: exit status of ``effortface train`` when the model folder was written but a later part was not
+#: (the float32 engine file refused, the report failed): scripts tell it from 0 and from 2 (issue 26)
+EXIT_MODEL_WRITTEN_PARTLY = 3
+
+
+def partial_export_line(exported: ExportedModel) -> str:
+    """One line saying what was saved and what was not (for stderr and the Train stage)."""
+    return (f"model written to {exported.model_dir} (model.json, svr.npz, face_f64.onnx, MODEL_CARD.md"
+            f"{'' if any(n.startswith('report') for n in exported.not_written) else ', report'}); not written: "
+            + "; ".join(exported.not_written))
 
 
 def export_outcome(outcome: TrainingOutcome, out: str | Path, *, force: bool = False,
@@ -381,8 +413,11 @@ def export_outcome(outcome: TrainingOutcome, out: str | Path, *, force: bool = F
     Returns
     -------
     ExportedModel
+        Its ``not_written`` names a refused float32 ``face.onnx`` and a report that failed; the
+        model folder itself is written whenever this returns.
     """
-    from effortface.train.export import build_bundle, export_model  # lazy: onnx loads slowly
+    from effortface.train.export import (FACE_ONNX, build_bundle, engine_export_refusal,  # lazy: onnx
+                                         export_model)
     from effortface.train.report import write_report
 
     o = outcome
@@ -399,15 +434,21 @@ def export_outcome(outcome: TrainingOutcome, out: str | Path, *, force: bool = F
                                             if o.label_comparison is not None else o.label_note)
     bundle = build_bundle(o.face, o.hr_eval.fit, o.blendshapes, metrics, provenance)
     model_dir = export_model(bundle, o.face, out, force=force, inputs=o.sources)
+    refusal = engine_export_refusal(bundle.metrics)
+    not_written = [] if refusal is None else [f"{FACE_ONNX} (float32 engine file refused: {refusal})"]
     progress(0.8, "report")
-    report = write_report(model_dir / REPORT_DIR, evaluation=o.hr_eval, series=o.series, fit=o.face,
-                          held_out=o.held_out, protocols=o.protocols,
-                          protocol_predictions=o.protocol_predictions,
-                          header=report_header(bundle.provenance, model_dir),
-                          label_comparison=(o.label_comparison if o.label_comparison is not None
-                                            else o.label_note or None))
+    report = model_dir / REPORT_DIR / "report.md"
+    try:  # the model is written: a late failure of the figures must not lose it
+        report = write_report(model_dir / REPORT_DIR, evaluation=o.hr_eval, series=o.series, fit=o.face,
+                              held_out=o.held_out, protocols=o.protocols,
+                              protocol_predictions=o.protocol_predictions,
+                              header=report_header(bundle.provenance, model_dir),
+                              label_comparison=(o.label_comparison if o.label_comparison is not None
+                                                else o.label_note or None))
+    except Exception as exc:  # noqa: BLE001 - any failure of the figures; the model stays
+        not_written.append(f"report ({model_dir / REPORT_DIR}: {type(exc).__name__}: {exc})")
     progress(1.0, "done")
-    return ExportedModel(model_dir, report, bundle.metrics)
+    return ExportedModel(model_dir, report, bundle.metrics, not_written)
 
 
 class ProgressBar:

@@ -32,7 +32,7 @@ from effortface.annotate.completeness import session_status, summary
 from effortface.core.session.folder import (VIDEO_FRAMES_CSV, list_sessions, parse_session_id, read_session_info,
                                              read_video_frames)
 from effortface.train.dataset import ANNOTATIONS_DIR, prepare, read_table, sessions_table
-from effortface.train.pipeline import (TrainingOutcome, TrainSettings, export_outcome,
+from effortface.train.pipeline import (TrainingOutcome, TrainSettings, export_outcome, partial_export_line,
                                        train_models, training_table)
 from effortface.train.run_log import bundle_settings, fold_scores, grid_edge_warnings, grid_table, timing_text
 
@@ -450,7 +450,7 @@ class TrainSession:
             raise UserError("export: expected a trained model, found none (train first)")
         out = refuse_overwrite(out_dir, overwrite=overwrite, what="model folder")
         outcome = self.outcome
-        self._start("export", lambda _job: export_outcome(outcome, out, force=overwrite).model_dir, self._exported)
+        self._start("export", lambda _job: export_outcome(outcome, out, force=overwrite), self._exported)
 
     def compare(self, bundle_a: str | os.PathLike, bundle_b: str | os.PathLike,
                 session: str | None = None) -> None:
@@ -583,8 +583,12 @@ class TrainSession:
 
     def _exported(self, result: JobResult) -> None:
         if self._ended(result):
-            self.export_changed.emit(result.value)
-            self.status_changed.emit(f"exported model to {result.value}", False)
+            exported = result.value
+            self.export_changed.emit(exported.model_dir)
+            if exported.not_written:  # the model is saved; say what is not, as the CLI's exit 3 does
+                self.status_changed.emit(partial_export_line(exported), True)
+            else:
+                self.status_changed.emit(f"exported model to {exported.model_dir}", False)
 
     def _compared(self, result: JobResult) -> None:
         if self._ended(result):

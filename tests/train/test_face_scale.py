@@ -16,8 +16,8 @@ import pytest
 from effortface.cli import main
 from effortface.core.blendshapes import DEFAULT_SET
 from effortface.train.dataset import prepare, synthetic_table, write_table
-from effortface.train.face_fit import (EXACT_MAX_ROWS, N_LANDMARKS, FaceFitConfig, LandmarkRegressor,
-                                       fit_face_models, fit_landmark_models, held_out_scores)
+from effortface.train.face_fit import (EXACT_MAX_ROWS, N_LANDMARKS, PENALTY_REFERENCE_ROWS, FaceFitConfig,
+                                       LandmarkRegressor, fit_face_models, fit_landmark_models, held_out_scores)
 from effortface.synth.runtime import load_model
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -46,7 +46,8 @@ def test_approximation_is_within_5_percent_of_exact_svr():
     assert exact.method == "exact_svr" and approx.method == "nystroem"
     assert len(approx.data.x) == len(exact.data.x) > 1000
     for model in approx.svrs.values():
-        assert isinstance(model, LandmarkRegressor) and len(model.support_vectors_) == N_LANDMARKS
+        # at most N_LANDMARKS: the pick stops once the kernel is explained (no near-duplicates)
+        assert isinstance(model, LandmarkRegressor) and 20 <= len(model.support_vectors_) <= N_LANDMARKS
     rmse_exact, rmse_approx = _mean_held_out_rmse(exact), _mean_held_out_rmse(approx)
     assert rmse_approx <= 1.05 * rmse_exact, (rmse_approx, rmse_exact)
 
@@ -61,7 +62,9 @@ def test_landmark_fit_is_kernel_ridge_on_the_landmarks():
     from sklearn.metrics.pairwise import rbf_kernel
 
     centred = y[:, 0] - coefs[10.0][-1, 0]
-    ref = KernelRidge(alpha=0.1, kernel="rbf", gamma=0.5).fit(xs, centred)
+    assert len(landmarks) == 60
+    # the penalty (n / PENALTY_REFERENCE_ROWS) / C: C keeps its meaning as the rows grow (issue 26)
+    ref = KernelRidge(alpha=60 / PENALTY_REFERENCE_ROWS / 10.0, kernel="rbf", gamma=0.5).fit(xs, centred)
     pred = rbf_kernel(xs, landmarks, gamma=0.5) @ coefs[10.0][:-1, 0]
     np.testing.assert_allclose(pred, ref.predict(xs), atol=1e-4)
 
@@ -95,7 +98,7 @@ def test_workers_2_gives_the_serial_model(big_table_csv, tmp_path):
     # the choice, the landmarks and the rows are recorded
     fit_info = doc_a["provenance"]["face_fit"]
     assert fit_info["method"] == "nystroem" and fit_info["n_face_rows"] > EXACT_MAX_ROWS
-    assert fit_info["n_landmarks"] == [N_LANDMARKS] * 4
+    assert all(20 <= n <= N_LANDMARKS for n in fit_info["n_landmarks"]), fit_info
     assert f"on {fit_info['n_face_rows']} face rows" in (serial / "MODEL_CARD.md").read_text()
     # the runtime and face.onnx evaluate the approximation unchanged (export's parity checks ran)
     assert doc_a["metrics"]["export_parity"]["onnx_max_abs_diff"] < 1e-5

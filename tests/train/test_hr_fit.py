@@ -195,3 +195,17 @@ def test_tl_model_beats_pooled_on_held_out_sample_lab_participants():
     assert ev.fit.tl_regression.c_inc.slope < 0 and ev.fit.tl_regression.c_inc.r < -0.8  # fitter -> slower rise
     assert ev.fit.tl_regression.c_dec.slope > 0  # fitter -> faster recovery
     assert summary["per_participant"]["r"] > 0.85
+
+
+def test_held_out_population_models_reuse_the_fits_and_equal_a_refit():
+    """issue 26: the evaluation refitted every other participant once per participant (P^2); the
+    reused fits give the same pooled tree and training-level regression as a refit."""
+    from effortface.train.dataset import hr_series, prepare, synthetic_table
+    from effortface.train.hr_fit import _without_participant, fit_hr_model, step_samples
+
+    series = hr_series(prepare(synthetic_table(n_participants=4, seconds=300, seed=8)))
+    fit = fit_hr_model(series)
+    samples = [step_samples(s) for s in series]
+    pooled, tl = _without_participant(fit, series, samples, "P02")
+    refit = fit_hr_model([s for s in series if s.participant != "P02"])
+    assert pooled == refit.pooled and tl.as_dict() == refit.tl_regression.as_dict()

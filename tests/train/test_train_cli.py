@@ -175,3 +175,51 @@ def test_one_kind_of_exercise_gives_null_unseen_exercise_scores(table, tmp_path)
     rows = json.loads((out / "model.json").read_text())["metrics"]["face_protocols"]
     assert all(r["r"] is None for r in rows if r["protocol"] == "unseen_exercise")
     assert all(r["r"] is not None for r in rows if r["protocol"] == "unseen_participant")
+
+
+def test_refused_engine_file_keeps_the_model_and_exits_3(table_csv, tmp_path, capsys, monkeypatch):
+    """issue 26: a float32 face.onnx over its bound used to end the run with exit 2 and no model."""
+    from effortface.train import export
+    from effortface.train.runtime import load_model
+
+    monkeypatch.setattr(export, "ONNX_TOL_FLOAT32", 1e-12)
+    out = tmp_path / "model"
+    capsys.readouterr()
+    assert main(["train", "--table", str(table_csv), "--out", str(out), "--max-rows", "40"]) == 3
+    err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("effortface train:")]
+    assert len(err) == 1 and err[0].startswith(f"effortface train: model written to {out} (model.json, svr.npz, "
+                                               "face_f64.onnx, MODEL_CARD.md, report); not written: face.onnx "
+                                               "(float32 engine file refused: "), err
+    assert "found" in err[0] and "face.onnx" not in {p.name for p in out.iterdir()}
+    assert load_model(out).face.predict([[1.0, 1.5, 0.5, 0.2]]).shape == (1, 4)
+    assert (out / "report" / "report.md").is_file()
+    doc = json.loads((out / "model.json").read_text())
+    assert doc["metrics"]["engine_export"]["status"] == "refused"
+
+
+def test_failed_report_keeps_the_model_and_exits_3(table_csv, tmp_path, capsys, monkeypatch):
+    from effortface.train import report
+
+    def broken(*_args, **_kwargs):
+        raise ValueError("figure broke")
+
+    monkeypatch.setattr(report, "write_report", broken)
+    out = tmp_path / "model"
+    capsys.readouterr()
+    assert main(["train", "--table", str(table_csv), "--out", str(out), "--max-rows", "40"]) == 3
+    err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("effortface train:")]
+    assert err == [f"effortface train: model written to {out} (model.json, svr.npz, face_f64.onnx, MODEL_CARD.md); "
+                   f"not written: report ({out / 'report'}: ValueError: figure broke)"]
+    assert {"model.json", "svr.npz", "face.onnx", "face_f64.onnx"} <= {p.name for p in out.iterdir()}
+
+
+def test_c_and_gamma_options(table_csv, tmp_path, capsys):
+    out = tmp_path / "model"
+    assert main(["train", "--table", str(table_csv), "--out", str(out), "--max-rows", "40", "--C", "0.5",
+                 "--gamma", "0.2", "0.4"]) == 0
+    doc = json.loads((out / "model.json").read_text())
+    assert all(b["best"]["C"] == 0.5 for b in doc["metrics"]["face_cv"].values())
+    assert all(b["best"]["gamma"] in (0.2, 0.4) for b in doc["metrics"]["face_cv"].values())
+    capsys.readouterr()
+    assert main(["train", "--table", str(table_csv), "--out", str(tmp_path / "m2"), "--C", "0"]) == 2
+    assert capsys.readouterr().err.strip() == "effortface train: error: --C: expected one or more positive numbers, found 0"

@@ -461,3 +461,39 @@ def test_the_stage_fits_the_main_window_at_1280x800(qtbot, tmp_path: Path, monke
     finally:
         window.shutdown()
         stage.session.wait(30)
+
+
+def test_a_refused_engine_file_is_shown_and_the_model_kept(qtbot, stage: QtTrainStage, tmp_path: Path,
+                                                            monkeypatch) -> None:
+    """issue 26: the stage says what was saved and what was not, as the CLI's exit status 3 does."""
+    from effortface.train import export
+
+    monkeypatch.setattr(export, "ONNX_TOL_FLOAT32", 1e-12)
+    _pick_cardio_small(stage)
+    _train(qtbot, stage)
+    out = tmp_path / "model"
+    assert stage.export(out)
+    qtbot.waitUntil(lambda: not stage.session.busy and "not written" in stage.status.text(), timeout=TIMEOUT_MS)
+    assert stage.status.text().startswith(f"model written to {out}") and "face.onnx (float32 engine file refused" \
+        in stage.status.text()
+    assert "b00020" in stage.status.styleSheet()
+    assert not (out / "face.onnx").exists() and load_model(out).blendshapes.names == stage.session.outcome.face.blendshapes
+
+
+def test_c_and_gamma_values_replace_the_grid(qtbot, stage: QtTrainStage) -> None:
+    """issue 26: the Train stage's C and gamma fields, as effortface train --C / --gamma."""
+    panel = stage.settings_panel
+    assert panel.values["C"].placeholderText() == "grid's: 1 10"
+    panel.values["C"].setText("0.3 3")
+    assert panel.commit_values("C")
+    assert stage.session.settings.c_values == (0.3, 3.0)
+    assert stage.session.settings.config().grid["C"] == [0.3, 3.0]
+    panel.values["gamma"].setText("0.2 zero")
+    assert not panel.commit_values("gamma")
+    assert stage.status.text() == "gamma values: expected positive numbers separated by spaces, found '0.2 zero'"
+    panel.values["gamma"].setText("-1")
+    assert not panel.commit_values("gamma")
+    assert stage.status.text() == "gamma values: expected one or more positive numbers, found -1"
+    assert stage.session.settings.gamma_values is None
+    panel.values["C"].setText("")
+    assert panel.commit_values("C") and stage.session.settings.c_values is None

@@ -317,6 +317,9 @@ class QtSettingsPanel(QtWidgets.QGroupBox):
         form.addRow("SVR grid", self.grid)
         form.addRow("Cross-validation", self.cv)
         form.addRow("Face rows per participant", self.max_rows)
+        self.values = {key: self._values_edit(key) for key in ("C", "gamma")}
+        form.addRow("C values", self.values["C"])
+        form.addRow("gamma values", self.values["gamma"])
         session.sessions_changed.connect(self._fill_raters)
         self._fill_raters()
         self.show_settings()
@@ -326,8 +329,35 @@ class QtSettingsPanel(QtWidgets.QGroupBox):
         self.sources.currentIndexChanged.connect(lambda i: self._write(raters=self.sources.itemData(i)))
         self.grid.currentTextChanged.connect(lambda v: self._write(grid=v))
         self.grid.currentTextChanged.connect(lambda v: self.grid.setToolTip(grid_tooltip(v)))
+        self.grid.currentTextChanged.connect(lambda _v: self.show_settings())  # the values' placeholders
         self.cv.currentIndexChanged.connect(lambda i: self._write(cv=self.cv.itemData(i)))
         self.max_rows.valueChanged.connect(lambda v: self._write(max_rows_per_participant=int(v)))
+
+    def _values_edit(self, key: str) -> QtWidgets.QLineEdit:
+        """A field of numbers replacing the grid's values of ``key`` (``--C`` / ``--gamma``)."""
+        edit = QtWidgets.QLineEdit()
+        edit.setToolTip(f"Values of {key} to search, separated by spaces, in place of the grid's "
+                        f"(empty: the grid's). Same as effortface train --{key}.")
+        edit.editingFinished.connect(lambda: self.commit_values(key))
+        return edit
+
+    def commit_values(self, key: str) -> bool:
+        """Use the numbers typed in the ``key`` field (empty: the grid's); a bad entry is reported."""
+        text = self.values[key].text().strip()
+        field = {"C": "c_values", "gamma": "gamma_values"}[key]
+        try:
+            values = tuple(float(v) for v in text.replace(",", " ").split()) if text else None
+        except ValueError:
+            self._on_error(f"{key} values: expected positive numbers separated by spaces, found {text!r}", True)
+            return False
+        if values == getattr(self.session.settings, field):
+            return True
+        try:
+            self.session.set_settings(**{field: values})
+        except UserError as exc:
+            self._on_error(str(exc).replace(f"--{key}:", f"{key} values:"), True)
+            return False
+        return True
 
     def _fill_raters(self) -> None:
         raters = sorted({r for e in self.session.entries for r in e.raters})
@@ -371,6 +401,9 @@ class QtSettingsPanel(QtWidgets.QGroupBox):
         self.grid.setToolTip(grid_tooltip(s.grid))
         self.cv.setCurrentIndex(CV_CHOICES.index(s.cv))
         self.max_rows.setValue(s.max_rows_per_participant)
+        for key, values in (("C", s.c_values), ("gamma", s.gamma_values)):
+            self.values[key].setPlaceholderText("grid's: " + " ".join(f"{v:g}" for v in GRIDS[s.grid][key]))
+            self.values[key].setText("" if values is None else " ".join(f"{v:g}" for v in values))
         for w in (self.rater, self.sources, self.grid, self.cv, self.max_rows):
             w.blockSignals(False)
 
