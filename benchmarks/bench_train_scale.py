@@ -58,7 +58,7 @@ def lab_table(n_participants: int, seconds: int = SECONDS_PER_PARTICIPANT, seed:
     (cardio then strength, half the seconds each)."""
     from effortface.core.blendshapes import DEFAULT_SET
     from effortface.train.dataset import hr_max_bpm, hr_rest_bpm
-    from effortface.train.physiology import NhrParams, nhr_step
+    from effortface.synth.physiology import NhrParams, nhr_step
 
     rng = np.random.default_rng(seed)
     names = DEFAULT_SET.names

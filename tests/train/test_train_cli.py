@@ -180,7 +180,7 @@ def test_one_kind_of_exercise_gives_null_unseen_exercise_scores(table, tmp_path)
 def test_refused_engine_file_keeps_the_model_and_exits_3(table_csv, tmp_path, capsys, monkeypatch):
     """issue 26: a float32 face.onnx over its bound used to end the run with exit 2 and no model."""
     from effortface.train import export
-    from effortface.train.runtime import load_model
+    from effortface.synth.runtime import load_model
 
     monkeypatch.setattr(export, "ONNX_TOL_FLOAT32", 1e-12)
     out = tmp_path / "model"
