@@ -84,6 +84,7 @@ ANNOTATE_KEYS = (
     ("F", "frame the whole track"),
     ("L", "loop over the selected keys (else the visible time); L again: off"),
     ("Ctrl+B", "hide / show the session list"),
+    ("A", "accept the machine rater's curve as keys over the loop, the selection or the time shown"),
 )
 
 

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from effortface.annotate.machine.track import CSV_NAME, MACHINE_DIR
 from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
 from effortface.core.events import Emitter
 from effortface.core.errors import UserError
@@ -65,6 +66,8 @@ class SessionEntry:
     tracks: str = ""
     #: the video's length, seconds (NaN when it has no readable video_frames.csv)
     duration_s: float = float("nan")
+    #: True when the machine rater has rated the session (``machine/face_landmarker.csv``)
+    machine_rated: bool = False
 
     @property
     def annotated(self) -> bool:
@@ -73,8 +76,14 @@ class SessionEntry:
 
     @property
     def unusable(self) -> str:
-        """Why the session cannot be trained on ('' when it can): no annotations, or too short."""
-        if not self.raters:
+        """Why the session cannot be trained on human labels ('' when it can): see :meth:`unusable_for`."""
+        return self.unusable_for("humans")
+
+    def unusable_for(self, raters: str) -> str:
+        """Why the session cannot be trained on ('' when it can) under the label sources ``raters``
+        (``"humans"`` or ``"humans+machine"``): no annotations (nor, with the machine, a machine
+        track), or too short."""
+        if not self.raters and not (raters == "humans+machine" and self.machine_rated):
             return "no annotations: key it in Annotate first"
         if self.duration_s == self.duration_s and self.duration_s < MIN_TRAIN_S:
             return f"too short: {self.duration_s:.0f} s of video (at least {MIN_TRAIN_S:.0f} s to train on)"
@@ -97,7 +106,8 @@ def scan_sessions(folder: str | os.PathLike) -> list[SessionEntry]:
         tl = info.participant.training_level
         out.append(SessionEntry(path, info.session_id, info.participant.code, label,
                                 float("nan") if tl is None else float(tl), raters, info.complete,
-                                _tracks_summary(path), _duration_s(path)))
+                                _tracks_summary(path), _duration_s(path),
+                                (path / MACHINE_DIR / CSV_NAME).is_file()))
     return out
 
 
@@ -252,7 +262,9 @@ class TrainSession:
         unknown = [s for s in session_ids if s not in known]
         if unknown:
             raise UserError(f"sessions: expected sessions of {self.sessions_dir}, found {unknown}")
-        refused = {e.session_id: e.unusable for e in self.entries if e.session_id in session_ids and e.unusable}
+        raters = self.settings.raters
+        refused = {e.session_id: e.unusable_for(raters) for e in self.entries
+                   if e.session_id in session_ids and e.unusable_for(raters)}
         wanted = set(session_ids) - set(refused) if selected else set(session_ids)
         self.selected = (self.selected | wanted) if selected else (self.selected - wanted)
         self.table_path = None

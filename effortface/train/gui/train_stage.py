@@ -212,7 +212,7 @@ class QtDataPicker(QtWidgets.QGroupBox):
         for r, e in enumerate(shown):
             use = QtWidgets.QTableWidgetItem()
             use.setData(QtCore.Qt.ItemDataRole.UserRole, e.session_id)
-            why = e.unusable
+            why = e.unusable_for(self.session.settings.raters)
             if why:  # greyed, never ticked, the reason on the row
                 use.setText(why.split(":")[0])
                 use.setFlags(use.flags() & ~QtCore.Qt.ItemFlag.ItemIsUserCheckable

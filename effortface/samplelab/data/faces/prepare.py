@@ -16,8 +16,11 @@ import hashlib
 import sys
 from pathlib import Path
 
-import cv2
 import numpy as np
+
+from effortface.core.opencv import import_cv2
+
+cv2 = import_cv2()
 
 HERE = Path(__file__).resolve().parent
 CROP_SIZE = (240, 180)
