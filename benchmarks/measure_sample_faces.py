@@ -32,15 +32,16 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from annotate.keyframes import read_annotations  # noqa: E402
+from effortface.annotate.keyframes import read_annotations  # noqa: E402
 
 from effortface.core.blendshapes import DEFAULT_SET  # noqa: E402
 
 ARKIT = {"mouth_stretch": ("mouthStretchLeft", "mouthStretchRight"), "mouth_open": ("jawOpen",),
          "eye_squint": ("eyeSquintLeft", "eyeSquintRight"), "brow_lower": ("browDownLeft", "browDownRight")}
-#: ``../shared/models`` beside the checkout (a worktree one level deeper looks one more level up)
-DEFAULT_MODEL = next((p / "shared" / "models" / "face_landmarker.task" for p in (ROOT.parent, ROOT.parent.parent)
-                      if (p / "shared" / "models" / "face_landmarker.task").is_file()),
+#: the bundle the package ships (effortface.annotate.machine), else ``../shared/models`` beside the checkout
+DEFAULT_MODEL = next((p for p in (ROOT / "effortface" / "annotate" / "machine" / "data" / "face_landmarker.task",
+                                  ROOT.parent / "shared" / "models" / "face_landmarker.task",
+                                  ROOT.parent.parent / "shared" / "models" / "face_landmarker.task") if p.is_file()),
                      ROOT.parent / "shared" / "models" / "face_landmarker.task")
 
 

@@ -14,7 +14,7 @@ from effortface.capture_tool.replay import PtyReplay, TimedChunk, start_replay_t
 from effortface.core.session.folder import read_session_info
 
 from .capture_helpers import hxm_chunks
-from .test_capture_stage_daily import _choose, _confirm, _end, _record, _stop, _strap, settings, window  # noqa: F401
+from .test_capture_stage_daily import _choose, _confirm, _end, _record, _stop, _strap  # noqa: F401
 
 pytestmark = pytest.mark.qt_log_ignore("This plugin does not support propagateSizeHints")
 
