@@ -37,13 +37,18 @@ def test_the_script_takes_its_screenshots_from_a_copy_of_the_sample_lab(tmp_path
     expected = {f"{name}_{w}x{h}.png": (w, h) for name in names for w, h in SIZES}
     assert {p.name: _png_size(p) for p in tmp_path.iterdir()} == expected
     assert _lab_state() == before
-    readme = (ROOT / "README.md").read_text(encoding="utf-8")
-    assert "docs/screenshots/make_screenshots.py" in readme
+    assert "docs/screenshots/make_screenshots.py" in _readme_and_guide()
+
+
+def _readme_and_guide() -> str:
+    """The README and the guide's pages (the screenshots moved into the guide with the reference)."""
+    pages = [ROOT / "README.md", ROOT / "docs" / "index.md", *sorted((ROOT / "docs" / "guide").glob("*.md"))]
+    return "\n".join(p.read_text(encoding="utf-8") for p in pages if p.is_file())
 
 
 def test_every_screenshot_the_readme_cites_is_there_at_both_sizes() -> None:
-    readme = (ROOT / "README.md").read_text(encoding="utf-8")
-    cited = set(re.findall(r"docs/screenshots/([a-z_]+)_1280x800\.png", readme))
+    readme = _readme_and_guide()
+    cited = set(re.findall(r"screenshots/([a-z_]+)_1280x800\.png", readme))
     assert {"app", "capture_during", "synth_trained", "annotate_keyframes"} <= cited
     for name in cited:
         for w, h in SIZES:

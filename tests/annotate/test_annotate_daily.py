@@ -4,6 +4,7 @@ the expert editing basics, the blind round's unrated state and the reliability r
 
 from __future__ import annotations
 
+import shutil
 import time
 from pathlib import Path
 

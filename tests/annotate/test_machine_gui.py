@@ -25,13 +25,10 @@ SESSION = "P01_20260112-093000_cardio"
 
 
 @pytest.fixture
-def lab(tmp_path: Path) -> Path:
-    """One sample session with the three raters' files, a machine track, and the reliability round."""
-    dst = tmp_path / "lab"
-    shutil.copytree(SAMPLES / SESSION, dst / SESSION, ignore=shutil.ignore_patterns("serial", "work.csv"))
-    shutil.copytree(SAMPLES / "reliability", dst / "reliability")
-    write_fake_machine(dst / SESSION)
-    return dst
+def lab(lab: Path) -> Path:
+    """conftest.py's copy of one sample session and the reliability round, with a machine track."""
+    write_fake_machine(lab / SESSION)
+    return lab
 
 
 @pytest.fixture
