@@ -10,6 +10,7 @@
    a real lab (the sample lab records no work: :func:`effortface.synth.work.derive_work`);
 4. **train**: :func:`effortface.train.pipeline.run_training`, the one training run, on ``DIR/lab/``;
 5. **evaluate**: :func:`effortface.train.evaluation.evaluate_bundle`, the one evaluation;
+   then the machine rater (:func:`rater_step`) on one session of that copy;
 6. **synthesize** (:func:`synth_step`): a clip's face curves with the trained bundle, written by
    :func:`effortface.synth.curves_io.write_curves`.
 
@@ -241,6 +242,50 @@ def work_step(lab: Path, out: Path) -> tuple[Path, list[str]]:
         raise UserError(f"effortface work {copy}: expected exit 0, found {done.returncode}: "
                         f"{done.stderr.strip().splitlines()[-1] if done.stderr.strip() else ''}")
     return copy, done.stdout.strip().splitlines()
+
+
+def rater_step(session: Path) -> str:
+    """Run the machine rater on one session (of the demo's lab copy) and summarise it in one line.
+
+    Parameters
+    ----------
+    session : Path
+        A session folder with video; an existing machine rating is read, not replaced.
+
+    Returns
+    -------
+    str
+        The face-found rate and, per blendshape, Pearson r of the machine's raw (uncalibrated) weights
+        against the humans' mean at their key-frames; or why the rater was skipped.
+    """
+    import importlib.util
+
+    import numpy as np
+
+    if importlib.util.find_spec("ai_edge_litert") is None:
+        return "skipped: the package ai-edge-litert is not installed (no wheel for this platform)"
+    from effortface.annotate.machine.mapping import default_mapping, human_keys, map_scores
+    from effortface.annotate.machine.preannotate import preannotate_session
+    from effortface.annotate.machine.track import FOUR, machine_paths, read_machine_track
+
+    if not machine_paths(session)[0].is_file():
+        preannotate_session(session)
+    track = read_machine_track(session)
+    if track is None or track.t_s.size == 0:
+        return f"{session.name}: no machine rating written"
+    raw = map_scores(track.scores, default_mapping(), FOUR)
+    idx, keyed = human_keys(session, np.asarray(track.frame), FOUR)
+    parts = []
+    for j, name in enumerate(FOUR):
+        frames = np.unique(idx[np.isfinite(keyed[:, j])])
+        mean = np.array([np.nanmean(keyed[idx == f, j]) for f in frames])
+        ok = np.isfinite(raw[frames, j])
+        r = (float(np.corrcoef(raw[frames[ok], j], mean[ok])[0, 1])
+             if ok.sum() > 2 and np.ptp(raw[frames[ok], j]) > 0 and np.ptp(mean[ok]) > 0 else float("nan"))
+        parts.append(f"{name} {r:.2f}")
+    found = 100.0 * float(np.mean(track.face))
+    return (f"{session.name}: a face on {found:.1f} % of {track.t_s.size} frames; raw machine r vs the "
+            f"human mean at their key-frames: " + ", ".join(parts))
 
 
 def synth_step(model_dir: Path, lab: Path, out: Path) -> Path:

@@ -11,7 +11,7 @@ training level 8 on the sample lab, whose P01 is a woman of 23 with 2.5, Record 
 ``capture_participant_record``: the code P01 alone, the lab's record taken), ``annotate`` (``keyframes``, ``blind_round``, ``reliability``), ``train`` (``fig2``,
 ``fig3``, ``runlog`` after training in the stage; ``compare`` of two bundles made by
 ``effortface train``), ``synth`` (``rule``, ``trained``), ``machine`` (``annotate_machine_guide``:
-R1's keys over the machine rater's dashed curves and the no-face shading, 330-470 s; ``annotate_machine_accept``:
+R1's keys over the machine rater's dashed curves (the real rater, run on the copy), 330-470 s; ``annotate_machine_accept``:
 a new rater after "Accept machine" over the whole session).
 
 The sample lab (``sample_sessions/``) is copied to a temporary folder first and never written to;
@@ -263,7 +263,8 @@ def machine_track(session: Path) -> None:
     from effortface.core.errors import UserError
 
     try:
-        preannotate_session(session)
+        written = preannotate_session(session)
+        print(f"machine: the real rater wrote {written}", flush=True)
     except UserError as exc:
         from tests.annotate.machine_helpers import write_fake_machine
 
@@ -291,7 +292,7 @@ def shoot_machine(lab: Path, tmp: Path, out: Path) -> None:
             def framed(editor=editor, whole=rater == BLIND_RATER) -> None:
                 if whole:
                     editor.timeline.frame_all()
-                else:  # around the no-face stretch before the cursor, where the dashes show
+                else:  # a close-up before the cursor, where the dashes show between R1's keys
                     editor.timeline.curve_plot.setXRange(*GUIDE_SPAN_S, padding=0)
             grab(window, name, out, before=framed)
 

@@ -6,6 +6,8 @@
 2. **decode**: ``effortface decode`` turns the captured raw bytes back into a heart-rate CSV;
 3. **work**: the sessions are copied into ``DIR/lab/`` and ``effortface work`` derives their
    ``work.csv`` from the exercise log and motion clips (the sample lab, like a real one, records none);
+   the machine rater (``effortface preannotate``) rates one session of the copy: one line with its
+   face-found rate and its r against the humans' mean (or why it was skipped);
 4. **train**: the heart-rate and face models on those sessions (``DIR/model/``, with its report);
 5. **evaluate**: the exported bundle re-scored through the runtime (``DIR/evaluation.md``);
 6. **synthesize**: a clip's face curves with the trained bundle (``DIR/synth.csv``).
@@ -25,7 +27,7 @@ from pathlib import Path
 
 from effortface.core.errors import UserError
 from effortface.demo import (CAPTURE_S, REPLAY_SPEED, capture_step, decode_step, demo_out_dir, held_out_summary,
-                             replace_out, synth_step, work_step)
+                             rater_step, replace_out, synth_step, work_step)
 from effortface.samplelab import sample_lab
 from effortface.train.face_fit import MIN_ROWS_PER_PARTICIPANT
 
@@ -79,6 +81,7 @@ def run(args: argparse.Namespace) -> int:
     lab_copy, lines = work_step(lab, out)
     _say("work", f"effortface work: {len(lines)} sessions' work.csv derived from their exercise logs and "
                  f"motion clips into {lab_copy}")
+    _say("rater", rater_step(list_sessions(lab_copy)[0]))
     table, sources = training_table([lab_copy], None, DEFAULT_SET)
     _say("train", f"{table['participant'].nunique()} participants, {table['session'].nunique()} sessions, "
                   f"{len(table)} participant-seconds")

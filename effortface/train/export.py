@@ -628,6 +628,18 @@ def _label_comparison_card(comparison: object) -> list[str]:
     return [*head, _md_table(rows, ["blendshape", "labels", "r", "rmse_pct_range", "n", "machine_seconds"])]
 
 
+def _machine_agreement_card(rows: object) -> list[str]:
+    """Model-card lines: the machine rater's agreement with the humans on this training data."""
+    if not isinstance(rows, list) or not rows:
+        return []
+    return ["", "The machine rater's agreement with the humans on this training data (machine/face_landmarker.csv "
+                "against the human labels under the rater policy, at the seconds where both exist; ICC(A,1) "
+                "with its 95 % CI, Pearson r, mean absolute difference in % of the range; the CI treats the seconds "
+                "as independent, which neighbouring seconds are not, so it is too narrow; the machine's weights "
+                "are calibrated on these humans' key-frames, so this is no independent test):", "",
+            _md_table(rows, ["blendshape", "n", "icc_a1", "icc_a1_ci_low", "icc_a1_ci_high", "r", "mad_pct"])]
+
+
 def model_card(bundle: ModelBundle) -> str:
     """``MODEL_CARD.md``: data, participants, metrics, limitations, intended use."""
     prov, met = bundle.provenance, bundle.metrics
@@ -680,6 +692,7 @@ def model_card(bundle: ModelBundle) -> str:
         "", "Face in-sample (the final SVRs on their training rows, comparable to the paper's 17-26 %):", "",
         _md_table(met.get("face_in_sample", []), ["blendshape", "model", "r", "rmse_pct_range", "rmse_pct_unit"]),
         *_label_comparison_card(met.get("face_label_comparison")),
+        *_machine_agreement_card(met.get("machine_agreement")),
         "", _engine_line(met), f"Export parity: {met.get('export_parity', {})}", "",
         "## Built-in models",
         "`default` (no bundle) is the rule face model with heart rate calibrated against the 2024 "

@@ -427,9 +427,11 @@ def export_outcome(outcome: TrainingOutcome, out: str | Path, *, force: bool = F
     provenance = training_provenance(o.prepared, o.face, o.sources, o.settings.rater_policy, config)
     provenance["raters"] = o.settings.raters
     if o.settings.raters == "humans+machine":
-        from effortface.train.rater_sources import machine_label_counts
+        from effortface.train.rater_sources import machine_agreement, machine_label_counts
 
         provenance["machine_labelled_seconds"] = machine_label_counts(o.prepared, o.blendshapes.names)
+        metrics["machine_agreement"] = _finite_or_none(
+            machine_agreement(o.sources, o.blendshapes, o.settings.rater_policy))
         metrics["face_label_comparison"] = (_finite_or_none(o.label_comparison.to_dict("records"))
                                             if o.label_comparison is not None else o.label_note)
     bundle = build_bundle(o.face, o.hr_eval.fit, o.blendshapes, metrics, provenance)

@@ -9,11 +9,15 @@ participants only: the same question for both, "how well are the humans' key-fra
 
 from __future__ import annotations
 
+import math
+import os
 from collections.abc import Sequence
 
 import numpy as np
 import pandas as pd
 
+from effortface.core.blendshapes import BlendshapeSet
+from effortface.core.errors import UserError
 from effortface.train.dataset import MACHINE_PREFIX
 from effortface.train.face_fit import FaceModelFit, _fold_expressiveness, weight_metrics
 
@@ -84,3 +88,62 @@ def label_comparison(fit_humans: FaceModelFit, table_humans: pd.DataFrame, fit_b
                          "machine_seconds": counts[name] if labels == "humans+machine" else 0})
     return pd.DataFrame(rows)
 
+
+
+def machine_agreement(folders: Sequence[str | os.PathLike], blendshapes: BlendshapeSet,
+                      rater_policy: str = "mean") -> list[dict[str, object]]:
+    """The machine rater's agreement with the humans on the training sessions, per blendshape.
+
+    At every second of a session where the humans' label exists (their key-frames under the rater
+    policy, interpolated as for training) and the machine found a face, the pair (machine weight,
+    human label) is kept; the figures are over all such pairs of all sessions.
+
+    Parameters
+    ----------
+    folders : sequence of path-like
+        Session folders, or folders of sessions (as given to training).
+    blendshapes : BlendshapeSet
+    rater_policy : str
+        ``"mean"`` (the humans' mean) or one rater's name.
+
+    Returns
+    -------
+    list of dict
+        ``blendshape, n, icc_a1, icc_a1_ci_low, icc_a1_ci_high, r, mad_pct``; NaN where fewer than
+        three pairs exist (or the blendshape is not one the machine rates).
+    """
+    from effortface.annotate.agreement import icc_a1, icc_a1_ci
+    from effortface.annotate.machine.track import FOUR, read_machine_track
+    from effortface.core.session.folder import check_session
+    from effortface.train.dataset import _nearest_frames, _weights, expand_paths
+
+    pairs: dict[str, list[np.ndarray]] = {b: [] for b in blendshapes.names}
+    for folder in expand_paths(folders):
+        s = check_session(folder)
+        track = read_machine_track(s.path)
+        if track is None or track.t_s.size < 2 or not s.frame_times_s:
+            continue
+        t = np.arange(0.0, math.floor(s.frame_times_s[-1]) + 1.0)
+        try:
+            human = _weights(s, t, blendshapes, rater_policy, machine=True)
+        except UserError:
+            continue
+        idx = _nearest_frames(np.asarray(track.t_s, float), t)
+        for j, name in enumerate(blendshapes.names):
+            if name in FOUR:
+                machine = np.clip(track.weights[idx, FOUR.index(name)], 0.0, 1.0)
+                ok = np.isfinite(machine) & np.isfinite(human[:, j])
+                pairs[name].append(np.column_stack([machine[ok], human[ok, j]]))
+    rows: list[dict[str, object]] = []
+    for name, parts in pairs.items():
+        x = np.concatenate(parts) if parts else np.empty((0, 2))
+        row: dict[str, object] = {"blendshape": name, "n": int(len(x)), "icc_a1": math.nan,
+                                  "icc_a1_ci_low": math.nan, "icc_a1_ci_high": math.nan,
+                                  "r": math.nan, "mad_pct": math.nan}
+        if len(x) >= 3 and np.ptp(x, axis=0).min() > 0:
+            low, high = icc_a1_ci(x)
+            row.update(icc_a1=icc_a1(x), icc_a1_ci_low=low, icc_a1_ci_high=high,
+                       r=float(np.corrcoef(x[:, 0], x[:, 1])[0, 1]),
+                       mad_pct=100.0 * float(np.mean(np.abs(x[:, 0] - x[:, 1]))))
+        rows.append(row)
+    return rows

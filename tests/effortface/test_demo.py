@@ -53,6 +53,24 @@ def test_demo_runs_the_whole_pipeline(lab, tmp_path, capsys, monkeypatch):
                for src in pd.read_csv(c.parent / "work.csv", keep_default_na=False)["source"]}
     assert sources == {"log", "motion"}
     assert any(line.startswith("[work] effortface work: 12 sessions' work.csv derived") for line in printed)
+    rater = next(line for line in printed if line.startswith("[rater] "))  # the machine rater on one session
+    first = copies[0].parent
+    assert rater.startswith(f"[rater] {first.name}: a face on ") and "raw machine r vs the human mean" in rater
+    assert (first / "machine" / "face_landmarker.csv").is_file()
+    rs = [float(part.rsplit(" ", 1)[1]) for part in rater.split("key-frames: ")[1].split(", ")]
+    assert len(rs) == 4 and min(rs) >= 0.5, rater
+
+
+def test_demo_rater_step_says_why_it_was_skipped(tmp_path, monkeypatch):
+    import importlib.util
+
+    from effortface.demo import rater_step
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "ai_edge_litert" else real(name, *a))
+    line = rater_step(tmp_path)
+    assert line == "skipped: the package ai-edge-litert is not installed (no wheel for this platform)"
+    assert not (tmp_path / "machine").exists()
 
 
 def test_demo_refuses_an_existing_out(lab, tmp_path, capsys):

@@ -72,6 +72,17 @@ def test_train_humans_plus_machine_records_and_compares(lab: Path, tmp_path: Pat
     card = (out / "MODEL_CARD.md").read_text()
     assert "- raters: humans+machine (the machine rater's weights" in card
     assert "human labels only against human + machine labels" in card
+    agreement = {r["blendshape"]: r for r in metrics["machine_agreement"]}  # the machine vs the humans
+    assert sorted(agreement) == sorted(FOUR)
+    for name in FOUR:  # human-keyed sessions only: three of the four, less the fake track's blank stretches
+        row = agreement[name]
+        assert row["n"] > 500
+        assert -1.0 <= row["icc_a1_ci_low"] <= row["icc_a1"] <= row["icc_a1_ci_high"] <= 1.0
+        assert np.isfinite([row["r"], row["mad_pct"]]).all() and row["mad_pct"] > 0
+    assert "The machine rater's agreement with the humans on this training data" in card
+    table = card.split("The machine rater's agreement with the humans")[1]
+    assert "| blendshape | n | icc_a1 | icc_a1_ci_low | icc_a1_ci_high | r | mad_pct |" in table
+    assert f"| mouth_open | {agreement['mouth_open']['n']} | {agreement['mouth_open']['icc_a1']:.3g} |" in table
     report = (out / "report" / "report.md").read_text()
     assert "## Human labels only against human + machine labels" in report
     assert "- raters: humans+machine" in report
