@@ -21,11 +21,12 @@ through the methods (the rule: a view writes back only through model methods and
 from __future__ import annotations
 
 import dataclasses
+import datetime
 import os
 import re
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
 from effortface.annotate.completeness import TrackStatus, rater_status
@@ -36,6 +37,9 @@ from effortface.core.errors import UserError
 from effortface.core.events import Emitter
 from effortface.core.locks import FileLock, LockedError, acquire_lock, describe_owner, lock_owner
 from effortface.core.session.folder import Session, check_not_recording, read_session
+
+if TYPE_CHECKING:
+    from effortface.annotate.reliability import Correction
 
 ANNOTATIONS_DIR = "annotations"
 _RATER_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,31}")
@@ -615,8 +619,6 @@ class BlindRound:
             For an unknown pose or blendshape, a weight outside [0, 1], a rating the lab file
             already holds, or a finished round (the rater has seen the report).
         """
-        from effortface.annotate.reliability import Rating, write_ratings
-
         if pose_id not in {p.pose_id for p in self.poses}:
             raise UserError(f"pose: expected one of the pose set, found {pose_id!r}")
         self.blendshapes.index(name)
@@ -630,7 +632,76 @@ class BlindRound:
             raise UserError(f"{pose_id} {name}: {self.rater} has finished the blind round and seen the "
                             "agreement report, so the ratings are locked")
         self.ratings[(pose_id, name)] = round(float(weight), 4)
+        self._save()
+
+    def _save(self) -> None:
+        """Write this rater's own ratings atomically (temporary file, then replace)."""
+        from effortface.annotate.reliability import Rating, write_ratings
+
         mine = [Rating(p, self.rater, n, w) for (p, n), w in self.ratings.items() if (p, n) not in self.locked]
         tmp = self.path.with_name(f".{self.path.name}.tmp")
         write_ratings(tmp, mine, overwrite=True)
         os.replace(tmp, self.path)
+
+    @property
+    def corrections_path(self) -> Path:
+        """``reliability/corrections_<rater>.csv``: the log of corrections after the round."""
+        return self.path.with_name(f"corrections_{self.rater}.csv")
+
+    def correct_rating(self, pose_id: str, name: str, weight: float, reason: str,
+                       when_utc: datetime.datetime | None = None) -> Correction:
+        """Correct one rating of a finished round (a typo), logged with its reason.
+
+        The change is appended to :attr:`corrections_path` (``time_utc,pose_id,blendshape,old,new,reason``)
+        and the ratings file is then rewritten atomically; both files are replaced whole, never left
+        half-written.
+
+        Parameters
+        ----------
+        pose_id, name : str
+            The pose and blendshape corrected.
+        weight : float
+            The corrected weight in [0, 1].
+        reason : str
+            Why (required; one line).
+        when_utc : datetime, optional
+            Time of the correction (default: now, UTC).
+
+        Returns
+        -------
+        Correction
+            The logged change.
+
+        Raises
+        ------
+        UserError
+            Before the round is finished (rate normally instead), for a rating the lab's ``ratings.csv``
+            holds, an unknown pose or blendshape, a weight outside [0, 1], the same value, or no reason.
+        """
+        from effortface.annotate.reliability import Correction, append_correction
+
+        if pose_id not in {p.pose_id for p in self.poses}:
+            raise UserError(f"pose: expected one of the pose set, found {pose_id!r}")
+        self.blendshapes.index(name)
+        if not self.complete:
+            raise UserError(f"{pose_id} {name}: the blind round is not finished: change the rating directly "
+                            "(corrections are for a finished round)")
+        if (pose_id, name) in self.locked:
+            raise UserError(f"{pose_id} {name}: rated by {self.rater} in reliability/ratings.csv, the lab's "
+                            "file: ask the lab to correct it there")
+        if weight is None or isinstance(weight, bool) or not 0.0 <= float(weight) <= 1.0:
+            raise UserError(f"weight: expected a number in [0, 1], found {weight!r}")
+        reason = " ".join(str(reason).split())
+        if not reason:
+            raise UserError(f"{pose_id} {name}: expected a reason for the correction (e.g. 'typo: 0.7 not 0.07'), "
+                            "found none")
+        old, new = self.ratings[(pose_id, name)], round(float(weight), 4)
+        if abs(old - new) < 5e-5:
+            raise UserError(f"{pose_id} {name}: expected a new value, found the same ({old:.2f})")
+        when = when_utc or datetime.datetime.now(datetime.timezone.utc)
+        change = Correction(when.astimezone(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+                            pose_id, name, old, new, reason)
+        append_correction(self.corrections_path, change)
+        self.ratings[(pose_id, name)] = new
+        self._save()
+        return change

@@ -24,6 +24,7 @@ from effortface.core.fileio import refuse_overwrite
 
 POSES_HEADER = ("pose_id", "session_id", "frame", "t_s")
 RATINGS_HEADER = ("pose_id", "rater", "blendshape", "weight")
+CORRECTIONS_HEADER = ("time_utc", "pose_id", "blendshape", "old", "new", "reason")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -44,6 +45,50 @@ class Rating:
     rater: str
     blendshape: str
     weight: float
+
+
+@dataclasses.dataclass(frozen=True)
+class Correction:
+    """One rating corrected after the blind round: when (ISO 8601 UTC), what, old and new weight, why."""
+
+    time_utc: str
+    pose_id: str
+    blendshape: str
+    old: float
+    new: float
+    reason: str
+
+
+def read_corrections(path: str | os.PathLike) -> list[Correction]:
+    """Read a ``corrections_<rater>.csv`` log (empty list if it does not exist).
+
+    Raises
+    ------
+    SessionFormatError
+        On missing columns or a weight that is not a number; the message names the file and the line.
+    """
+    path = Path(path)
+    if not path.is_file():
+        return []
+    out: list[Correction] = []
+    for line, row in enumerate(_read_csv(path, CORRECTIONS_HEADER), start=2):
+        try:
+            out.append(Correction(row["time_utc"], row["pose_id"], row["blendshape"], float(row["old"]),
+                                  float(row["new"]), row["reason"]))
+        except (TypeError, ValueError):
+            raise SessionFormatError(f"{path}:{line}: expected numbers in old,new, found {row}") from None
+    return out
+
+
+def append_correction(path: str | os.PathLike, change: Correction) -> Path:
+    """Add one correction to the log, rewriting it whole through a temporary file (atomic)."""
+    path = Path(path)
+    rows = [*read_corrections(path), change]
+    tmp = path.with_name(f".{path.name}.tmp")
+    _write_csv(tmp, CORRECTIONS_HEADER, ((c.time_utc, c.pose_id, c.blendshape, f"{c.old:.4f}", f"{c.new:.4f}",
+                                          c.reason) for c in rows), overwrite=True)
+    os.replace(tmp, path)
+    return path
 
 
 def _write_csv(path: Path, header: tuple[str, ...], rows: Iterable[tuple], overwrite: bool) -> Path:

@@ -480,3 +480,33 @@ def test_hiding_the_stage_pauses_playback(qtbot, stage: QtAnnotateStage) -> None
     assert editor.playing
     stage.tabs.setCurrentIndex(1)  # the editor is out of sight on the other tab too
     assert not editor.playing
+
+
+def test_a_finished_rating_is_corrected_with_a_reason_and_the_report_recomputes(qtbot, stage: QtAnnotateStage,
+                                                                                lab: Path) -> None:
+    stage.rater.setText("R4")
+    stage.tabs.setCurrentIndex(1)
+    panel = stage.reliability
+    for row in range(18):
+        panel.poses.setCurrentCell(row, 0)
+        for spin in panel.spins.values():
+            spin.setValue(0.3)
+        qtbot.mouseClick(panel.save_button, Left)
+    assert panel.report is not None and panel.correct_box.isVisibleTo(panel)
+    panel.poses.setCurrentCell(0, 0)
+    pose = panel.round.poses[0].pose_id
+    before = panel.report.overall.disagreement_pct
+    panel.correct_shape.setCurrentText("mouth_open")
+    panel.correct_value.setValue(0.9)
+    qtbot.mouseClick(panel.correct_button, Left)  # no reason: refused, nothing written
+    assert "expected a reason" in panel.status.text()
+    assert not (lab / "reliability" / "corrections_R4.csv").exists()
+    qtbot.keyClicks(panel.correct_reason, "typo")
+    qtbot.mouseClick(panel.correct_button, Left)
+    assert "corrected 0.30 -> 0.90" in panel.status.text()
+    mine = {(r.pose_id, r.blendshape): r.weight for r in read_ratings(lab / "reliability" / "ratings_R4.csv")}
+    assert mine[(pose, "mouth_open")] == 0.9
+    log = (lab / "reliability" / "corrections_R4.csv").read_text().splitlines()
+    assert log[0] == "time_utc,pose_id,blendshape,old,new,reason" and log[1].endswith(f",{pose},mouth_open,0.3000,0.9000,typo")
+    assert panel.spins["mouth_open"].value() == pytest.approx(0.9)
+    assert panel.report.overall.disagreement_pct != before  # recomputed

@@ -242,3 +242,45 @@ def test_a_move_that_cannot_move_every_key_moves_none_and_says_why(session: Path
     back = m.shift_keys(chosen, d_frames=-d_frames)
     assert back == [f - d_frames for f in chosen]
     assert m.history[0][-1].endswith(f"move 3 mouth_stretch keys by {-d_frames:+d} frames")
+
+
+def test_a_finished_rating_is_corrected_with_the_change_logged(tmp_path: Path) -> None:
+    """After the round a typo is corrected with a reason: logged (time UTC, pose, blendshape, old, new,
+    reason), the ratings file rewritten, the report's input changed; refused without a reason, before the
+    round ends, for the lab's own ratings and for the same value."""
+    import datetime
+
+    from effortface.annotate.agreement import gather_ratings
+    from effortface.annotate.reliability import read_corrections
+
+    shutil.copytree(SAMPLES / "reliability", tmp_path / "reliability")
+    r4 = BlindRound(tmp_path, "R4")
+    with pytest.raises(UserError, match="not finished"):
+        r4.correct_rating("pose01", "mouth_open", 0.7, "typo")
+    for pose in r4.poses:
+        for name in r4.blendshapes.names:
+            r4.set_rating(pose.pose_id, name, 0.25)
+    before = (tmp_path / "reliability" / "ratings_R4.csv").read_bytes()
+    with pytest.raises(UserError, match="expected a reason"):
+        r4.correct_rating("pose01", "mouth_open", 0.7, "  ")
+    with pytest.raises(UserError, match="same"):
+        r4.correct_rating("pose01", "mouth_open", 0.25, "typo")
+    with pytest.raises(UserError, match=r"weight: expected a number in \[0, 1\]"):
+        r4.correct_rating("pose01", "mouth_open", 7.0, "typo")
+    assert (tmp_path / "reliability" / "ratings_R4.csv").read_bytes() == before
+    assert not r4.corrections_path.exists()
+    when = datetime.datetime(2026, 3, 1, 10, 30, tzinfo=datetime.timezone.utc)
+    r4.correct_rating("pose01", "mouth_open", 0.7, "typo: 0.25 for 0.7", when_utc=when)
+    r4.correct_rating("pose02", "eye_squint", 0.1, "wrong row")
+    log = read_corrections(tmp_path / "reliability" / "corrections_R4.csv")
+    assert [(c.pose_id, c.blendshape, c.old, c.new, c.reason) for c in log] == [
+        ("pose01", "mouth_open", 0.25, 0.7, "typo: 0.25 for 0.7"), ("pose02", "eye_squint", 0.25, 0.1, "wrong row")]
+    assert log[0].time_utc == "2026-03-01T10:30:00Z" and re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\dZ", log[1].time_utc)
+    reopened = BlindRound(tmp_path, "R4")
+    assert reopened.rating("pose01", "mouth_open") == 0.7 and reopened.complete
+    ratings, _ = gather_ratings(tmp_path)
+    assert {(r.pose_id, r.blendshape): r.weight for r in ratings if r.rater == "R4"}[("pose01", "mouth_open")] == 0.7
+    assert not list((tmp_path / "reliability").glob(".*.tmp"))
+    r1 = BlindRound(tmp_path, "R1")  # R1's ratings are in the lab's ratings.csv
+    with pytest.raises(UserError, match="the lab's file"):
+        r1.correct_rating("pose01", "mouth_open", 0.99 if r1.rating("pose01", "mouth_open") != 0.99 else 0.5, "typo")

@@ -446,3 +446,20 @@ def test_the_face_can_be_drawn_larger_so_small_weights_show(qtbot, stage: QtSynt
     pixels = np.frombuffer(shown.constBits(), np.uint8).reshape(h, shown.bytesPerLine())[:, :3 * w].reshape(h, w, 3)
     np.testing.assert_array_equal(pixels, render_face(np.full(4, 0.8), (w, h))[:, :, ::-1])
     assert not np.array_equal(pixels, render_face(np.full(4, 0.2), (w, h))[:, :, ::-1])
+
+
+def test_each_curve_can_be_hidden_so_none_hides_another(qtbot, stage: QtSynthStage) -> None:
+    """Issue 25 item 6: one check box per curve under the plots hides or shows it; a recompute keeps it hidden."""
+    qtbot.waitUntil(lambda: bool(stage.curve_boxes), timeout=30000)
+    names = stage.session.model.blendshapes.names
+    assert set(stage.curve_boxes) == {"w_per_kg", "p_per_kg", "nhr", "epoc", *names}
+    first = names[0]
+    assert stage.plots.curves[first].isVisible()
+    stage.curve_boxes[first].setChecked(False)     # what a click does
+    assert not stage.plots.curves[first].isVisible() and stage.plots.curves[names[1]].isVisible()
+    stage.curve_boxes["epoc"].click()
+    assert not stage.plots.curves["epoc"].isVisible()
+    stage._on_curves_changed()                     # a recompute redraws: still hidden
+    assert not stage.plots.curves[first].isVisible() and not stage.curve_boxes[first].isChecked()
+    stage.curve_boxes[first].click()
+    assert stage.plots.curves[first].isVisible()

@@ -130,6 +130,20 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         rate_layout.addLayout(pictures, 1)
         rate_layout.addLayout(form)
         rate_layout.addWidget(self.save_button)
+        self.correct_box = QtWidgets.QWidget()
+        correct = QtWidgets.QHBoxLayout(self.correct_box)
+        correct.setContentsMargins(0, 0, 0, 0)
+        self.correct_shape = QtWidgets.QComboBox()
+        self.correct_value = QtWidgets.QDoubleSpinBox(minimum=0.0, maximum=1.0, singleStep=0.05, decimals=2)
+        self.correct_reason = QtWidgets.QLineEdit(placeholderText="reason (required)")
+        self.correct_button = QtWidgets.QPushButton("Correct")
+        self.correct_button.setToolTip("Correct a typo after the round: logged in reliability/corrections_<rater>.csv "
+                                       "(time UTC, pose, blendshape, old, new, reason)")
+        self.correct_button.clicked.connect(self.correct)
+        for w in (self.correct_shape, self.correct_value, self.correct_reason, self.correct_button):
+            correct.addWidget(w, 1 if w is self.correct_reason else 0)
+        rate_layout.addWidget(self.correct_box)
+        self.correct_box.setVisible(False)
         self._form = form
         save = QtGui.QShortcut(QtGui.QKeySequence("Ctrl+Return"), self, self.save_pose)
         save.setContext(QtCore.Qt.ShortcutContext.WidgetWithChildrenShortcut)
@@ -259,6 +273,8 @@ class QtReliabilityPanel(QtWidgets.QWidget):
             self.spins[name] = spin
             self._form.addRow(name, spin)
         self.save_button.setEnabled(bool(names))
+        self.correct_shape.clear()
+        self.correct_shape.addItems(list(names))
 
     def _fit_pictures(self) -> None:
         """Keep the pose frame and the face 4:3 at the width they get (on the frame's own resize: the
@@ -339,8 +355,27 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         self.save_button.setEnabled(not locked)
         self.save_button.setText("Rated in the lab's ratings.csv" if in_lab_file
                                  else "Round done: ratings locked" if locked else "Save my rating of this pose (Ctrl+Enter)")
-        self.save_button.setToolTip("You have seen the agreement report: your ratings can no longer change"
+        self.save_button.setToolTip("You have seen the agreement report: correct a typo below, with a reason"
                                     if locked and not in_lab_file else "")
+        self.correct_box.setVisible(self.round.complete and not in_lab_file)
+
+    def correct(self) -> None:
+        """Correct the chosen blendshape of the selected pose after the round, with the typed reason (logged)."""
+        row = self.poses.currentRow()
+        if self.round is None or row < 0:
+            return
+        pose = self.round.poses[row]
+        try:
+            change = self.round.correct_rating(pose.pose_id, self.correct_shape.currentText(),
+                                               self.correct_value.value(), self.correct_reason.text())
+        except UserError as exc:
+            self.status.setText(str(exc))
+            return
+        self.correct_reason.clear()
+        self._show_pose(row)
+        self.refresh_report()
+        self.status.setText(f"{change.pose_id} {change.blendshape}: corrected {change.old:.2f} -> {change.new:.2f} "
+                            f"({change.reason}); logged in reliability/{self.round.corrections_path.name}")
 
     def save_pose(self) -> None:
         """Save this rater's weights for the selected pose (atomic write of their ratings file)."""

@@ -343,6 +343,7 @@ class QtSynthPlots(pg.GraphicsLayoutWidget):
         for key in ("work", "nhr", "epoc"):
             self.plots[key].setXLink(self.plots["weights"])  # one time axis: zoom or pan one, all follow
         self.curves: dict[str, pg.PlotDataItem] = {}
+        self.hidden: set[str] = set()  # curves the user hid (kept hidden across recomputes)
         self._hr_view = self._add_hr_axis(self.plots["nhr"])
         self._hr_view.setYRange(60, 190, padding=0)
 
@@ -375,6 +376,15 @@ class QtSynthPlots(pg.GraphicsLayoutWidget):
             self.curves[name] = item
         return self.curves[name]
 
+    def set_curve_visible(self, name: str, visible: bool) -> None:
+        """Show or hide one curve (``w_per_kg``, ``p_per_kg``, ``nhr``, ``epoc`` or a blendshape)."""
+        if visible:
+            self.hidden.discard(name)
+        else:
+            self.hidden.add(name)
+        if name in self.curves:
+            self.curves[name].setVisible(visible)
+
     def show_curves(self, curves: dict[str, np.ndarray], names: tuple[str, ...],
                     hr_range_bpm: tuple[float, float] = (60.0, 190.0)) -> None:
         """Set every curve's data (called when the curves are recomputed).
@@ -404,6 +414,8 @@ class QtSynthPlots(pg.GraphicsLayoutWidget):
         self.plots["weights"].setTitle("weights: " + "<br>".join(
             "  ".join(spans[i:i + 2]) for i in range(0, len(spans), 2)), size="8pt")
         self.plots["weights"].setXRange(0, float(t[-1]) if len(t) else 1, padding=0.01)  # linked
+        for name, item in self.curves.items():
+            item.setVisible(name not in self.hidden)
 
     def move_cursor(self, t_s: float) -> None:
         """Move the time cursor of every plot."""
@@ -482,7 +494,14 @@ class QtSynthStage(QtWidgets.QWidget):
         views.setSizes([500, 400])
         self.view_split = QtWidgets.QSplitter(QtCore.Qt.Orientation.Vertical)  # the views above the plots
         self.view_split.addWidget(views)
-        self.view_split.addWidget(self.plots)
+        plots_widget = QtWidgets.QWidget()
+        plots_box = QtWidgets.QVBoxLayout(plots_widget)
+        plots_box.setContentsMargins(0, 0, 0, 0)
+        plots_box.addWidget(self.plots, 1)
+        self.curve_row = QtWidgets.QHBoxLayout()
+        self.curve_boxes: dict[str, QtWidgets.QCheckBox] = {}
+        plots_box.addLayout(self.curve_row)
+        self.view_split.addWidget(plots_widget)
         self.view_split.setSizes([380, 420])
         self.character_scroll = QtWidgets.QScrollArea(widgetResizable=True)
         self.character_scroll.setWidget(self.character)
@@ -760,12 +779,35 @@ class QtSynthStage(QtWidgets.QWidget):
         params = s.model.physiology_params(s.character)
         self.plots.show_curves(s.curves, s.model.blendshapes.names,
                                (float(params.hr_rest_bpm), float(params.hr_max_bpm)))
+        self._sync_curve_boxes()
         self.slider.blockSignals(True)
         self.slider.setRange(0, max(s.n_frames - 1, 0))
         self.slider.blockSignals(False)
         self.loops.blockSignals(True)
         self.loops.setValue(s.loops)
         self.loops.blockSignals(False)
+
+    def _sync_curve_boxes(self) -> None:
+        """One check box per curve under the plots (Show: w, p, NHR, EPOC, each blendshape): untick to
+        hide a curve that covers another."""
+        names = list(self.plots.curves)
+        if names == list(self.curve_boxes):
+            return
+        while self.curve_row.count():
+            item = self.curve_row.takeAt(0)
+            widget = item.widget() if item is not None else None
+            if widget is not None:
+                widget.deleteLater()
+        self.curve_boxes = {}
+        self.curve_row.addWidget(QtWidgets.QLabel("Show:"))
+        for name in names:
+            box = QtWidgets.QCheckBox(name.replace("_per_kg", "").replace("_", " "))
+            box.setChecked(name not in self.plots.hidden)
+            box.setToolTip(f"Show or hide the {name} curve")
+            box.toggled.connect(lambda on, n=name: self.plots.set_curve_visible(n, on))
+            self.curve_row.addWidget(box)
+            self.curve_boxes[name] = box
+        self.curve_row.addStretch(1)
 
     def _on_playing_changed(self, playing: bool) -> None:
         self.play_button.blockSignals(True)
