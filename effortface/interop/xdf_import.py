@@ -50,12 +50,15 @@ from effortface.core.bounds import BOUNDS
 from effortface.core.errors import UserError
 from effortface.core.opencv import import_cv2
 from effortface.core.fileio import atomic_write_text, fsync_folder
+from effortface.core.physio_limits import HR_BPM
 from effortface.core.version import __version__
 
 XdfStream = dict[str, Any]
 
-#: the heart rates a sample may have to be valid (bpm), as the strap readers keep them
-HR_RANGE_BPM = (25.0, 250.0)
+#: the heart rates an imported sample may have to be valid (bpm): the strap readers' ceiling
+#: (:data:`effortface.core.physio_limits.HR_BPM`) with a stricter floor, since a stream from another
+#: app may hold anything under its name (25 bpm: below it, an imported value is not taken as a rate)
+HR_RANGE_BPM = (25.0, HR_BPM[1])
 #: names, types and channel labels (lower case, letters and digits only) that say heart rate
 HR_KEYS = frozenset({"heartrate", "hr", "hrbpm", "bpm", "pulse", "pulserate"})
 #: ... and R-R (inter-beat) intervals
