@@ -33,7 +33,7 @@ SOURCES = (("astronaut", "astronaut.png"), ("bio_022117", "022117.jpg"), ("bio_0
 
 
 def _landmarks(lm: object, bgr: np.ndarray) -> np.ndarray | None:
-    import mediapipe as mp  # type: ignore[import-untyped]
+    import mediapipe as mp
 
     img = mp.Image(image_format=mp.ImageFormat.SRGB, data=np.ascontiguousarray(bgr[:, :, ::-1]))
     res = lm.detect(img)  # type: ignore[attr-defined]
@@ -45,7 +45,7 @@ def _landmarks(lm: object, bgr: np.ndarray) -> np.ndarray | None:
 
 def main(argv: list[str] | None = None) -> int:
     """Write the crops, landmarks and print their sha256."""
-    from mediapipe.tasks.python import BaseOptions, vision  # type: ignore[import-untyped]
+    from mediapipe.tasks.python import BaseOptions, vision
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("astronaut", type=Path)
