@@ -23,11 +23,14 @@ Prints figures and ratios against a baseline measured in the same run:
    float64 (the baseline), in float32 and the compact surrogate (``surrogate=True``); the time
    split between the energies and physiology + face (``step_work`` on the same work); each
    option's max |weight - float64| against its stated bound; the floor of an exact float32 face.
+5. **Synth memory**: peak RSS of a whole ``effortface synth`` process (``os.wait4`` rusage of the
+   child) on the jumping-jacks clip tiled forwards and backwards to 10, 30 and 60 minutes at 120 Hz,
+   the growth per clip minute, and the ratio against the 1-minute clip measured in the same run.
 
 Clips come from ``../shared/data``, else the repository's ``tests/data`` (``bench_data.py``).
 
 Run: ``python benchmarks/bench_scale.py [--participants 10 30 100] [--repeat N]
-[--skip train,synth,bvh,crowd] [--svr-model DIR] [--crowd 2500]``.
+[--skip memory,train,synth,bvh,crowd] [--synth-minutes 10 30 60] [--svr-model DIR] [--crowd 2500]``.
 """
 
 from __future__ import annotations
@@ -189,10 +192,12 @@ WHOLE_FILE_MAX_MINUTES = 10
 
 
 def tiled_bvh(minutes: float, folder: Path) -> Path:
-    """The real clip's frame lines repeated to ``minutes`` at 120 Hz."""
+    """The real clip's frame lines tiled to ``minutes`` at 120 Hz, forwards then backwards (a
+    palindrome, as ``bench_runtime.tiled_clip``: no jumps at the seams)."""
     lines = CLIP.read_text().splitlines()
     at = next(i for i, line in enumerate(lines) if line.strip().upper() == "MOTION")
     frames = [line for line in lines[at + 3:] if line.strip()]
+    frames = frames + frames[::-1]
     n = int(minutes * 60 * 120)
     out = folder / f"jj_{minutes:g}min.bvh"
     with out.open("w") as f:
@@ -216,19 +221,33 @@ def one_read(path: str, whole: bool) -> dict:
             "data_mb": (m.positions_m.nbytes + m.rotations.nbytes) / 2**20}
 
 
-def _whole_process_synth(path: Path, model: str, duration_s: float) -> None:
-    """Time ``python -m effortface synth MODEL CLIP`` (interpreter start-up and imports included)."""
+def synth_process(path: Path, model: str = "default") -> dict:
+    """Run ``python -m effortface synth MODEL CLIP`` once in its own process (interpreter start-up
+    and imports included): wall seconds, exit status and the child's peak RSS in MB (``os.wait4``'s
+    rusage of that process alone). The output files are removed."""
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    out = path.with_name(path.stem + "_synth.csv")
+    t0 = time.perf_counter()
+    child = subprocess.Popen([sys.executable, "-m", "effortface", "synth", model, str(path), "--out", str(out)],
+                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    _, status, usage = os.wait4(child.pid, 0)
+    wall_s = time.perf_counter() - t0
+    child.returncode = os.waitstatus_to_exitcode(status)
+    error = child.stderr.read().decode(errors="replace").strip() if child.stderr else ""
+    if child.stderr:
+        child.stderr.close()
+    for f in (out, out.with_name(out.stem + ".units.json")):
+        f.unlink(missing_ok=True)
+    return {"wall_s": wall_s, "status": child.returncode, "peak_mb": usage.ru_maxrss / 1024.0, "error": error}
+
+
+def _whole_process_synth(path: Path, model: str, duration_s: float) -> None:
+    """Time ``python -m effortface synth MODEL CLIP`` (:func:`synth_process`; best and median of runs)."""
     walls, status = [], 0
-    for k in range(SYNTH_RUNS):
-        out = path.with_name(f"synth_{k}.csv")
-        t0 = time.perf_counter()
-        done = subprocess.run([sys.executable, "-m", "effortface", "synth", model, str(path), "--out", str(out)],
-                              env=env, capture_output=True, text=True)
-        walls.append(time.perf_counter() - t0)
-        status = status or done.returncode
-        for f in (out, out.with_name(out.stem + ".units.json")):
-            f.unlink(missing_ok=True)
+    for _ in range(SYNTH_RUNS):
+        run = synth_process(path, model)
+        walls.append(run["wall_s"])
+        status = status or run["status"]
     best, median = min(walls), sorted(walls)[len(walls) // 2]
     print(f"       whole process `effortface synth {model if model == 'default' else 'SVR_BUNDLE'}` on it "
           f"({SYNTH_RUNS} runs): best {best:.2f} s = {duration_s / best:.0f}x real time, median "
@@ -255,6 +274,35 @@ def bench_bvh(minutes_list: list[float], svr_models: list[str]) -> None:
             for model in ["default", *svr_models]:
                 _whole_process_synth(path, model, minutes * 60)
         path.unlink()
+    shutil.rmtree(tmp)
+
+
+# --------------------------------------------------------------------------- 5. synth memory
+
+
+def bench_synth_memory(minutes_list: list[float], baseline_minutes: float = 1.0) -> None:
+    """Peak RSS of whole ``effortface synth`` processes on long clips, against a short clip's."""
+    print(f"5. `effortface synth default` peak memory (whole process, os.wait4 rusage), 120 Hz BVH "
+          f"tiled forwards and backwards; baseline: the {baseline_minutes:g}-minute clip")
+    tmp = Path(tempfile.mkdtemp())
+    peaks: dict[float, float] = {}
+    for minutes in [baseline_minutes, *minutes_list]:
+        path = tiled_bvh(minutes, tmp)
+        run = synth_process(path)
+        path.unlink()
+        if run["status"]:
+            print(f"  {minutes:4g} min: exit {run['status']}: {run['error'][-300:]}")
+            continue
+        peaks[minutes] = run["peak_mb"]
+        ratio = run["peak_mb"] / peaks[baseline_minutes]
+        print(f"  {minutes:4g} min ({int(minutes * 60 * 120):,} frames): peak RSS {run['peak_mb']:6.0f} MB, "
+              f"{run['wall_s']:6.1f} s = {minutes * 60 / run['wall_s']:4.0f}x real time; "
+              f"{ratio:4.2f}x the {baseline_minutes:g}-minute clip's")
+    longest = [m for m in minutes_list if m in peaks]
+    if len(longest) >= 2:
+        lo, hi = min(longest), max(longest)
+        print(f"  growth {lo:g} -> {hi:g} min: {(peaks[hi] - peaks[lo]) / (hi - lo):+.2f} MB per clip minute "
+              f"(target: an hour within 1024 MB: {'met' if peaks[hi] <= 1024 or hi < 60 else 'NOT met'})")
     shutil.rmtree(tmp)
 
 
@@ -371,6 +419,8 @@ def main() -> None:
                         help="training: run each configuration N times, keep the fastest (a shared machine)")
     parser.add_argument("--clips", type=int, default=8)
     parser.add_argument("--minutes", type=float, nargs="+", default=[10, 60])
+    parser.add_argument("--synth-minutes", type=float, nargs="+", default=[10, 30, 60],
+                        help="clip lengths of the synth memory section (5)")
     parser.add_argument("--crowd", type=int, default=2500)
     parser.add_argument("--crowd-frames", type=int, default=20)
     parser.add_argument("--svr-model", action="append", default=[], metavar="DIR",
@@ -389,6 +439,8 @@ def main() -> None:
         return
     skip = set(args.skip.split(","))
     print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}")
+    if "memory" not in skip:
+        bench_synth_memory(args.synth_minutes)
     if "bvh" not in skip:
         bench_bvh(args.minutes, args.svr_model)
     if "crowd" not in skip:

@@ -214,6 +214,31 @@ class WeightFilter:
             x = self._stages[k]
         return x.copy()
 
+    def run(self, weights: Any, dt_s: float) -> np.ndarray:
+        """Filter T frames (T, B) at a constant frame time, continuing from the previous call.
+
+        A clip filtered in consecutive pieces gives :func:`filter_weights`'s numbers on the whole
+        clip within rounding (each stage restarts from its last output: within 1e-14).
+        """
+        y = np.array(weights, dtype=float)
+        if y.shape[0] == 0:
+            return y
+        if self._stages is None:
+            self._stages = [y[0].copy(), y[0].copy()]
+        taus = np.broadcast_to(self.tau_s, y.shape[1:])
+        for tau in np.unique(taus[taus > 0]):
+            gain = -np.expm1(-dt_s / tau)
+            stage = np.array([[gain, 0.0, 0.0, 1.0, gain - 1.0, 0.0]])  # y[k] = (1 - gain) y[k-1] + gain x[k]
+            cols = taus == tau
+            for k in range(2):
+                state = np.zeros((2, int(cols.sum())))
+                state[0] = (1.0 - gain) * self._stages[k][cols]  # the section's state after its last output
+                y[:, cols] = iir.sosfilt(stage, y[:, cols].T, state).T
+                self._stages[k][cols] = y[-1, cols]
+        for k in range(2):
+            self._stages[k][taus == 0] = y[-1, taus == 0]
+        return y
+
 
 def filter_weights(weights: Any, dt_s: float, tau_s: Any) -> np.ndarray:
     """:class:`WeightFilter` over a whole clip at a constant frame time (identical numbers).

@@ -135,12 +135,14 @@ def check_finite(source: str | Path, name: str, values: np.ndarray, frame_axis: 
 _CHECK_CHUNK_FRAMES = 4096
 
 
-def check_positions(source: str | Path, positions_m: np.ndarray, joint_names: Sequence[str]) -> None:
+def check_positions(source: str | Path, positions_m: np.ndarray, joint_names: Sequence[str],
+                    first_frame: int = 0) -> None:
     """Raise naming ``source``, the frame and the joint if a world position is not finite or absurd.
 
     The one check every motion reader ends with (issue 29): a frame of huge finite values (1e308 in a
     BVH, 1e200 in a CSV) would make NaN energies and weights downstream. The bound is
-    ``BOUNDS["position_m"]`` (:mod:`effortface.core.bounds`).
+    ``BOUNDS["position_m"]`` (:mod:`effortface.core.bounds`). ``first_frame``: the clip's frame
+    number of ``positions_m[0]`` (a block of a streamed clip).
 
     Raises
     ------
@@ -156,7 +158,7 @@ def check_positions(source: str | Path, positions_m: np.ndarray, joint_names: Se
             frame, joint, axis = (int(i[0]) for i in np.nonzero(bad))
             name = joint_names[joint] if joint < len(joint_names) else str(joint)
             raise MotionFormatError(f"{source}: positions_m: expected {bound.describe()}, found "
-                                    f"{float(chunk[frame, joint, axis]):g} at frame {start + frame}, "
+                                    f"{float(chunk[frame, joint, axis]):g} at frame {first_frame + start + frame}, "
                                     f"joint {name!r}")
 
 
@@ -851,7 +853,19 @@ def _pose_frames(path: Path, f: TextIO, first: int, joints: list[_BvhJoint], par
     """Parse and pose the frame lines of ``f`` about :data:`BVH_CHUNK_FRAMES` at a time into ``out``
     (positions in file units, Z up; rotations), so the working memory does not grow with the clip."""
     pos_out, rot_out = out
-    n_frames = len(pos_out)
+    done = 0
+    for pos, rot in _posed_blocks(path, f, first, joints, parents, offsets, n_channels, up_axis, len(pos_out)):
+        pos_out[done:done + len(pos)] = pos
+        rot_out[done:done + len(pos)] = rot
+        done += len(pos)
+
+
+def _posed_blocks(path: Path, f: TextIO, first: int, joints: list[_BvhJoint], parents: np.ndarray,
+                  offsets: np.ndarray, n_channels: int, up_axis: str,
+                  n_frames: int) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """The frame lines of ``f`` parsed and posed about :data:`BVH_CHUNK_FRAMES` at a time: positions
+    (T, J, 3) in file units, Z up, and rotations (T, J, 3, 3), float64 views; the frame count is
+    checked against ``n_frames`` (the ``Frames:`` line)."""
     done = 0
     chunks = _frame_chunks(f)
     for chunk in chunks:
@@ -863,10 +877,155 @@ def _pose_frames(path: Path, f: TextIO, first: int, joints: list[_BvhJoint], par
             _check_frame_count(path, first, n_frames, done + len(chunk) + sum(len(c) for c in chunks))
             raise
         pos, rot = _pose_chunk(joints, parents, offsets, frames, up_axis)
-        pos_out[done:done + len(chunk)] = pos.transpose(2, 0, 1)
-        rot_out[done:done + len(chunk)] = rot.transpose(3, 0, 1, 2)
+        yield pos.transpose(2, 0, 1), rot.transpose(3, 0, 1, 2)
         done += len(chunk)
     _check_frame_count(path, first, n_frames, done)
+
+
+@dataclasses.dataclass(frozen=True)
+class MotionBlocks:
+    """A clip read block by block (:func:`read_motion_blocks`): memory bounded by a block, not the clip.
+
+    Attributes
+    ----------
+    skeleton : Motion
+        Joint names, parents, fps and source; its frames are the clip's reference frames (every
+        ``step``-th frame, ``step = max(1, n_frames // reference_frames)``, at most about twice
+        ``reference_frames`` of them), for bone lengths.
+    n_frames : int
+        Frames of the whole clip.
+    blocks : callable
+        ``blocks()`` -> an iterator over consecutive (positions_m (T, J, 3), rotations (T, J, 3, 3)
+        or None) blocks of the clip, in metres, Z up, as :func:`read_motion` gives them (same dtype
+        and values); each call reads the clip again from its start.
+    """
+
+    skeleton: Motion
+    n_frames: int
+    blocks: Callable[[], Iterator[tuple[np.ndarray, np.ndarray | None]]]
+
+
+def read_motion_blocks(path: str | Path, *, unit_m: float | None = None,
+                       reference_frames: int = 600) -> MotionBlocks:
+    """A motion file as :class:`MotionBlocks`: BVH streamed from the file, other formats read whole.
+
+    A BVH file is read twice: a first pass counts the frame lines and poses the reference frames
+    only, and every call of ``blocks()`` parses and poses :data:`BVH_CHUNK_FRAMES` at a time, so an
+    hour at 120 Hz (432,000 frames, 0.8 GB as float32 positions and rotations) never sits in memory.
+    The values are :func:`read_bvh`'s (float32 above :data:`FLOAT32_ABOVE_FRAMES`, the same scaling).
+    The other formats (.npz, .csv, .c3d, registered readers, a registered ``.bvh`` reader) are read whole by :func:`read_motion`
+    and handed out in slices: their readers hold the clip.
+
+    Raises
+    ------
+    MotionFormatError, UserError
+        As :func:`read_motion` (a bad frame line of a BVH may be raised by ``blocks()``).
+    """
+    path = Path(path)
+    if path.suffix.lower() != ".bvh" or _READERS.get(".bvh") is not _read_bvh:  # not ours: read whole
+        motion = read_motion(path, unit_m=unit_m)
+        return _blocks_of(motion, reference_frames)
+    if path.exists():
+        check_regular_file(path, "a motion file (.bvh)", MotionFormatError)
+    header = _bvh_stream_header(path, unit_m)
+    step = max(1, header.n_frames // reference_frames)
+    ref_pos, ref_rot = _bvh_reference_frames(path, header, step)
+    skeleton = Motion(header.names, header.parents, ref_pos, ref_rot, header.fps, str(path))
+    return MotionBlocks(skeleton, header.n_frames, lambda: _bvh_blocks(path, header))
+
+
+def _blocks_of(motion: Motion, reference_frames: int) -> MotionBlocks:
+    """A motion already in memory as :class:`MotionBlocks` (slices of :data:`BVH_CHUNK_FRAMES`)."""
+    step = max(1, motion.n_frames // reference_frames)
+    rot = None if motion.rotations is None else motion.rotations[::step]
+    skeleton = dataclasses.replace(motion, positions_m=motion.positions_m[::step], rotations=rot)
+
+    def blocks() -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
+        for at in range(0, motion.n_frames, BVH_CHUNK_FRAMES):
+            keep = slice(at, at + BVH_CHUNK_FRAMES)
+            yield motion.positions_m[keep], None if motion.rotations is None else motion.rotations[keep]
+
+    return MotionBlocks(skeleton, motion.n_frames, blocks)
+
+
+@dataclasses.dataclass(frozen=True)
+class _BvhHeader:
+    """What a streamed BVH read needs from the file's header."""
+
+    joints: list[_BvhJoint]
+    names: tuple[str, ...]
+    parents: np.ndarray
+    offsets: np.ndarray
+    n_channels: int
+    first: int          # 0-based line of the first frame
+    n_frames: int
+    fps: float
+    dtype: np.dtype
+    scale: float
+    up_axis: str
+
+
+def _bvh_stream_header(path: Path, unit_m: float | None, up_axis: str = "y") -> _BvhHeader:
+    """Parse the hierarchy and motion header of a BVH file (as :func:`read_bvh`)."""
+    try:
+        with path.open(encoding="utf-8", errors="replace") as f:
+            lines = _read_bvh_header(f)
+    except OSError as exc:
+        raise MotionFormatError(f"{path}: expected a readable BVH file, got {exc.strerror}") from None
+    joints, n_channels, motion_at = _parse_hierarchy(path, lines)
+    n_frames, frame_time_s = _parse_motion_header(path, lines, motion_at)
+    _check_frames_fit(path, motion_at + 2, n_frames, n_channels)
+    parents = check_parents(np.array([j.parent for j in joints]), path)
+    offsets = np.array([j.offset for j in joints])
+    dtype = np.dtype(np.float32 if n_frames > FLOAT32_ABOVE_FRAMES else np.float64)
+    return _BvhHeader(joints, tuple(j.name for j in joints), parents, offsets, n_channels, motion_at + 3,
+                      n_frames, _fps_from_frame_time(frame_time_s), dtype,
+                      _bvh_scale(path, offsets, parents, up_axis, unit_m), up_axis)
+
+
+def _scaled(header: _BvhHeader, pos: np.ndarray, rot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Posed frames in :func:`read_bvh`'s dtype and metres (the same operations, the same values)."""
+    pos = pos.astype(header.dtype, copy=False)  # a float64 block: the posed arrays themselves
+    pos *= header.scale
+    return pos, rot.astype(header.dtype, copy=False)
+
+
+def _bvh_reference_frames(path: Path, header: _BvhHeader, step: int) -> tuple[np.ndarray, np.ndarray]:
+    """First pass: count the frame lines (raise on a wrong count) and pose every ``step``-th frame."""
+    rows: list[str] = []
+    numbers: list[int] = []
+    done = 0
+    try:
+        with path.open(encoding="utf-8", errors="replace") as f:
+            _read_bvh_header(f)
+            for chunk in _frame_chunks(f):
+                for k in range(-done % step, len(chunk), step):
+                    rows.append(chunk[k])
+                    numbers.append(done + k)
+                done += len(chunk)
+    except OSError as exc:
+        raise MotionFormatError(f"{path}: expected a readable BVH file, got {exc.strerror}") from None
+    _check_frame_count(path, header.first, header.n_frames, done)
+    frames = np.concatenate([_parse_chunk(path, [row], header.first + k, header.n_channels)
+                             for row, k in zip(rows, numbers)]) if rows else np.zeros((0, header.n_channels))
+    pos, rot = _pose_chunk(header.joints, header.parents, header.offsets, frames, header.up_axis)
+    return _scaled(header, pos.transpose(2, 0, 1), rot.transpose(3, 0, 1, 2))  # checked by blocks()
+
+
+def _bvh_blocks(path: Path, header: _BvhHeader) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """Second pass: the clip's frames, posed and scaled, :data:`BVH_CHUNK_FRAMES` at a time."""
+    try:
+        with path.open(encoding="utf-8", errors="replace") as f:
+            _read_bvh_header(f)
+            done = 0
+            for pos, rot in _posed_blocks(path, f, header.first, header.joints, header.parents, header.offsets,
+                                          header.n_channels, header.up_axis, header.n_frames):
+                pos, rot = _scaled(header, pos, rot)
+                check_positions(path, pos, header.names, first_frame=done)
+                yield pos, rot
+                done += len(pos)
+    except OSError as exc:
+        raise MotionFormatError(f"{path}: expected a readable BVH file, got {exc.strerror}") from None
 
 
 def _pose_chunk(joints: list[_BvhJoint], parents: np.ndarray, offsets: np.ndarray, frames: np.ndarray,

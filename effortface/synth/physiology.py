@@ -558,6 +558,44 @@ class PhysiologyState:
             self.ticks += 1
         return derived(self.nhr, self.epoc, self.params)
 
+    def run(self, w_per_kg: Any, dt_s: Any) -> dict[str, np.ndarray]:
+        """Advance by T frames at once (one character): :meth:`step` on each, vectorised.
+
+        A clip run in consecutive pieces gives :func:`simulate`'s numbers on the whole clip (the
+        clock is the same sequential sum; the recursion runs once per tick in both).
+
+        Parameters
+        ----------
+        w_per_kg : array_like, shape (T,)
+        dt_s : float or array_like, shape (T,)
+
+        Returns
+        -------
+        dict
+            Arrays of shape (T,): ``nhr, hr_bpm, vo2, resp_rate, epoc, epoc_norm``.
+        """
+        w = np.asarray(w_per_kg, dtype=float)
+        dt = np.broadcast_to(np.asarray(dt_s, dtype=float), w.shape)
+        elapsed = np.cumsum(np.concatenate([[self.elapsed_s], dt]))[1:]  # continues the sequential sum
+        ticks_after = np.floor(elapsed / self.params.update_period_s).astype(np.int64)
+        n_ticks = max(int(ticks_after[-1]) - self.ticks, 0) if w.size else 0
+        tick_frame = np.searchsorted(ticks_after, np.arange(self.ticks + 1, self.ticks + n_ticks + 1), side="left")
+        nhr_t = np.empty(n_ticks + 1)
+        epoc_t = np.empty(n_ticks + 1)
+        nhr_t[0], epoc_t[0] = self.nhr, self.epoc
+        nhr, epoc = self.nhr, self.epoc
+        for k, frame in enumerate(tick_frame, start=1):
+            nhr, epoc = _tick(nhr, epoc, w[frame], self.params)
+            nhr_t[k], epoc_t[k] = nhr, epoc
+        self.nhr, self.epoc = np.asarray(nhr, dtype=float), np.asarray(epoc, dtype=float)
+        if w.size:
+            self.elapsed_s = float(elapsed[-1])
+            at = ticks_after - self.ticks
+            self.ticks += n_ticks
+        else:
+            at = ticks_after
+        return derived(nhr_t[at], epoc_t[at], self.params)
+
 
 def simulate(w_per_kg: Any, dt_s: Any, character: _PersonLike | PhysiologyParams, *,
              nhr0: float = 0.0, epoc0: float = 0.0) -> dict[str, np.ndarray]:
@@ -582,20 +620,7 @@ def simulate(w_per_kg: Any, dt_s: Any, character: _PersonLike | PhysiologyParams
     """
     params = character if isinstance(character, PhysiologyParams) else \
         PhysiologyParams.from_character(character)
-    w = np.asarray(w_per_kg, dtype=float)
-    dt = np.broadcast_to(np.asarray(dt_s, dtype=float), w.shape)
-    elapsed = np.cumsum(dt)  # sequential sums, as the stream does
-    ticks_after = np.floor(elapsed / params.update_period_s).astype(np.int64)
-    n_ticks = int(ticks_after[-1]) if w.size else 0
-    tick_frame = np.searchsorted(ticks_after, np.arange(1, n_ticks + 1), side="left")
-    nhr_t = np.empty(n_ticks + 1)
-    epoc_t = np.empty(n_ticks + 1)
-    nhr, epoc = np.asarray(float(nhr0)), np.asarray(float(epoc0))
-    nhr_t[0], epoc_t[0] = nhr, epoc
-    for k, frame in enumerate(tick_frame, start=1):
-        nhr, epoc = _tick(nhr, epoc, w[frame], params)
-        nhr_t[k], epoc_t[k] = nhr, epoc
-    return derived(nhr_t[ticks_after], epoc_t[ticks_after], params)
+    return PhysiologyState(params, float(nhr0), float(epoc0)).run(w_per_kg, dt_s)
 
 
 def nhr_from_hr_bpm(hr_bpm: Any, hr_rest: Any, hr_max: Any) -> np.ndarray:

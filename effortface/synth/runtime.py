@@ -25,7 +25,7 @@ import dataclasses
 import math
 import numbers
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -239,9 +239,18 @@ class FaceModel:
         e = self.expressiveness(character) if e is None else e
         taus = self.filter_taus(filter_tau_s)
         phys = simulate(w_per_kg, dt_s, self.physiology_params(character))
+        return self.curves_from_physiology(t_s, w_per_kg, p_per_kg, phys, e,
+                                           lambda weights: filter_weights(weights, dt_s, taus))
+
+    def curves_from_physiology(self, t_s: Any, w_per_kg: Any, p_per_kg: Any, phys: dict[str, np.ndarray],
+                               e: np.ndarray, smooth: Callable[[np.ndarray], np.ndarray]
+                               ) -> dict[str, np.ndarray]:
+        """The curves of some frames from their work, power and physiology: the face model, the
+        expressiveness ``e`` and the output filter ``smooth`` ((T, B) -> (T, B); a whole clip's
+        :func:`~effortface.synth.face.filter_weights` or a piece's :meth:`WeightFilter.run`)."""
         features = np.column_stack([w_per_kg, p_per_kg, phys["nhr"], phys["epoc_norm"]])
         normalised = self.anchored(self.face.predict(features))
-        weights = filter_weights(apply_expressiveness(normalised, e), dt_s, taus)
+        weights = smooth(apply_expressiveness(normalised, e))
         curves = {"t_s": np.asarray(t_s, float), "w_per_kg": np.asarray(w_per_kg, float),
                   "p_per_kg": np.asarray(p_per_kg, float)}
         curves.update({k: phys[k] for k in CURVE_COLUMNS[3:]})

@@ -5,6 +5,8 @@ On success it prints one line on stdout: the file written, its frames and the cl
 ``MODEL_DIR`` is a model bundle folder or ``default`` (the built-in rule model). The file formats
 (the per-frame CSV, ``--format livelink`` for the Live Link Face CSV) are
 :mod:`effortface.synth.curves_io`'s. An existing ``--out`` is never replaced without ``--force``.
+One clip is synthesized and written a minute of motion at a time (:mod:`effortface.synth.chunked`):
+the memory does not grow with the clip (an hour of 120 Hz BVH motion within 1 GB).
 
 ``MOTION`` may be a folder of clips: then ``--out`` is a folder and every clip gives one file
 (:mod:`effortface.synth.batch_synth`, on Dask with ``--workers N`` or ``--scheduler ADDRESS``), with
@@ -19,17 +21,16 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
-
 from effortface.core import bounds
 from effortface.core.docs import DESIGN, SCIENCE
 from effortface.core.errors import UserError
 from effortface.core.fileio import check_apart
 from effortface.synth.character_options import add_character_arguments, character_from_args
-from effortface.synth.curves_io import CURVE_FORMATS, check_output, units_path, write_curves
-from effortface.synth.motion import read_motion
+from effortface.synth.chunked import synthesize_chunks
+from effortface.synth.curves_io import CURVE_FORMATS, check_output, units_path, write_curve_chunks
+from effortface.synth.motion import read_motion_blocks
 from effortface.synth.parallel import ComputeSettings, add_compute_arguments
-from effortface.synth.runtime import load_model
+from effortface.synth.runtime import REFERENCE_FRAMES, load_model
 
 if TYPE_CHECKING:  # a folder of clips only: one clip does not pay for its imports
     from effortface.synth.batch_synth import BatchSummary, SynthOptions
@@ -88,18 +89,16 @@ def run(args: argparse.Namespace) -> int:
         options = SynthOptions(args.model_dir, character, args.format, args.force, args.mapping,
                                args.unit_m, taus)
         return _run_batch(Path(args.motion), out, options, compute)
-    motion = read_motion(args.motion, unit_m=args.unit_m)
-    curves = model.synthesize(motion, character, mapping=args.mapping, filter_tau_s=taus)
-    write_curves(out, curves, model, fmt=args.format, force=args.force, provenance=motion.source,
-                 every_frame=args.every_frame)
-    print(written_line(out, curves["t_s"], args.format))
+    motion = read_motion_blocks(args.motion, unit_m=args.unit_m, reference_frames=REFERENCE_FRAMES)
+    chunks = synthesize_chunks(model, motion, character, mapping=args.mapping, filter_tau_s=taus)
+    n_frames, duration_s = write_curve_chunks(out, chunks, model, fmt=args.format, force=args.force,
+                                              provenance=motion.skeleton.source, every_frame=args.every_frame)
+    print(written_line(out, n_frames, duration_s, args.format))
     return 0
 
 
-def written_line(out: Path, t_s: np.ndarray, fmt: str) -> str:
+def written_line(out: Path, n_frames: int, duration_s: float, fmt: str) -> str:
     """What ``synth`` wrote: the file, its frames and the clip's duration (and the units sidecar)."""
-    n_frames = len(t_s)
-    duration_s = float(t_s[-1] - t_s[0]) if n_frames else 0.0
     units = f", units in {units_path(out)}" if fmt == "csv" else ""
     return f"wrote {out}: {n_frames} frames, {duration_s:.2f} s of motion{units}"
 def _run_batch(clips_dir: Path, out: Path, options: SynthOptions, compute: ComputeSettings) -> int:
