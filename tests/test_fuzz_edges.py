@@ -8,7 +8,9 @@ Fixed seed (``derandomize``), :data:`EXAMPLES` examples per property. The promis
 - ``.serlog``: any mutation of a real log reads without raising (or one UserError line), and the
   records read, the damaged bytes skipped and the torn tail account for every byte;
 - BVH headers (joint depth, frame count, frame time) and XDF files (mutated headers and chunks) are
-  read, or refused with one UserError line, never another exception, a hang or a half session.
+  read, or refused with one UserError line, never another exception, a hang or a half session;
+- a mutated MJPG AVI (a crashed capture's video) is rewritten by ``recover``'s video copy without
+  raising or hanging, and every frame it keeps decodes.
 """
 
 from __future__ import annotations
@@ -24,9 +26,12 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from effortface.capture_tool.avi_writer import MjpgAviWriter, mjpg_frames
+from effortface.capture_tool.camera import rewrite_video
 from effortface.capture_tool.serlog import MAGIC, read_serlog
 from effortface.core.bounds import BOUNDS
 from effortface.core.errors import UserError
+from effortface.core.opencv import import_cv2
 from effortface.interop.serve import FaceProcessor, ServeStats, check_sample, parse_work_datagram
 from effortface.synth.motion import read_bvh
 
@@ -119,6 +124,36 @@ def test_a_mutated_serlog_accounts_for_every_byte(data: st.DataObject, tmp_path_
     assert used + log.skipped_bytes + log.truncated_bytes == len(body)
     assert all(r.kind in (0, 1) and math.isfinite(r.t_s) for r in log.records)
     assert (log.damage_warning() is None) == (log.skipped_bytes == 0)
+
+
+# ----------------------------------------------------------------------------------------- AVI
+
+
+@pytest.fixture(scope="module")
+def recorded_avi(tmp_path_factory) -> tuple[bytes, list[bytes]]:
+    """A 6-frame MJPG AVI as a killed capture leaves it (no index), and its frames' JPEG bytes."""
+    path = tmp_path_factory.mktemp("avi") / "live.avi"
+    writer = MjpgAviWriter(path, 15.0, (32, 24), quality=50)
+    for k in range(6):
+        writer.write(np.full((24, 32, 3), 40 * k, np.uint8))
+    blob = path.read_bytes()
+    writer.release()
+    return blob, list(mjpg_frames(path))
+
+
+@FUZZ
+@given(data=st.data())
+def test_a_mutated_avi_is_copied_frame_by_frame_or_not_at_all(data: st.DataObject, recorded_avi,
+                                                               tmp_path_factory) -> None:
+    blob, _ = recorded_avi  # (the exact copy of the recorded JPEGs is tested in test_camera.py)
+    folder = tmp_path_factory.mktemp("avi")
+    (folder / "cut.avi").write_bytes(data.draw(mutated(blob), label="avi"))
+    with _no_hang():
+        n = rewrite_video(folder / "cut.avi", folder / "fixed.avi")
+    kept = list(mjpg_frames(folder / "fixed.avi")) if n else []
+    assert len(kept) == n
+    cv2 = import_cv2()
+    assert all(cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR) is not None for jpeg in kept)
 
 
 # ----------------------------------------------------------------------------------------- BVH

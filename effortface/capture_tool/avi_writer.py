@@ -20,6 +20,7 @@ from __future__ import annotations
 import errno
 import os
 import struct
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +28,10 @@ AVIF_HASINDEX = 0x10
 AVIIF_KEYFRAME = 0x10
 #: JPEG quality of the frames (OpenCV's MJPG muxer default)
 JPEG_QUALITY = 95
+#: the largest frame side the AVI headers hold (16-bit fields)
+MAX_AVI_SIDE = 32767
+#: the highest nominal rate written in the headers
+MAX_AVI_FPS = 1000.0
 #: a placeholder size a crashed file keeps: FFmpeg reads such a RIFF or movi list to the end of the file
 _OPEN_SIZE = 0
 
@@ -52,6 +57,44 @@ def _strh(width: int, height: int, fps: float, n_frames: int, max_bytes: int) ->
                                            n_frames, max_bytes, 0xFFFFFFFF, 0, 0, 0, width, height)
 
 
+#: chunk ids of video frames in a ``movi`` list (compressed, uncompressed)
+_FRAME_IDS = (b"00dc", b"00db")
+
+
+def mjpg_frames(path: str | os.PathLike) -> Iterator[bytes]:
+    """The JPEG bytes of each video frame of an MJPG AVI, in file order, read straight from its chunks.
+
+    Walks the ``RIFF 'AVI '`` (and OpenDML ``RIFF 'AVIX'``) lists and yields the payload of every
+    ``00dc`` chunk of a ``movi`` list, so frames are copied without decoding and encoding again. A
+    crashed file's open sizes (0, see :class:`MjpgAviWriter`) read to the end of the file; a chunk cut
+    by the end of the file ends the walk.
+
+    Parameters
+    ----------
+    path : path-like
+        The AVI file.
+
+    Yields
+    ------
+    bytes
+        One frame's JPEG data.
+    """
+    with open(path, "rb") as f:
+        stop = os.fstat(f.fileno()).st_size
+        at = 0
+        while at + 8 <= stop:  # one flat walk: a list's header is stepped into, never recursed
+            f.seek(at)
+            fourcc, size = struct.unpack("<4sI", f.read(8))
+            if fourcc in (b"RIFF", b"LIST"):
+                at += 12
+                continue
+            if at + 8 + size > stop:  # cut by the end of the file
+                return
+            if fourcc in _FRAME_IDS:
+                yield f.read(size)
+            at += 8 + size + size % 2
+
+
 class MjpgAviWriter:
     """Append MJPG frames to a new AVI, each handed to the OS at once (OpenCV ``VideoWriter``'s API).
 
@@ -70,6 +113,8 @@ class MjpgAviWriter:
     ------
     OSError
         When the file cannot be created or written (its ``filename`` is the path).
+    ValueError
+        When the size or rate do not fit the AVI headers (checked before the file is created).
     """
 
     def __init__(self, path: str | os.PathLike, fps: float, size: tuple[int, int],
@@ -77,6 +122,9 @@ class MjpgAviWriter:
         self.path = Path(path)
         self.fps = float(fps)
         self.size = (int(size[0]), int(size[1]))
+        if not (0 < self.fps <= MAX_AVI_FPS and all(0 < side <= MAX_AVI_SIDE for side in self.size)):
+            raise ValueError(f"{self.path}: expected a frame size of 1 to {MAX_AVI_SIDE} pixels a side and 0 to "
+                             f"{MAX_AVI_FPS:g} fps, found {self.size[0]}x{self.size[1]} at {self.fps:g} fps")
         self.quality = int(quality)
         self.frames = 0
         self._index: list[bytes] = []

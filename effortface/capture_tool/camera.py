@@ -27,13 +27,15 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 try:
     import resource
 except ImportError:  # pragma: no cover - not POSIX: no file-size limit to watch
     resource = None  # type: ignore[assignment]
 
 from effortface.core.errors import DeviceError, DeviceErrorReason, UserError
-from effortface.capture_tool.avi_writer import MjpgAviWriter
+from effortface.capture_tool.avi_writer import MAX_AVI_FPS, MAX_AVI_SIDE, MjpgAviWriter, mjpg_frames
 from effortface.core.opencv import avi_header_frames, index_video  # noqa: F401  (the session format counts frames too)
 from effortface.core.session.folder import FrameTimeWriter
 
@@ -320,32 +322,94 @@ def open_avi_writer(path: str | os.PathLike, fps: float, size: tuple[int, int]) 
         raise FileExistsError(f"{path}: exists; refusing to overwrite") from None
     except OSError as exc:
         raise UserError(f"{path}: expected a writable MJPG video file, found {exc.strerror or exc}") from None
+    except ValueError as exc:  # a size or rate the AVI headers cannot hold
+        raise UserError(str(exc)) from None
 
 
 def rewrite_video(src: str | os.PathLike, dst: str | os.PathLike, max_frames: int | None = None) -> int:
     """Copy the decodable frames of ``src`` into a fresh MJPG AVI ``dst`` (a correct index).
+
+    The frames of an MJPG AVI are copied byte for byte (:func:`copy_mjpg_frames`: no second JPEG
+    encoding, the recovered video is the recorded one); any other video is decoded and encoded.
+    Either way the copy stops at the first frame that does not decode, or after ``max_frames``.
 
     Returns
     -------
     int
         Frames written.
     """
-    cv2 = _cv2()
     dst = Path(dst)
     if dst.exists():
         raise FileExistsError(f"{dst}: exists; refusing to overwrite")
+    n = copy_mjpg_frames(src, dst, max_frames)
+    if n:
+        return n
+    dst.unlink(missing_ok=True)
+    return _reencode_video(src, dst, max_frames)
+
+
+def _avi_fps(src: str | os.PathLike) -> float:
+    """The nominal frame rate OpenCV reads from a video's headers (30 when it has none or an absurd one)."""
+    cv2 = _cv2()
     cap = cv2.VideoCapture(str(src))
     fps = float(cap.get(cv2.CAP_PROP_FPS) or 0.0)
+    cap.release()
+    return fps if 1 <= fps <= MAX_AVI_FPS else 30.0
+
+
+def copy_mjpg_frames(src: str | os.PathLike, dst: str | os.PathLike, max_frames: int | None = None) -> int:
+    """Copy an MJPG AVI's frames, undecoded, into a new AVI; 0 (and no ``dst``) if ``src`` has none.
+
+    Frames are taken in file order while each decodes (``cv2.imdecode``) to the first frame's size.
+
+    Parameters
+    ----------
+    src, dst : path-like
+        The AVI to read and the one to create (an existing ``dst`` is refused).
+    max_frames : int, optional
+        Stop after this many frames.
+
+    Returns
+    -------
+    int
+        Frames copied.
+    """
+    cv2 = _cv2()
+    writer: MjpgAviWriter | None = None
+    n = 0
+    try:
+        for jpeg in mjpg_frames(src):
+            if max_frames is not None and n >= max_frames:
+                break
+            image = cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR)
+            size = None if image is None else (image.shape[1], image.shape[0])
+            if size is None or max(size) > MAX_AVI_SIDE or (writer is not None and size != writer.size):
+                break
+            if writer is None:
+                writer = open_avi_writer(dst, _avi_fps(src), size)
+            writer.write_jpeg(jpeg)
+            n += 1
+    finally:
+        if writer is not None:
+            writer.release()
+    return n
+
+
+def _reencode_video(src: str | os.PathLike, dst: Path, max_frames: int | None) -> int:
+    """Decode ``src`` with OpenCV and encode each frame into a new MJPG AVI ``dst``; frames written."""
+    cv2 = _cv2()
+    fps = _avi_fps(src)
+    cap = cv2.VideoCapture(str(src))
     writer = None
     n = 0
     try:
         while max_frames is None or n < max_frames:
             ok, frame = cap.read()
-            if not ok:
+            if not ok or max(frame.shape[:2]) > MAX_AVI_SIDE:
                 break
             if writer is None:
                 h, w = frame.shape[:2]
-                writer = open_avi_writer(dst, fps if fps >= 1 else 30.0, (w, h))
+                writer = open_avi_writer(dst, fps, (w, h))
             writer.write(frame)
             n += 1
     finally:

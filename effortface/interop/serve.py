@@ -68,9 +68,15 @@ MAX_DT_S = 1.0
 #: silence (s) after which the LSL input checks whether its source restarted as a new stream
 SILENCE_PROBE_S = 0.3
 #: pause (s) before looking again when no acceptable stream is listed (no busy loop)
-REFUSED_WAIT_S = 0.1
-#: a stream the continuous resolver has not heard from for this long (s) is no longer listed
+REFUSED_WAIT_S = 0.02
+#: a stream the finder has not heard from for this long (s) is no longer listed
 RESOLVER_FORGET_S = 1.0
+#: one query of the finder waits this long (s) for an answer when no stream answers
+FINDER_QUERY_S = 0.2
+#: the finder asks at most this often (s): a stream that answers at once does not make it spin
+FINDER_PACE_S = 0.05
+#: the finder keeps asking for this long (s) after the server last looked at its list
+FINDER_IDLE_S = 1.0
 #: datagrams read in one pull at most: a flood waits in the kernel's buffer, the loop keeps its pace
 MAX_DATAGRAMS_PER_PULL = 1024
 #: pylsl's channel format code of string channels
@@ -449,6 +455,56 @@ def _discard(holder: list[Any]) -> None:
     threading.Thread(target=holder.clear, name="lsl-inlet-discard", daemon=True).start()
 
 
+class StreamFinder:
+    """Streams matching an LSL query, found by a background thread while someone looks for them.
+
+    liblsl's continuous resolver sends a query wave only every ``ContinuousResolveInterval +
+    MulticastMinRTT`` (1 s by default): a returning stream waited up to 1.2 s to be seen. A one-shot
+    query that waits for one answer returns within milliseconds of a stream appearing, but blocks
+    :data:`FINDER_QUERY_S` while none does; so it runs here, in a daemon thread, only while
+    :meth:`listed` was called in the last :data:`FINDER_IDLE_S` (a lost or silent input), at most
+    every :data:`FINDER_PACE_S`. Answers are merged and forgotten after :data:`RESOLVER_FORGET_S`, as
+    the continuous resolver does, so a query that returned the old stream first still lists the new.
+
+    Parameters
+    ----------
+    query : str
+        An LSL predicate (see :meth:`LslInput.query`).
+    """
+
+    def __init__(self, query: str) -> None:
+        self.query = query
+        self._lock = threading.Lock()
+        self._seen: dict[str, tuple[Any, float]] = {}  # uid -> (info, monotonic time last answered)
+        self._wanted_at = 0.0
+        self._wake = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="lsl-finder", daemon=True)
+        self._thread.start()
+
+    def listed(self) -> list[Any]:
+        """The streams that answered in the last :data:`RESOLVER_FORGET_S`; keeps the finder asking."""
+        now = time.monotonic()
+        self._wanted_at = now
+        self._wake.set()
+        with self._lock:
+            return [info for info, seen_at in self._seen.values() if now - seen_at <= RESOLVER_FORGET_S]
+
+    def _run(self) -> None:
+        import pylsl
+
+        while True:
+            if time.monotonic() - self._wanted_at > FINDER_IDLE_S:
+                self._wake.clear()
+                self._wake.wait()
+            started = time.monotonic()
+            found = pylsl.resolve_bypred(self.query, 1, FINDER_QUERY_S)
+            now = time.monotonic()
+            with self._lock:
+                self._seen.update((info.uid(), (info, now)) for info in found)
+                self._seen = {uid: seen for uid, seen in self._seen.items() if now - seen[1] <= RESOLVER_FORGET_S}
+            time.sleep(max(0.0, FINDER_PACE_S - (now - started)))
+
+
 class LslInput:
     """An LSL inlet that is re-resolved whenever its stream is lost.
 
@@ -472,7 +528,7 @@ class LslInput:
         self._refused: set[str] = set()
         self._gone: set[str] = set()  # streams lost: the resolver may list them a while longer
         self._uid, self._created_at = "", 0.0
-        self._resolver: Any = None
+        self._finder: StreamFinder | None = None
         self._last_data = self._last_probe = 0.0
         self.srate_hz = 0.0
         self.channels = 0
@@ -528,20 +584,17 @@ class LslInput:
         restarted): LSL may take seconds to report the old inlet lost, so the server switches now."""
         now = time.monotonic()
         quiet_s = max(SILENCE_PROBE_S, 3.0 / self.srate_hz if self.srate_hz > 0 else SILENCE_PROBE_S)
-        if now - self._last_data < quiet_s or now - self._last_probe < quiet_s:
+        if now - self._last_data < quiet_s or now - self._last_probe < REFUSED_WAIT_S:
             return False
         self._last_probe = now
         return any(info.uid() != self._uid and info.created_at() > self._created_at
                    and info.uid() not in self._gone and self._acceptable(info) for info in self._listed())
 
     def _listed(self) -> list[Any]:
-        """The streams the query finds now, from a continuous resolver (never blocks: a one-shot
-        ``resolve_bypred`` took 5.5 s instead of its 0.5 s timeout in the soak)."""
-        import pylsl
-
-        if self._resolver is None:
-            self._resolver = pylsl.ContinuousResolver(pred=self.query(), forget_after=RESOLVER_FORGET_S)
-        return list(self._resolver.results())
+        """The streams the query finds now, from the background :class:`StreamFinder` (never blocks)."""
+        if self._finder is None:
+            self._finder = StreamFinder(self.query())
+        return self._finder.listed()
 
     def pull(self, stats: ServeStats) -> tuple[list, list] | None:
         """Samples and time stamps available now (waiting up to 0.1 s); None while disconnected."""

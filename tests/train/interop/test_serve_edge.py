@@ -21,8 +21,8 @@ import pylsl
 import pytest
 from pythonosc.osc_message_builder import OscMessageBuilder
 
-from effortface.interop.serve import (FaceProcessor, LslInput, OscInput, Outputs, ServeStats, check_sample,
-                                            serve, xpath_literal)
+from effortface.interop.serve import (FaceProcessor, LslInput, OscInput, Outputs, ServeStats, StreamFinder,
+                                            check_sample, serve, xpath_literal)
 from effortface.synth.runtime import Character, load_model
 
 from .lsl_helpers import unique
@@ -148,6 +148,29 @@ def test_wrong_width_and_string_lsl_streams_are_refused_then_a_good_one_is_taken
     assert source.channels == 2 and stats.connects == 1
     assert log.getvalue().count("ignored") == 2  # each refused stream is told once
     del narrow, text, good
+
+
+def _wait_for(condition, seconds: float = 20.0) -> bool:
+    deadline = time.monotonic() + seconds
+    while not condition() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    return condition()
+
+
+def test_the_finder_lists_a_returning_stream_forgets_a_gone_one_and_rests_when_unwatched() -> None:
+    name = unique("finder")
+    finder = StreamFinder(LslInput("EffortWork", name).query())
+    assert finder.listed() == []  # nothing answered yet; the first call starts the asking
+    first = pylsl.StreamOutlet(pylsl.StreamInfo(name, "EffortWork", 2, 120, "float32", unique("a")))
+    first_uid = first.get_info().uid()
+    assert _wait_for(lambda: [i.uid() for i in finder.listed()] == [first_uid])
+    second = pylsl.StreamOutlet(pylsl.StreamInfo(name, "EffortWork", 2, 120, "float32", unique("b")))
+    second_uid = second.get_info().uid()
+    assert _wait_for(lambda: {i.uid() for i in finder.listed()} == {first_uid, second_uid})  # both, merged
+    del first
+    assert _wait_for(lambda: [i.uid() for i in finder.listed()] == [second_uid])  # the gone one forgotten
+    assert _wait_for(lambda: not finder._wake.is_set())  # unwatched: it stops asking the network
+    del second
 
 
 def test_lsl_names_are_quoted_safely() -> None:
