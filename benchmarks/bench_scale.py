@@ -1,6 +1,8 @@
 """Issue 15 (scale): training on every annotated second, Dask, batch synthesis, long clips, crowds.
 
-Prints figures and ratios against a baseline measured in the same run:
+Prints figures and ratios against a baseline measured in the same run. Every time that is
+repeated is given as its median first, with the best and the worst beside it, and every ratio is
+taken between medians of the same work on both sides:
 
 1. **Training** (the face part of a training run: grid search, final fit, held-out scores and the
    paper's protocols) on generated tables of P participants x 1 h (P = 10, 30, 100 by default):
@@ -10,19 +12,22 @@ Prints figures and ratios against a baseline measured in the same run:
    process), face rows used, method, mean held-out RMSE; serial and with ``--workers 2``, and the
    ratio serial / 2 workers; baseline: the old caps (300 rows per participant, 2,000 in all, exact
    SVR). On a shared machine the CPU times tell what the wall times cannot: the machine's load
-   average is printed with each line.
+   average is printed with each line. With ``--repeat N`` each configuration runs N times (serial
+   and workers alternating): median, best and worst.
 2. **Batch synthesis** of a folder of real clips: clips/s and frames/s in this process and on a
    local Dask cluster of 1 and 2 workers.
 3. **Long BVH clips** (the real jumping-jacks clip tiled to 10 min and 1 h at 120 Hz): read time and
    peak memory (own process each), against the whole-file float64 parse (``BVH_CHUNK_FRAMES`` as
    large as the clip); whole-process ``effortface synth`` time for the 10-minute clip in x real time
-   (interpreter start-up and imports included; best and median of 3 runs), with the default model
+   (interpreter start-up and imports included; median, best and worst of 3 runs), with the default model
    and with each ``--svr-model`` bundle.
 4. **Crowd from positions**: characters per core at 60 FPS (one BLAS thread) with a
-   ~2,000-support-vector SVR model (best frame, and the median), through ``CrowdStream.step(positions)``: the exact face in
+   ~2,000-support-vector SVR model (the median frame, with the best and the worst frame beside it),
+   through ``CrowdStream.step(positions)``: the exact face in
    float64 (the baseline), in float32 and the compact surrogate (``surrogate=True``); the time
    split between the energies and physiology + face (``step_work`` on the same work); each
-   option's max |weight - float64| against its stated bound; the floor of an exact float32 face.
+   option's max |weight - float64| against its stated bound; the floor of an exact float32 face
+   (median of 15 runs, best and worst beside). Ratios to float64 are of the median frames.
 5. **Synth memory**: peak RSS of a whole ``effortface synth`` process (``os.wait4`` rusage of the
    child) on the jumping-jacks clip tiled forwards and backwards to 10, 30 and 60 minutes at 120 Hz,
    the growth per clip minute, and the ratio against the 1-minute clip measured in the same run.
@@ -57,6 +62,13 @@ CLIP = DATA / "motion" / "cmu_13_29_jumping_jacks_120fps.bvh"
 SQUATS = DATA / "motion" / "cmu_13_29_squats_120fps.bvh"
 #: whole-process runs of ``effortface synth`` timed on the 10-minute clip (best and median shown)
 SYNTH_RUNS = 3
+
+
+def spread(values: list[float]) -> tuple[float, float, float]:
+    """(median, best, worst) of repeated timings: the median is the figure, the others its range."""
+    import numpy as np
+
+    return float(np.median(values)), float(min(values)), float(max(values))
 
 
 def _max_rss_mb() -> float:
@@ -127,7 +139,8 @@ def one_training(n_participants: int, workers: int, legacy: bool) -> dict:
 
 def bench_training(sizes: list[int], workers_list: list[int], repeat: int) -> None:
     print("1. training (face part: grid search, final fit, held-out scores, protocols), P x 1 h"
-          + (f"; the fastest of {repeat} runs of each (serial and workers alternating)" if repeat > 1 else ""))
+          + (f"; the median of {repeat} runs of each (serial and workers alternating), best and worst beside it"
+             if repeat > 1 else "; one run of each"))
     for p in sizes:
         base = _child(["--one-training", str(p), "0", "legacy"])
         print(f"  P={p:3d} baseline (old caps, exact SVR): {base['seconds']:7.1f} s, "
@@ -137,20 +150,22 @@ def bench_training(sizes: list[int], workers_list: list[int], repeat: int) -> No
         for _ in range(repeat):
             for w in workers_list:
                 tries[w].append(_child(["--one-training", str(p), str(w), "new"]))
-        runs = {w: min(results, key=lambda r: r["seconds"]) for w, results in tries.items()}
+        runs = {w: sorted(results, key=lambda r: r["seconds"])[(len(results) - 1) // 2]  # the median run
+                for w, results in tries.items()}
         for w, res in runs.items():
             label = "serial" if w == 0 else f"{w} workers"
             workers = (f", cluster start-up {res['start_s']:.1f} s, largest worker peak "
                        f"{res['worker_peak_mb']:.0f} MB" if w else "")
             print(f"  P={p:3d} {label:>9} ({res['method']}): {res['seconds']:7.1f} s "
-                  f"({res['seconds'] / base['seconds']:5.1f}x the baseline's time), CPU {res['cpu_s']:6.1f} s, "
+                  f"({res['seconds'] / base['seconds']:5.1f}x the old caps' time: not the same fit, more rows), CPU {res['cpu_s']:6.1f} s, "
                   f"{res['rows']:6d} rows ({100 * res['rows'] / res['available']:.0f} %), held-out RMSE "
                   f"{res['rmse_pct']:.2f} % (baseline {base['rmse_pct']:.2f} %), r {res['r']:.3f}, "
                   f"peak {res['peak_mb']:.0f} MB{workers}; load average {res['load']:.1f}"
-                  + (f" (all runs: {', '.join('%.1f' % r['seconds'] for r in tries[w])} s)" if repeat > 1 else ""))
+                  + (" (median run; best {1:.1f} s, worst {2:.1f} s)".format(*spread([r["seconds"] for r in tries[w]]))
+                     if repeat > 1 else ""))
         for w in (w for w in workers_list if w and 0 in runs):
             serial, par = runs[0], runs[w]
-            print(f"  P={p:3d} serial / {w} workers: {serial['seconds'] / par['seconds']:.2f}x in wall time "
+            print(f"  P={p:3d} serial / {w} workers (median runs): {serial['seconds'] / par['seconds']:.2f}x in wall time "
                   f"(> 1: the workers are faster), CPU {par['cpu_s'] / serial['cpu_s']:.2f}x the serial run's, "
                   f"same held-out RMSE: {serial['rmse_pct'] == par['rmse_pct']}")
 
@@ -248,10 +263,10 @@ def _whole_process_synth(path: Path, model: str, duration_s: float) -> None:
         run = synth_process(path, model)
         walls.append(run["wall_s"])
         status = status or run["status"]
-    best, median = min(walls), sorted(walls)[len(walls) // 2]
+    median, best, worst = spread(walls)
     print(f"       whole process `effortface synth {model if model == 'default' else 'SVR_BUNDLE'}` on it "
-          f"({SYNTH_RUNS} runs): best {best:.2f} s = {duration_s / best:.0f}x real time, median "
-          f"{median:.2f} s = {duration_s / median:.0f}x (target >= 200x), exit {status}"
+          f"({SYNTH_RUNS} runs): median {median:.2f} s = {duration_s / median:.0f}x real time (target >= 200x; "
+          f"best {duration_s / best:.0f}x, worst {duration_s / worst:.0f}x), exit {status}"
           + ("" if model == "default" else f" [{model}]"))
 
 
@@ -326,7 +341,7 @@ def bench_crowd(n_chars: int, frames: int) -> None:
     model = load_model(svr_model_dir(svrs, scaler, Path(tempfile.mkdtemp()) / "m"))
     n_sv = sum(len(s.support_) for s in svrs)
     print(f"4. crowd from positions, {n_chars} characters, SVR model ({n_sv} support vectors in all), "
-          "one core (BLAS limited to one thread), best of the frames")
+          f"one core (BLAS limited to one thread), median of {frames} frames (best and worst frame beside it)")
     motion = read_motion(CLIP)
     pos = [np.stack([motion.positions_m[(k + 13 * i) % motion.n_frames] for i in range(n_chars)])
            for k in range(frames + 1)]
@@ -336,12 +351,14 @@ def bench_crowd(n_chars: int, frames: int) -> None:
         for label, options in CROWD_OPTIONS:
             results[label] = _one_crowd(model, chars, motion, pos, options)
         floor_s = _exact_float32_floor(model, n_chars)
-    base = results["float64"][0]
-    for label, (step_s, face_s, _, median_s) in results.items():
-        print(f"  {label:>9}: {step_s * 1e3:6.2f} ms/frame (energies {(step_s - face_s) * 1e3:5.2f} ms, "
-              f"physiology + face {face_s * 1e3:5.2f} ms) -> {n_chars / 60 / step_s:5.0f} characters per core "
-              f"at 60 FPS (target >= 2,500; median frame {n_chars / 60 / median_s:5.0f}); "
-              f"{base / step_s:4.1f}x float64's speed")
+    base = results["float64"][0][0]
+    for label, (steps, faces, _) in results.items():
+        (step_s, best_s, worst_s), face_s = steps, faces[0]
+        print(f"  {label:>9}: median frame {step_s * 1e3:6.2f} ms (best {best_s * 1e3:.2f}, worst "
+              f"{worst_s * 1e3:.2f}; energies {(step_s - face_s) * 1e3:5.2f} ms, physiology + face "
+              f"{face_s * 1e3:5.2f} ms by medians) -> {n_chars / 60 / step_s:5.0f} characters per core "
+              f"at 60 FPS (target >= 2,500; best frame {n_chars / 60 / best_s:5.0f}, worst frame "
+              f"{n_chars / 60 / worst_s:5.0f}); {base / step_s:4.2f}x float64's speed (median frames)")
     exact, face = results["float64"][2], model.face
     surrogate = face.surrogate()
     alpha = max(np.abs(a).sum() for a in face.dual_coef)
@@ -349,17 +366,15 @@ def bench_crowd(n_chars: int, frames: int) -> None:
           f"{SINGLE_PRECISION_ERROR_PER_ALPHA:g} x sum|alpha| = {SINGLE_PRECISION_ERROR_PER_ALPHA * alpha:.1e}); "
           f"surrogate {np.max(np.abs(results['surrogate'][2] - exact)):.2e} (stated <= {SURROGATE_MAX_ERROR:g}; "
           f"{surrogate.n_centres} centres, {surrogate.max_error.max():.1e} on its held-out points)")
-    for how, seconds in zip(("as one matrix", "in cached blocks of rows"), floor_s):
+    for how, (seconds, best, worst) in zip(("as one matrix", "in cached blocks of rows"), floor_s):
         print(f"  floor of the exact face in float32, one sgemm + one exp over {n_chars} x {n_sv} {how}: "
-              f"{seconds * 1e3:.2f} ms -> at most {n_chars / 60 / seconds:.0f} characters per core with "
-              "free energies and physiology")
+              f"median {seconds * 1e3:.2f} ms (best {best * 1e3:.2f}, worst {worst * 1e3:.2f}) -> at most "
+              f"{n_chars / 60 / seconds:.0f} characters per core with free energies and physiology")
 
 
-def _one_crowd(model, chars, motion, pos, options) -> tuple[float, float, object, float]:
-    """Seconds per step (positions in) and per step_work on the same work, best frames (the machine
-    is shared: the fastest frame is the least disturbed); the last weights; the median step."""
-    import numpy as np
-
+def _one_crowd(model, chars, motion, pos, options) -> tuple[tuple, tuple, object]:
+    """Seconds per step (positions in) and per step_work on the same work, each as (median, best,
+    worst) over the frames; the last weights."""
     crowd = model.stream_batch(chars, motion, **options)  # a surrogate is fitted here, once
     crowd.step(pos[0], 1 / 60)
     steps, work = [], []
@@ -374,11 +389,11 @@ def _one_crowd(model, chars, motion, pos, options) -> tuple[float, float, object
         t0 = time.perf_counter()
         replay.step_work(w, p, 1 / 60)
         faces.append(time.perf_counter() - t0)
-    return min(steps), min(faces), out, float(np.median(steps))
+    return spread(steps), spread(faces), out
 
 
-def _exact_float32_floor(model, n_chars: int) -> tuple[float, float]:
-    """Best seconds of one (n, 6) x (6, support vectors) sgemm and one in-place exp over it: as one
+def _exact_float32_floor(model, n_chars: int) -> tuple[tuple, tuple]:
+    """(median, best, worst) seconds of one (n, 6) x (6, support vectors) sgemm and one in-place exp over it: as one
     matrix, and in blocks of rows that stay in the cache (as ``SvrModel`` evaluates it)."""
     import numpy as np
 
@@ -400,15 +415,15 @@ def _exact_float32_floor(model, n_chars: int) -> tuple[float, float]:
             np.matmul(z[start:start + rows], block, out=k)
             np.exp(k, out=k)
 
-    best = []
+    spreads = []
     for run in (one_matrix, in_blocks):
         times = []
         for _ in range(15):
             t0 = time.perf_counter()
             run()
             times.append(time.perf_counter() - t0)
-        best.append(min(times))
-    return best[0], best[1]
+        spreads.append(spread(times))
+    return spreads[0], spreads[1]
 
 
 def main() -> None:
@@ -416,7 +431,7 @@ def main() -> None:
     parser.add_argument("--participants", type=int, nargs="+", default=[10, 30, 100])
     parser.add_argument("--workers", type=int, nargs="+", default=[0, 2], help="0 = serial")
     parser.add_argument("--repeat", type=int, default=1,
-                        help="training: run each configuration N times, keep the fastest (a shared machine)")
+                        help="training: run each configuration N times (median, best and worst shown)")
     parser.add_argument("--clips", type=int, default=8)
     parser.add_argument("--minutes", type=float, nargs="+", default=[10, 60])
     parser.add_argument("--synth-minutes", type=float, nargs="+", default=[10, 30, 60],

@@ -26,7 +26,16 @@ autocorrelated; power differs from work by per-second noise that the weights fol
 does not. The generator is not the trainer's own ``synthetic_table`` (bouts of 40-120 s, other
 curves).
 
-Run: ``python benchmarks/bench_train_scale.py [--participants 10 30] [--keep DIR]``.
+With ``--hr-only`` it runs instead, in this process, only the heart-rate evaluation
+(``evaluate_hr_models``, the step that refitted everyone once per participant) on the same generated
+tables, and prints its seconds per size and the growth between sizes (time ratio against row ratio:
+1 is linear). Below ``--hr-reference-max`` participants it also times the plain refit (every
+held-out model fitted again on the other participants' sessions, every session simulated on its
+own: the evaluation as it was) on the same table, checks that both give the same scores, and prints
+the ratio: the same evaluation on both sides.
+
+Run: ``python benchmarks/bench_train_scale.py [--participants 10 30] [--keep DIR]``, or
+``python benchmarks/bench_train_scale.py --hr-only --participants 10 30 100``.
 """
 
 from __future__ import annotations
@@ -135,12 +144,77 @@ def _mean_held_out(metrics: dict) -> float:
     return float(np.mean([r["rmse_pct_unit"] for r in rows])) if rows else float("nan")
 
 
+def refit_evaluation(series: list) -> dict[str, dict[str, float]]:
+    """The heart-rate evaluation the plain way (the baseline): per held-out participant the pooled
+    tree and the training-level model refitted on everyone else, each session simulated alone.
+    Returns the summary, to be compared with ``evaluate_hr_models``'s."""
+    from effortface.train.hr_fit import (HrEvaluation, by_participant, fit_hr_model, fit_participant,
+                                         held_out_time_blocks, score_series, simulate_series)
+
+    fit = fit_hr_model(series)
+    scores = []
+    for code, own in by_participant(series).items():
+        rest = fit_hr_model([s for s in series if s.participant != code])
+        for s in own:
+            for name, coef in (("per_participant_in_sample", fit.per_participant[code]),
+                               ("pooled_threshold", rest.pooled),
+                               ("tl_regression", rest.tl_regression.at(own[0].training_level))):
+                scores.append(score_series(s, simulate_series(s, coef), name))
+        for fit_on, score_on in held_out_time_blocks(own):
+            try:
+                coef = fit_participant(fit_on)
+            except ValueError:
+                continue
+            scores += [score_series(b, simulate_series(b, coef), "per_participant") for b in score_on]
+    return HrEvaluation(scores, {}, fit).summary()
+
+
+def hr_only(sizes: list[int], reference_max: int) -> None:
+    """Time ``evaluate_hr_models`` in this process on generated tables of each size (module docstring)."""
+    from effortface.train.dataset import hr_series, prepare
+    from effortface.train.hr_fit import evaluate_hr_models
+
+    print(f"heart-rate evaluation (evaluate_hr_models) on generated labs of P participants x 1 h, in-process "
+          f"({os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f})")
+    previous = None
+    for n in sizes:
+        prepared = prepare(lab_table(n))
+        rows = len(prepared)
+        series = hr_series(prepared)
+        del prepared
+        t0 = time.perf_counter()
+        summary = evaluate_hr_models(series).summary()
+        seconds = time.perf_counter() - t0
+        line = (f"  P={n:3d}: {rows:7d} rows, {len(series)} sessions: {seconds:6.2f} s; pooled tree held-out "
+                f"RMSE {summary['pooled_threshold']['rmse_pct']:.3f} %, TL model {summary['tl_regression']['rmse_pct']:.3f} %")
+        if previous is not None:
+            line += (f"; growth {seconds / previous[1]:.2f}x the time for {rows / previous[0]:.2f}x the rows "
+                     f"({seconds / previous[1] / (rows / previous[0]):.2f} per unit of rows, 1 = linear)")
+        print(line + f"; load average {os.getloadavg()[0]:.1f}", flush=True)
+        if n <= reference_max:
+            t0 = time.perf_counter()
+            ref = refit_evaluation(series)
+            ref_s = time.perf_counter() - t0
+            same = all(abs(ref[m][k] - summary[m][k]) <= 1e-12 * max(1.0, abs(ref[m][k]))
+                       for m in ref for k in ref[m])
+            print(f"         baseline, plain refit (same evaluation): {ref_s:6.2f} s, {ref_s / seconds:.1f}x "
+                  f"the time; summaries {'identical to 1e-12' if same else 'DIFFER'}", flush=True)
+        previous = (rows, seconds)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--participants", type=int, nargs="+", default=[10, 30])
     parser.add_argument("--keep", type=Path, help="keep the tables and models in this folder")
     parser.add_argument("--train-args", default="", help="extra options of effortface train, quoted")
+    parser.add_argument("--hr-only", action="store_true",
+                        help="time only the heart-rate evaluation, in-process (no training run)")
+    parser.add_argument("--hr-reference-max", type=int, default=30,
+                        help="with --hr-only: also time the plain refit up to this many participants")
     args = parser.parse_args()
+    if args.hr_only:
+        hr_only(args.participants, args.hr_reference_max)
+        return
     work = args.keep or Path(tempfile.mkdtemp(prefix="bench_train_scale-"))
     work.mkdir(parents=True, exist_ok=True)
     from effortface.train.dataset import write_table

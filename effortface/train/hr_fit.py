@@ -206,20 +206,49 @@ def fit_threshold_tree(w_per_kg: np.ndarray, nhr: np.ndarray, dnhr_per_s: np.nda
         If there are too few samples or no spread in w to place a threshold.
     """
     w, nhr, y = (np.asarray(a, dtype=float) for a in (w_per_kg, nhr, dnhr_per_s))
-    if len(w) < 10 or np.ptp(w) <= 0:
+    _check_spread(len(w), len(w) >= 10 and not np.ptp(w) <= 0)
+    m = _sorted_moments(w, nhr, y)
+    t_cand = _candidate_thresholds(m.w_per_kg)
+    n_low = np.searchsorted(m.w_per_kg, t_cand, side="right")  # samples with w <= t
+    return _best_split(t_cand, n_low, len(w), m.low[:, n_low], m.up[:, len(w) - n_low], min_leaf_fraction)
+
+
+def _check_spread(n: int, spread: bool) -> None:
+    """The tree's input check: at least 10 samples and some spread in w."""
+    if n < 10 or not spread:
         raise ValueError(f"heart-rate fit: expected >= 10 samples (evenly spaced seconds t_s with "
-                         f"hr_bpm) with varying work (w_per_kg), found {len(w)}"
-                         + (" with constant work" if len(w) >= 10 else ""))
+                         f"hr_bpm) with varying work (w_per_kg), found {n}"
+                         + (" with constant work" if n >= 10 else ""))
+
+
+@dataclasses.dataclass(frozen=True)
+class _SortedMoments:
+    """Samples sorted by work with the prefix sums of both leaves (see :func:`_leaf_moments`).
+
+    ``low[:, k]``: moments of the k smallest w (lower leaf, g = NHR^2); ``up[:, k]``: moments of the
+    k largest w (upper leaf, g = (1 - NHR)^2).
+    """
+
+    w_per_kg: np.ndarray
+    low: np.ndarray
+    up: np.ndarray
+
+
+def _sorted_moments(w: np.ndarray, nhr: np.ndarray, y: np.ndarray) -> _SortedMoments:
+    """Sort the samples by w (stable) and take both leaves' prefix sums."""
     order = np.argsort(w, kind="stable")
     w, nhr, y = w[order], nhr[order], y[order]
-    t_cand = _candidate_thresholds(w)
-    n_low = np.searchsorted(w, t_cand, side="right")  # samples with w <= t
-    low = _leaf_moments(w, nhr**2, y)
-    up = _leaf_moments(w[::-1], ((1 - nhr) ** 2)[::-1], y[::-1])
-    sse_l, c_l = _leaf_sse(low, n_low, t_cand)
-    sse_u, c_u = _leaf_sse(up, len(w) - n_low, t_cand)
-    min_n = max(int(min_leaf_fraction * len(w)), 3)
-    ok = (n_low >= min_n) & (len(w) - n_low >= min_n)
+    return _SortedMoments(w, _leaf_moments(w, nhr**2, y),
+                          _leaf_moments(w[::-1], ((1 - nhr) ** 2)[::-1], y[::-1]))
+
+
+def _best_split(t_cand: np.ndarray, n_low: np.ndarray, n: int, low: np.ndarray, up: np.ndarray,
+                min_leaf_fraction: float) -> HrCoefficients:
+    """The candidate of least residual sum of squares (leaf moments ``low``, ``up`` per candidate)."""
+    sse_l, c_l = _leaf_sse(low, t_cand)
+    sse_u, c_u = _leaf_sse(up, t_cand)
+    min_n = max(int(min_leaf_fraction * n), 3)
+    ok = (n_low >= min_n) & (n - n_low >= min_n)
     score = np.where(ok & (c_l >= 0) & (c_u >= 0), sse_l + sse_u, np.inf)
     if not np.isfinite(score).any():
         score = np.where(ok, sse_l + sse_u, np.inf)
@@ -231,10 +260,24 @@ def fit_threshold_tree(w_per_kg: np.ndarray, nhr: np.ndarray, dnhr_per_s: np.nda
 
 def _candidate_thresholds(w_sorted: np.ndarray) -> np.ndarray:
     """Mid-points between distinct values of w plus an even grid over its range."""
-    u = np.unique(w_sorted)
+    return _candidates_from_values(np.unique(w_sorted))
+
+
+def _candidates_from_values(u: np.ndarray) -> np.ndarray:
+    """:func:`_candidate_thresholds` from the sorted distinct values ``u`` of w."""
     mids = (u[:-1] + u[1:]) / 2
     grid = np.linspace(u[0], u[-1], N_GRID_THRESHOLDS)
     return np.unique(np.concatenate([mids, grid]))
+
+
+def _merged_candidates(u: np.ndarray) -> np.ndarray:
+    """:func:`_candidates_from_values` (the same array) by merging the two sorted parts, no sort."""
+    mids = (u[:-1] + u[1:]) / 2
+    grid = np.linspace(u[0], u[-1], N_GRID_THRESHOLDS)
+    merged = np.insert(mids, np.searchsorted(mids, grid), grid)
+    keep = np.ones(len(merged), dtype=bool)
+    keep[1:] = merged[1:] != merged[:-1]
+    return merged[keep]
 
 
 def _leaf_moments(w: np.ndarray, g: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -243,15 +286,77 @@ def _leaf_moments(w: np.ndarray, g: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.concatenate([np.zeros((6, 1)), np.cumsum(terms, axis=1)], axis=1)
 
 
-def _leaf_sse(moments: np.ndarray, n: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Residual sum of squares and LS coefficient of ``y = c (w - t) g`` over the first n samples."""
-    s_wgy, s_gy, s_wwgg, s_wgg, s_gg, s_yy = moments[:, n]
+def _leaf_sse(moments: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Residual sum of squares and LS coefficient of ``y = c (w - t) g`` from a leaf's moments
+    (one column per candidate t)."""
+    s_wgy, s_gy, s_wwgg, s_wgg, s_gg, s_yy = moments
     sxy = s_wgy - t * s_gy
     sxx = s_wwgg - 2 * t * s_wgg + t * t * s_gg
     with np.errstate(divide="ignore", invalid="ignore"):
         c = np.where(sxx > 1e-12, sxy / sxx, 0.0)
         sse = np.where(sxx > 1e-12, s_yy - sxy * sxy / sxx, s_yy)
     return sse, c
+
+
+def pooled_trees_leaving_each_out(samples: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]],
+                                  min_leaf_fraction: float = MIN_LEAF_FRACTION
+                                  ) -> dict[str, HrCoefficients]:
+    """The pooled threshold tree fitted without each participant in turn, from shared prefix sums.
+
+    Equal (up to the order of floating-point additions) to :func:`fit_threshold_tree` on the other
+    participants' samples concatenated, but each held-out fit costs O(own samples + candidate
+    thresholds) instead of a sort of everyone's samples: the samples are sorted and the leaves'
+    prefix sums taken once over everyone, and at every candidate threshold the held-out
+    participant's own counts and sums (from their own sorted prefix sums) are subtracted. The
+    candidates are those of the refit exactly: the mid-points between the work values that remain
+    (a value is dropped when only the held-out participant has it) plus the even grid over their
+    range.
+
+    Parameters
+    ----------
+    samples : dict
+        Participant code -> (w_per_kg, nhr, dnhr_per_s), their sessions' step samples
+        (:func:`step_samples`) concatenated.
+    min_leaf_fraction : float
+        As in :func:`fit_threshold_tree` (a share of the remaining samples).
+
+    Returns
+    -------
+    dict
+        Participant code -> the pooled tree fitted on everyone else.
+
+    Raises
+    ------
+    ValueError
+        As :func:`fit_threshold_tree` on the remaining samples.
+    """
+    arrays = [[np.asarray(own[k], dtype=float) for own in samples.values()] for k in range(3)]
+    whole = _sorted_moments(*(np.concatenate(a) if a else np.empty(0) for a in arrays))
+    values, counts = np.unique(whole.w_per_kg, return_counts=True)
+    out = {}
+    for code, own in samples.items():
+        mine = _sorted_moments(*(np.asarray(a, dtype=float) for a in own))
+        out[code] = _tree_without(whole, values, counts, mine, min_leaf_fraction)
+    return out
+
+
+def _tree_without(whole: _SortedMoments, values: np.ndarray, counts: np.ndarray, mine: _SortedMoments,
+                  min_leaf_fraction: float) -> HrCoefficients:
+    """The threshold tree on ``whole`` minus ``mine`` (``values``/``counts``: whole's distinct w)."""
+    n_all, n_mine = len(whole.w_per_kg), len(mine.w_per_kg)
+    n = n_all - n_mine
+    own_values, own_counts = np.unique(mine.w_per_kg, return_counts=True)
+    at = np.searchsorted(values, own_values)
+    present = np.ones(len(values), dtype=bool)
+    present[at[counts[at] == own_counts]] = False  # values only the held-out participant has
+    u = values[present]
+    _check_spread(n, len(u) >= 2)
+    t_cand = _merged_candidates(u)
+    below_all = np.searchsorted(whole.w_per_kg, t_cand, side="right")
+    below_mine = np.searchsorted(mine.w_per_kg, t_cand, side="right")
+    low = whole.low[:, below_all] - mine.low[:, below_mine]
+    up = whole.up[:, n_all - below_all] - mine.up[:, n_mine - below_mine]
+    return _best_split(t_cand, below_all - below_mine, n, low, up, min_leaf_fraction)
 
 
 # --------------------------------------------------------------------------- fits
@@ -432,6 +537,89 @@ def simulate_series(series: HrSeries, coef: HrCoefficients) -> np.ndarray:
     return pred
 
 
+#: most values (steps x sessions) simulated together by :func:`simulate_many`
+SIMULATE_BATCH_VALUES = 2_000_000
+
+
+def simulate_many(jobs: Sequence[tuple[HrSeries, HrCoefficients]]) -> list[np.ndarray]:
+    """:func:`simulate_series` for many (session, model) pairs at once, the same numbers.
+
+    The recursion steps every session together (one vectorised step per second instead of one
+    Python step per second and session), in batches of sessions of similar length holding at most
+    :data:`SIMULATE_BATCH_VALUES` values. Each session runs on its own 1 s grid from its first
+    measured NHR, exactly as :func:`simulate_series`; the padding after a shorter session's end is
+    discarded.
+
+    Parameters
+    ----------
+    jobs : sequence of (HrSeries, HrCoefficients)
+        Sessions and the model to simulate each with.
+
+    Returns
+    -------
+    list of ndarray
+        Simulated NHR at each session's own ``t_s`` (NaN before its first measured value), in
+        ``jobs`` order.
+
+    Raises
+    ------
+    ValueError
+        If a session has no measured heart rate.
+    """
+    grids = [_work_grid(s) for s, _ in jobs]
+    order = sorted(range(len(jobs)), key=lambda j: len(grids[j][1]))
+    sims: list[np.ndarray] = [np.empty(0)] * len(jobs)
+    start = 0
+    while start < len(order):
+        stop = start + 1
+        while stop < len(order) and (stop + 1 - start) * len(grids[order[stop]][1]) <= SIMULATE_BATCH_VALUES:
+            stop += 1
+        batch = order[start:stop]
+        w = np.zeros((len(grids[batch[-1]][1]), len(batch)))
+        for col, j in enumerate(batch):
+            w[:len(grids[j][1]), col] = grids[j][1]
+        nhr0 = np.array([grids[j][2] for j in batch])
+        coefs = [jobs[j][1] for j in batch]
+        params = NhrParams(np.array([c.t_root_w_per_kg for c in coefs]), np.array([c.c_inc for c in coefs]),
+                           np.array([c.c_dec for c in coefs]))
+        out = _simulate_columns(w, nhr0, params)
+        for col, j in enumerate(batch):
+            sims[j] = out[:len(grids[j][1]), col]
+        start = stop
+    return [_read_back(s, grids[j][0], sims[j]) for j, (s, _) in enumerate(jobs)]
+
+
+def _work_grid(series: HrSeries) -> tuple[int, np.ndarray, float]:
+    """(first measured index, work on the 1 s grid from there with gaps held, NHR there)."""
+    valid = np.flatnonzero(np.isfinite(series.nhr))
+    if len(valid) == 0:
+        raise ValueError(f"session {series.session}: no measured heart rate to start from")
+    i0 = int(valid[0])
+    t = np.asarray(series.t_s[i0:], dtype=float)
+    grid = t[0] + np.arange(int(round(t[-1] - t[0])) + 1)
+    held = np.clip(np.searchsorted(t, grid + 1e-9, side="right") - 1, 0, len(t) - 1)
+    w = np.nan_to_num(np.asarray(series.w_per_kg[i0:], dtype=float)[held])
+    return i0, w, float(series.nhr[i0])
+
+
+def _simulate_columns(w_per_kg: np.ndarray, nhr0: np.ndarray, params: NhrParams) -> np.ndarray:
+    """The recursion of :func:`simulate_nhr` for every column of ``w_per_kg`` (steps x sessions)."""
+    out = np.empty_like(w_per_kg)
+    nhr = np.clip(nhr0, 0.0, 1.0)
+    for i, wi in enumerate(w_per_kg):
+        out[i] = nhr
+        nhr = nhr_step(nhr, wi, params, 1.0)
+    return out
+
+
+def _read_back(series: HrSeries, i0: int, sim: np.ndarray) -> np.ndarray:
+    """A simulated 1 s grid read back at the session's own ``t_s`` (NaN before ``i0``)."""
+    t = np.asarray(series.t_s[i0:], dtype=float)
+    pred = np.full(len(series.t_s), np.nan)
+    pred[i0:] = sim[np.clip(np.round(t - t[0]).astype(int), 0, len(sim) - 1)]
+    return pred
+
+
 # --------------------------------------------------------------------------- evaluation
 
 
@@ -543,44 +731,45 @@ def evaluate_hr_models(series: Sequence[HrSeries], smooth_s: int = DEFAULT_SMOOT
     """
     fit = fit_hr_model(series, smooth_s)
     groups = by_participant(series)
-    scores, preds = [], {}
-
-    def add(name: str, s: HrSeries, coef: HrCoefficients, key: str) -> None:
-        pred = simulate_series(s, coef)
-        preds[(name, key)] = pred
-        scores.append(score_series(s, pred, name))
-
-    samples = [step_samples(s, smooth_s) for s in series]
+    population = _population_models_without(fit, groups, smooth_s)
+    jobs: list[tuple[str, HrSeries, HrCoefficients, str]] = []  # (model, scored series, fit, key)
     for code, own in groups.items():
-        pooled, tl_regression = _without_participant(fit, series, samples, code)
+        pooled, tl_regression = population[code]
         for s in own:
-            add("per_participant_in_sample", s, fit.per_participant[code], s.session)
-            add("pooled_threshold", s, pooled, s.session)
-            add("tl_regression", s, tl_regression.at(own[0].training_level), s.session)
-        for block, coef in _held_out_time(own, smooth_s):
-            if coef is not None:
-                add("per_participant", block, coef, f"{block.session}@{block.t_s[0]:g}")
+            jobs += [("per_participant_in_sample", s, fit.per_participant[code], s.session),
+                     ("pooled_threshold", s, pooled, s.session),
+                     ("tl_regression", s, tl_regression.at(own[0].training_level), s.session)]
+        jobs += [("per_participant", block, coef, f"{block.session}@{block.t_s[0]:g}")
+                 for block, coef in _held_out_time(own, smooth_s) if coef is not None]
+    simulated = iter(simulate_many([(s, coef) for _, s, coef, _ in jobs]))
+    scores, preds = [], {}
+    for code, own in groups.items():
+        for name, s, _, key in (j for j in jobs if j[1].participant == code):
+            preds[(name, key)] = pred = next(simulated)
+            scores.append(score_series(s, pred, name))
         for s in own:  # whole-session curve for Fig. 2 (halves joined for a single session)
             preds[("per_participant", s.session)] = _joined(preds, s)
     return HrEvaluation(scores, preds, fit)
 
 
-def _without_participant(fit: HrModelFit, series: Sequence[HrSeries],
-                         samples: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], code: str
-                         ) -> tuple[HrCoefficients, TlRegression]:
-    """The pooled tree and the training-level regression fitted without participant ``code``.
+def _population_models_without(fit: HrModelFit, groups: dict[str, list[HrSeries]], smooth_s: int
+                               ) -> dict[str, tuple[HrCoefficients, TlRegression]]:
+    """Per participant, the pooled tree and the training-level regression fitted without them.
 
-    The other participants' own trees (``fit.per_participant``) and every session's step samples
-    (``samples``, in ``series`` order) are reused: refitting them for each held-out participant
-    made the evaluation grow as the square of the lab (issue 26). Same models as
-    ``fit_hr_model`` on the other participants' sessions.
+    Both are the models ``fit_hr_model`` gives on the other participants' sessions. Refitting them
+    once per participant made the evaluation grow as the square of the lab; here the other
+    participants' own trees (``fit.per_participant``) are reused for the regression (P lines of P
+    points), and the pooled trees come from one sort of everyone's samples
+    (:func:`pooled_trees_leaving_each_out`).
     """
-    keep = [i for i, s in enumerate(series) if s.participant != code]
-    w, nhr, dnhr = (np.concatenate([samples[i][k] for i in keep]) for k in range(3))
-    pooled = fit_threshold_tree(w, nhr, dnhr)
-    others = [c for c in fit.per_participant if c != code]
-    return pooled, fit_tl_regression([fit.training_levels[c] for c in others],
-                                     [fit.per_participant[c] for c in others])
+    samples = {code: _pool_samples(own, smooth_s) for code, own in groups.items()}
+    pooled = pooled_trees_leaving_each_out(samples)
+    out = {}
+    for code in groups:
+        others = [c for c in fit.per_participant if c != code]
+        out[code] = (pooled[code], fit_tl_regression([fit.training_levels[c] for c in others],
+                                                     [fit.per_participant[c] for c in others]))
+    return out
 
 
 def _joined(preds: dict[tuple[str, str], np.ndarray], s: HrSeries) -> np.ndarray:

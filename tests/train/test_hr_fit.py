@@ -197,15 +197,107 @@ def test_tl_model_beats_pooled_on_held_out_sample_lab_participants():
     assert summary["per_participant"]["r"] > 0.85
 
 
+def _reference_evaluation(series: list[HrSeries]) -> tuple[list, dict]:
+    """The evaluation the slow, plain way: for every held-out participant all models refitted on
+    the other participants' sessions, every session simulated on its own."""
+    from effortface.train.hr_fit import _joined
+
+    fit = fit_hr_model(series)
+    scores, preds = [], {}
+
+    def add(name: str, s: HrSeries, coef: HrCoefficients, key: str) -> None:
+        preds[(name, key)] = pred = simulate_series(s, coef)
+        scores.append(score_series(s, pred, name))
+
+    for code, own in by_participant(series).items():
+        rest = fit_hr_model([s for s in series if s.participant != code])
+        for s in own:
+            add("per_participant_in_sample", s, fit.per_participant[code], s.session)
+            add("pooled_threshold", s, rest.pooled, s.session)
+            add("tl_regression", s, rest.tl_regression.at(own[0].training_level), s.session)
+        for fit_on, score_on in held_out_time_blocks(own):
+            try:
+                coef = fit_participant(fit_on)
+            except ValueError:
+                continue
+            for b in score_on:
+                add("per_participant", b, coef, f"{b.session}@{b.t_s[0]:g}")
+        for s in own:
+            preds[("per_participant", s.session)] = _joined(preds, s)
+    return scores, preds
+
+
+@pytest.fixture(scope="module")
+def twelve() -> list[HrSeries]:
+    """12 participants: 8 with continuous noisy work, 4 on a few shared constant levels (ties across
+    participants; one alone has the top level, so leaving them out moves the candidate grid)."""
+    rng = np.random.default_rng(3)
+    series = [_participant(f"P{i:02d}", tl, rng, dur_s=900) for i, tl in enumerate(np.linspace(0, 7.5, 8))]
+    for i in range(4):
+        levels = rng.choice([0.0, 2.0, 4.0, 8.0, 12.0] + [25.0] * (i == 0), 15)
+        w = np.repeat(levels, 60)
+        nhr = simulate_nhr(w, 0.1, HrCoefficients(5.0 + i, 0.003, 0.001))
+        series.append(HrSeries(f"Q{i}", f"Q{i}_20260101-000000", float(i), np.arange(900.0), w,
+                               np.clip(nhr + rng.normal(0, 0.005, 900), 0, 1), 60.0, 190.0))
+    series[3] = dataclasses.replace(series[3], t_s=np.r_[series[3].t_s[:400], series[3].t_s[410:] + 5],
+                                    w_per_kg=np.r_[series[3].w_per_kg[:400], series[3].w_per_kg[410:]],
+                                    nhr=np.r_[np.full(3, np.nan), series[3].nhr[3:400], series[3].nhr[410:]])
+    return series
+
+
+def test_leave_one_out_pooled_trees_equal_a_refit_on_the_others(twelve):
+    """The incremental pooled trees (shared prefix sums minus the held-out participant's own) equal
+    the plain tree fitted on the other participants' samples concatenated."""
+    from effortface.train.hr_fit import _pool_samples, pooled_trees_leaving_each_out
+
+    groups = by_participant(twelve)
+    samples = {code: _pool_samples(own, 3) for code, own in groups.items()}
+    fast = pooled_trees_leaving_each_out(samples)
+    for code in groups:
+        others = [np.concatenate([samples[c][k] for c in groups if c != code]) for k in range(3)]
+        ref = fit_threshold_tree(*others)
+        assert fast[code].t_root_w_per_kg == ref.t_root_w_per_kg, code  # the same candidate wins
+        np.testing.assert_allclose(dataclasses.astuple(fast[code]), dataclasses.astuple(ref), rtol=1e-12, atol=0)
+
+
+def test_evaluation_equals_the_plain_refit_evaluation(twelve):
+    """Reused fits, incremental pooled trees and batched simulation: the same scores and curves as
+    refitting everything on the others and simulating session by session (to 1e-12)."""
+    ev = evaluate_hr_models(twelve)
+    ref_scores, ref_preds = _reference_evaluation(twelve)
+    assert [(s.participant, s.session, s.model, s.n) for s in ev.scores] == \
+        [(s.participant, s.session, s.model, s.n) for s in ref_scores]
+    for got, want in zip(ev.scores, ref_scores):
+        np.testing.assert_allclose([got.r, got.rmse_pct, got.hr_rmse_bpm],
+                                   [want.r, want.rmse_pct, want.hr_rmse_bpm], rtol=1e-12, atol=1e-12)
+    assert list(ev.predictions) == list(ref_preds)
+    for key, want in ref_preds.items():
+        np.testing.assert_allclose(ev.predictions[key], want, rtol=0, atol=1e-12, equal_nan=True, err_msg=str(key))
+
+
+def test_simulate_many_equals_one_session_at_a_time(twelve, monkeypatch):
+    """The batched recursion gives exactly the per-session numbers, also split into small batches
+    of unequal lengths (a gap in t_s, a late first heart rate)."""
+    import effortface.train.hr_fit as hr_fit
+
+    jobs = [(s, HrCoefficients(4.0 + k / 3, 0.004, 0.001)) for k, s in enumerate(twelve)]
+    jobs.append((dataclasses.replace(twelve[0], t_s=twelve[0].t_s[:100], w_per_kg=twelve[0].w_per_kg[:100],
+                                     nhr=twelve[0].nhr[:100]), jobs[0][1]))
+    monkeypatch.setattr(hr_fit, "SIMULATE_BATCH_VALUES", 2000)
+    for got, (s, coef) in zip(hr_fit.simulate_many(jobs), jobs):
+        assert np.array_equal(got, simulate_series(s, coef), equal_nan=True)
+
+
 def test_held_out_population_models_reuse_the_fits_and_equal_a_refit():
-    """issue 26: the evaluation refitted every other participant once per participant (P^2); the
-    reused fits give the same pooled tree and training-level regression as a refit."""
+    """The reused per-participant fits give the same training-level regression as a refit, and the
+    incremental pooled tree the refit's pooled tree."""
     from effortface.train.dataset import hr_series, prepare, synthetic_table
-    from effortface.train.hr_fit import _without_participant, fit_hr_model, step_samples
+    from effortface.train.hr_fit import _population_models_without
 
     series = hr_series(prepare(synthetic_table(n_participants=4, seconds=300, seed=8)))
     fit = fit_hr_model(series)
-    samples = [step_samples(s) for s in series]
-    pooled, tl = _without_participant(fit, series, samples, "P02")
+    pooled, tl = _population_models_without(fit, by_participant(series), 3)["P02"]
     refit = fit_hr_model([s for s in series if s.participant != "P02"])
-    assert pooled == refit.pooled and tl.as_dict() == refit.tl_regression.as_dict()
+    assert pooled.t_root_w_per_kg == refit.pooled.t_root_w_per_kg
+    np.testing.assert_allclose(dataclasses.astuple(pooled), dataclasses.astuple(refit.pooled), rtol=1e-12)
+    assert tl.as_dict() == refit.tl_regression.as_dict()
