@@ -11,9 +11,15 @@
    stream per character). Baselines: scikit-learn ``SVR.predict`` called per frame, once per
    blendshape on all characters (batched) and once per character and blendshape (naive).
    Target: >= 10x against calling scikit-learn per frame.
+2b. **Crowd from joint positions** (``CrowdStream.step``, the crowd built at 60 FPS: one energy tick
+   a frame) at 2,500 characters with the same model (4 x ~2,250 = 8,996 support vectors): characters
+   at 60 FPS per core by the median frame, best and worst beside it, exact float64 and float32 faces
+   (target >= 2,500 in float32), the energies split off, float32's max |weight - float64|, and the
+   ratio of scikit-learn's ``SVR.predict`` on the same features to our whole step.
 3. **Memory** per streaming character (tracemalloc), single streams and crowd members.
 
-Run: ``python benchmarks/bench_runtime.py [--minutes 10] [--crowd 1000] [--support 2000]``
+Run: ``python benchmarks/bench_runtime.py [--minutes 10] [--crowd 1000] [--support 2000]
+[--crowd-positions 2500] [--skip pipeline,crowd,positions,memory]``
 """
 
 from __future__ import annotations
@@ -154,18 +160,98 @@ def bench_crowd(model: FaceModel, svrs, scaler, n_chars: int, frames: int, skele
           f"float32 ratios {batched_s / single_s:5.1f}x and {naive_s / single_s:6.1f}x")
 
 
-def bench_crowd_positions(model: FaceModel, n_chars: int, frames: int, motion: Motion) -> None:
-    """The full crowd path: joint positions in, one causal energy stream per character."""
-    chars = [Character(training_level=5.0) for _ in range(n_chars)]
-    crowd = model.stream_batch(chars, motion)
-    t0 = time.perf_counter()
-    for k in range(frames):
-        pos = np.stack([motion.positions_m[(k + 13 * i) % motion.n_frames] for i in range(n_chars)])
-        crowd.step(pos, 1 / 60)
-    per_frame = (time.perf_counter() - t0) / frames
-    print(f"  step (positions in), {n_chars} characters: {per_frame * 1e3:6.2f} ms/frame -> "
-          f"{n_chars * (1 / 60) / per_frame:5.0f} characters in real time per core "
-          "(energies vectorised over the characters, exact float64 face)")
+#: the crowd's face options timed from positions, each against the float64 exact face
+CROWD_OPTIONS = (("float64", {}), ("float32", {"single_precision": True}),
+                 ("surrogate", {"surrogate": True}))
+#: frames of the crowd timed through scikit-learn (spread over the run)
+SKLEARN_FRAMES = 5
+#: the game's frame rate in the crowd benchmarks: one energy tick per frame (the crowd's ``fps``)
+CROWD_FPS = 60.0
+
+
+@dataclasses.dataclass(frozen=True)
+class CrowdTiming:
+    """One crowd option stepped from joint positions: seconds per frame and the weights."""
+
+    label: str
+    n_chars: int
+    step_s: np.ndarray     # seconds of every timed ``step`` (positions in)
+    face_s: np.ndarray     # seconds of ``step_work`` on the same work (physiology + face + filter)
+    weights: np.ndarray    # (frames, N, B) weights of every timed step
+    features: np.ndarray   # (frames, N, 4) the face's features [w, p, NHR, EPOC_norm] of every step
+
+    def per_core(self, seconds: float) -> float:
+        """Characters kept at :data:`CROWD_FPS` on one core at ``seconds`` per frame."""
+        return self.n_chars / CROWD_FPS / seconds
+
+    def line(self) -> str:
+        """Characters at 60 FPS per core: median frame first, best and worst beside it."""
+        med, best, worst = np.median(self.step_s), self.step_s.min(), self.step_s.max()
+        energy = np.median(self.step_s) - np.median(self.face_s)
+        return (f"{self.label:>9}: {self.per_core(med):5.0f} characters at 60 FPS per core by the median frame "
+                f"(best {self.per_core(best):5.0f}, worst {self.per_core(worst):5.0f}); "
+                f"{med * 1e3:6.2f} ms/frame = energies {energy * 1e3:5.2f} + physiology, face and filter "
+                f"{np.median(self.face_s) * 1e3:5.2f}")
+
+
+def crowd_positions(n_chars: int, frames: int, motion: Motion) -> list[np.ndarray]:
+    """Joint positions (N, J, 3) for ``frames + 1`` frames: character i plays the clip 13 i frames on."""
+    offsets = 13 * np.arange(n_chars)
+    return [motion.positions_m[(k + offsets) % motion.n_frames] for k in range(frames + 1)]
+
+
+def time_crowd(model: FaceModel, label: str, options: dict, positions: list[np.ndarray],
+               skeleton: Motion, fps: float = CROWD_FPS) -> CrowdTiming:
+    """Step a crowd from positions (the first frame untimed), then replay its work through
+    ``step_work`` on a fresh crowd to split the energies from the rest."""
+    n_chars = len(positions[0])
+    chars = [Character()] * n_chars
+    crowd = model.stream_batch(chars, skeleton, fps=fps, **options)  # a surrogate is fitted here, once
+    crowd.step(positions[0], 1 / fps)
+    steps, weights, features = [], [], []
+    for pos in positions[1:]:
+        t0 = time.perf_counter()
+        weights.append(crowd.step(pos, 1 / fps))
+        steps.append(time.perf_counter() - t0)
+        last = crowd.last
+        features.append(np.column_stack([last["w_per_kg"], last["p_per_kg"], last["nhr"], last["epoc_norm"]]))
+    replay = model.stream_batch(chars, skeleton, fps=fps, **options)
+    faces = []
+    for x in features:
+        t0 = time.perf_counter()
+        replay.step_work(x[:, 0], x[:, 1], 1 / fps)
+        faces.append(time.perf_counter() - t0)
+    return CrowdTiming(label, n_chars, np.array(steps), np.array(faces), np.array(weights), np.array(features))
+
+
+def bench_crowd_positions(model: FaceModel, svrs, scaler, n_chars: int, frames: int, motion: Motion,
+                          labels: tuple[str, ...] = ("float64", "float32")) -> dict[str, CrowdTiming]:
+    """The full crowd path, joint positions in: characters at 60 FPS per core for each face option,
+    the float32 error against float64, and scikit-learn's ``SVR.predict`` on the same features."""
+    positions = crowd_positions(n_chars, frames, motion)
+    results = {label: time_crowd(model, label, options, positions, motion)
+               for label, options in CROWD_OPTIONS if label in labels}
+    exact = results["float64"]
+    for timing in results.values():
+        print("  " + timing.line())
+    for label, timing in results.items():
+        if label != "float64":
+            print(f"  {label}: max |weight - float64| {np.abs(timing.weights - exact.weights).max():.1e} "
+                  f"over {frames} frames x {n_chars} characters")
+    sklearn_s = []
+    for x in exact.features[::max(1, len(exact.features) // SKLEARN_FRAMES)]:  # about a second each
+        z = scaler.transform(x)
+        t0 = time.perf_counter()
+        for s in svrs:
+            s.predict(z)
+        sklearn_s.append(time.perf_counter() - t0)
+    sk = float(np.median(sklearn_s))
+    ratios = ", ".join(f"{label} {sk / np.median(t.step_s):4.1f}x" for label, t in results.items())
+    print(f"  scikit-learn SVR.predict on the same features (one call per blendshape, all characters): "
+          f"{sk * 1e3:6.2f} ms/frame median for the face alone = {exact.per_core(sk):5.0f} characters at 60 FPS; "
+          f"ratio scikit-learn face / our whole step (energies included), median frames "
+          f"({len(sklearn_s)} frames of scikit-learn): {ratios}")
+    return results
 
 
 def bench_memory(model: FaceModel, skeleton: Motion, n: int = 50) -> None:
@@ -196,7 +282,11 @@ def main() -> None:
     parser.add_argument("--crowd", type=int, default=1000)
     parser.add_argument("--support", type=int, default=2000)
     parser.add_argument("--frames", type=int, default=30, help="crowd frames to time")
+    parser.add_argument("--crowd-positions", type=int, default=2500,
+                        help="characters of the crowd stepped from joint positions")
+    parser.add_argument("--skip", default="", help="comma-separated sections to skip: pipeline,crowd,positions,memory")
     args = parser.parse_args()
+    skip = set(args.skip.split(","))
     import tempfile
 
     print(f"clip: {CLIP.name} tiled to {args.minutes:g} min at 120 Hz")
@@ -209,14 +299,21 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         svr_model = load_model(svr_model_dir(svrs, scaler, Path(tmp) / "model"))
     rule_model = load_model("default")
-    print("1. whole pipeline")
-    bench_pipeline(rule_model, "rule model", motion, stream_frames=2000)
-    bench_pipeline(svr_model, f"SVR model ({sum(n_sv)} SVs)", motion, stream_frames=1000)
-    print("2. crowd at 60 FPS, SVR model")
-    bench_crowd(svr_model, svrs, scaler, args.crowd, args.frames, motion)
-    bench_crowd_positions(svr_model, min(args.crowd, 200), 10, motion)
-    print("3. memory")
-    bench_memory(svr_model, motion)
+    if "pipeline" not in skip:
+        print("1. whole pipeline")
+        bench_pipeline(rule_model, "rule model", motion, stream_frames=2000)
+        bench_pipeline(svr_model, f"SVR model ({sum(n_sv)} SVs)", motion, stream_frames=1000)
+    if "crowd" not in skip:
+        print("2. crowd at 60 FPS, SVR model")
+        bench_crowd(svr_model, svrs, scaler, args.crowd, args.frames, motion)
+    if "positions" not in skip:
+        print(f"2b. crowd from joint positions, {args.crowd_positions} characters at {CROWD_FPS:g} FPS "
+              f"(crowd fps={CROWD_FPS:g}: one energy tick per frame), SVR model ({sum(n_sv)} support vectors), "
+              f"one core, load average {os.getloadavg()[0]:.1f}")
+        bench_crowd_positions(svr_model, svrs, scaler, args.crowd_positions, args.frames, motion)
+    if "memory" not in skip:
+        print("3. memory")
+        bench_memory(svr_model, motion)
 
 
 if __name__ == "__main__":

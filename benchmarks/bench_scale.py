@@ -21,13 +21,14 @@ taken between medians of the same work on both sides:
    large as the clip); whole-process ``effortface synth`` time for the 10-minute clip in x real time
    (interpreter start-up and imports included; median, best and worst of 3 runs), with the default model
    and with each ``--svr-model`` bundle.
-4. **Crowd from positions**: characters per core at 60 FPS (one BLAS thread) with a
-   ~2,000-support-vector SVR model (the median frame, with the best and the worst frame beside it),
-   through ``CrowdStream.step(positions)``: the exact face in
-   float64 (the baseline), in float32 and the compact surrogate (``surrogate=True``); the time
-   split between the energies and physiology + face (``step_work`` on the same work); each
-   option's max |weight - float64| against its stated bound; the floor of an exact float32 face
-   (median of 15 runs, best and worst beside). Ratios to float64 are of the median frames.
+4. **Crowd from positions**: characters per core at 60 FPS (one BLAS thread) with
+   ``bench_runtime``'s SVR model (4 x ~2,250 = 8,996 support vectors; median frame first, best and
+   worst beside it), through ``CrowdStream.step(positions)``: the exact face in float64 (the
+   baseline), in float32 and the compact surrogate (``surrogate=True``); the time split between the
+   energies and physiology + face (``step_work`` on the same work); each option's max
+   |weight - float64| against its stated bound; scikit-learn's ``SVR.predict`` on the same features;
+   the floor of an exact float32 face. The timing is ``bench_runtime.bench_crowd_positions`` (one
+   helper for both benchmarks).
 5. **Synth memory**: peak RSS of a whole ``effortface synth`` process (``os.wait4`` rusage of the
    child) on the jumping-jacks clip tiled forwards and backwards to 10, 30 and 60 minutes at 120 Hz,
    the growth per clip minute, and the ratio against the 1-minute clip measured in the same run.
@@ -324,72 +325,37 @@ def bench_synth_memory(minutes_list: list[float], baseline_minutes: float = 1.0)
 # --------------------------------------------------------------------------- 4. crowd
 
 
-#: the crowd's face options timed, each against the float64 exact face
-CROWD_OPTIONS = (("float64", {}), ("float32", {"single_precision": True}), ("surrogate", {"surrogate": True}))
-
-
 def bench_crowd(n_chars: int, frames: int) -> None:
+    """Section 4: the crowd from joint positions, timed by ``bench_runtime``'s helper (one definition)."""
     import numpy as np
-    from bench_runtime import fit_svrs, svr_model_dir
+    from bench_runtime import CROWD_FPS, bench_crowd_positions, fit_svrs, svr_model_dir
     from threadpoolctl import threadpool_limits
 
     from effortface.synth.face import SINGLE_PRECISION_ERROR_PER_ALPHA, SURROGATE_MAX_ERROR
     from effortface.synth.motion import read_motion
-    from effortface.synth.runtime import Character, load_model
+    from effortface.synth.runtime import load_model
 
     svrs, scaler = fit_svrs(2000)
     model = load_model(svr_model_dir(svrs, scaler, Path(tempfile.mkdtemp()) / "m"))
     n_sv = sum(len(s.support_) for s in svrs)
-    print(f"4. crowd from positions, {n_chars} characters, SVR model ({n_sv} support vectors in all), "
-          f"one core (BLAS limited to one thread), median of {frames} frames (best and worst frame beside it)")
+    print(f"4. crowd from positions, {n_chars} characters at {CROWD_FPS:g} FPS, SVR model ({n_sv} support vectors "
+          f"in all), one core (BLAS limited to one thread), load average {os.getloadavg()[0]:.1f}")
     motion = read_motion(CLIP)
-    pos = [np.stack([motion.positions_m[(k + 13 * i) % motion.n_frames] for i in range(n_chars)])
-           for k in range(frames + 1)]
-    chars = [Character()] * n_chars
-    results = {}
     with threadpool_limits(limits=1):
-        for label, options in CROWD_OPTIONS:
-            results[label] = _one_crowd(model, chars, motion, pos, options)
+        bench_crowd_positions(model, svrs, scaler, n_chars, frames, motion,
+                              labels=("float64", "float32", "surrogate"))
         floor_s = _exact_float32_floor(model, n_chars)
-    base = results["float64"][0][0]
-    for label, (steps, faces, _) in results.items():
-        (step_s, best_s, worst_s), face_s = steps, faces[0]
-        print(f"  {label:>9}: median frame {step_s * 1e3:6.2f} ms (best {best_s * 1e3:.2f}, worst "
-              f"{worst_s * 1e3:.2f}; energies {(step_s - face_s) * 1e3:5.2f} ms, physiology + face "
-              f"{face_s * 1e3:5.2f} ms by medians) -> {n_chars / 60 / step_s:5.0f} characters per core "
-              f"at 60 FPS (target >= 2,500; best frame {n_chars / 60 / best_s:5.0f}, worst frame "
-              f"{n_chars / 60 / worst_s:5.0f}); {base / step_s:4.2f}x float64's speed (median frames)")
-    exact, face = results["float64"][2], model.face
-    surrogate = face.surrogate()
+    face = model.face
     alpha = max(np.abs(a).sum() for a in face.dual_coef)
-    print(f"  max |weight - float64|: float32 {np.max(np.abs(results['float32'][2] - exact)):.2e} (bound "
-          f"{SINGLE_PRECISION_ERROR_PER_ALPHA:g} x sum|alpha| = {SINGLE_PRECISION_ERROR_PER_ALPHA * alpha:.1e}); "
-          f"surrogate {np.max(np.abs(results['surrogate'][2] - exact)):.2e} (stated <= {SURROGATE_MAX_ERROR:g}; "
-          f"{surrogate.n_centres} centres, {surrogate.max_error.max():.1e} on its held-out points)")
+    surrogate = face.surrogate()
+    print(f"  stated bounds: float32 {SINGLE_PRECISION_ERROR_PER_ALPHA:g} x sum|alpha| = "
+          f"{SINGLE_PRECISION_ERROR_PER_ALPHA * alpha:.1e}; surrogate {SURROGATE_MAX_ERROR:g} "
+          f"({surrogate.n_centres} centres, {surrogate.max_error.max():.1e} on its held-out points)")
     for how, (seconds, best, worst) in zip(("as one matrix", "in cached blocks of rows"), floor_s):
-        print(f"  floor of the exact face in float32, one sgemm + one exp over {n_chars} x {n_sv} {how}: "
-              f"median {seconds * 1e3:.2f} ms (best {best * 1e3:.2f}, worst {worst * 1e3:.2f}) -> at most "
-              f"{n_chars / 60 / seconds:.0f} characters per core with free energies and physiology")
-
-
-def _one_crowd(model, chars, motion, pos, options) -> tuple[tuple, tuple, object]:
-    """Seconds per step (positions in) and per step_work on the same work, each as (median, best,
-    worst) over the frames; the last weights."""
-    crowd = model.stream_batch(chars, motion, **options)  # a surrogate is fitted here, once
-    crowd.step(pos[0], 1 / 60)
-    steps, work = [], []
-    for k in range(1, len(pos)):
-        t0 = time.perf_counter()
-        out = crowd.step(pos[k], 1 / 60)
-        steps.append(time.perf_counter() - t0)
-        work.append((crowd.last["w_per_kg"], crowd.last["p_per_kg"]))
-    replay = model.stream_batch(chars, motion, **options)
-    faces = []
-    for w, p in work:
-        t0 = time.perf_counter()
-        replay.step_work(w, p, 1 / 60)
-        faces.append(time.perf_counter() - t0)
-    return spread(steps), spread(faces), out
+        print(f"  floor of the exact face in float32, one sgemm + one exp over {n_chars} x "
+              f"{face._single.shape[1]} distinct support vectors {how}: median {seconds * 1e3:.2f} ms (best "
+              f"{best * 1e3:.2f}, worst {worst * 1e3:.2f}) -> at most {n_chars / 60 / seconds:.0f} characters "
+              f"per core with free energies and physiology")
 
 
 def _exact_float32_floor(model, n_chars: int) -> tuple[tuple, tuple]:

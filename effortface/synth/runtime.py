@@ -348,14 +348,15 @@ class CrowdStream:
     grows with its support vectors (2,500 characters x 8,000 support vectors: 20 million kernel
     terms a frame):
 
-    * ``single_precision``: the kernels in float32, about 2x faster; the error grows with the
-      dual coefficients (:meth:`effortface.synth.face.SvrModel.predict`: 6.5e-3 over the training
-      range of a C = 100 model with 9,000 support vectors, 8e-4 on a crowd).
+    * ``single_precision``: the kernels in float32, each distinct support vector once for all the
+      blendshapes that share it (6.5x faster than float64 for a model of 8,996 vectors, 2,300
+      distinct: about 3,300 characters at 60 FPS per core from joint positions, median frame); the
+      error grows with the dual coefficients (:meth:`effortface.synth.face.SvrModel.predict`:
+      6.5e-3 over the training range of a C = 100 model with 9,000 support vectors, 1.1e-3 on a crowd).
     * ``surrogate``: the model's compact surrogate (:class:`effortface.synth.face.SvrSurrogate`,
       fitted once per model in 1-2 s): at most :data:`~effortface.synth.face.SURROGATE_MAX_ERROR`
       (1e-3; 8e-5 on its held-out points for that model) from the exact weights on the training
-      range, the exact model outside it; its face about 5x faster than float32 for that model
-      (2.5 ms against 13 ms for 2,500 characters). Models too small to gain from one (no surrogate
+      range, the exact model outside it. Models too small to gain from one (no surrogate
       within 1/4 of their kernel terms) stay exact.
 
     Neither is used unless asked: single characters (:meth:`FaceModel.stream`) are always exact.
@@ -387,7 +388,10 @@ class CrowdStream:
         return self._n
 
     def step(self, positions_m: Any, dt_s: float) -> np.ndarray:
-        """Advance all characters: positions (N, J, 3) in metres -> weights (N, B)."""
+        """Advance all characters: positions (N, J, 3) in metres -> weights (N, B).
+
+        Everything is vectorised over the characters (no per-character Python): one energy tick
+        per 1 / fps of game time (build the crowd with the game's frame rate as ``fps``)."""
         pos = np.asarray(positions_m, dtype=float)
         if pos.ndim != 3 or pos.shape[0] != len(self):
             raise UserError(f"positions_m: expected shape ({len(self)}, J, 3), found {pos.shape}")

@@ -115,3 +115,52 @@ def test_small_models_keep_their_exact_face(tmp_path: Path, shared_data: Path) -
     motion = read_motion(shared_data / JJ)
     np.testing.assert_array_equal(_crowd_weights(model, motion, 5, surrogate=True),
                                   _crowd_weights(model, motion, 5))
+
+
+def test_float32_kernels_evaluate_each_shared_support_vector_once(big_svr: SvrModel) -> None:
+    """The four SVRs share gamma and training rows: the float32 block holds the union of their
+    support vectors (one kernel term each), not the sum, and still gives every blendshape's sum."""
+    union = np.unique(np.vstack(big_svr.support_vectors), axis=0)
+    assert big_svr._single.shape[1] == len(union) < sum(len(s) for s in big_svr.support_vectors)
+    x = HIGH * np.random.default_rng(5).uniform(size=(300, 4))
+    error = np.abs(big_svr.predict(x, single_precision=True) - big_svr.predict(x)).max(axis=0)
+    assert np.all(error > 0)
+    assert np.all(error <= SINGLE_PRECISION_ERROR_PER_ALPHA * _alpha_sums(big_svr))
+
+
+def test_float32_crowd_from_positions_equals_separate_exact_streams(big_model: FaceModel,
+                                                                     shared_data: Path) -> None:
+    """Six different characters stepped together from joint positions (float32 face) against six
+    separate exact float64 streams: within the stated float32 bound on every frame."""
+    motion = read_motion(shared_data / JJ)
+    chars = [Character(training_level=float(tl), mass_kg=55.0 + 9 * tl, sex="female" if tl % 2 else "male")
+             for tl in range(6)]
+    crowd = big_model.stream_batch(chars, motion, single_precision=True)
+    streams = [big_model.stream(c, motion) for c in chars]
+    assert isinstance(big_model.face, SvrModel)
+    bound = SINGLE_PRECISION_ERROR_PER_ALPHA * _alpha_sums(big_model.face).max()
+    worst = 0.0
+    for k in range(40):
+        positions = np.stack([motion.positions_m[(k + 17 * i) % motion.n_frames] for i in range(len(chars))])
+        together = crowd.step(positions, 1 / 60)
+        alone = np.array([s.step(p, 1 / 60) for s, p in zip(streams, positions)])
+        worst = max(worst, float(np.abs(together - alone).max()))
+    assert 0 < worst <= bound, (worst, bound)
+
+
+def test_crowd_step_has_no_per_character_work(big_model: FaceModel, shared_data: Path) -> None:
+    """The same character 50 times gives 50 identical rows (float32 and float64), and one character
+    alone the same weights within the precision's bound (BLAS sums one row in another order):
+    nothing in the step depends on how many characters share it."""
+    motion = read_motion(shared_data / JJ)
+    assert isinstance(big_model.face, SvrModel)
+    float32_bound = SINGLE_PRECISION_ERROR_PER_ALPHA * _alpha_sums(big_model.face).max()
+    for options, bound in (({}, 1e-9), ({"single_precision": True}, float32_bound)):
+        one = big_model.stream_batch([Character()], motion, **options)
+        many = big_model.stream_batch([Character()] * 50, motion, **options)
+        for k in range(12):
+            alone = one.step(motion.positions_m[k][None], 1 / 60)
+            stacked = many.step(np.repeat(motion.positions_m[k][None], 50, axis=0), 1 / 60)
+            if options:
+                np.testing.assert_array_equal(stacked, np.repeat(stacked[:1], 50, axis=0))
+            np.testing.assert_allclose(stacked, np.repeat(alone, 50, axis=0), rtol=0, atol=bound)
