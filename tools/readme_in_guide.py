@@ -67,6 +67,16 @@ SUPERSEDED = {
     # reworded only to drop an issue number
     "Output filter (new in issue 18, on by default)": "guide/synthesize.md (new, on by default)",
     "exact: 1,300; before issue 15's work here": "guide/synthesize.md (before the scaling work)",
+    # figures re-measured like for like (median frames) or behaviour changed since the old README
+    "CPU, and takes 0.73x the serial time": "guide/train.md (re-measured: median of 3 runs)",
+    "seeks land on the right frame, trims `video_frames.csv`": "guide/capture.md (frames copied byte for byte)",
+    "support vector (2,500 characters x 9,000 vectors": "guide/synthesize.md (re-measured)",
+    "exact): `single_precision=True` evaluates the kernels in float32, about 2x": "guide/synthesize.md",
+    "6e-8 x sum |alpha| of float64 (`SINGLE_PRECISION_ERROR_PER_ALPHA`; 8e-4": "guide/synthesize.md",
+    "about 2,300 characters per core at 60 FPS": "guide/synthesize.md (3,300 by the median frame)",
+    "the energies are paid); `surrogate=True`": "guide/synthesize.md",
+    "on the benchmark's crowd) and the exact model outside it, about 5,000": "guide/synthesize.md",
+    "blendshape) stays exact. Figures: `benchmarks/bench_scale.py` (section 4).": "guide/synthesize.md",
 }
 
 
