@@ -222,6 +222,7 @@ def main() -> None:
     print(f"issue 26: effortface train --table on generated labs of P participants x 1 h "
           f"({os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f})")
     previous = None
+    sizes: list[tuple[int, float, float]] = []
     for n in args.participants:
         t0 = time.perf_counter()
         table = lab_table(n)
@@ -246,6 +247,11 @@ def main() -> None:
                   f"({res['peak_mb'] / previous[2]:.2f}x the memory, {res['seconds'] / previous[1]:.2f}x the time "
                   f"for {rows / previous[0]:.2f}x the rows)")
         previous = (rows, res["seconds"], res["peak_mb"])
+        sizes.append(previous)
+    if len(sizes) > 1:
+        (r0, s0, m0), (r1, s1, m1) = sizes[-2], sizes[-1]
+        print(f"growth law ({r0} -> {r1} rows): {1024 * (m1 - m0) / (r1 - r0):.2f} KB of peak RSS and "
+              f"{1e3 * (s1 - s0) / (r1 - r0):.3f} ms of wall time per row (goal: < 1 KB per row)")
     if args.keep is None:
         import shutil
 

@@ -82,6 +82,10 @@ N_LANDMARKS = 300
 METHODS = ("exact_svr", "nystroem")
 #: rows per chunk when the approximation sums its normal equations (bounds the memory)
 _CHUNK_ROWS = 16384
+#: rows per chunk when the approximation predicts: its (rows x landmarks) kernel and the distance
+#: temporaries behind it stay a few MB whatever the rows (issue 26: a prediction over all rows at
+#: once cost about 3 KB of peak memory per row)
+PREDICT_CHUNK_ROWS = 4096
 
 
 @dataclasses.dataclass(frozen=True)
@@ -261,14 +265,42 @@ class LandmarkRegressor:
         self.C, self.gamma, self.epsilon = float(C), float(gamma), float(epsilon)
 
     def predict(self, xs: np.ndarray) -> np.ndarray:
-        """Predictions for standardised rows ``xs`` (n, F)."""
-        return _landmark_kernel(xs, self.support_vectors_, self.gamma) @ self.dual_coef_[0] \
+        """Predictions for standardised rows ``xs`` (n, F), in chunks of :data:`PREDICT_CHUNK_ROWS`."""
+        return kernel_products(xs, self.support_vectors_, self.gamma, [self.dual_coef_[0]])[0] \
             + self.intercept_[0]
 
 
 def _landmark_kernel(xs: np.ndarray, landmarks: np.ndarray, gamma: float) -> np.ndarray:
     """RBF kernel (n, m) of rows against landmarks."""
     return rbf_kernel(xs, landmarks, gamma=gamma)
+
+
+def kernel_products(xs: np.ndarray, landmarks: np.ndarray, gamma: float,
+                    weights: Sequence[np.ndarray]) -> list[np.ndarray]:
+    """``K(xs, landmarks) @ w`` for every ``w`` of ``weights``, over chunks of
+    :data:`PREDICT_CHUNK_ROWS` rows: the kernel is never held for all rows at once.
+
+    Parameters
+    ----------
+    xs : ndarray, shape (n, F)
+        Standardised rows.
+    landmarks : ndarray, shape (m, F)
+    gamma : float
+        RBF gamma.
+    weights : sequence of ndarray, each shape (m,) or (m, k)
+
+    Returns
+    -------
+    list of ndarray
+        One product per weight, shape (n,) or (n, k).
+    """
+    out = [np.empty((len(xs), *np.shape(w)[1:])) for w in weights]
+    for start in range(0, len(xs), PREDICT_CHUNK_ROWS):
+        rows = slice(start, start + PREDICT_CHUNK_ROWS)
+        k = _landmark_kernel(xs[rows], landmarks, gamma)
+        for product, w in zip(out, weights):
+            product[rows] = k @ w
+    return out
 
 
 def landmark_rows(n_rows: int, n_landmarks: int, seed: int) -> np.ndarray:
@@ -367,7 +399,7 @@ def _normal_equations(xs: np.ndarray, y: np.ndarray, landmarks: np.ndarray, gamm
         a[:, m] = 1.0
         for key, cols in groups.items():
             ok = finite[rows, cols[0]]
-            a_ok = a[ok]
+            a_ok = a if ok.all() else a[ok]  # no copy of the chunk when every row is annotated
             ata, aty = sums[key]
             ata += a_ok.T @ a_ok
             aty += a_ok.T @ y[rows][ok][:, cols]
@@ -543,9 +575,10 @@ def _search_fold_landmarks(data: FaceData, train: np.ndarray, test: np.ndarray, 
     for gamma in config.grid["gamma"]:
         landmarks, coefs = fit_landmark_models(xs_tr, y_tr, gamma, config.grid["C"], config.n_landmarks,
                                                config.seed)
-        k_te = _landmark_kernel(xs_te, landmarks, gamma)
+        products = dict(zip(config.grid["C"], kernel_products(xs_te, landmarks, gamma,
+                                                              [coefs[c][:-1] for c in config.grid["C"]])))
         for c, eps in itertools.product(config.grid["C"], config.grid["epsilon"]):
-            pred = k_te @ coefs[c][:-1] + coefs[c][-1]
+            pred = products[c] + coefs[c][-1]
             pred[~te_ok] = np.nan
             preds[(c, gamma, eps)][:] = pred
             err = np.where(te_ok, pred - y_te, np.nan)

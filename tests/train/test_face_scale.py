@@ -16,8 +16,9 @@ import pytest
 from effortface.cli import main
 from effortface.core.blendshapes import DEFAULT_SET
 from effortface.train.dataset import prepare, synthetic_table, write_table
-from effortface.train.face_fit import (EXACT_MAX_ROWS, N_LANDMARKS, PENALTY_REFERENCE_ROWS, FaceFitConfig,
-                                       LandmarkRegressor, fit_face_models, fit_landmark_models, held_out_scores)
+from effortface.train.face_fit import (EXACT_MAX_ROWS, N_LANDMARKS, PENALTY_REFERENCE_ROWS, PREDICT_CHUNK_ROWS,
+                                       FaceFitConfig, LandmarkRegressor, fit_face_models, fit_landmark_models,
+                                       held_out_scores, kernel_products)
 from effortface.synth.runtime import load_model
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -67,6 +68,51 @@ def test_landmark_fit_is_kernel_ridge_on_the_landmarks():
     ref = KernelRidge(alpha=60 / PENALTY_REFERENCE_ROWS / 10.0, kernel="rbf", gamma=0.5).fit(xs, centred)
     pred = rbf_kernel(xs, landmarks, gamma=0.5) @ coefs[10.0][:-1, 0]
     np.testing.assert_allclose(pred, ref.predict(xs), atol=1e-4)
+
+
+def _landmark_model(n_landmarks: int = N_LANDMARKS) -> LandmarkRegressor:
+    rng = np.random.default_rng(1)
+    xs = rng.normal(size=(3 * n_landmarks, 4))
+    y = np.sin(xs[:, :1]) + 0.1 * rng.normal(size=(len(xs), 1))
+    landmarks, coefs = fit_landmark_models(xs, y, 0.5, [10.0], n_landmarks=n_landmarks, seed=0)
+    return LandmarkRegressor(landmarks, coefs[10.0][:-1, 0], coefs[10.0][-1, 0], 10.0, 0.5, 0.05)
+
+
+def test_chunked_prediction_equals_the_whole_kernel_product():
+    """Predictions over chunks of rows are the product with the whole kernel (to float noise), at
+    chunk edges too; several weight matrices share each chunk's kernel."""
+    from sklearn.metrics.pairwise import rbf_kernel
+
+    model = _landmark_model()
+    xs = np.random.default_rng(2).normal(size=(2 * PREDICT_CHUNK_ROWS + 17, 4))
+    whole = rbf_kernel(xs, model.support_vectors_, gamma=0.5)
+    np.testing.assert_allclose(model.predict(xs), whole @ model.dual_coef_[0] + model.intercept_[0],
+                               rtol=0, atol=1e-12)
+    w2 = np.random.default_rng(3).normal(size=(len(model.support_vectors_), 3))
+    one, two = kernel_products(xs, model.support_vectors_, 0.5, [model.dual_coef_[0], w2])
+    assert one.shape == (len(xs),) and two.shape == (len(xs), 3)
+    np.testing.assert_allclose(two, whole @ w2, rtol=0, atol=1e-12)
+    assert model.predict(xs[:0]).shape == (0,)
+
+
+def test_prediction_memory_does_not_grow_with_the_rows():
+    """issue 26: the approximation predicted every row at once, its (rows x landmarks) kernel and
+    distance temporaries about 3 KB of peak memory per row (in-sample scores, protocols, folds).
+    tracemalloc sees numpy's buffers: over 8x the rows the peak grows only by the output (8 bytes
+    a row), not by the kernel."""
+    import tracemalloc
+
+    model = _landmark_model()
+    rng = np.random.default_rng(4)
+    peaks = []
+    for n_rows in (2 * PREDICT_CHUNK_ROWS, 16 * PREDICT_CHUNK_ROWS):
+        xs = rng.normal(size=(n_rows, 4))
+        tracemalloc.start()
+        model.predict(xs)
+        peaks.append(tracemalloc.get_traced_memory()[1])
+        tracemalloc.stop()
+    grown_per_row = (peaks[1] - peaks[0]) / (14 * PREDICT_CHUNK_ROWS)
+    assert grown_per_row < 64, (peaks, grown_per_row)  # a whole kernel: 300 landmarks x 8 bytes and more
 
 
 @pytest.fixture(scope="module")
