@@ -290,12 +290,9 @@ def write_curves(path: str | Path, curves: Mapping[str, np.ndarray], model: Face
     UserError
         As :func:`curves_text` and :func:`write_output`.
     """
-    out = Path(path)
-    check_output(out, force, fmt)
-    write_output(out, curves_text(curves, model, fmt, digits, every_frame), force)
-    if fmt == "csv":
-        write_output(units_path(out), units_json(model.columns, provenance), force=True)  # checked with ``out``
-    return out
+    write_curve_chunks(path, [curves], model, fmt=fmt, force=force, digits=digits, provenance=provenance,
+                       every_frame=every_frame)  # one writer for whole and streamed curves
+    return Path(path)
 
 
 class LivelinkResampler:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -398,7 +399,7 @@ def test_ctrl_c_leaves_nothing_half_written(tmp_path: Path) -> None:
     session = _copy(source, tmp_path)
     proc = subprocess.Popen(effortface("preannotate", session), stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     seen = b""
-    while b"frame/s" not in seen and proc.poll() is None:  # rating has started (the bar shows a rate)
+    while not re.search(rb" [1-9][0-9]*/[0-9]+ \[", seen) and proc.poll() is None:  # frames rated (not only loading)
         seen += proc.stderr.read1(4096)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=120)

@@ -28,7 +28,7 @@ def test_demo_runs_the_whole_pipeline(lab, tmp_path, capsys, monkeypatch):
     calls = spy_on_jobs(monkeypatch)  # the demo trains, exports, evaluates and writes as the CLI and GUI do
     out = tmp_path / "demo"
     assert main(["demo", "--out", str(out), "--capture-seconds", "4", "--max-rows", "60"]) == 0
-    assert calls == {"train_models": 1, "export_outcome": 1, "evaluate_bundle": 1, "write_curves": 1}
+    assert calls == {"train_models": 1, "export_outcome": 1, "evaluate_bundle": 1, "write_curve_chunks": 1}
     printed = capsys.readouterr().out.strip().splitlines()
     assert printed[-1] == f"report: {out / 'model' / 'report' / 'report.md'}"
     assert (out / "model" / "report" / "report.md").is_file()

@@ -2,7 +2,8 @@
 (:func:`effortface.train.pipeline.train_models`), its export and report
 (:func:`~effortface.train.pipeline.export_outcome`), the evaluation
 (:func:`effortface.train.evaluation.evaluate_bundle`) and the curve writer
-(:func:`effortface.synth.curves_io.write_curves`) each exist once, and both paths call them.
+(:func:`effortface.synth.curves_io.write_curve_chunks`, which ``write_curves`` calls) each exist
+once, and both paths call them.
 
 Each function is replaced, wherever a loaded ``effortface`` module holds it, by a spy that counts
 the call and runs the real function; the CLI commands and the GUI models (``TrainSession``,
@@ -29,7 +30,7 @@ from effortface.train.dataset import synthetic_table, write_table
 
 #: module -> the one function of a job
 JOBS = {"train_models": "effortface.train.pipeline", "export_outcome": "effortface.train.pipeline",
-        "evaluate_bundle": "effortface.train.evaluation", "write_curves": "effortface.synth.curves_io"}
+        "evaluate_bundle": "effortface.train.evaluation", "write_curve_chunks": "effortface.synth.curves_io"}
 #: the callers: the command modules and the GUI models (imported before the spies go in)
 CALLERS = ("effortface.train.commands.train", "effortface.train.commands.evaluate",
            "effortface.synth.commands.synth", "effortface.commands.demo",
@@ -76,7 +77,7 @@ def test_cli_and_train_stage_run_the_same_training_and_export(table_csv: Path, t
     calls = spy_on_jobs(monkeypatch)
     cli_model = tmp_path / "cli"
     assert main(["train", "--table", str(table_csv), "--out", str(cli_model), "--max-rows", "40"]) == 0
-    assert calls == {"train_models": 1, "export_outcome": 1, "evaluate_bundle": 0, "write_curves": 0}
+    assert calls == {"train_models": 1, "export_outcome": 1, "evaluate_bundle": 0, "write_curve_chunks": 0}
 
     session = TrainSession(tmp_path / "no-sessions")
     session.load_table(table_csv)
@@ -87,7 +88,7 @@ def test_cli_and_train_stage_run_the_same_training_and_export(table_csv: Path, t
     gui_model = tmp_path / "gui"
     session.export(gui_model)
     session.wait(300)
-    assert calls == {"train_models": 2, "export_outcome": 2, "evaluate_bundle": 0, "write_curves": 0}
+    assert calls == {"train_models": 2, "export_outcome": 2, "evaluate_bundle": 0, "write_curve_chunks": 0}
 
     # same data and settings -> the same model, whichever path trained it
     assert (cli_model / "svr.npz").read_bytes() == (gui_model / "svr.npz").read_bytes()
@@ -107,12 +108,12 @@ def test_synth_cli_and_synthesize_stage_write_with_the_same_writer(shared_data: 
     for fmt in ("csv", "livelink"):
         assert main(["synth", "default", str(shared_data / CLIP), "--format", fmt,
                      "--out", str(tmp_path / f"cli-{fmt}.csv")]) == 0
-    assert calls["write_curves"] == 2
+    assert calls["write_curve_chunks"] == 2
     session = SynthSession()
     session.load_motion(shared_data / CLIP)
     for fmt in ("csv", "livelink"):
         session.export(tmp_path / f"gui-{fmt}.csv", fmt)
-    assert calls["write_curves"] == 4
+    assert calls["write_curve_chunks"] == 4  # the stage writes whole curves through the same writer
     # the default character and model on the same clip: the same files
     cli = pd.read_csv(tmp_path / "cli-csv.csv")
     gui = pd.read_csv(tmp_path / "gui-csv.csv")
