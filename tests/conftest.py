@@ -3,9 +3,16 @@
 from __future__ import annotations
 
 import os
+import signal
 from pathlib import Path
 
 import pytest
+
+# A suite started in the background by a non-interactive shell (``cmd &``) inherits SIGINT ignored,
+# and so would every command it starts, which then could not be stopped with Ctrl-C as the capture,
+# recover and pre-annotate tests do: give the suite (and so its children) the default handling.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 
