@@ -341,11 +341,7 @@ def rewrite_video(src: str | os.PathLike, dst: str | os.PathLike, max_frames: in
     dst = Path(dst)
     if dst.exists():
         raise FileExistsError(f"{dst}: exists; refusing to overwrite")
-    n = copy_mjpg_frames(src, dst, max_frames)
-    if n:
-        return n
-    dst.unlink(missing_ok=True)
-    return _reencode_video(src, dst, max_frames)
+    return copy_mjpg_frames(src, dst, max_frames) or _reencode_video(src, dst, max_frames)
 
 
 def _avi_fps(src: str | os.PathLike) -> float:

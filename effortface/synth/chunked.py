@@ -32,7 +32,8 @@ import numpy as np
 
 from effortface.core.errors import UserError
 from effortface.synth import iir
-from effortface.synth.energy import butterworth_sos, frame_rates, segment_energies
+from effortface.synth.energy import (CUTOFF_HZ, POWER_WINDOW_S, WORK_WINDOW_S, butterworth_sos, frame_rates,
+                                     segment_energies)
 from effortface.synth.face import WeightFilter
 from effortface.synth.motion import Motion, MotionBlocks
 from effortface.synth.physiology import PhysiologyState
@@ -43,8 +44,6 @@ from effortface.synth.runtime import Character, FaceModel
 CHUNK_S = 60.0
 #: What is left of the energy filter's transients at the edge of a piece's margin, relative to the signal.
 MARGIN_DECAY = 1e-18
-#: The whole-clip defaults of :func:`effortface.synth.energy.work_and_power`.
-WINDOW_S, POWER_WINDOW_S, CUTOFF_HZ = 1.0, 0.25, 6.0
 
 
 def margin_frames(fps: float, cutoff_hz: float = CUTOFF_HZ) -> int:
@@ -156,7 +155,7 @@ def synthesize_chunks(model: FaceModel, motion: MotionBlocks, character: Charact
     body = model.body(character, skeleton, mapping)
     physiology = PhysiologyState(model.physiology_params(character))
     smooth = WeightFilter(taus)
-    work, power = TrailingWindow(fps, WINDOW_S), TrailingWindow(fps, POWER_WINDOW_S)
+    work, power = TrailingWindow(fps, WORK_WINDOW_S), TrailingWindow(fps, POWER_WINDOW_S)
     chunk_frames = max(1, int(round(chunk_s * fps)))
     for lo, a, b, pos, rot in _windows(motion, chunk_frames, margin_frames(fps)):
         piece = Motion(skeleton.joint_names, skeleton.parents, pos, rot, fps, skeleton.source)

@@ -64,6 +64,9 @@ from effortface.synth.segments import BACK_LOAD_OFFSET_M, BodyModel, stack_bodie
 #: Gravitational acceleration, m/s^2.
 G_M_PER_S2 = 9.81
 _EZ = np.array([0.0, 0.0, 1.0])
+#: defaults of :func:`work_and_power` and the streams: work's trailing window (s), power's (s) and
+#: the energy filter's cutoff (Hz)
+WORK_WINDOW_S, POWER_WINDOW_S, CUTOFF_HZ = 1.0, 0.25, 6.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -428,7 +431,7 @@ def segment_energies(
     motion: Motion,
     body: BodyModel,
     *,
-    cutoff_hz: float = 6.0,
+    cutoff_hz: float = CUTOFF_HZ,
     zero_phase: bool = True,
     use_rotations: bool = True,
 ) -> SegmentEnergies:
@@ -508,9 +511,9 @@ def work_and_power(
     motion: Motion,
     body: BodyModel,
     *,
-    window_s: float = 1.0,
-    power_window_s: float = 0.25,
-    cutoff_hz: float = 6.0,
+    window_s: float = WORK_WINDOW_S,
+    power_window_s: float = POWER_WINDOW_S,
+    cutoff_hz: float = CUTOFF_HZ,
     zero_phase: bool = True,
     use_rotations: bool = True,
 ) -> EnergyCurves:
@@ -555,8 +558,8 @@ def _windowed(t_s: np.ndarray, rate: np.ndarray, fps: float, window_s: float,
     return EnergyCurves(t_s, _window_rate(rate, fps, window_s), _window_rate(rate, fps, power_window_s), rate)
 
 
-def looped(curves: EnergyCurves, loops: int, fps: float, *, window_s: float = 1.0,
-           power_window_s: float = 0.25) -> EnergyCurves:
+def looped(curves: EnergyCurves, loops: int, fps: float, *, window_s: float = WORK_WINDOW_S,
+           power_window_s: float = POWER_WINDOW_S) -> EnergyCurves:
     """Work and power of a clip played ``loops`` times end to end.
 
     The clip's per-frame rates are repeated and the windows run across the seams, so w does not
@@ -753,8 +756,8 @@ class EnergyStream:
     >>> w_per_kg, p_per_kg = stream.step(joint_positions_m, 1 / 60)  # doctest: +SKIP
     """
 
-    def __init__(self, body: BodyModel, fps: float, *, window_s: float = 1.0,
-                 power_window_s: float = 0.25, cutoff_hz: float = 6.0,
+    def __init__(self, body: BodyModel, fps: float, *, window_s: float = WORK_WINDOW_S,
+                 power_window_s: float = POWER_WINDOW_S, cutoff_hz: float = CUTOFF_HZ,
                  tick_hz: float | None = None) -> None:
         if not fps > 0:
             raise UserError(f"fps: expected a positive frame rate, got {fps!r}")
@@ -894,8 +897,8 @@ class EnergyCrowd(EnergyStream):
         As in :class:`EnergyStream`.
     """
 
-    def __init__(self, bodies: Sequence[BodyModel], fps: float, *, window_s: float = 1.0,
-                 power_window_s: float = 0.25, cutoff_hz: float = 6.0,
+    def __init__(self, bodies: Sequence[BodyModel], fps: float, *, window_s: float = WORK_WINDOW_S,
+                 power_window_s: float = POWER_WINDOW_S, cutoff_hz: float = CUTOFF_HZ,
                  tick_hz: float | None = None) -> None:
         super().__init__(stack_bodies(bodies), fps, window_s=window_s, power_window_s=power_window_s,
                          cutoff_hz=cutoff_hz, tick_hz=tick_hz)

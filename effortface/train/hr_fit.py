@@ -524,17 +524,8 @@ def simulate_series(series: HrSeries, coef: HrCoefficients) -> np.ndarray:
     The recursion runs on a 1 s grid from that sample to the end (across a gap in the table the
     last known work is held), and is read back at the session's own ``t_s``.
     """
-    valid = np.flatnonzero(np.isfinite(series.nhr))
-    if len(valid) == 0:
-        raise ValueError(f"session {series.session}: no measured heart rate to start from")
-    i0 = int(valid[0])
-    t = np.asarray(series.t_s[i0:], dtype=float)
-    grid = t[0] + np.arange(int(round(t[-1] - t[0])) + 1)
-    held = np.clip(np.searchsorted(t, grid + 1e-9, side="right") - 1, 0, len(t) - 1)
-    sim = simulate_nhr(np.asarray(series.w_per_kg[i0:], dtype=float)[held], float(series.nhr[i0]), coef)
-    pred = np.full(len(series.t_s), np.nan)
-    pred[i0:] = sim[np.clip(np.round(t - t[0]).astype(int), 0, len(sim) - 1)]
-    return pred
+    i0, w_per_kg, nhr0 = _work_grid(series)
+    return _read_back(series, i0, simulate_nhr(w_per_kg, nhr0, coef))
 
 
 #: most values (steps x sessions) simulated together by :func:`simulate_many`

@@ -377,7 +377,8 @@ def test_typing_another_rater_code_hides_the_open_session(qtbot, stage: QtAnnota
     assert stage.editor.isVisible() and stage.editor.session.rater == "R2"
 
 
-def test_a_rater_who_finished_the_round_cannot_change_a_rating(qtbot, stage: QtAnnotateStage, lab: Path) -> None:
+def _finish_the_round_as_r4(qtbot, stage: QtAnnotateStage):
+    """Rate all 18 poses of the blind round as R4 (every weight 0.3); returns the reliability panel."""
     stage.rater.setText("R4")
     stage.tabs.setCurrentIndex(1)
     panel = stage.reliability
@@ -386,6 +387,11 @@ def test_a_rater_who_finished_the_round_cannot_change_a_rating(qtbot, stage: QtA
         for spin in panel.spins.values():
             spin.setValue(0.3)
         qtbot.mouseClick(panel.save_button, Left)
+    return panel
+
+
+def test_a_rater_who_finished_the_round_cannot_change_a_rating(qtbot, stage: QtAnnotateStage, lab: Path) -> None:
+    panel = _finish_the_round_as_r4(qtbot, stage)
     assert panel.report is not None
     before = (lab / "reliability" / "ratings_R4.csv").read_bytes()
     panel.poses.setCurrentCell(3, 0)
@@ -484,14 +490,7 @@ def test_hiding_the_stage_pauses_playback(qtbot, stage: QtAnnotateStage) -> None
 
 def test_a_finished_rating_is_corrected_with_a_reason_and_the_report_recomputes(qtbot, stage: QtAnnotateStage,
                                                                                 lab: Path) -> None:
-    stage.rater.setText("R4")
-    stage.tabs.setCurrentIndex(1)
-    panel = stage.reliability
-    for row in range(18):
-        panel.poses.setCurrentCell(row, 0)
-        for spin in panel.spins.values():
-            spin.setValue(0.3)
-        qtbot.mouseClick(panel.save_button, Left)
+    panel = _finish_the_round_as_r4(qtbot, stage)
     assert panel.report is not None and panel.correct_box.isVisibleTo(panel)
     panel.poses.setCurrentCell(0, 0)
     pose = panel.round.poses[0].pose_id
