@@ -41,11 +41,12 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import warnings
 from collections.abc import Callable, Iterator, Sequence
 
 import numpy as np
 import pandas as pd
-from scipy.linalg import solve_triangular
+from scipy.linalg import blas, solve_triangular
 from sklearn.linear_model import LinearRegression
 from sklearn.metrics.pairwise import rbf_kernel
 from sklearn.model_selection import GroupKFold, KFold, LeaveOneGroupOut
@@ -384,7 +385,9 @@ def _normal_equations(xs: np.ndarray, y: np.ndarray, landmarks: np.ndarray, gamm
     """Per distinct pattern of annotated rows: ``A'A``, ``A'Y`` and the columns of Y using it.
 
     ``A = [K(xs, landmarks) @ basis, 1]``; summed over chunks of rows, so the memory does not grow
-    with the rows. Blendshapes annotated on the same seconds share one ``A'A``.
+    with the rows. Blendshapes annotated on the same seconds share one ``A'A``. ``basis`` is upper
+    triangular, so ``K @ basis`` is a triangular product (BLAS ``trmm``) and ``A'A`` a symmetric
+    rank update (``syrk``): half the floating-point work of two general products, the same sums.
     """
     finite = np.isfinite(y)
     groups: dict[bytes, list[int]] = {}
@@ -394,15 +397,22 @@ def _normal_equations(xs: np.ndarray, y: np.ndarray, landmarks: np.ndarray, gamm
     sums = {key: (np.zeros((m + 1, m + 1)), np.zeros((m + 1, len(cols)))) for key, cols in groups.items()}
     for start in range(0, len(xs), _CHUNK_ROWS):
         rows = slice(start, start + _CHUNK_ROWS)
-        a = np.empty((len(xs[rows]), m + 1))
-        a[:, :m] = _landmark_kernel(xs[rows], landmarks, gamma) @ basis
-        a[:, m] = 1.0
+        k = np.ascontiguousarray(_landmark_kernel(xs[rows], landmarks, gamma))
+        a = blas.dtrmm(1.0, basis, k.T, side=0, lower=0, trans_a=1, overwrite_b=1).T  # K @ basis, in place
         for key, cols in groups.items():
             ok = finite[rows, cols[0]]
             a_ok = a if ok.all() else a[ok]  # no copy of the chunk when every row is annotated
+            y_ok = y[rows][ok][:, cols]
             ata, aty = sums[key]
-            ata += a_ok.T @ a_ok
-            aty += a_ok.T @ y[rows][ok][:, cols]
+            ata[:m, :m] += blas.dsyrk(1.0, a_ok.T, trans=0, lower=0)  # upper triangle
+            ata[:m, m] += a_ok.sum(axis=0)
+            ata[m, m] += len(a_ok)
+            aty[:m] += a_ok.T @ y_ok
+            aty[m] += y_ok.sum(axis=0)
+    for ata, _ in sums.values():
+        ata[m, :m] = ata[:m, m]
+        lower = np.tril_indices(m, -1)
+        ata[lower] = ata[:m, :m].T[lower]
     return {key: (*sums[key], np.array(cols)) for key, cols in groups.items()}
 
 
@@ -472,6 +482,62 @@ def fit_one(xs: np.ndarray, y: np.ndarray, params: dict[str, float], method: str
     return LandmarkRegressor(landmarks, coefs[c][:-1, 0], coefs[c][-1, 0], c, gamma, eps)
 
 
+def fit_predict(xs: np.ndarray, targets: np.ndarray, params: Sequence[dict[str, float]], method: str,
+                n_landmarks: int, seed: int, tests: Sequence[np.ndarray], min_rows: int = 2
+                ) -> list[np.ndarray]:
+    """Fit every column of ``targets`` with its own hyper-parameters and predict ``tests``.
+
+    The same models as :func:`fit_one` on each column's annotated rows, one by one; with the
+    approximation the columns that share gamma and annotated rows share one landmark fit (the
+    landmarks depend on the rows and gamma only) and one kernel pass per test array.
+
+    Parameters
+    ----------
+    xs : ndarray, shape (n, F)
+        Standardised training rows.
+    targets : ndarray, shape (n, B)
+        Targets, NaN where not annotated.
+    params : sequence of dict
+        Per column: ``C``, ``gamma``, ``epsilon``.
+    method : str
+        ``"exact_svr"`` or ``"nystroem"``.
+    n_landmarks, seed : int
+        The approximation's landmarks.
+    tests : sequence of ndarray, each shape (n_i, F)
+        Standardised rows to predict.
+    min_rows : int
+        A column with fewer annotated rows is not fitted (its predictions stay NaN).
+
+    Returns
+    -------
+    list of ndarray
+        Per test array, predictions (n_i, B).
+    """
+    outs = [np.full((len(t), targets.shape[1]), np.nan) for t in tests]
+    finite = np.isfinite(targets)
+    shared: dict[tuple, list[int]] = {}
+    for b in range(targets.shape[1]):
+        if finite[:, b].sum() >= min_rows:
+            key = (b,) if method == METHODS[0] else (float(params[b]["gamma"]), finite[:, b].tobytes())
+            shared.setdefault(key, []).append(b)
+    for cols in shared.values():
+        ok = finite[:, cols[0]]
+        xs_ok = xs if ok.all() else xs[ok]
+        if method == METHODS[0]:
+            model = fit_one(xs_ok, targets[ok, cols[0]], params[cols[0]], method, n_landmarks, seed)
+            for out, t in zip(outs, tests):
+                out[:, cols[0]] = model.predict(t)
+            continue
+        gamma, cs = float(params[cols[0]]["gamma"]), [float(params[b]["C"]) for b in cols]
+        landmarks, coefs = fit_landmark_models(xs_ok, targets[ok][:, cols], gamma, sorted(set(cs)),
+                                               n_landmarks, seed)
+        weights = np.column_stack([coefs[c][:-1, i] for i, c in enumerate(cs)])
+        intercepts = np.array([coefs[c][-1, i] for i, c in enumerate(cs)])
+        for out, t in zip(outs, tests):
+            out[:, cols] = kernel_products(t, landmarks, gamma, [weights])[0] + intercepts
+    return outs
+
+
 # --------------------------------------------------------------------------- the search
 
 
@@ -485,6 +551,10 @@ class SearchResult:
     table: list[dict[str, float]]        # one row per grid point: C, gamma, epsilon, mse
     oof: np.ndarray                      # out-of-fold normalised predictions at the best point
     baselines: dict[str, np.ndarray]     # out-of-fold "mean" and "linear" predictions
+    #: per fold, (C, gamma) -> that fold's approximation (landmarks, coef (m,), intercept) for this
+    #: blendshape (landmarks shared by the blendshapes and Cs of a gamma); empty for exact SVRs
+    fold_models: list[dict[tuple[float, float], tuple[np.ndarray, np.ndarray, float]]] = \
+        dataclasses.field(default_factory=list)
 
 
 def grid_search(data: FaceData, config: FaceFitConfig,
@@ -514,37 +584,118 @@ def grid_search(data: FaceData, config: FaceFitConfig,
     oof = {p: np.full((n, nb), np.nan) for p in points}
     fold_mse = {p: np.zeros((len(folds), nb)) for p in points}
     base = {k: np.full((n, nb), np.nan) for k in ("mean", "linear")}
+    models: list[dict] = []
     method = config.method(n)
     calls = ((train, test, config, method) for train, test in folds)
     results = map_ordered(_search_fold, calls, shared=(data,))
-    for f, ((train, test), (preds, mses, baselines)) in enumerate(zip(folds, results)):
+    for f, ((train, test), (preds, mses, baselines, fold_models)) in enumerate(zip(folds, results)):
         for p in points:
             oof[p][test] = preds[p]
             fold_mse[p][f] = mses[p]
         for k, v in baselines.items():
             base[k][test] = v
+        models.append(fold_models)
         if progress:
             progress(1)
-    return {name: _best(data, b, points, oof, fold_mse, base) for b, name in enumerate(data.blendshapes)}
+    out = {name: _best(data, b, points, oof, fold_mse, base) for b, name in enumerate(data.blendshapes)}
+    if method == METHODS[1]:
+        for b, name in enumerate(data.blendshapes):
+            out[name].fold_models = [{(c, gamma): (landmarks, coefs[c][:-1, b], float(coefs[c][-1, b]))
+                                      for gamma, (landmarks, coefs) in fold.items() for c in coefs}
+                                     for fold in models]
+    return out
+
+
+def nested_choices(data: FaceData, config: FaceFitConfig, folds: Sequence[tuple[np.ndarray, np.ndarray]]
+                   ) -> list[dict[str, dict[str, float]]]:
+    """Per outer fold, the hyper-parameters a search on that fold's training rows alone chooses.
+
+    The search of outer fold k scores every grid point on inner folds that are the other outer
+    folds: inner fold j trains on every row outside folds j and k and is scored on fold j. That
+    training set is the same for (k, j) and (j, k), so each pair of folds is fitted once and
+    scored on both (half the fits of searching each outer fold on its own). With leave one
+    participant out (at most ``max_folds`` participants) these are exactly the folds, fits and
+    choice of :func:`grid_search` run on the outer training rows; with more participants the inner
+    folds are the outer participant groups. Nothing of fold k's rows enters its choice.
+
+    Parameters
+    ----------
+    data : FaceData
+        Every row.
+    config : FaceFitConfig
+        Grid and the exact/approximate switch (by each outer fold's training rows).
+    folds : sequence of (train, test)
+        The outer folds (disjoint test folds covering the rows).
+
+    Returns
+    -------
+    list of dict
+        Per outer fold: blendshape name -> ``{"C", "gamma", "epsilon"}``.
+    """
+    points = list(itertools.product(config.grid["C"], config.grid["gamma"], config.grid["epsilon"]))
+    if len(folds) < 3:
+        raise ValueError("cv: a nested search needs >= 3 participant folds")
+    n, nb = data.y_norm.shape
+    fold_of = np.full(n, -1)
+    for f, (_, test) in enumerate(folds):
+        fold_of[test] = f
+    methods = [config.method(len(train)) for train, _ in folds]
+    pairs = sorted({(min(j, k), max(j, k), methods[k]) for k in range(len(folds)) for j in range(len(folds))
+                    if j != k})
+    calls = ((np.flatnonzero((fold_of != j) & (fold_of != k)), [folds[j][1], folds[k][1]], config, method)
+             for j, k, method in pairs)
+    scores = dict(zip(pairs, map_ordered(_pair_fold_mses, calls, shared=(data,))))
+    choices = []
+    for k in range(len(folds)):
+        inner = [j for j in range(len(folds)) if j != k]
+        fold_mse = {p: np.array([scores[(min(j, k), max(j, k), methods[k])][0 if j < k else 1][p]
+                                 for j in inner]) for p in points}
+        choices.append({name: {key: best[key] for key in ("C", "gamma", "epsilon")}
+                        for b, name in enumerate(data.blendshapes)
+                        for best in [_best_point(b, points, fold_mse)[0]]})
+    return choices
+
+
+def _pair_fold_mses(data: FaceData, train: np.ndarray, tests: list[np.ndarray], config: FaceFitConfig,
+                    method: str) -> list[dict[tuple, np.ndarray]]:
+    """One fit per grid point on ``train`` (:func:`_search_fold`), scored on each of ``tests``
+    separately: per test fold, grid point -> MSE per blendshape (B,) (NaN where nothing to score)."""
+    union = np.concatenate(tests)
+    order = np.argsort(union, kind="stable")
+    preds = _search_fold(data, train, union[order], config, method, baselines=False)[0]
+    where = np.empty(len(union), dtype=int)
+    where[order] = np.arange(len(union))
+    out, start = [], 0
+    for test in tests:
+        at = where[start:start + len(test)]
+        start += len(test)
+        y = data.y_norm[test]
+        with np.errstate(invalid="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # a blendshape with nothing to score: NaN
+            out.append({p: np.nanmean((pred[at] - y) ** 2, axis=0) for p, pred in preds.items()})
+    return out
 
 
 def _search_fold(data: FaceData, train: np.ndarray, test: np.ndarray, config: FaceFitConfig,
-                 method: str) -> tuple[dict, dict, dict]:
-    """One fold of the search: per grid point the test predictions (n_test, B) and MSEs (B,), and
-    the baselines' test predictions. A pure function of its arguments (runs anywhere)."""
+                 method: str, baselines: bool = True) -> tuple[dict, dict, dict, dict]:
+    """One fold of the search: per grid point the test predictions (n_test, B) and MSEs (B,), the
+    baselines' test predictions (when ``baselines``), and for the approximation the fold's fits
+    (gamma -> (landmarks, {C: coefs})). A pure function of its arguments (runs anywhere)."""
     points = list(itertools.product(config.grid["C"], config.grid["gamma"], config.grid["epsilon"]))
     nb = data.y_norm.shape[1]
     preds = {p: np.full((len(test), nb), np.nan) for p in points}
     mses = {p: np.full(nb, np.nan) for p in points}
+    models: dict = {}
     if method == METHODS[0]:
         for gamma, k_tr, k_te, _, _ in _fold_kernels(data.x, train, test, config.grid["gamma"]):
             for b in range(nb):
                 _fit_fold(data, b, train, test, k_tr, k_te, gamma, config, preds, mses)
     else:
-        _search_fold_landmarks(data, train, test, config, preds, mses)
+        models = _search_fold_landmarks(data, train, test, config, preds, mses)
     base = {k: np.full((len(test), nb), np.nan) for k in ("mean", "linear")}
-    _baseline_fold(data, train, test, base)
-    return preds, mses, base
+    if baselines:
+        _baseline_fold(data, train, test, base)
+    return preds, mses, base, models
 
 
 def _fit_fold(data: FaceData, b: int, train: np.ndarray, test: np.ndarray, k_tr: np.ndarray,
@@ -565,16 +716,19 @@ def _fit_fold(data: FaceData, b: int, train: np.ndarray, test: np.ndarray, k_tr:
 
 
 def _search_fold_landmarks(data: FaceData, train: np.ndarray, test: np.ndarray, config: FaceFitConfig,
-                           preds: dict, mses: dict) -> None:
+                           preds: dict, mses: dict) -> dict[float, tuple[np.ndarray, dict[float, np.ndarray]]]:
     """The approximation's fold: per gamma one set of landmarks and normal equations, every C
-    solved from them (epsilon does not enter the approximation: its points share the result)."""
+    solved from them (epsilon does not enter the approximation: its points share the result).
+    Returns the fits: gamma -> (landmarks, {C: (m + 1, B) coefficients, intercepts last})."""
     scaler = StandardScaler().fit(data.x[train])
     xs_tr, xs_te = scaler.transform(data.x[train]), scaler.transform(data.x[test])
     y_tr, y_te = data.y_norm[train], data.y_norm[test]
     te_ok = np.isfinite(y_te)
+    models = {}
     for gamma in config.grid["gamma"]:
         landmarks, coefs = fit_landmark_models(xs_tr, y_tr, gamma, config.grid["C"], config.n_landmarks,
                                                config.seed)
+        models[gamma] = (landmarks, coefs)
         products = dict(zip(config.grid["C"], kernel_products(xs_te, landmarks, gamma,
                                                               [coefs[c][:-1] for c in config.grid["C"]])))
         for c, eps in itertools.product(config.grid["C"], config.grid["epsilon"]):
@@ -585,6 +739,7 @@ def _search_fold_landmarks(data: FaceData, train: np.ndarray, test: np.ndarray, 
             with np.errstate(invalid="ignore"):
                 mse = np.nanmean(err ** 2, axis=0) if te_ok.any() else np.full(len(mses[(c, gamma, eps)]), np.nan)
             mses[(c, gamma, eps)][:] = np.where(te_ok.any(axis=0) & np.isfinite(coefs[c][-1]), mse, np.nan)
+    return models
 
 
 def _baseline_fold(data: FaceData, train: np.ndarray, test: np.ndarray, base: dict) -> None:
@@ -601,11 +756,17 @@ def _baseline_fold(data: FaceData, train: np.ndarray, test: np.ndarray, base: di
         base["linear"][te, b] = lin.predict(scaler.transform(data.x[test[te]]))
 
 
-def _best(data: FaceData, b: int, points: list, oof: dict, fold_mse: dict, base: dict) -> SearchResult:
-    """The grid point with the lowest fold-averaged MSE for blendshape b."""
+def _best_point(b: int, points: list, fold_mse: dict) -> tuple[dict[str, float], list[dict[str, float]]]:
+    """Blendshape b's grid point with the lowest fold-averaged MSE (its row: C, gamma, epsilon,
+    mse), and every point's row."""
     rows = [{"C": c, "gamma": g, "epsilon": e, "mse": float(np.nanmean(fold_mse[(c, g, e)][:, b]))}
             for c, g, e in points]
-    best = min(rows, key=lambda r: r["mse"] if np.isfinite(r["mse"]) else np.inf)
+    return min(rows, key=lambda r: r["mse"] if np.isfinite(r["mse"]) else np.inf), rows
+
+
+def _best(data: FaceData, b: int, points: list, oof: dict, fold_mse: dict, base: dict) -> SearchResult:
+    """The grid point with the lowest fold-averaged MSE for blendshape b."""
+    best, rows = _best_point(b, points, fold_mse)
     key = (best["C"], best["gamma"], best["epsilon"])
     y, pred = data.y_norm[:, b], oof[key][:, b]
     ok = np.isfinite(y) & np.isfinite(pred)
@@ -874,7 +1035,11 @@ def protocol_scores(fit: FaceModelFit, protocols: Sequence[str] = PROTOCOLS) -> 
 
     - ``same_participant_exercise``: one model per participant and exercise, each contiguous fifth of
       the time predicted from the other four fifths;
-    - ``unseen_participant``: trained on everyone else (leave one participant out);
+    - ``unseen_participant``: trained on everyone else (leave one participant out); with the
+      approximation and the default participant folds, by the search's own fits of each fold at the
+      chosen point (:func:`search_fit_predictions`: the same folds, rows and hyper-parameters,
+      targets normalised by each training participant's expressiveness as in every fit), not
+      fitted a second time;
     - ``unseen_exercise``: trained on every other exercise, everyone pooled (leave one exercise out).
 
     Returns
@@ -886,12 +1051,60 @@ def protocol_scores(fit: FaceModelFit, protocols: Sequence[str] = PROTOCOLS) -> 
     """
     rows, preds = [], {}
     for protocol in protocols:
-        pred = _predict_folds(fit, _protocol_folds(fit.data, protocol, max_folds=fit.config.max_folds))
+        if protocol == "unseen_participant" and fit.config.cv == "lopo" and fit.method == METHODS[1]:
+            pred = _unseen_participant_from_search(fit)
+        else:
+            pred = _predict_folds(fit, _protocol_folds(fit.data, protocol, max_folds=fit.config.max_folds))
         preds[protocol] = pred
         for b, name in enumerate(fit.blendshapes):
             y = fit.data.y_norm[:, b] * fit.data.e[:, b]
             rows.append({"protocol": protocol, "blendshape": name, **weight_metrics(y, pred[:, b])})
     return pd.DataFrame(rows), preds
+
+
+def search_fit_predictions(fit: FaceModelFit, fold: int, params: Sequence[dict[str, float]],
+                           tests: Sequence[np.ndarray]) -> list[np.ndarray]:
+    """Normalised predictions by the grid search's own approximation fits of one fold.
+
+    Parameters
+    ----------
+    fit : FaceModelFit
+        A Nystroem fit (its :attr:`SearchResult.fold_models`).
+    fold : int
+        The fold (in :func:`cv_folds` order of the search).
+    params : sequence of dict
+        Per blendshape the grid point (``C``, ``gamma``) whose fit to use.
+    tests : sequence of ndarray, each shape (n_i, F)
+        Rows standardised by the fold's scaler (fitted on its training rows).
+
+    Returns
+    -------
+    list of ndarray
+        Per test array, predictions (n_i, B); one kernel pass per gamma and test array.
+    """
+    by_gamma: dict[float, list[int]] = {}
+    for b, p in enumerate(params):
+        by_gamma.setdefault(float(p["gamma"]), []).append(b)
+    outs = [np.full((len(t), len(params)), np.nan) for t in tests]
+    for gamma, cols in by_gamma.items():
+        models = [fit.search[fit.blendshapes[b]].fold_models[fold][(params[b]["C"], gamma)] for b in cols]
+        weights = np.column_stack([coef for _, coef, _ in models])
+        intercepts = np.array([intercept for _, _, intercept in models])
+        for out, t in zip(outs, tests):
+            out[:, cols] = kernel_products(t, models[0][0], gamma, [weights])[0] + intercepts
+    return outs
+
+
+def _unseen_participant_from_search(fit: FaceModelFit) -> np.ndarray:
+    """The unseen-participant protocol's weights (n, B) from the search's fits at the chosen point."""
+    d, c = fit.data, fit.config
+    out = np.full(d.y_norm.shape, np.nan)
+    params = [fit.search[name].best for name in fit.blendshapes]
+    for f, (train, test) in enumerate(cv_folds(d, c.cv, c.n_splits, c.seed, c.max_folds)):
+        xs = StandardScaler().fit(d.x[train]).transform(d.x[test])
+        norm = search_fit_predictions(fit, f, params, [xs])[0]
+        out[test] = np.clip(norm * training_expressiveness(d, train, test), 0, 1)
+    return out
 
 
 def _predict_folds(fit: FaceModelFit, folds: list) -> np.ndarray:
@@ -913,18 +1126,10 @@ def _predict_folds(fit: FaceModelFit, folds: list) -> np.ndarray:
 def _protocol_fold(d: FaceData, train: np.ndarray, test: np.ndarray, params: dict[str, dict[str, float]],
                    method: str, config: FaceFitConfig) -> np.ndarray:
     """Predicted weights (n_test, B) of one protocol fold (NaN for a blendshape not fitted)."""
-    out = np.full((len(test), len(d.blendshapes)), np.nan)
-    weights = d.y_norm * d.e
     scaler = StandardScaler().fit(d.x[train])
     e_train = training_expressiveness(d, train, train)
     e_test = training_expressiveness(d, train, test)
-    xs_test = scaler.transform(d.x[test])
-    for b, name in enumerate(d.blendshapes):
-        ok = np.isfinite(d.y_norm[train, b])
-        if ok.sum() < 5:
-            continue
-        target = np.clip(weights[train[ok], b] / e_train[ok, b], 0.0, 1.0)
-        model = fit_one(scaler.transform(d.x[train[ok]]), target, params[name], method,
-                        config.n_landmarks, config.seed)
-        out[:, b] = np.clip(model.predict(xs_test) * e_test[:, b], 0, 1)
-    return out
+    targets = np.clip(d.y_norm[train] * d.e[train] / e_train, 0.0, 1.0)
+    pred = fit_predict(scaler.transform(d.x[train]), targets, [params[name] for name in d.blendshapes], method,
+                       config.n_landmarks, config.seed, [scaler.transform(d.x[test])], min_rows=5)[0]
+    return np.clip(pred * e_test, 0, 1)

@@ -11,8 +11,13 @@ everything fitted without them (leave one participant out; participant-grouped f
    (:func:`~effortface.synth.physiology.simulate`) runs over each of the participant's sessions on
    a 1 s grid, from rest (NHR 0, EPOC 0), on the session's work only; its NHR and EPOC_norm replace
    the measured ones in the face features.
-3. **Hyper-parameters (nested).** The face grid search runs on the other participants only (its
-   own leave-one-participant-out folds), and the fold's SVRs are fitted on them with its choice.
+3. **Hyper-parameters (nested).** The face grid search runs on the other participants only
+   (:func:`~effortface.train.face_fit.nested_choices`: its inner folds are the other outer folds,
+   so with leave one participant out, its own leave-one-participant-out folds), and the fold's
+   models are fitted on them with its choice. With the Nystroem approximation and the default
+   participant folds these models are the outer search's own fits of that fold at the chosen
+   point (the same rows, scaler, landmarks and penalty; kept by
+   :func:`~effortface.train.face_fit.grid_search`), so they are not fitted twice.
 4. **Expressiveness.** The mean maximal key-framed weight of the other participants (what
    :func:`~effortface.train.face_fit.training_expressiveness` gives an unseen participant).
 
@@ -33,8 +38,8 @@ import numpy as np
 import pandas as pd
 from sklearn.preprocessing import StandardScaler
 
-from effortface.train.face_fit import (FaceData, FaceModelFit, cv_folds, fit_one, grid_search,
-                                       training_expressiveness, weight_metrics)
+from effortface.train.face_fit import (METHODS, FaceModelFit, cv_folds, fit_predict, nested_choices,
+                                       search_fit_predictions, training_expressiveness, weight_metrics)
 from effortface.train.hr_fit import HrSeries, fit_hr_model
 from effortface.synth.physiology import EpocParams, PhysiologyParams, simulate
 
@@ -112,12 +117,6 @@ def simulated_features(series: HrSeries, person: pd.Series, regression: object,
     return np.asarray(phys["nhr"])[at], np.asarray(phys["epoc_norm"])[at]
 
 
-def _subset(d: FaceData, rows: np.ndarray) -> FaceData:
-    """The face rows ``rows`` of ``d``."""
-    return FaceData(d.x[rows], d.y_norm[rows], d.e[rows], d.groups[rows], d.exercise[rows], d.t_s[rows],
-                    d.session[rows], d.blendshapes)
-
-
 def _game_x(fit: FaceModelFit, test: np.ndarray, series: Sequence[HrSeries], prepared: pd.DataFrame
             ) -> np.ndarray:
     """The test rows' features with NHR and EPOC_norm simulated by a heart model fitted without them."""
@@ -125,15 +124,15 @@ def _game_x(fit: FaceModelFit, test: np.ndarray, series: Sequence[HrSeries], pre
     held = set(np.unique(d.groups[test]).tolist())
     regression = fit_hr_model([s for s in series if s.participant not in held]).tl_regression.to_nhr_regression()
     people = prepared.drop_duplicates("participant").set_index("participant")
-    x = d.x[test].copy()
+    x, sessions, t_s = d.x[test], d.session[test], d.t_s[test]
     for s in series:
         if s.participant not in held:
             continue
-        rows = np.flatnonzero(d.session[test] == s.session)
+        rows = np.flatnonzero(sessions == s.session)
         if not len(rows):
             continue
         nhr, epoc = simulated_features(s, people.loc[s.participant], regression)
-        at = np.searchsorted(np.asarray(s.t_s, dtype=float), d.t_s[test][rows])
+        at = np.searchsorted(np.asarray(s.t_s, dtype=float), t_s[rows])
         at = np.clip(at, 0, len(nhr) - 1)
         x[rows, _NHR], x[rows, _EPOC] = nhr[at], epoc[at]
     return x
@@ -159,20 +158,19 @@ def game_predictions(fit: FaceModelFit, series: Sequence[HrSeries], prepared: pd
     d, c = fit.data, fit.config
     shape = d.y_norm.shape
     out = GamePredictions(np.full(shape, np.nan), np.full(shape, np.nan), d.x.copy())
-    for train, test in cv_folds(d, "lopo", c.n_splits, c.seed, c.max_folds):
-        inner = grid_search(_subset(d, train), c)
+    folds = cv_folds(d, "lopo", c.n_splits, c.seed, c.max_folds)
+    reuse = c.cv == "lopo" and fit.method == METHODS[1]  # the search's folds are these folds
+    for f, ((train, test), inner) in enumerate(zip(folds, nested_choices(d, c, folds))):
         out.game_x[test] = _game_x(fit, test, series, prepared)
         scaler = StandardScaler().fit(d.x[train])
+        xs = [scaler.transform(out.game_x[test]), scaler.transform(d.x[test])]
+        params = [inner[name] for name in d.blendshapes]
+        norm = (search_fit_predictions(fit, f, params, xs) if reuse else
+                fit_predict(scaler.transform(d.x[train]), d.y_norm[train], params, fit.method, c.n_landmarks,
+                            c.seed, xs))
         e_test = training_expressiveness(d, train, test)
-        xs_game, xs_measured = scaler.transform(out.game_x[test]), scaler.transform(d.x[test])
-        for b, name in enumerate(d.blendshapes):
-            ok = np.isfinite(d.y_norm[train, b])
-            if ok.sum() < 2:
-                continue
-            model = fit_one(scaler.transform(d.x[train[ok]]), d.y_norm[train[ok], b], inner[name].best,
-                            fit.method, c.n_landmarks, c.seed)
-            out.as_game[test, b] = np.clip(model.predict(xs_game) * e_test[:, b], 0, 1)
-            out.nested_measured[test, b] = np.clip(model.predict(xs_measured) * e_test[:, b], 0, 1)
+        out.as_game[test] = np.clip(norm[0] * e_test, 0, 1)
+        out.nested_measured[test] = np.clip(norm[1] * e_test, 0, 1)
     return out
 
 

@@ -85,8 +85,11 @@ def test_the_training_data_is_sent_to_the_workers_once(table, serial, cluster, m
     assert isinstance(data, FaceData) and data is fit.data and kwargs.get("broadcast") is True
     # the folds, final fits and protocol folds in a few tasks per worker, each carrying indices, not the data
     n_calls = [len(cv_folds(data, max_folds=fit.config.max_folds)), len(DEFAULT_SET.names)]
-    n_calls += [len(_protocol_folds(data, p, max_folds=fit.config.max_folds)) for p in PROTOCOLS]
-    assert n_calls == [4, 4, 40, 4, 2]
+    # (the unseen-participant protocol of an approximate fit reads the search's own fold fits: no task)
+    assert fit.method == "nystroem"
+    n_calls += [len(_protocol_folds(data, p, max_folds=fit.config.max_folds)) for p in PROTOCOLS
+                if p != "unseen_participant"]
+    assert n_calls == [4, 4, 40, 2]
     assert len(calls.task_bytes) == sum(min(n, TASKS_PER_THREAD * 2) for n in n_calls)
     data_bytes = len(pickle.dumps(data, protocol=5))
     assert max(calls.task_bytes) < MAX_TASK_SHARE_OF_DATA * data_bytes, (max(calls.task_bytes), data_bytes)
