@@ -60,6 +60,8 @@ TABLE_COLUMNS = ("participant", "session", "t_s", "sex", "age", "height_m", "mas
 #: optional columns understood by :func:`read_table`
 OPTIONAL_COLUMNS = ("exercise", "hr_rest_bpm", "hr_max_bpm")
 PARTICIPANT_COLUMNS = ("sex", "age", "height_m", "mass_kg", "training_level")
+#: the text columns :func:`read_table` holds as categoricals (one byte a row each, not a string pointer)
+STRING_COLUMNS = ("participant", "session", "sex", "exercise")
 #: longest strap gap bridged by interpolation, seconds (choice)
 MAX_HR_GAP_S = 5.0
 ANNOTATIONS_DIR = "annotations"
@@ -89,7 +91,8 @@ def read_table(path: str | os.PathLike, blendshapes: BlendshapeSet | None = None
     Returns
     -------
     DataFrame
-        The table with numeric columns as floats and an ``exercise`` column.
+        The table with numeric columns as floats and an ``exercise`` column; the text columns
+        (:data:`STRING_COLUMNS`) are categoricals with sorted categories (:func:`_categorical`).
 
     Raises
     ------
@@ -101,7 +104,7 @@ def read_table(path: str | os.PathLike, blendshapes: BlendshapeSet | None = None
     """
     path = check_regular_file(path, "a CSV table", DatasetError)
     try:
-        df = pd.read_csv(path, dtype={"participant": str, "session": str, "sex": str, "exercise": str})
+        df = pd.read_csv(path, dtype={c: "category" for c in STRING_COLUMNS})
     except (OSError, ValueError, pd.errors.ParserError) as exc:
         raise DatasetError(f"{path}: expected a CSV training table, found {exc}") from None
     missing = [c for c in TABLE_COLUMNS if c not in df.columns]
@@ -122,12 +125,26 @@ def read_table(path: str | os.PathLike, blendshapes: BlendshapeSet | None = None
         except (ValueError, TypeError):
             raise DatasetError(f"{path}: column {col}: expected numbers, found "
                                f"{df[col][pd.to_numeric(df[col], errors='coerce').isna() & df[col].notna()].iloc[0]!r}") from None
-    df["exercise"] = df["exercise"] if "exercise" in df else df["session"].map(_session_label)
-    df["sex"] = df["sex"].map(lambda v: SEX_ALIASES.get(str(v).strip().lower(), v) if pd.notna(v) else v)
+    df["exercise"] = _categorical(df["exercise"] if "exercise" in df else df["session"].map(_session_label))
+    df["sex"] = _categorical(df["sex"].map(lambda v: SEX_ALIASES.get(str(v).strip().lower(), v)
+                                           if pd.notna(v) else v))
     check_rows(df, str(path))
     check_participants(df, str(path))
     check_values(df, names, str(path))
     return df
+
+
+def _categorical(values: pd.Series) -> pd.Series:
+    """``values`` as a categorical whose categories are sorted (NaN stays missing).
+
+    Sorting, ``groupby`` (with ``observed=True``), ``==`` and ``to_numpy(str)`` then give what they
+    give on the strings themselves, while the table holds one small code a row.
+    """
+    if isinstance(values.dtype, pd.CategoricalDtype):
+        categories = values.cat.categories
+        return values if categories.is_monotonic_increasing else \
+            values.cat.reorder_categories(sorted(categories))
+    return values.astype("category")
 
 
 def write_table(table: pd.DataFrame, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
@@ -220,7 +237,7 @@ def check_participants(table: pd.DataFrame, source: str) -> None:
     DatasetError
         Naming the source, the participant (and session) and the field.
     """
-    for code, rows in table.groupby("participant", sort=False):
+    for code, rows in table.groupby("participant", sort=False, observed=True):
         for col in PARTICIPANT_COLUMNS:
             values = rows[col].dropna().unique()
             if len(values) > 1:
@@ -302,6 +319,7 @@ def sessions_table(paths: Iterable[str | os.PathLike], blendshapes: BlendshapeSe
     Returns
     -------
     DataFrame
+        The text columns (:data:`STRING_COLUMNS`) as categoricals, as :func:`read_table` gives them.
 
     Raises
     ------
@@ -316,6 +334,8 @@ def sessions_table(paths: Iterable[str | os.PathLike], blendshapes: BlendshapeSe
     source = ", ".join(str(f.parent) for f in folders[:1]) or "sessions"
     check_participants(table, source)
     check_values(table, blendshapes.names, source)
+    for col in STRING_COLUMNS:  # as read_table holds them
+        table[col] = _categorical(table[col])
     return table
 
 
@@ -495,6 +515,11 @@ def prepare(table: pd.DataFrame, hr_max_formula: str = "tanaka",
     gives measured values. NHR is clipped to [0, 1]; EPOC runs the physiology recursion on the
     measured NHR of each session.
 
+    The new frame shares the table's columns where no reordering is needed (a table already sorted
+    by participant, session and ``t_s``, as the long tables are; pandas copies on write, so neither
+    frame sees the other's changes): keeping both costs the four new columns a row, not a second
+    table.
+
     Raises
     ------
     DatasetError
@@ -502,41 +527,47 @@ def prepare(table: pd.DataFrame, hr_max_formula: str = "tanaka",
     """
     if table.empty:
         raise DatasetError(f"{source}: expected rows of participant-seconds, found none")
-    out = table.sort_values(["participant", "session", "t_s"]).reset_index(drop=True).copy()
-    for col in ("hr_rest_bpm", "hr_max_bpm"):
-        if col not in out:
-            out[col] = np.nan
-    parts = []
-    for sid, rows in out.groupby("session", sort=False):
+    out = table.sort_values(["participant", "session", "t_s"]).reset_index(drop=True)
+    added = {col: np.full(len(out), np.nan) for col in ("hr_rest_bpm", "hr_max_bpm", "nhr", "epoc_norm")}
+    order = []
+    for sid, rows in out.groupby("session", sort=False, observed=True):
         try:
-            parts.append(_prepare_session(rows, hr_max_formula, epoc, source))
+            values = _prepare_session(rows, hr_max_formula, epoc, source)
         except DatasetError:
             raise
         except UserError as exc:  # physiology: names the field only
             raise DatasetError(f"{source}: session {sid}: {exc}") from None
-    return pd.concat(parts).reset_index(drop=True)
+        at = rows.index.to_numpy()
+        for col, v in values.items():
+            added[col][at] = v
+        order.append(at)
+    out = out.assign(**added)  # measured hr_rest/max_bpm replaced in place, nhr and epoc_norm last
+    order_rows = np.concatenate(order)
+    if not np.array_equal(order_rows, np.arange(len(out))):  # a session id shared by participants
+        out = out.take(order_rows).reset_index(drop=True)
+    return out
 
 
-def _prepare_session(rows: pd.DataFrame, formula: str, epoc: EpocParams, source: str) -> pd.DataFrame:
-    """NHR and EPOC for one session's rows."""
-    rows = rows.copy()
+def _prepare_session(rows: pd.DataFrame, formula: str, epoc: EpocParams, source: str
+                     ) -> dict[str, np.ndarray]:
+    """HR_rest, HR_max, NHR and EPOC_norm (one array each) for one session's rows."""
     first = rows.iloc[0]
     if not rows["hr_bpm"].notna().any():
         raise DatasetError(f"{source}: session {first['session']}: expected heart-rate values "
                            f"(hr_bpm), found none")
-    rest = first["hr_rest_bpm"] if pd.notna(first["hr_rest_bpm"]) else hr_rest_bpm(
+    rest = first["hr_rest_bpm"] if "hr_rest_bpm" in first and pd.notna(first["hr_rest_bpm"]) else hr_rest_bpm(
         first["age"], first["sex"], first["training_level"])
-    top = first["hr_max_bpm"] if pd.notna(first["hr_max_bpm"]) else hr_max_bpm(first["age"], formula)
+    top = first["hr_max_bpm"] if "hr_max_bpm" in first and pd.notna(first["hr_max_bpm"]) else hr_max_bpm(
+        first["age"], formula)
     if top <= rest:
         raise DatasetError(f"{source}: participant {first['participant']}: expected hr_max_bpm > "
                            f"hr_rest_bpm, found {top:g} <= {rest:g}")
-    rows["hr_rest_bpm"], rows["hr_max_bpm"] = float(rest), float(top)
-    rows["nhr"] = ((rows["hr_bpm"] - rest) / (top - rest)).clip(0, 1)
+    n = len(rows)
+    nhr = ((rows["hr_bpm"] - rest) / (top - rest)).clip(0, 1).to_numpy(float)
     vo2max = vo2max_ml_per_kg_min(first["age"], first["sex"], first["height_m"], first["mass_kg"],
                                   first["training_level"])
-    rows["epoc_norm"] = _epoc(rows["t_s"].to_numpy(float), rows["nhr"].to_numpy(float), vo2max,
-                              epoc) / epoc.scale_ml_per_kg
-    return rows
+    return {"hr_rest_bpm": np.full(n, float(rest)), "hr_max_bpm": np.full(n, float(top)), "nhr": nhr,
+            "epoc_norm": _epoc(rows["t_s"].to_numpy(float), nhr, vo2max, epoc) / epoc.scale_ml_per_kg}
 
 
 def _epoc(t_s: np.ndarray, nhr: np.ndarray, vo2max: float, params: EpocParams) -> np.ndarray:
@@ -556,7 +587,7 @@ def _epoc(t_s: np.ndarray, nhr: np.ndarray, vo2max: float, params: EpocParams) -
 def hr_series(prepared: pd.DataFrame) -> list[HrSeries]:
     """One :class:`~effortface.train.hr_fit.HrSeries` per session of a prepared table."""
     out = []
-    for sid, rows in prepared.groupby("session", sort=False):
+    for sid, rows in prepared.groupby("session", sort=False, observed=True):
         f = rows.iloc[0]
         out.append(HrSeries(str(f["participant"]), str(sid), float(f["training_level"]),
                             rows["t_s"].to_numpy(float), rows["w_per_kg"].to_numpy(float),

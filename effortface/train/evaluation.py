@@ -131,7 +131,7 @@ def _game_features(prepared: pd.DataFrame, measured: np.ndarray, regression: obj
 
     x = measured.copy()
     epoc = EpocParams(**physiology["epoc"])
-    for s, (_, rows) in zip(hr_series(prepared), prepared.groupby("session", sort=False)):
+    for s, (_, rows) in zip(hr_series(prepared), prepared.groupby("session", sort=False, observed=True)):
         nhr, epoc_norm = simulated_features(s, rows.iloc[0], regression, epoc, physiology["hr_max_formula"])
         at = prepared.index.get_indexer(rows.index)
         x[at, 2], x[at, 3] = nhr, epoc_norm

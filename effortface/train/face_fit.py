@@ -170,14 +170,14 @@ def expressiveness(table: pd.DataFrame, blendshapes: Sequence[str]) -> pd.DataFr
     DataFrame
         Index: participant; columns: blendshapes; values floored at ``MIN_EXPRESSIVENESS``.
     """
-    e = table.groupby("participant", sort=False)[list(blendshapes)].max()
+    e = table.groupby("participant", sort=False, observed=True)[list(blendshapes)].max()
     return e.fillna(MIN_EXPRESSIVENESS).clip(lower=MIN_EXPRESSIVENESS)
 
 
 def subsample(table: pd.DataFrame, max_rows_per_participant: int) -> pd.DataFrame:
     """At most ``max_rows_per_participant`` rows per participant, evenly spaced in time."""
     parts = []
-    for _, rows in table.groupby("participant", sort=False):
+    for _, rows in table.groupby("participant", sort=False, observed=True):
         rows = rows.sort_values(["session", "t_s"])
         if len(rows) > max_rows_per_participant:
             idx = np.linspace(0, len(rows) - 1, max_rows_per_participant).round().astype(int)

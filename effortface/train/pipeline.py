@@ -575,7 +575,7 @@ def _finite_or_none(value: Any) -> Any:
 def training_provenance(prepared: pd.DataFrame, face: Any, sources: Sequence[str], rater_policy: str,
                 config: FaceFitConfig) -> dict[str, Any]:
     """Data and software description for model.json and the model card."""
-    tls = prepared.groupby("participant")["training_level"].first()
+    tls = prepared.groupby("participant", observed=True)["training_level"].first()
     return {
         "created_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "software_version": _software_version(), "sources": list(sources),
