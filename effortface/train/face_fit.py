@@ -636,15 +636,14 @@ def nested_choices(data: FaceData, config: FaceFitConfig, folds: Sequence[tuple[
     if len(folds) < 3:
         raise ValueError("cv: a nested search needs >= 3 participant folds")
     n, nb = data.y_norm.shape
-    fold_of = np.full(n, -1)
+    fold_of = np.full(n, -1, dtype=np.int16)
     for f, (_, test) in enumerate(folds):
         fold_of[test] = f
     methods = [config.method(len(train)) for train, _ in folds]
     pairs = sorted({(min(j, k), max(j, k), methods[k]) for k in range(len(folds)) for j in range(len(folds))
                     if j != k})
-    calls = ((np.flatnonzero((fold_of != j) & (fold_of != k)), [folds[j][1], folds[k][1]], config, method)
-             for j, k, method in pairs)
-    scores = dict(zip(pairs, map_ordered(_pair_fold_mses, calls, shared=(data,))))
+    calls = ((j, k, config, method) for j, k, method in pairs)  # small tasks: the rows follow from fold_of
+    scores = dict(zip(pairs, map_ordered(_pair_fold_mses, calls, shared=(data, fold_of))))
     choices = []
     for k in range(len(folds)):
         inner = [j for j in range(len(folds)) if j != k]
@@ -656,10 +655,13 @@ def nested_choices(data: FaceData, config: FaceFitConfig, folds: Sequence[tuple[
     return choices
 
 
-def _pair_fold_mses(data: FaceData, train: np.ndarray, tests: list[np.ndarray], config: FaceFitConfig,
+def _pair_fold_mses(data: FaceData, fold_of: np.ndarray, j: int, k: int, config: FaceFitConfig,
                     method: str) -> list[dict[tuple, np.ndarray]]:
-    """One fit per grid point on ``train`` (:func:`_search_fold`), scored on each of ``tests``
-    separately: per test fold, grid point -> MSE per blendshape (B,) (NaN where nothing to score)."""
+    """One fit per grid point on the rows outside folds ``j`` and ``k`` (``fold_of``: each row's
+    fold; :func:`_search_fold`), scored on fold j and on fold k separately: per fold, grid point ->
+    MSE per blendshape (B,) (NaN where nothing to score)."""
+    train = np.flatnonzero((fold_of != j) & (fold_of != k))
+    tests = [np.flatnonzero(fold_of == j), np.flatnonzero(fold_of == k)]
     union = np.concatenate(tests)
     order = np.argsort(union, kind="stable")
     preds = _search_fold(data, train, union[order], config, method, baselines=False)[0]

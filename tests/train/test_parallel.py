@@ -20,7 +20,7 @@ from distributed import Client, Event, Future
 from effortface.core.blendshapes import DEFAULT_SET
 from effortface.train.dataset import prepare, synthetic_table
 from effortface.train.face_fit import (PROTOCOLS, FaceData, FaceFitConfig, _protocol_folds, cv_folds, face_data,
-                                       fit_face_models, held_out_scores, protocol_scores)
+                                       fit_face_models, held_out_scores, nested_choices, protocol_scores)
 from effortface.synth.parallel import (FORKSERVER_PRELOAD, TASKS_PER_THREAD, ComputeSettings, compute_backend,
                                        _chunks, map_ordered, single_threaded)
 
@@ -65,8 +65,10 @@ def _train(table) -> tuple[Any, Any, Any]:
 
 @pytest.fixture(scope="module")
 def serial(table) -> tuple[Any, Any, Any]:
-    """The face part of a training run in this process (before the cluster opens)."""
-    return _train(table)
+    """The face part of a training run in this process (before the cluster opens), and the nested
+    search's choices."""
+    fit, held, protos = _train(table)
+    return fit, held, protos, nested_choices(fit.data, fit.config, cv_folds(fit.data, "lopo"))
 
 
 @pytest.fixture(scope="module")
@@ -76,7 +78,7 @@ def cluster(serial) -> Iterator[Client]:
 
 
 def test_the_training_data_is_sent_to_the_workers_once(table, serial, cluster, monkeypatch):
-    serial_fit, serial_held, (serial_protos, serial_preds) = serial
+    serial_fit, serial_held, (serial_protos, serial_preds), _ = serial
     calls = Recorder(monkeypatch)
     fit, held, (protos, preds) = _train(table)
     # one scatter, of the training data, to every worker
@@ -101,6 +103,17 @@ def test_the_training_data_is_sent_to_the_workers_once(table, serial, cluster, m
     assert held.equals(serial_held) and protos.equals(serial_protos)
     for protocol in PROTOCOLS:
         np.testing.assert_array_equal(preds[protocol], serial_preds[protocol])
+
+
+def test_the_nested_search_sends_the_folds_once_and_matches_the_serial_one(table, serial, cluster, monkeypatch):
+    """The nested search's tasks carry two fold numbers (the rows' folds are shipped with the data),
+    and its choices on the workers are the serial ones."""
+    fit, expected = serial[0], serial[3]
+    calls = Recorder(monkeypatch)
+    assert nested_choices(fit.data, fit.config, cv_folds(fit.data, "lopo")) == expected
+    assert len(calls.futures) > 0 and max(calls.task_bytes) < 2_000  # no row indices in a task
+    fold_of = [d for d, _ in calls.scattered if isinstance(d, np.ndarray)]
+    assert len(fold_of) == 1 and len(fold_of[0]) == len(fit.data.x)
 
 
 def _worker_settings() -> dict[str, Any]:
