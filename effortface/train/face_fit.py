@@ -193,7 +193,7 @@ class FaceData:
     x: np.ndarray            # (n, 4) raw features
     y_norm: np.ndarray       # (n, B) weight / e_b
     e: np.ndarray            # (n, B) the row's participant expressiveness
-    groups: np.ndarray       # (n,) participant codes
+    groups: np.ndarray       # (n,) participant codes (object arrays of shared strings: shared_labels)
     exercise: np.ndarray     # (n,) exercise labels
     t_s: np.ndarray
     session: np.ndarray
@@ -216,8 +216,19 @@ def face_data(table: pd.DataFrame, blendshapes: Sequence[str],
     y = table[list(blendshapes)].to_numpy(float)
     exercise = table["exercise"] if "exercise" in table else table["session"]
     return FaceData(table[list(FEATURES)].to_numpy(float), np.clip(y / e, 0.0, 1.0), e,
-                    table["participant"].to_numpy(str), exercise.to_numpy(str),
-                    table["t_s"].to_numpy(float), table["session"].to_numpy(str), blendshapes)
+                    shared_labels(table["participant"]), shared_labels(exercise),
+                    table["t_s"].to_numpy(float), shared_labels(table["session"]), blendshapes)
+
+
+def shared_labels(values: pd.Series) -> np.ndarray:
+    """Text labels as an object array whose rows share one string per distinct value.
+
+    The values and their order are those of ``values.to_numpy(str)`` (a missing value reads
+    ``"nan"``), in 8 bytes a row: a fixed-width numpy string array holds every character of every
+    row (108 bytes a row for a 27-character session id).
+    """
+    codes, uniques = pd.factorize(values, sort=True)
+    return np.array([str(u) for u in uniques] + ["nan"], dtype=object)[codes]
 
 
 # --------------------------------------------------------------------------- folds and search

@@ -109,8 +109,8 @@ def plot_fig3(fit: FaceModelFit, predictions: Mapping[str, np.ndarray], path: st
 def _liveliest_session(fit: FaceModelFit) -> str:
     """The session whose annotated weights vary most (the most telling plot)."""
     d = fit.data
-    spread = {s: float(np.nanstd(d.y_norm[d.session == s] * d.e[d.session == s]))
-              for s in np.unique(d.session)}
+    weights = pd.DataFrame(d.y_norm * d.e)
+    spread = {s: float(np.nanstd(w.to_numpy())) for s, w in weights.groupby(d.session, sort=True)}
     return max(spread, key=spread.__getitem__)
 
 

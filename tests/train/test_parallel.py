@@ -25,7 +25,9 @@ from effortface.synth.parallel import (FORKSERVER_PRELOAD, TASKS_PER_THREAD, Com
                                        _chunks, map_ordered, single_threaded)
 
 #: a task may carry its fold's row indices, never the training data: at most this share of its bytes
-MAX_TASK_SHARE_OF_DATA = 0.05
+#: (a fold's indices are one int64 per training row, the data about 13 float64 values per row, its
+#: text columns shared strings)
+MAX_TASK_SHARE_OF_DATA = 0.1
 
 
 class Recorder:
