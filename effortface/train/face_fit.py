@@ -597,9 +597,11 @@ def grid_search(data: FaceData, config: FaceFitConfig,
     base = {k: np.full((n, nb), np.nan) for k in ("mean", "linear")}
     models: list[dict] = []
     method = config.method(n)
-    calls = ((train, test, config, method) for train, test in folds)
-    results = map_ordered(_search_fold, calls, shared=(data,))
-    for f, ((train, test), (preds, mses, baselines, fold_models)) in enumerate(zip(folds, results)):
+    fold_of = fold_numbers(folds, n)
+    calls = ((f, config, method) for f in range(len(folds)))  # small tasks: the rows follow from fold_of
+    results = map_ordered(_search_numbered_fold, calls, shared=(data, fold_of))
+    for f, (preds, mses, baselines, fold_models) in enumerate(results):
+        test = np.flatnonzero(fold_of == f)
         for p in points:
             oof[p][test] = preds[p]
             fold_mse[p][f] = mses[p]
@@ -615,6 +617,21 @@ def grid_search(data: FaceData, config: FaceFitConfig,
                                       for gamma, (landmarks, coefs) in fold.items() for c in coefs}
                                      for fold in models]
     return out
+
+
+def fold_numbers(folds: Sequence[tuple[np.ndarray, np.ndarray]], n_rows: int) -> np.ndarray:
+    """Each row's test fold (int16; -1 for a row in no test fold). The folds' test rows partition
+    the rows and each fold trains on all the others, so a task needs only its fold's number."""
+    fold_of = np.full(n_rows, -1, dtype=np.int16)
+    for f, (_, test) in enumerate(folds):
+        fold_of[test] = f
+    return fold_of
+
+
+def _search_numbered_fold(data: FaceData, fold_of: np.ndarray, fold: int, config: FaceFitConfig,
+                          method: str) -> tuple[dict, dict, dict, dict]:
+    """:func:`_search_fold` of fold number ``fold`` (test rows ascending; see :func:`fold_numbers`)."""
+    return _search_fold(data, np.flatnonzero(fold_of != fold), np.flatnonzero(fold_of == fold), config, method)
 
 
 def nested_choices(data: FaceData, config: FaceFitConfig, folds: Sequence[tuple[np.ndarray, np.ndarray]]
@@ -646,10 +663,7 @@ def nested_choices(data: FaceData, config: FaceFitConfig, folds: Sequence[tuple[
     points = list(itertools.product(config.grid["C"], config.grid["gamma"], config.grid["epsilon"]))
     if len(folds) < 3:
         raise ValueError("cv: a nested search needs >= 3 participant folds")
-    n, nb = data.y_norm.shape
-    fold_of = np.full(n, -1, dtype=np.int16)
-    for f, (_, test) in enumerate(folds):
-        fold_of[test] = f
+    fold_of = fold_numbers(folds, len(data.x))
     methods = [config.method(len(train)) for train, _ in folds]
     pairs = sorted({(min(j, k), max(j, k), methods[k]) for k in range(len(folds)) for j in range(len(folds))
                     if j != k})

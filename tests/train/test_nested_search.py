@@ -15,7 +15,7 @@ from sklearn.preprocessing import StandardScaler
 
 from effortface.train.dataset import hr_series, prepare, synthetic_table
 from effortface.train.face_fit import (FaceData, FaceFitConfig, _pair_fold_mses, _search_fold, cv_folds,
-                                       face_data, fit_face_models, fit_one, fit_predict, grid_search,
+                                       face_data, fit_face_models, fit_one, fit_predict, fold_numbers, grid_search,
                                        _predict_folds, _protocol_folds, nested_choices, protocol_scores,
                                        training_expressiveness)
 from effortface.train.game_score import game_predictions
@@ -55,9 +55,7 @@ def test_one_fit_scored_on_two_folds_gives_each_folds_own_errors(lab, exact_max_
     config = FaceFitConfig(grid=GRID, exact_max_rows=exact_max_rows, n_landmarks=40)
     d = face_data(lab, NAMES)
     folds = cv_folds(d, "lopo")
-    fold_of = np.full(len(d.x), -1)
-    for f, (_, test) in enumerate(folds):
-        fold_of[test] = f
+    fold_of = fold_numbers(folds, len(d.x))
     train = np.flatnonzero((fold_of != 1) & (fold_of != 3))
     method = config.method(len(train))
     paired = _pair_fold_mses(d, fold_of, 1, 3, config, method)

@@ -83,10 +83,12 @@ def test_the_training_data_is_sent_to_the_workers_once(table, serial, cluster, m
     serial_fit, serial_held, (serial_protos, serial_preds), _ = serial
     calls = Recorder(monkeypatch)
     fit, held, (protos, preds) = _train(table)
-    # one scatter, of the training data, to every worker
-    assert len(calls.scattered) == 1
+    # one scatter of the training data to every worker, and one of the search's fold numbers
+    assert len(calls.scattered) == 2
     data, kwargs = calls.scattered[0]
     assert isinstance(data, FaceData) and data is fit.data and kwargs.get("broadcast") is True
+    fold_of = calls.scattered[1][0]
+    assert fold_of.dtype == np.int16 and len(fold_of) == len(data.x)
     # the folds, final fits and protocol folds in a few tasks per worker, each carrying indices, not the data
     n_calls = [len(cv_folds(data, max_folds=fit.config.max_folds)), len(DEFAULT_SET.names)]
     # (the unseen-participant protocol of an approximate fit reads the search's own fold fits: no task)
