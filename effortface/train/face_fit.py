@@ -573,7 +573,8 @@ def grid_search(data: FaceData, config: FaceFitConfig,
     """Grid search of every blendshape's model (exact SVR or the approximation, by the rows).
 
     The folds run through :func:`effortface.synth.parallel.map_ordered` (this process or a Dask
-    cluster, same results; ``data`` goes to the workers once, a task carries its fold's indices).
+    cluster, same results; ``data`` and each row's fold (:func:`fold_numbers`) go to the workers
+    once, a task carries its fold's number).
 
     Parameters
     ----------
