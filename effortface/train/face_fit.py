@@ -420,9 +420,9 @@ def _normal_equations(xs: np.ndarray, y: np.ndarray, landmarks: np.ndarray, gamm
             ata[m, m] += len(a_ok)
             aty[:m] += a_ok.T @ y_ok
             aty[m] += y_ok.sum(axis=0)
+    lower = np.tril_indices(m, -1)
     for ata, _ in sums.values():
         ata[m, :m] = ata[:m, m]
-        lower = np.tril_indices(m, -1)
         ata[lower] = ata[:m, :m].T[lower]
     return {key: (*sums[key], np.array(cols)) for key, cols in groups.items()}
 
@@ -542,11 +542,19 @@ def fit_predict(xs: np.ndarray, targets: np.ndarray, params: Sequence[dict[str, 
         gamma, cs = float(params[cols[0]]["gamma"]), [float(params[b]["C"]) for b in cols]
         landmarks, coefs = fit_landmark_models(xs_ok, targets[ok][:, cols], gamma, sorted(set(cs)),
                                                n_landmarks, seed)
-        weights = np.column_stack([coefs[c][:-1, i] for i, c in enumerate(cs)])
-        intercepts = np.array([coefs[c][-1, i] for i, c in enumerate(cs)])
-        for out, t in zip(outs, tests):
-            out[:, cols] = kernel_products(t, landmarks, gamma, [weights])[0] + intercepts
+        _predict_columns(outs, cols, tests, landmarks, gamma,
+                         [(coefs[c][:-1, i], coefs[c][-1, i]) for i, c in enumerate(cs)])
     return outs
+
+
+def _predict_columns(outs: Sequence[np.ndarray], cols: list[int], tests: Sequence[np.ndarray],
+                     landmarks: np.ndarray, gamma: float, models: Sequence[tuple[np.ndarray, float]]) -> None:
+    """Fill columns ``cols`` of each ``outs[i]`` with the landmark models' predictions for ``tests[i]``
+    (one kernel pass per test array for all the models; ``models``: (coef (m,), intercept) per column)."""
+    weights = np.column_stack([coef for coef, _ in models])
+    intercepts = np.array([intercept for _, intercept in models])
+    for out, t in zip(outs, tests):
+        out[:, cols] = kernel_products(t, landmarks, gamma, [weights])[0] + intercepts
 
 
 # --------------------------------------------------------------------------- the search
@@ -686,18 +694,13 @@ def _pair_fold_mses(data: FaceData, fold_of: np.ndarray, j: int, k: int, config:
     """One fit per grid point on the rows outside folds ``j`` and ``k`` (``fold_of``: each row's
     fold; :func:`_search_fold`), scored on fold j and on fold k separately: per fold, grid point ->
     MSE per blendshape (B,) (NaN where nothing to score)."""
-    train = np.flatnonzero((fold_of != j) & (fold_of != k))
-    tests = [np.flatnonzero(fold_of == j), np.flatnonzero(fold_of == k)]
-    union = np.concatenate(tests)
-    order = np.argsort(union, kind="stable")
-    preds = _search_fold(data, train, union[order], config, method, baselines=False)[0]
-    where = np.empty(len(union), dtype=int)
-    where[order] = np.arange(len(union))
-    out, start = [], 0
-    for test in tests:
-        at = where[start:start + len(test)]
-        start += len(test)
-        y = data.y_norm[test]
+    scored = (fold_of == j) | (fold_of == k)
+    both = np.flatnonzero(scored)
+    preds = _search_fold(data, np.flatnonzero(~scored), both, config, method, baselines=False)[0]
+    out = []
+    for fold in (j, k):
+        at = fold_of[both] == fold
+        y = data.y_norm[both[at]]
         with np.errstate(invalid="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # a blendshape with nothing to score: NaN
             out.append({p: np.nanmean((pred[at] - y) ** 2, axis=0) for p, pred in preds.items()})
@@ -1116,10 +1119,7 @@ def search_fit_predictions(fit: FaceModelFit, fold: int, params: Sequence[dict[s
     outs = [np.full((len(t), len(params)), np.nan) for t in tests]
     for gamma, cols in by_gamma.items():
         models = [fit.search[fit.blendshapes[b]].fold_models[fold][(params[b]["C"], gamma)] for b in cols]
-        weights = np.column_stack([coef for _, coef, _ in models])
-        intercepts = np.array([intercept for _, _, intercept in models])
-        for out, t in zip(outs, tests):
-            out[:, cols] = kernel_products(t, models[0][0], gamma, [weights])[0] + intercepts
+        _predict_columns(outs, cols, tests, models[0][0], gamma, [(coef, icpt) for _, coef, icpt in models])
     return outs
 
 
