@@ -69,6 +69,15 @@ _Y_UP_TO_Z_UP = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 _Y_UP_TO_Z_UP_ORDER = np.argmax(_Y_UP_TO_Z_UP, axis=1)
 
 
+#: what :attr:`Motion.reading` may hold (every key optional):
+#: ``unit_m`` (float, metres per file unit), ``unit_from`` (str, how it was decided: the file's
+#: declaration, the rest pose's height, an option), ``up_axis`` (the file's up: one of x, y, z, -x,
+#: -y, -z), ``up_from`` (str, how it was decided), ``producer`` (str, e.g. a C3D's MANUFACTURER),
+#: ``marker_set`` / ``convention`` (str, what named the joints), ``window`` (dict: ``first_frame``,
+#: ``n_frames``, ``of_frames``, why a sub-window of the file was kept).
+READING_KEYS = ("unit_m", "unit_from", "up_axis", "up_from", "producer", "marker_set", "convention", "window")
+
+
 class MotionFormatError(UserError):
     """A motion file does not follow its format; the message names the file (and line)."""
 
@@ -180,6 +189,10 @@ class Motion:
         Frames per second.
     source : str
         Where the motion came from (a file path or a description).
+    reading : dict
+        How the file was read, for ``effortface motion inspect``, ``.units.json`` and BIDS (keys
+        :data:`READING_KEYS`; a reader fills what it knows): the length unit and how it was decided,
+        the file's up axis and how, the producer, the frame window kept.
     """
 
     joint_names: tuple[str, ...]
@@ -188,6 +201,7 @@ class Motion:
     rotations: np.ndarray | None
     fps: float
     source: str = ""
+    reading: dict[str, Any] = dataclasses.field(default_factory=dict, compare=False)
 
     @property
     def t_s(self) -> np.ndarray:
