@@ -190,7 +190,7 @@ def test_bvh_headers_are_read_or_refused_in_one_line(depth, frames, frame_time, 
 
 
 def _seed_xdf() -> bytes:
-    from tests.train.interop.xdf_writer import XdfStream, write_xdf
+    from tests.interop.xdf_writer import XdfStream, write_xdf
 
     with tempfile.TemporaryDirectory() as tmp:
         hr = XdfStream("Polar", "HeartRate", [("hr_bpm", "bpm"), ("rr_ms", "ms")], [5000.0 + k for k in range(12)],

@@ -132,3 +132,15 @@ def test_a_clone_without_symlinks_installs_and_imports_every_stage_from_its_own_
     assert done.returncode == 0, done.stderr[-3000:]
     for file in json.loads(done.stdout):
         assert Path(file).resolve().is_relative_to(clone.resolve()), file
+
+
+def test_the_tests_mirror_the_package_rooms() -> None:
+    """One test folder per room of effortface/ (the front door's commands in tests/commands/), and no
+    other folder of tests but data/: a test of effortface/synth/ is found in tests/synth/."""
+    rooms = {p.parent.name for p in (ROOT / "effortface").glob("*/__init__.py")}
+    folders = {p.parent.name for p in (ROOT / "tests").glob("*/__init__.py")}
+    assert folders == rooms
+    stray = [p.relative_to(ROOT).as_posix() for p in (ROOT / "tests").glob("*/*/test_*.py")]
+    assert stray == []
+    named_after_rounds = [p.name for p in (ROOT / "tests").rglob("test_*round*.py")]
+    assert named_after_rounds == []

@@ -17,7 +17,7 @@ clip and the curves can be written as they come (:func:`effortface.synth.curves_
   (:meth:`~effortface.synth.face.WeightFilter.run`) carry their state from piece to piece.
 
 Tested: equal to the whole-clip path within 1e-12 of each curve's size on a clip of several pieces,
-and the peak memory does not grow with the clip (``tests/train/test_synth_chunked.py``). On an hour
+and the peak memory does not grow with the clip (``tests/synth/test_synth_chunked.py``). On an hour
 at 120 Hz the two differ by 2e-12 of the curves' sizes: the rounding of the whole clip's own running
 sum of the work (its ulp at that length), which the pieces continue from slightly different rates.
 """

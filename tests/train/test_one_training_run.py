@@ -8,7 +8,7 @@ once, and both paths call them.
 Each function is replaced, wherever a loaded ``effortface`` module holds it, by a spy that counts
 the call and runs the real function; the CLI commands and the GUI models (``TrainSession``,
 ``SynthSession``) then run for real. ``effortface demo`` is checked the same way in
-tests/effortface/test_demo.py (:func:`spy_on_jobs`).
+tests/commands/test_demo.py (:func:`spy_on_jobs`).
 """
 
 from __future__ import annotations

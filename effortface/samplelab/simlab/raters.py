@@ -42,7 +42,7 @@ class RaterDesign:
         ``|bias| + |drift| duration / 10 min`` (the bias at the session's end) ``+ 0.8 noise_sd``
         (a key's own error; E|N(0, s)| = 0.8 s) ``+ 0.04`` for what interpolation between keys
         cannot follow (breathing, expirations, repetition strain) (choice, checked on the generated
-        lab by tests/test_sample_sessions.py).
+        lab by tests/samplelab/test_sample_sessions.py).
         """
         return tuple(round(abs(b) + abs(d) * duration_s / 600.0 + 0.8 * self.noise_sd + 0.04, 4)
                      for b, d in zip(self.bias, self.drift_per_10min))

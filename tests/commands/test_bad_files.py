@@ -31,7 +31,7 @@ from effortface.synth.work import write_work
 from effortface.synth.work import WorkError, read_motion_index
 from effortface.synth.physiology import PhysiologyParams
 from effortface.synth.runtime import Character
-from tests.train.test_bundle import make_bundle
+from tests.synth.test_bundle import make_bundle
 
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLES = ROOT / "sample_sessions"

@@ -82,7 +82,7 @@ def test_default_model_settles_at_the_compendium_vo2_reserve(default_curves: dic
 
 def test_calibration_is_reproduced_from_the_clips(shared_data: Path) -> None:
     """Fitting METs = 1.3 + a w^b to the reference clips' steady w gives the shipped MetCurve."""
-    from tests.train.test_energy import _steady_w  # the clips' steady stretches, as SCIENCE.md's table
+    from tests.synth.test_energy import _steady_w  # the clips' steady stretches, as SCIENCE.md's table
 
     full = "cmu_13_29_full_30fps.bvh"
     w = {"standing": _steady_w(shared_data, full, 37.5, 38.3, slice_first=True),

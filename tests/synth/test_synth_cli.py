@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from effortface.cli import main
-from tests.train.test_bundle import make_bundle
+from tests.synth.test_bundle import make_bundle
 from effortface.synth.bundle import write_bundle
 from effortface.synth.curves_io import LIVELINK_BLENDSHAPES, livelink_timecode
 from effortface.synth.face import jitter

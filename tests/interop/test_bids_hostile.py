@@ -13,7 +13,7 @@ from effortface.core.session.folder import EventWriter, Event
 from effortface.cli import main
 from effortface.interop.bids import bids_text
 
-ROOT = Path(__file__).resolve().parents[3]
+ROOT = Path(__file__).resolve().parents[2]
 SAMPLE = ROOT / "sample_sessions"
 SESSIONS = ("P01_20260112-093000_cardio", "P02_20260112-113700_strength")
 

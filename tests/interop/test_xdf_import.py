@@ -25,7 +25,7 @@ from effortface.train.dataset import session_table
 
 from .xdf_writer import XdfStream, write_xdf
 
-ROOT = Path(__file__).resolve().parents[3]
+ROOT = Path(__file__).resolve().parents[2]
 SAMPLE = ROOT / "sample_sessions"
 SESSION = "P06_20260121-125500_cardio"
 LSL_T0 = 5000.0   # the recording's LSL clock at the session's time 0

@@ -17,7 +17,7 @@ import pytest
 from effortface.core.session.folder import list_sessions, read_session
 from effortface.interop.bids import bids_label, export_bids
 
-ROOT = Path(__file__).resolve().parents[3]
+ROOT = Path(__file__).resolve().parents[2]
 SAMPLE = ROOT / "sample_sessions"
 #: BIDS file names of this export: entities in the specification's order, alphanumeric labels
 NAME_RE = re.compile(r"^sub-(?P<sub>[A-Za-z0-9]+)_ses-(?P<ses>[A-Za-z0-9]+)_task-[A-Za-z0-9]+"

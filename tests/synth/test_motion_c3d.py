@@ -50,7 +50,7 @@ def test_c3d_reads_back_and_gives_the_same_work(shared_data: Path, tmp_path: Pat
 
 
 def test_c3d_attaches_with_sync(shared_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    from tests.train.test_motion_attach import TRUE_OFFSET_S, _raw_apexes_s, _session
+    from tests.synth.test_motion_attach import TRUE_OFFSET_S, _raw_apexes_s, _session
 
     bvh_path = shared_data / "motion" / "cmu_13_29_full_30fps.bvh"
     clip = write_c3d(read_motion(bvh_path), tmp_path / "routine.c3d")

@@ -17,8 +17,8 @@ from effortface.synth.face import (SINGLE_PRECISION_ERROR_PER_ALPHA, SURROGATE_M
 from effortface.synth.motion import Motion, read_motion
 from effortface.synth.physiology import NhrParams, NhrRegression
 from effortface.synth.runtime import Character, FaceModel, load_model
-from tests.train.test_bundle import make_bundle
-from tests.train.test_face import _fit_random
+from tests.synth.test_bundle import make_bundle
+from tests.synth.test_face import _fit_random
 
 JJ = "motion/cmu_13_29_jumping_jacks_120fps.bvh"
 #: the features' training range of the big model below (w, p in W/kg, NHR, EPOC_norm)

@@ -27,9 +27,9 @@ from effortface.capture_tool.recorder import decode_serlog
 from effortface.capture_tool.serlog import read_serlog
 from effortface.core.session.folder import list_sessions, read_session, validate_session
 
-from .capture_tool.capture_helpers import BODY, content, effortface, start_replay
+from tests.capture_tool.capture_helpers import BODY, content, effortface, start_replay
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 LAB = ROOT / "sample_sessions"
 TRUTH = LAB / "_ground_truth"
 GENERATE = LAB / "generate.py"

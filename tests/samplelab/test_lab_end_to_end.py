@@ -19,9 +19,9 @@ import pytest
 from effortface.core.session.folder import read_session
 from effortface.synth.exercise_log import read_exercise_log
 
-from .capture_tool.capture_helpers import effortface, start_replay
+from tests.capture_tool.capture_helpers import effortface, start_replay
 
-SAMPLES = Path(__file__).resolve().parents[1] / "sample_sessions"
+SAMPLES = Path(__file__).resolve().parents[2] / "sample_sessions"
 #: three participants of distinct training levels, three strap protocols' worth of bytes
 SOURCES = ("P01_20260112-093000_cardio", "P02_20260112-113700_strength", "P03_20260120-142200_strength")
 REPLAY_SPEED = 12.0  # the 10-12-minute strap logs in about 1 minute of capture

@@ -21,7 +21,7 @@ from effortface.synth.face import WeightFilter, filter_weights
 from effortface.synth.motion import read_bvh, read_motion, read_motion_blocks
 from effortface.synth.physiology import PhysiologyParams, PhysiologyState, simulate
 from effortface.synth.runtime import Character, load_model
-from tests.train.test_bundle import make_bundle
+from tests.synth.test_bundle import make_bundle
 
 JJ = "motion/cmu_13_29_jumping_jacks_120fps.bvh"
 CSV_POSITIONS = "positions.csv"

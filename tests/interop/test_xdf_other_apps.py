@@ -18,7 +18,7 @@ from effortface.interop.xdf_import import HR_RANGE_BPM, load_xdf, marker_events
 
 from .xdf_writer import XdfStream, write_xdf
 
-DATA = Path(__file__).resolve().parents[2] / "data" / "xdf"
+DATA = Path(__file__).resolve().parents[1] / "data" / "xdf"
 
 
 def _import(xdf: Path, out: Path, *args) -> subprocess.CompletedProcess:

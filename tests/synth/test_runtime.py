@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from effortface.core.errors import UserError
-from tests.train.test_bundle import make_bundle
+from tests.synth.test_bundle import make_bundle
 from effortface.synth.bundle import write_bundle
 from effortface.synth.motion import motion_from_positions, read_motion
 from effortface.synth.face import DEFAULT_FILTER_TAU_S, WeightFilter, filter_weights, jitter

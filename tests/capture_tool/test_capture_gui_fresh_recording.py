@@ -1,4 +1,4 @@
-"""Capture, round 3 (issue 25 items 2 and 3), the real main window offscreen (pytest-qt): nothing
+"""Capture, the real main window offscreen (pytest-qt): nothing
 carries over from one recording to the next, and one strap status behind the Strap line, the banner
 and the HR readout (a real HxM stream read as ANT is named, Detect clears it)."""
 

@@ -52,7 +52,7 @@ def _clip_w(shared_data: Path, clip: str, start_s: float, stop_s: float, loads: 
     return float(curves.w_per_kg[keep].mean())
 
 
-CLIPS = {  # exercise -> clip, steady part (as tests/train/test_energy.py), logged state, loads
+CLIPS = {  # exercise -> clip, steady part (as tests/synth/test_energy.py), logged state, loads
     "walk, 10 kg backpack": ("treadmill_walk", "amp_humanoid_walk.npz", 1.0, np.inf,
                              PhaseState(speed_m_s=1.53, loads_kg=_loads(back=10)), Loads(0, 0, 10)),
     "run": ("treadmill_run", "amp_humanoid_run.npz", 1.0, np.inf, PhaseState(speed_m_s=3.45), Loads()),
