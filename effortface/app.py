@@ -676,6 +676,24 @@ def render_screenshot(window: MainWindow, stage: str, out: Path,
     return out
 
 
+def check_display(offscreen: bool) -> None:
+    """Refuse in one line when there is no display to open a window on (``offscreen``: a screenshot
+    is rendered offscreen instead, so any machine will do). Called before anything is built or copied.
+
+    Raises
+    ------
+    UserError
+        No ``$DISPLAY``, ``$WAYLAND_DISPLAY`` or ``$QT_QPA_PLATFORM`` on Linux and not a screenshot.
+    """
+    if offscreen:
+        os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+        return
+    if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+            or os.environ.get("QT_QPA_PLATFORM") or sys.platform in ("win32", "darwin")):
+        raise UserError("display: expected $DISPLAY or $WAYLAND_DISPLAY to open the window, found neither "
+                        "(use --screenshot PATH to render a stage offscreen)")
+
+
 def main(args: argparse.Namespace) -> int:
     """Run the application (or render a screenshot) and return the exit status.
 
@@ -695,13 +713,7 @@ def main(args: argparse.Namespace) -> int:
         raise UserError(f"--stage: expected one of {', '.join(STAGES)}, found {args.stage!r}")
     size = parse_size(getattr(args, "size", None))
     out = _check_screenshot_path(args.screenshot) if args.screenshot else None
-    has_display = bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
-                       or os.environ.get("QT_QPA_PLATFORM") or sys.platform in ("win32", "darwin"))
-    if out is not None:
-        os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
-    elif not has_display:
-        raise UserError("display: expected $DISPLAY or $WAYLAND_DISPLAY to open the window, found neither "
-                        "(use --screenshot PATH to render a stage offscreen)")
+    check_display(out is not None)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     app = QtWidgets.QApplication.instance() or QtWidgets.QApplication([sys.argv[0]])
     install_message_filter()  # Qt's propagateSizeHints() noise

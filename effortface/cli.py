@@ -52,7 +52,8 @@ class _Parser(argparse.ArgumentParser):
 
 def top_parser() -> argparse.ArgumentParser:
     """The parser of ``effortface`` itself (``--help``, ``--version``); the guide's command-line reference uses it."""
-    epilog = "\n".join(f"  {name:<10} {text}" for name, (_, text) in COMMANDS.items())
+    width = max(map(len, COMMANDS)) + 2  # the longest command name never runs into its text
+    epilog = "\n".join(f"  {name:<{width}}{text}" for name, (_, text) in COMMANDS.items())
     parser = _Parser(
         prog="effortface",
         description="Facial expressions of physical effort: capture, annotate, train, synthesize.",

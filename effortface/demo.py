@@ -78,22 +78,28 @@ def demo_out_dir(out_arg: str | None, force: bool = False, lab: str | Path | Non
     out = Path(out_arg)
     if not out.exists() and not out.is_symlink():
         return out
+    refusal = _not_replaceable(out, lab)
+    if refusal is not None:  # --force would be refused too: the hint names another --out
+        raise UserError(f"--out {out}: expected a new folder or one made by effortface demo, found {refusal} "
+                        "(not replaced: choose another --out)")
     if not force:
         raise UserError(f"--out {out}: expected a new folder, found an existing one (pass --force)")
+    return out
+
+
+def _not_replaceable(out: Path, lab: str | Path | None) -> str | None:
+    """Why ``--force`` may not replace the existing ``out`` (None: a previous demo output or empty)."""
     if out.is_symlink() or not out.is_dir():
-        raise UserError(f"--out {out}: expected a folder made by effortface demo, found "
-                        f"{'a symbolic link' if out.is_symlink() else 'a file'} (not replaced)")
+        return "a symbolic link" if out.is_symlink() else "a file"
     protected_dirs = [("the current directory", Path.cwd()), ("the repository's sample lab", repo_lab())]
     if lab is not None:
         protected_dirs.append(("the --lab folder", Path(lab)))
     for name, protected in protected_dirs:
         if protected is not None and protected.exists() and _contains(out, protected):
-            raise UserError(f"--out {out}: expected a folder made by effortface demo, found {name} "
-                            "or a folder holding it (not replaced)")
+            return f"{name} or a folder holding it"
     if not (out / MARKER).is_file() and any(out.iterdir()):
-        raise UserError(f"--out {out}: expected a folder made by effortface demo (with {MARKER}) or an "
-                        "empty folder, found other files (not replaced)")
-    return out
+        return f"other files (no {MARKER})"
+    return None
 
 
 def replace_out(out: Path) -> None:

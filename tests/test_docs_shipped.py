@@ -91,3 +91,6 @@ def test_cited_documents_are_in_the_wheel(wheel_files: set[str], trained_texts: 
     missing = {p for p in cited if f"effortface/{p}" not in wheel_files}
     assert not missing, sorted(missing)
     assert not any(name.startswith("effortface/docs/screenshots") for name in wheel_files)
+    # the pages the installed docs/index.md links to travel with it
+    pages = {f"effortface/docs/guide/{p.name}" for p in (ROOT / "docs" / "guide").glob("*.md")}
+    assert pages and pages <= wheel_files, sorted(pages - wheel_files)

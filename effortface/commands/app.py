@@ -36,11 +36,13 @@ def default_dir() -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Open the main window (imports Qt only here)."""
+    """Open the main window (imports Qt only here); no display: refused before the sample lab is copied."""
+    from effortface.app import check_display, main
+
+    if args.dir is not None and not Path(args.dir).exists():
+        raise UserError(f"DIR {args.dir}: expected a folder of sessions, found nothing")
+    check_display(bool(getattr(args, "screenshot", None)))
     if args.dir is None:
         args.dir = default_dir()
-    elif not Path(args.dir).exists():
-        raise UserError(f"DIR {args.dir}: expected a folder of sessions, found nothing")
-    from effortface.app import main
 
     return main(args)

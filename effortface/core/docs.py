@@ -28,14 +28,15 @@ def doc_path(cited: str) -> Path:
     Parameters
     ----------
     cited : str
-        The path as cited, relative to the repository root (``docs/<name>``).
+        The path as cited, relative to the repository root (``docs/<name>`` or ``docs/guide/<page>``).
 
     Returns
     -------
     Path
         The document (it exists in a repository checkout and in an installed wheel).
     """
-    return DOCS_DIR / Path(cited).name
+    parts = Path(cited).parts
+    return DOCS_DIR.joinpath(*parts[1:]) if parts[:1] == ("docs",) else DOCS_DIR / Path(cited).name
 
 
 def cite(cited: str) -> str:

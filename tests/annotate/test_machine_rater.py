@@ -266,7 +266,10 @@ def _copy(session: Path, tmp_path: Path) -> Path:
 def test_preannotate_a_captured_real_face_session_matches_mediapipe(recorded: Path, tmp_path: Path, capsys) -> None:
     session = _copy(recorded, tmp_path)
     assert main(["preannotate", str(session)]) == 0
-    assert f"wrote {session / MACHINE_DIR / CSV_NAME}" in capsys.readouterr().out
+    out, err = capsys.readouterr()
+    assert f"wrote {session / MACHINE_DIR / CSV_NAME}" in out
+    # stderr is not a terminal here: plain progress lines a log can hold, no carriage returns
+    assert "\r" not in err and "\x1b" not in err and f"{session.name[:32]}: 100% frames rated" in err
     track = read_machine_track(session)
     times = read_session(session).frame_times_s
     assert track is not None and len(track.frame) == len(times)  # one row per recorded frame

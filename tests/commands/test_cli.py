@@ -128,3 +128,25 @@ def test_other_errors_are_not_hidden(monkeypatch, exc) -> None:
     monkeypatch.setattr(demo_module, "run", run)
     with pytest.raises(type(exc)):
         main(["demo"])
+
+
+def test_top_help_keeps_every_command_apart_from_its_description(capsys) -> None:
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    lines = {line.split()[0]: line for line in capsys.readouterr().out.splitlines()
+             if line.startswith("  ") and line.split() and line.split()[0] in COMMANDS}
+    assert set(lines) == set(COMMANDS)
+    for name, line in lines.items():
+        assert line[2 + len(name):2 + len(name) + 2] == "  ", line  # 'preannotate the machine...' ran together
+
+
+def test_no_display_is_refused_before_the_sample_lab_is_copied(tmp_path, monkeypatch, capsys) -> None:
+    """A headless ``effortface`` outside the repository refused at once (it copied 40 MB first)."""
+    for name in ("DISPLAY", "WAYLAND_DISPLAY", "QT_QPA_PLATFORM"):
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setenv("EFFORTFACE_DATA_DIR", str(tmp_path / "data"))
+    monkeypatch.chdir(tmp_path)
+    assert main([]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "display: expected $DISPLAY or $WAYLAND_DISPLAY" in err[0]
+    assert not (tmp_path / "data").exists()

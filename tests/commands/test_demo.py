@@ -74,9 +74,23 @@ def test_demo_rater_step_says_why_it_was_skipped(tmp_path, monkeypatch):
 
 
 def test_demo_refuses_an_existing_out(lab, tmp_path, capsys):
-    assert main(["demo", "--out", str(tmp_path)]) == 2
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert main(["demo", "--out", str(empty)]) == 2
     err = capsys.readouterr().err
-    assert f"--out {tmp_path}: expected a new folder, found an existing one (pass --force)" in err
+    assert f"--out {empty}: expected a new folder, found an existing one (pass --force)" in err
+
+
+def test_demo_hints_force_only_where_force_would_replace(lab, tmp_path, capsys):
+    """A folder --force may not replace is not answered with "pass --force" (that led to a second refusal)."""
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("mine")
+    assert main(["demo", "--out", str(mine)]) == 2
+    line = _one_line(capsys.readouterr().err)
+    assert "--force" not in line
+    assert line.endswith(f"--out {mine}: expected a new folder or one made by effortface demo, found other files "
+                         "(no .effortface-demo) (not replaced: choose another --out)")
 
 
 def test_demo_needs_sessions(tmp_path, capsys):
@@ -142,8 +156,8 @@ def test_force_refuses_a_folder_not_made_by_demo(lab, tmp_path, capsys):
     before = _precious(kept)
     assert main(["demo", "--out", str(kept), "--force"]) == 2
     line = _one_line(capsys.readouterr().err)
-    assert f"--out {kept}: expected a folder made by effortface demo (with .effortface-demo) or an empty " \
-           "folder, found other files (not replaced)" in line
+    assert f"--out {kept}: expected a new folder or one made by effortface demo, found other files " \
+           "(no .effortface-demo) (not replaced: choose another --out)" in line
     assert _snapshot(kept) == before
 
 
@@ -151,7 +165,7 @@ def test_force_refuses_a_file(lab, tmp_path, capsys):
     afile = tmp_path / "afile"
     afile.write_bytes(b"keep")
     assert main(["demo", "--out", str(afile), "--force"]) == 2
-    assert f"--out {afile}: expected a folder made by effortface demo, found a file (not replaced)" \
+    assert f"--out {afile}: expected a new folder or one made by effortface demo, found a file (not replaced" \
         in _one_line(capsys.readouterr().err)
     assert afile.read_bytes() == b"keep"
 
@@ -166,7 +180,7 @@ def test_force_never_replaces_the_lab_or_the_current_directory(tmp_path, monkeyp
     before = _snapshot(fake_lab)
     for out in (fake_lab, tmp_path):
         assert main(["demo", "--lab", str(fake_lab), "--out", str(out), "--force"]) == 2
-        assert "(not replaced)" in _one_line(capsys.readouterr().err)
+        assert "(not replaced: choose another --out)" in _one_line(capsys.readouterr().err)
     assert _snapshot(fake_lab) == before
     work = tmp_path / "work"
     work.mkdir()

@@ -21,6 +21,7 @@ from pathlib import Path
 
 from effortface.core.docs import SCIENCE
 from effortface.core.errors import UserError
+from effortface.core.progress import ProgressBar
 
 #: the shipped documents ``--help`` cites (effortface.core.docs)
 HELP_DOCS = (SCIENCE,)
@@ -79,19 +80,16 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_serial(sessions: list[Path], model: Path | None, force: bool) -> int:
-    """One session after the other, a frame progress bar each."""
-    from tqdm import tqdm
-
+    """One session after the other, a frame progress bar each (plain lines when stderr is a log)."""
     from effortface.annotate.machine.preannotate import preannotate_session
     from effortface.annotate.machine.track import read_machine_track
 
     failed = 0
     for session in sessions:
         error: UserError | None = None
-        with tqdm(total=None, desc=session.name[:32], unit="frame", file=sys.stderr, leave=False) as bar:
+        with ProgressBar(session.name[:32]) as bar:
             def progress(done: int, total: int) -> None:
-                bar.total = total
-                bar.update(done - bar.n)
+                bar(done / total if total else 0.0, "frames rated")
             try:
                 out = preannotate_session(session, model_path=model, force=force, progress=progress)
             except UserError as exc:
@@ -109,16 +107,14 @@ def _run_serial(sessions: list[Path], model: Path | None, force: bool) -> int:
 
 def _run_parallel(sessions: list[Path], model: Path | None, force: bool, workers: int) -> int:
     """Sessions in worker processes (spawned: no fork of the interpreters' threads), a bar over sessions."""
-    from tqdm import tqdm
-
     failed = 0
     threads = max(1, (os.cpu_count() or 1) // workers)
     context = multiprocessing.get_context("spawn")
     with cf.ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool, \
-            tqdm(total=len(sessions), desc="preannotate", unit="session", file=sys.stderr, leave=False) as bar:
+            ProgressBar("preannotate") as bar:
         futures = {pool.submit(_rate_one, s, model, force, threads): s for s in sessions}
-        for future in cf.as_completed(futures):
-            bar.update(1)
+        for done, future in enumerate(cf.as_completed(futures), start=1):
+            bar(done / len(sessions), "sessions rated")
             try:
                 print(future.result())
             except UserError as exc:

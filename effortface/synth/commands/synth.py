@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 from effortface.core import bounds
 from effortface.core.docs import DESIGN, SCIENCE
 from effortface.core.errors import UserError
+from effortface.core.progress import ProgressBar
 from effortface.core.fileio import check_apart
 from effortface.synth.character_options import add_character_arguments, character_from_args
 from effortface.synth.chunked import synthesize_chunks
@@ -103,13 +104,17 @@ def written_line(out: Path, n_frames: int, duration_s: float, fmt: str) -> str:
     return f"wrote {out}: {n_frames} frames, {duration_s:.2f} s of motion{units}"
 def _run_batch(clips_dir: Path, out: Path, options: SynthOptions, compute: ComputeSettings) -> int:
     """A folder of clips with a progress bar on stderr and a summary; 1 when some failed."""
-    from tqdm import tqdm
-
     from effortface.synth.batch_synth import list_clips, synth_batch
 
     n_clips = len(list_clips(clips_dir))  # no clips: the one error line, before any bar
-    with tqdm(total=n_clips, desc="synth", unit="clip", file=sys.stderr) as bar:
-        summary = synth_batch(clips_dir, out, options, compute, on_result=lambda _: bar.update(1))
+    done = [0]
+
+    def advance(_: object) -> None:
+        done[0] += 1
+        bar(done[0] / n_clips, "clips synthesized")
+
+    with ProgressBar("synth") as bar:
+        summary = synth_batch(clips_dir, out, options, compute, on_result=advance)
     return _report(summary, out)
 
 
