@@ -714,7 +714,8 @@ def _built_in(path: Path, points: C3dPoints, mset: MarkerSet, options: MarkerSet
     order = [name for name, _ in SKELETON]
     parents = [order.index(parent) if parent else -1 for _, parent in SKELETON]
     positions_m = np.stack([joints[n] for n in order], axis=1)
-    dropped = [k for k in picked.head if k not in kept_head]
+    found = match_names(points.labels)
+    dropped = [k for k in mset.head if k in found and k not in kept_head]
     head_note = f"; head from {', '.join(kept_head)}" + (f" ({', '.join(dropped)} left out)" if dropped else "") \
         if dropped or len(kept_head) < 4 else ""
     source = f"{path} ({mset.name} markers, {'; '.join(points.notes)}; {filled.note}{head_note})"
