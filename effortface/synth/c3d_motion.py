@@ -97,7 +97,7 @@ __all__ = ["C3dPoints", "FilledPoints", "HEAD_MARKERS", "JOINT_CENTRES", "Marker
            "PLUG_IN_GAIT", "QUALISYS_HEAD", "QUALISYS_SPORTS", "SKELETON", "UPPER_BODY", "complete_window",
            "fill_gaps", "fillable", "head_centre", "hip_centres", "is_plug_in_gait", "joint_centres", "marker_set",
            "pelvis_frame", "point_names", "producer", "read_c3d", "read_c3d_markers", "read_c3d_points",
-           "units_per_point", "write_c3d_markers"]
+           "units_per_point", "window_line", "write_c3d_markers"]
 
 #: the skeleton built from the markers: (joint, parent)
 SKELETON = (("Hips", ""), ("LeftUpLeg", "Hips"), ("LeftLeg", "LeftUpLeg"), ("LeftFoot", "LeftLeg"),
@@ -428,7 +428,7 @@ def fillable(missing: np.ndarray, max_frames: int) -> np.ndarray:
 def complete_window(ok: np.ndarray) -> tuple[int, int]:
     """``(first_frame, n_frames)`` of the longest run of frames where every point is ``ok`` (T, P);
     ``(0, 0)`` when there is none (the first such run on a tie)."""
-    runs = _runs(ok.all(axis=1))
+    runs = _runs(np.asarray(ok.all(axis=1), dtype=bool))
     return max(runs, key=lambda r: (r[1], -r[0])) if runs else (0, 0)
 
 
@@ -705,8 +705,8 @@ def _built_in(path: Path, points: C3dPoints, mset: MarkerSet, options: MarkerSet
     helpers = [n for n in picked.helpers() if _window_frames(points, needed + [n]) >= best]
     filled = fill_gaps(path, points, needed + helpers)
     by_name = {k: filled.positions_m[:, i] for i, k in enumerate(filled.labels)}
-    m = {role: sum(by_name[n] for n in names) / len(names) for role, names in picked.roles.items()
-         if all(n in by_name for n in names)}
+    m: dict[str, np.ndarray] = {role: np.mean([by_name[n] for n in names], axis=0)
+                                for role, names in picked.roles.items() if all(n in by_name for n in names)}
     hc = head_centre({k: by_name[picked.head[k]] for k in kept_head}, mset.head)
     assert hc is not None
     m["HEAD"] = hc
@@ -837,6 +837,16 @@ def read_c3d(path: str | os.PathLike[str], *, options: MarkerSetOptions = Marker
     if producer(points.params):
         motion.reading["producer"] = producer(points.params)
     return motion
+
+
+def window_line(reading: dict[str, Any], source: str | os.PathLike[str]) -> str:
+    """The line saying a clip was read over a window of its frames (``Motion.reading["window"]``),
+    or ``""`` when it was read whole."""
+    w = reading.get("window") or {}
+    if not w or w.get("n_frames") == w.get("of_frames"):
+        return ""
+    first, n = int(w["first_frame"]), int(w["n_frames"])
+    return f"{source}: read frames {first}-{first + n - 1} of {w['of_frames']}: {w['why']}"
 
 
 def write_c3d_markers(path: str | os.PathLike[str], markers: dict[str, np.ndarray], rate_hz: float) -> Path:
