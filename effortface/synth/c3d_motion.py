@@ -14,16 +14,24 @@ reads more first (it is also 1.8-2.5x faster on the files both read: 26 vs 46 ms
 together they read 49 (the other 9: empty, one frame, no points, damaged parameter sections).
 
 Points are converted from ``POINT:UNITS`` (one unit, or one per point, NUL-padded or not: ``mm``,
-``cm``, ``m``, ``in``; mm when the parameter is absent) to metres; the lab frame is taken as Z up
-(Vicon, Qualisys and Motion Analysis defaults; pass ``up_axis="y"`` otherwise). Subject prefixes
-(``Matt:LASI``) are dropped; unlabelled trajectories (``*12``) and model outputs stored as points
-(``POINT:ANGLES``, ``FORCES``, ``MOMENTS``, ``POWERS``) are left out. A point is **missing** in a
-frame when its residual is negative (the C3D convention for an occluded marker), its position is all
-zeros or not finite. **Occlusions** of at most :data:`MAX_GAP_S` (0.2 s) are filled by linear
-interpolation; the frames before the last marker appears and after the first one disappears are cut;
-a longer gap is refused in one line naming the point, its own missing frames and where the gap starts
-(:func:`fill_gaps`). What was filled and cut is stated in :attr:`Motion.source`, which ``synth`` keeps
-in the output's ``.units.json`` (``"motion"``). :func:`read_c3d` reads a file one of three ways:
+``cm``, ``m``, ``in``; mm when the parameter is absent; the caller's ``unit_m`` wins) to metres. The
+file's **up axis** comes from ``POINT:Y_SCREEN``, checked against the head and foot markers, or from
+the markers alone, and is turned to Z by a proper rotation (the caller's ``up`` wins:
+:func:`~effortface.synth.c3d_marker_sets.decide_up`). Subject and rigid-body prefixes
+(``Matt:LASI``, Motive's ``Skeleton:LShoulderTop`` / ``Skeleton_LShoulderTop``) are dropped for
+matching; a point keeps its label as in the file when two would share a name
+(:func:`point_names`), and messages name the label as in the file. Unlabelled trajectories
+(``*12``) and model outputs stored as points (``POINT:ANGLES``, ``FORCES``, ``MOMENTS``,
+``POWERS``) are left out. A point is **missing** in a frame when its residual is negative (the C3D
+convention for an occluded marker), its position is all zeros or not finite. **Occlusions** of at
+most :data:`MAX_GAP_S` (0.2 s) are filled by linear interpolation; the frames before the last
+marker appears and after the first one disappears are cut; when a needed marker is missing over
+more, the **longest window** where every needed marker is present is kept if it lasts at least
+:data:`MIN_WINDOW_S` (1 s), else the file is refused in one line naming the point as in the file,
+its missing frames and the longest window found (:func:`fill_gaps`). What was filled and cut is
+stated in :attr:`Motion.source`, which ``synth`` keeps in the output's ``.units.json``
+(``"motion"``), and in :attr:`Motion.reading` (``window``, with the unit, the up axis, the
+producer and the marker set). :func:`read_c3d` reads a file one of four ways:
 
 * **Plug-in Gait**, when the file holds at least half of :data:`PLUG_IN_GAIT` or all of
   :data:`PIG_LOWER`: the markers become the joint centres below. The head is the centre of its
@@ -33,11 +41,14 @@ in the output's ``.units.json`` (``"motion"``). :func:`read_c3d` reads a file on
 * **The Qualisys sports marker set** (:data:`QUALISYS_SPORTS`): its labels stand for the Plug-in
   Gait markers of the same places (waist markers for the ASIS/PSIS, ``SpineThoracic2`` for C7,
   ``Chest`` for CLAV...), the head is the centroid of its head markers; same rules.
-* **Labelled points**, otherwise: the points become joints named by their labels (a repeated or
-  empty label gets its index), the first point the root (the sync jump is looked for in its
-  height) and the others hanging from it: energies use positions only. Body segments are found
-  from the labels like any skeleton's joints (joint-centre exports such as ``LeftUpLeg``), or from
-  a mapping file (``--mapping``). Points missing in every frame are left out.
+* **CAST/ISB anatomical landmarks** (Qualisys PAF, Visual3D: ``L_IAS``, ``L_FLE``, ``CV7``...;
+  :data:`~effortface.synth.c3d_marker_sets.CAST_ISB`): the same rules, with knee, ankle, elbow
+  and wrist centres the mid-points of the lateral and medial landmarks.
+* **Labelled points**, otherwise: the points become joints named by their labels, the first point
+  the root (the sync jump is looked for in its height) and the others hanging from it: energies
+  use positions only. Body segments are found from the labels like any skeleton's joints
+  (joint-centre exports such as ``LeftUpLeg``), or from a mapping file (``--mapping``). Points
+  missing in every frame are left out.
 
 **The Plug-in Gait marker set** (:data:`PLUG_IN_GAIT`) gives the joints of the skeleton below,
 named as the built-in CMU convention of :mod:`effortface.synth.segments` expects, so the 14
