@@ -5,6 +5,7 @@ from tests/data/c3d (README.md there), rewritten with ezc3d where a variant is n
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -211,3 +212,83 @@ def test_synth_states_the_window_on_stderr_and_in_units_json(shared_data: Path, 
     assert done.stderr.strip().splitlines() == [done.stderr.strip()] and done.stderr.startswith(expected)
     provenance = json.loads((tmp_path / "face.units.json").read_text())["motion"]
     assert f"kept frames 70-{bvh.n_frames - 1} of {bvh.n_frames}" in provenance
+
+
+#: the point labels of a real Qualisys QTM 2.17 export with the CAST/ISB set (ezc3d's test file
+#: Qualisys.c3d, GPL: not copied here), in its order
+QTM_CAST_LABELS = (
+    "L_IAS", "L_IPS", "R_IPS", "R_IAS", "SNJ", "SXS", "TV8", "CV7", "R_SCAP", "L_HDF", "L_HDB", "R_HDB", "R_HDF",
+    "L_FTC", "L_WAND1", "L_FLE", "L_FME", "L_FAX", "L_TTC", "L_WAND2", "L_FAL", "L_TAM", "L_FCC", "L_FM1", "L_FM5",
+    "R_FTC", "R_WAND1", "R_FLE", "R_FME", "R_FAX", "R_TTC", "R_WAND2", "R_FAL", "R_TAM", "R_FCC", "R_FM1", "R_FM5",
+    "L_HM5", "L_HM2", "L_UHE", "L_RSP", "L_WAND4", "L_HLE", "L_HME", "L_WAND3", "R_HM5", "R_HM2", "R_UHE", "R_RSP",
+    "R_WAND4", "R_HLE", "R_HME", "R_WAND3", "L_SAJ", "R_SAJ")
+
+
+def _qtm_cast_layout(tmp: Path) -> Path:
+    """A file laid out as the real QTM CAST export (its 55 labels, ``X_SCREEN -X``, ``Y_SCREEN -Z``
+    on a Z-up capture, MANUFACTURER Qualisys), its points made from the real Vicon capture: the
+    landmarks at the Plug-in Gait markers of the same places, the medial epicondyles and malleoli
+    where the Plug-in Gait rule puts the joint centre's mirror (so the centres must come out equal)."""
+    from effortface.synth.c3d_motion import MarkerSetOptions
+
+    points = read_c3d_points(FULL)
+    m = {k: points.positions_m[:, points.labels.index(k)] for k in points.labels}
+    o = MarkerSetOptions()
+    lat = (m["LASI"] - m["RASI"]) / np.linalg.norm(m["LASI"] - m["RASI"], axis=1, keepdims=True)
+    sho = (m["LSHO"] - m["RSHO"]) / np.linalg.norm(m["LSHO"] - m["RSHO"], axis=1, keepdims=True)
+    xyz = {"L_IAS": m["LASI"], "R_IAS": m["RASI"], "L_IPS": m["LPSI"], "R_IPS": m["RPSI"], "SNJ": m["CLAV"],
+           "SXS": m["STRN"], "TV8": m["T10"], "CV7": m["C7"], "R_SCAP": m["RBAK"], "L_HDF": m["LFHD"],
+           "R_HDF": m["RFHD"], "L_HDB": m["LBHD"], "R_HDB": m["RBHD"]}
+    for s, sign in (("L", 1.0), ("R", -1.0)):
+        medial = -sign * lat
+        xyz.update({f"{s}_FTC": m[f"{s}THI"], f"{s}_WAND1": m[f"{s}THI"], f"{s}_FLE": m[f"{s}KNE"],
+                    f"{s}_FME": m[f"{s}KNE"] + medial * 2 * (o.knee_width_m / 2 + o.marker_radius_m),
+                    f"{s}_FAX": m[f"{s}TIB"], f"{s}_TTC": m[f"{s}TIB"], f"{s}_WAND2": m[f"{s}TIB"],
+                    f"{s}_FAL": m[f"{s}ANK"],
+                    f"{s}_TAM": m[f"{s}ANK"] + medial * 2 * (o.ankle_width_m / 2 + o.marker_radius_m),
+                    f"{s}_FCC": m[f"{s}HEE"], f"{s}_FM1": m[f"{s}TOE"] + 0.03 * medial,
+                    f"{s}_FM5": m[f"{s}TOE"] - 0.03 * medial, f"{s}_HM5": m[f"{s}FIN"], f"{s}_HM2": m[f"{s}FIN"],
+                    f"{s}_UHE": m[f"{s}WRB"], f"{s}_RSP": m[f"{s}WRA"], f"{s}_WAND4": m[f"{s}WRA"],
+                    f"{s}_HLE": m[f"{s}ELB"],
+                    f"{s}_HME": m[f"{s}ELB"] - sign * sho * 2 * (o.elbow_width_m / 2 + o.marker_radius_m),
+                    f"{s}_WAND3": m[f"{s}ELB"], f"{s}_SAJ": m[f"{s}SHO"]})
+    c = ezc3d.c3d()
+    c["parameters"]["POINT"]["RATE"]["value"] = [points.rate_hz]
+    c["parameters"]["POINT"]["LABELS"]["value"] = list(QTM_CAST_LABELS)
+    c["parameters"]["POINT"]["UNITS"]["value"] = ["mm"]
+    c.add_parameter("POINT", "X_SCREEN", ["-X"])
+    c.add_parameter("POINT", "Y_SCREEN", ["-Z"])
+    c.add_parameter("MANUFACTURER", "COMPANY", ["Qualisys"])
+    c.add_parameter("MANUFACTURER", "SOFTWARE", ["Qualisys Track Manager"])
+    pts = np.ones((4, len(QTM_CAST_LABELS), len(points.positions_m)))
+    pts[:3] = np.stack([xyz[k] for k in QTM_CAST_LABELS], axis=1).transpose(2, 1, 0) * 1000.0
+    c["data"]["points"] = pts
+    c.write(str(tmp / "qtm_cast.c3d"))
+    return tmp / "qtm_cast.c3d"
+
+
+def test_the_qualisys_cast_layout_reads_as_the_plug_in_gait_capture(tmp_path: Path) -> None:
+    """The real QTM CAST export's layout (measured: a standing height of 1.51 m, Z up by its
+    markers): the same joint centres as Plug-in Gait's rules on the same capture, its Y_SCREEN -Z
+    overruled by the markers, its producer read."""
+    clip = read_c3d(_qtm_cast_layout(tmp_path))
+    pig = read_c3d(FULL)
+    assert clip.reading["marker_set"].startswith("cast-isb")
+    assert clip.reading["up_axis"] == "z" and "POINT:Y_SCREEN -Z disagrees" in clip.reading["up_from"]
+    assert clip.reading["producer"] == "Qualisys Qualisys Track Manager"
+    np.testing.assert_allclose(clip.positions_m, pig.positions_m, atol=1e-5)
+
+
+def test_labelled_points_without_y_screen_are_turned_by_their_head_and_feet(shared_data: Path, tmp_path: Path) -> None:
+    """A Y-up export of labelled joints (the CMU squats' joint names) with no POINT:Y_SCREEN: the
+    Head is above the feet along +y, so it is read Y up."""
+    from tests.train.test_motion_c3d import write_c3d
+
+    bvh = read_motion(shared_data / "motion" / "cmu_13_29_squats_120fps.bvh")
+    file_frame = Z_UP_TO_FILE                                               # Z up -> the file's Y up
+    y_up = write_c3d(dataclasses.replace(bvh, positions_m=bvh.positions_m @ file_frame.T, rotations=None),
+                     tmp_path / "y_up.c3d")
+    clip = read_c3d(y_up)
+    assert clip.reading["up_axis"] == "y"
+    assert clip.reading["up_from"] == "markers: head above feet along +y (no POINT:Y_SCREEN)"
+    np.testing.assert_allclose(clip.positions_m[..., 2], bvh.positions_m[..., 2], atol=1e-4)
