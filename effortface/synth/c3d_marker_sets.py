@@ -22,15 +22,18 @@ the two landmarks. The sets:
 
 **Labels with prefixes.** A label is matched without its subject or rigid-body prefix: ``Matt:LASI``
 and OptiTrack Motive's ``Skeleton:LShoulderTop`` by the part after the colon, Motive's
-``Name_Hip``-style ``Skeleton_LShoulderTop`` by the part after the first underscore when the whole
-label is no marker of any set (so ``L_IAS`` stays ``L_IAS``). Messages name the label as it is in the
+``Name_Hip``-style ``Skeleton_LShoulderTop`` or ``251112_KUO_LASI`` by the part after an underscore
+that is a marker of a set, when the whole label is none (so ``L_IAS`` stays ``L_IAS``). Messages name the label as it is in the
 file.
 
 **Up axis** (:func:`decide_up`): the caller's ``up``; else the file's ``POINT:Y_SCREEN`` (the axis
 drawn upwards on screen: ``+Z`` for Vicon and most Z-up labs, ``+Y`` for Y-up ones); checked against
 the markers, the axis along which the head markers are above the foot markers (median over the
-frames): when the markers are clear and disagree with the file (QTM 2.17 writes ``Y_SCREEN -Z`` on a
-Z-up capture), the markers win and the disagreement is stated; with neither, Z up (the C3D habit).
+frames): when the markers are clear and disagree with the file, the markers win and the
+disagreement is stated; with neither, Z up (the C3D habit). A negative ``Y_SCREEN`` the markers
+cannot check gives the axis only, upwards: Qualisys Track Manager writes ``X_SCREEN -X``,
+``Y_SCREEN -Z`` on Z-up captures (measured: 21 of 21 QTM exports, versions 2.17 to 2020.3, whose
+head markers are above their feet along +Z), the screen's downward axis.
 :func:`up_rotation` turns the file's up to effortface's +Z by a proper rotation (a cyclic
 permutation of the axes, then a half turn about X for a negative axis), never a reflection.
 """
@@ -122,14 +125,16 @@ MARKER_SETS = (PIG_SET, QUALISYS_SET, CAST_SET)
 
 def match_names(names: tuple[str, ...] | list[str]) -> dict[str, str]:
     """``marker name -> point name`` for the points ``names`` (prefix after a colon already dropped
-    where unambiguous): each name as it is, then the part after the first underscore of a name that
-    is no marker of a built-in set (Motive's ``Skeleton_LShoulderTop``) when no other point has it."""
+    where unambiguous): each name as it is, then, for a name that is no marker of a built-in set, the
+    first part after an underscore that is one (Motive's ``Skeleton_LShoulderTop``,
+    ``251112_KUO_LASI``) when no other point has it."""
     known = {label for s in MARKER_SETS for alts in s.roles.values() for a in alts.split("|")
              for label in a.split("+")} | {k for s in MARKER_SETS for k in s.head}
     out = {name.rsplit(":", 1)[-1]: name for name in names}
     for name in names:
         short = name.rsplit(":", 1)[-1]
-        tail = short.split("_", 1)[1] if "_" in short and short not in known else ""
+        tails = [short.split("_", k)[-1] for k in range(1, short.count("_") + 1)] if short not in known else []
+        tail = next((t for t in tails if t in known), "")  # "251112_KUO_LASI" -> "LASI"
         if tail and tail not in out:
             out[tail] = name
     return out
@@ -214,8 +219,12 @@ def decide_up(up: str | None, y_screen: str, from_markers: str | None) -> tuple[
     marks = f"markers: head above feet along {_signed(from_markers)}" if from_markers else ""
     if stated and from_markers and from_markers != stated:
         return from_markers, f"{marks} ({shown} disagrees)"
+    if stated and from_markers:
+        return stated, shown + " (the markers agree)"
+    if stated and stated.startswith("-"):  # QTM writes -Z on Z-up captures: the axis, not the sign
+        return stated[1:], f"{shown}: its axis, upwards (a negative Y_SCREEN is the downward axis in QTM's files)"
     if stated:
-        return stated, shown + (" (the markers agree)" if from_markers else "")
+        return stated, shown
     if from_markers:
         return from_markers, marks + " (no POINT:Y_SCREEN)"
     return "z", "the C3D habit: Z up (no POINT:Y_SCREEN, no head and foot markers to tell)"

@@ -23,6 +23,7 @@ from effortface.synth.read_options import UP_AXES
 DATA = Path(__file__).resolve().parents[1] / "data" / "c3d"
 FULL = DATA / "PiG_Calibration-FlatFoot-Full.c3d"
 WALK = DATA / "walking5.c3d"
+QTM = DATA / "QTM_CGM2_Gait.c3d"
 ezc3d = pytest.importorskip("ezc3d")
 
 #: file -> its up axis written in: rows are the file's axes in the original's (a proper rotation:
@@ -31,10 +32,10 @@ Z_UP_TO_FILE = np.array([[-1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0]])
 
 
 def _rewrite(tmp: Path, name: str, *, rotate: np.ndarray | None = None, screen: tuple[str, str] | None = None,
-             rename: dict[str, str] | None = None) -> Path:
-    """The real full-body Vicon file rewritten by ezc3d: points rotated, POINT:X_SCREEN/Y_SCREEN set,
-    labels renamed."""
-    c = ezc3d.c3d(str(FULL))
+             rename: dict[str, str] | None = None, source: Path = FULL) -> Path:
+    """A real full-body file (the Vicon one unless told) rewritten by ezc3d: points rotated,
+    POINT:X_SCREEN/Y_SCREEN set, labels renamed."""
+    c = ezc3d.c3d(str(source))
     if rotate is not None:
         pts = c["data"]["points"]
         pts[:3] = np.einsum("ij,jpt->ipt", rotate, pts[:3])
@@ -65,18 +66,20 @@ def test_up_rotations_are_proper_and_turn_the_axis_up() -> None:
         np.testing.assert_allclose(rot @ axis, [0.0, 0.0, 1.0])
 
 
-def test_a_y_up_file_gives_the_same_curves_as_the_z_up_original(tmp_path: Path) -> None:
-    """Must show: the real Z-up Vicon capture rotated to Y up with POINT:Y_SCREEN +Y (X_SCREEN -X,
-    where the original's +X now lies) reads Y up and gives the original's curves within 1 %."""
-    y_up = _rewrite(tmp_path, "y_up.c3d", rotate=Z_UP_TO_FILE, screen=("-X", "+Y"))
-    original, turned = read_c3d(FULL), read_c3d(y_up)
-    assert turned.reading["up_axis"] == "y" and turned.reading["up_from"].startswith("POINT:Y_SCREEN +Y")
-    assert original.reading["up_axis"] == "z" and original.reading["up_from"].startswith("POINT:Y_SCREEN +Z")
+@pytest.mark.parametrize("source", [FULL, QTM], ids=["vicon", "qtm"])
+def test_a_y_up_file_gives_the_same_curves_as_the_z_up_original(tmp_path: Path, source: Path) -> None:
+    """Must show: a real Z-up capture (Vicon Nexus; Qualisys QTM, Plug-in Gait, the issue's case)
+    rotated to Y up with POINT:Y_SCREEN +Y (X_SCREEN -X, where the original's +X now lies) reads Y up
+    and gives the original's curves within 1 %."""
+    y_up = _rewrite(tmp_path, "y_up.c3d", rotate=Z_UP_TO_FILE, screen=("-X", "+Y"), source=source)
+    original, turned = read_c3d(source), read_c3d(y_up)
+    assert turned.reading["up_axis"] == "y" and turned.reading["up_from"] == "POINT:Y_SCREEN +Y (the markers agree)"
+    assert original.reading["up_axis"] == "z"
     np.testing.assert_allclose(turned.positions_m[..., 2], original.positions_m[..., 2], atol=1e-5)   # heights kept
     height = np.ptp(turned.positions_m[..., 2], axis=1)
     assert 1.3 < np.median(height) < 1.9                                    # standing, not lying on its side
     curves = {}
-    for name, clip in (("z", FULL), ("y", y_up)):
+    for name, clip in (("z", source), ("y", y_up)):
         out = tmp_path / f"{name}.csv"
         done = _synth(clip, out)
         assert done.returncode == 0, done.stderr
@@ -109,6 +112,19 @@ def test_the_markers_decide_when_the_file_is_silent_or_contradicted(tmp_path: Pa
     np.testing.assert_allclose(down.positions_m[..., 2], read_c3d(FULL).positions_m[..., 2], atol=1e-5)
     assert decide_up(None, "", "-y") == ("-y", "markers: head above feet along -y (no POINT:Y_SCREEN)")
     assert decide_up(None, "", None)[0] == "z"
+
+
+def test_a_real_qtm_export_is_read_upright_with_or_without_its_head() -> None:
+    """Real Qualisys QTM 2019 Plug-in Gait trial: X_SCREEN -X, Y_SCREEN -Z on a Z-up capture (as
+    in all 21 QTM files measured). The markers overrule it; a file without head and foot markers
+    takes a negative Y_SCREEN's axis upwards, so it is not read upside down either."""
+    qtm = read_c3d(QTM)
+    assert qtm.reading["up_from"] == "markers: head above feet along +z (POINT:Y_SCREEN -Z disagrees)"
+    assert qtm.reading["producer"] == "Qualisys Qualisys Track Manager 2019.4.4898"
+    assert 1.5 < np.median(np.ptp(qtm.positions_m[..., 2], axis=1)) < 1.9
+    axis, how = decide_up(None, "-Z", None)
+    assert axis == "z" and how.startswith("POINT:Y_SCREEN -Z: its axis, upwards")
+    assert decide_up(None, "+Y", None) == ("y", "POINT:Y_SCREEN +Y")
 
 
 def test_reading_says_unit_producer_and_marker_set() -> None:
@@ -165,7 +181,8 @@ def test_prefixed_labels_match_and_are_named_as_in_the_file(tmp_path: Path) -> N
     for clip in (colon, under):
         assert clip.reading["marker_set"].startswith("plug-in-gait")
         np.testing.assert_allclose(clip.positions_m, pig.positions_m, atol=1e-6)
-    assert match_names(["L_IAS", "Skel_L_IAS"]) ["L_IAS"] == "L_IAS"          # CAST's underscore is kept
+    assert match_names(["L_IAS", "Skel_L_IAS"])["L_IAS"] == "L_IAS"           # CAST's underscore is kept
+    assert match_names(["251112_KUO_LASI"])["LASI"] == "251112_KUO_LASI"      # a Motive take prefix
     rigid = _rewrite(tmp_path, "rigid.c3d", rename={"LTHI": "ForearmL:Marker3", "RTHI": "ForearmR:Marker3"})
     names = read_c3d_points(rigid).labels
     assert "ForearmL:Marker3" in names and "ForearmR:Marker3" in names and not any("_" in n[-3:] for n in names)
