@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import sys
 import warnings
@@ -68,9 +69,18 @@ def test_an_occluded_point_is_filled_or_named(shared_data: Path, tmp_path: Path)
     assert "linearly interpolated (3 point-frames)" in short.source
     np.testing.assert_allclose(short.positions_m[40:43, 3], bvh.positions_m[40:43, 3], atol=0.01)
     path = write_c3d(bvh, tmp_path / "gap.c3d", occlude=(40, 3), n_occluded=30)
-    with pytest.raises(MotionFormatError, match=rf"gap.c3d: point '{bvh.joint_names[3]}': expected gaps of at most "
-                                                r"0.2 s \(24 frames\) to fill, found 30 missing frames of its own, a gap "
-                                                r"of 30 from frame 40"):
+    long = read_motion(path)                 # the longest window without the long gap is kept, and stated
+    assert long.reading["window"] == {"first_frame": 70, "n_frames": bvh.n_frames - 70, "of_frames": bvh.n_frames,
+                                      "why": long.reading["window"]["why"]}
+    assert f"kept frames 70-{bvh.n_frames - 1} of {bvh.n_frames}" in long.source
+    np.testing.assert_allclose(long.positions_m, bvh.positions_m[70:], atol=1e-4)
+    short_clip = dataclasses.replace(bvh, positions_m=bvh.positions_m[:150], rotations=None)   # 1.25 s
+    path = write_c3d(short_clip, tmp_path / "gap.c3d", occlude=(40, 3), n_occluded=30)
+    with pytest.raises(MotionFormatError, match=rf"gap.c3d: point '{bvh.joint_names[3]}': expected every needed "
+                                                r"marker present \(gaps up to 0.2 s filled\) over at least 1 s, found "
+                                                rf"'{bvh.joint_names[3]}' missing in 30 of 150 frames, a gap of 30 frames "
+                                                r"from frame 40; the longest complete window is 80 frames \(0.67 s from "
+                                                r"frame 70\)"):
         read_motion(path)
 
 
@@ -144,5 +154,5 @@ def test_a_bad_up_axis_is_named(tmp_path: Path) -> None:
     from effortface.core.errors import UserError
     from effortface.synth.c3d_motion import read_c3d
 
-    with pytest.raises(UserError, match=r"up_axis: expected 'z' or 'y', found 'x'"):
-        read_c3d(tmp_path / "none.c3d", up_axis="x")
+    with pytest.raises(UserError, match=r"up: expected one of x, y, z, -x, -y, -z, found 'w'"):
+        read_c3d(tmp_path / "none.c3d", up="w")

@@ -26,6 +26,7 @@ from effortface.core.docs import DESIGN, SCIENCE
 from effortface.core.errors import UserError
 from effortface.core.progress import ProgressBar
 from effortface.core.fileio import check_apart
+from effortface.synth.c3d_motion import window_line
 from effortface.synth.character_options import add_character_arguments, character_from_args
 from effortface.synth.chunked import synthesize_chunks
 from effortface.synth.curves_io import CURVE_FORMATS, check_output, units_path, write_curve_chunks
@@ -95,6 +96,8 @@ def run(args: argparse.Namespace) -> int:
     n_frames, duration_s = write_curve_chunks(out, chunks, model, fmt=args.format, force=args.force,
                                               provenance=motion.skeleton.source, every_frame=args.every_frame)
     print(written_line(out, n_frames, duration_s, args.format))
+    if line := window_line(motion.skeleton.reading, args.motion):  # a trial read over its longest complete window
+        print(line, file=sys.stderr)
     return 0
 
 
