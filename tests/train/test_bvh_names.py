@@ -55,7 +55,8 @@ def test_unknown_skeleton_is_one_line_with_how_to_map(tmp_path):
                            str(tmp_path / "o.csv")], capture_output=True, text=True, timeout=600)
     assert done.returncode == 2 and "Traceback" not in done.stderr and len(done.stderr.strip().splitlines()) == 1
     assert "unmapped segments: trunk, left_upper_arm, left_thigh, right_thigh" in done.stderr, done.stderr
-    assert 'Map them with --mapping FILE.json: {"head": [' in done.stderr
+    assert 'Map them with --mapping FILE.json: {"version": 2, "trunk": [' in done.stderr
+    assert done.stderr.startswith(f"effortface: {clip}: skeleton joints:") or f"{clip}: skeleton joints:" in done.stderr
     with pytest.raises(SegmentMappingError):
         map_skeleton(read_motion(clip).joint_names)
 
