@@ -29,7 +29,7 @@ from effortface.core.fileio import atomic_write_text
 from effortface.synth.motion import BVH_UNITS_M, Motion
 from effortface.synth.read_options import MotionReadOptions
 from effortface.synth.segments import (CONVENTIONS, REQUIRED_SEGMENTS, MappingFound, SegmentMapping,
-                                       find_mapping, mapping_to_json, read_mapping)
+                                       end_names, find_mapping, mapping_to_json, read_mapping)
 from effortface.synth.work import read_clip
 
 #: the ``--json`` keys every inspection has (None where the file does not tell)
@@ -357,18 +357,19 @@ def _mapping_names(found: MappingFound, names: Sequence[str]) -> dict[str, dict[
 
 
 def mapping_template(inspection: Inspection) -> dict[str, object]:
-    """A complete mapping file (version 2) for this clip: every segment, the file's names where the
-    mapping found them, else the best convention's names as placeholders ``"<...>"`` to replace."""
-    internal: dict[str, tuple[Any, Any]] = {}
+    """A complete mapping file (version 2) for this clip: all 14 segments, each end as the file's
+    names where the mapping found it (or the best convention's end resolves), else a placeholder
+    ``"<...>"`` naming what the convention looks for (refused until replaced or the entry removed)."""
     name = (inspection.convention or "CMU").split(" (")[0].split(" ")[-1]
     fallback = CONVENTIONS.get(name, CONVENTIONS["CMU"])
+    internal: dict[str, tuple[Any, Any]] = {}
     for seg in REQUIRED_SEGMENTS:
         ends = inspection.mapping.get(seg)
         if ends is not None:
-            pair = [_one(ends["proximal"]), _one(ends["distal"])]
-            internal[seg] = (pair[1], pair[0]) if seg == "head" else (pair[0], pair[1])
+            prox, dist = _one(ends["proximal"]), _one(ends["distal"])
+            internal[seg] = (dist, prox) if seg == "head" else (prox, dist)
         else:
-            internal[seg] = tuple(_placeholder(e) for e in fallback[seg])  # type: ignore[assignment]
+            internal[seg] = tuple(_filled(e, inspection.joints) for e in fallback[seg])  # type: ignore[assignment]
     return mapping_to_json(internal)
 
 
@@ -377,11 +378,14 @@ def _one(names: list[str]) -> str | list[str]:
     return names[0] if len(names) == 1 else names
 
 
-def _placeholder(end: object) -> str | list[str]:
-    """A convention's end point as a template placeholder (``"<LeftToeBase>"``)."""
+def _filled(end: Any, joints: Sequence[str]) -> str | list[str]:
+    """A convention's end point as this file's names, or a placeholder (``"<LeftToeBase_end>"``)."""
+    names = end_names(end, joints)
+    if names is not None:
+        return _one(names)
     if isinstance(end, str):
         return f"<{end.split('|')[0]}>"
-    return [f"<{e.split('|')[0]}>" for e in end]  # type: ignore[attr-defined]
+    return [_filled(e, joints) for e in end]  # type: ignore[misc]
 
 
 def write_mapping_template(inspection: Inspection, out: str | os.PathLike[str], *, force: bool = False) -> Path:

@@ -360,6 +360,13 @@ def _resolve_end(end: EndPoint, index: Mapping[str, int]) -> tuple[int, ...] | N
     return tuple(i for f in found for i in f)  # type: ignore[union-attr]  # no None: checked above
 
 
+def end_names(end: EndPoint, joint_names: Sequence[str]) -> list[str] | None:
+    """The joint names of ``joint_names`` one end point resolves to (``A|B``: the first present; a
+    list: all of them), or None if it cannot be found."""
+    found = _resolve_end(end, {_joint_key(n): i for i, n in enumerate(joint_names)})
+    return None if found is None else [joint_names[i] for i in found]
+
+
 def resolve_mapping(
     joint_names: Sequence[str], mapping: SegmentMapping
 ) -> tuple[dict[str, tuple[tuple[int, ...], tuple[int, ...]]], list[str]]:
