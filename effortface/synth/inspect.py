@@ -18,6 +18,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -100,9 +101,9 @@ class Inspection:
                 rows.append((f"reading.{key}", str(value)))
         out = [f"{k:<11} {v}" for k, v in rows]
         shown = [k or "''" for k in self.labels]  # an empty label shown as ''
-        out.append(f"labels ({len(self.labels)}): {', '.join(shown)}")
+        out.extend(_wrapped(f"labels ({len(self.labels)}, as in the file):", shown))
         if self.joints != self.labels:
-            out.append(f"joints ({len(self.joints)}, as read): {', '.join(self.joints)}")
+            out.extend(_wrapped(f"joints ({len(self.joints)}, as read):", list(self.joints)))
         out.append("segments   proximal -> distal")
         width = max(len(s) for s in REQUIRED_SEGMENTS)
         for seg in REQUIRED_SEGMENTS:
@@ -401,6 +402,16 @@ def write_mapping_template(inspection: Inspection, out: str | os.PathLike[str], 
         raise UserError(f"{out}: expected a new file for the mapping template, found one (give --force to replace it)")
     atomic_write_text(out, json.dumps(mapping_template(inspection), indent=2) + "\n")
     return out
+
+
+#: the text report's width for name lists (the File info panel shows it whole at 1280 x 800)
+REPORT_WIDTH = 96
+
+
+def _wrapped(title: str, names: list[str]) -> list[str]:
+    """``title`` then the names, comma-separated, in lines of :data:`REPORT_WIDTH` indented by 2."""
+    return [title] + textwrap.wrap(", ".join(names), REPORT_WIDTH, initial_indent="  ", subsequent_indent="  ",
+                                   break_on_hyphens=False)
 
 
 def _fmt(value: float | None, spec: str) -> str:
