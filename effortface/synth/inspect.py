@@ -294,7 +294,7 @@ def plausibility(motion: Motion, trust: bool = False) -> dict[str, Any] | None:
     ``"ok"`` (False with ``"refusal"``, the one line the gate gives, when it refuses).
     """
     try:
-        from effortface.synth.plausibility import check_plausible  # type: ignore[import-not-found,unused-ignore]
+        from effortface.synth.plausibility import check_plausible  # type: ignore[import-not-found,import-untyped,unused-ignore]
     except ImportError:
         return None
     figures: dict[str, Any] = dict(check_plausible(motion, trust=True))
@@ -319,7 +319,7 @@ def marker_gaps(labels: Sequence[str], missing: np.ndarray, rate_hz: float) -> d
 
     out = {}
     for i, label in enumerate(labels):
-        runs = _runs(missing[:, i])
+        runs = _runs(np.asarray(missing[:, i]))
         if runs:
             out[label] = {"missing_frames": int(missing[:, i].sum()), "gaps": len(runs),
                           "longest_gap_s": round(max(n for _, n in runs) / rate_hz, 4)}
@@ -332,7 +332,7 @@ def complete_window(missing: np.ndarray) -> dict[str, float]:
     from effortface.synth.c3d_motion import _runs
 
     used = ~missing.all(axis=0)
-    runs = _runs(~missing[:, used].any(axis=1)) if used.any() else []
+    runs = _runs(np.asarray(~missing[:, used].any(axis=1))) if used.any() else []
     first, n = max(runs, key=lambda r: (r[1], -r[0])) if runs else (0, 0)
     return {"first_frame": first, "n_frames": n, "of_frames": int(len(missing))}
 
@@ -357,6 +357,14 @@ def _mapping_names(found: MappingFound, names: Sequence[str]) -> dict[str, dict[
     return out
 
 
+#: what each end of a segment is, for the template's placeholders (from the trunk outwards)
+END_PLACES = {"head": ("head top (vertex)", "neck base (C7)"),  # internal order: the head from its top
+              "trunk": ("neck base (C7)", "hip joint"), "upper_arm": ("shoulder", "elbow"),
+              "forearm": ("elbow", "wrist"), "hand": ("wrist", "hand end (middle knuckle or End Site)"),
+              "thigh": ("hip joint", "knee"), "shank": ("knee", "ankle"),
+              "foot": ("ankle", "toe (toe joint or its End Site)")}
+
+
 def mapping_template(inspection: Inspection) -> dict[str, object]:
     """A complete mapping file (version 2) for this clip: all 14 segments, each end as the file's
     names where the mapping found it (or the best convention's end resolves), else a placeholder
@@ -370,7 +378,10 @@ def mapping_template(inspection: Inspection) -> dict[str, object]:
             prox, dist = _one(ends["proximal"]), _one(ends["distal"])
             internal[seg] = (dist, prox) if seg == "head" else (prox, dist)
         else:
-            internal[seg] = tuple(_filled(e, inspection.joints) for e in fallback[seg])  # type: ignore[assignment]
+            what = END_PLACES[seg.split("_", 1)[-1]]
+            side = seg.split("_", 1)[0] + " " if seg.startswith(("left_", "right_")) else ""
+            filled = [_filled(e, inspection.joints, f"{side}{place}") for e, place in zip(fallback[seg], what)]
+            internal[seg] = (filled[0], filled[1])
     return mapping_to_json(internal)
 
 
@@ -379,14 +390,15 @@ def _one(names: list[str]) -> str | list[str]:
     return names[0] if len(names) == 1 else names
 
 
-def _filled(end: Any, joints: Sequence[str]) -> str | list[str]:
-    """A convention's end point as this file's names, or a placeholder (``"<LeftToeBase_end>"``)."""
+def _filled(end: Any, joints: Sequence[str], what: str) -> str | list[str]:
+    """A convention's end point as this file's names, or a placeholder naming the place and the
+    convention's name for it (``"<left toe: toe joint or its End Site, e.g. LeftToeBase_end>"``)."""
     names = end_names(end, joints)
     if names is not None:
         return _one(names)
     if isinstance(end, str):
-        return f"<{end.split('|')[0]}>"
-    return [_filled(e, joints) for e in end]  # type: ignore[misc]
+        return f"<{what}, e.g. {end.split('|')[0]}>"
+    return [str(_filled(e, joints, f"{side} {what}")) for e, side in zip(end, ("left", "right"))]
 
 
 def write_mapping_template(inspection: Inspection, out: str | os.PathLike[str], *, force: bool = False) -> Path:
@@ -400,7 +412,8 @@ def write_mapping_template(inspection: Inspection, out: str | os.PathLike[str], 
     out = Path(out)
     if out.exists() and not force:
         raise UserError(f"{out}: expected a new file for the mapping template, found one (give --force to replace it)")
-    atomic_write_text(out, json.dumps(mapping_template(inspection), indent=2) + "\n")
+    rows = [f"  {json.dumps(k)}: {json.dumps(v)}" for k, v in mapping_template(inspection).items()]
+    atomic_write_text(out, "{\n" + ",\n".join(rows) + "\n}\n")  # one segment a line
     return out
 
 

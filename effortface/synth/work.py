@@ -23,7 +23,7 @@ import numpy as np
 from effortface.core.errors import UserError
 from effortface.core import bounds
 from effortface.core.fileio import atomic_write_text, read_json
-from effortface.core.session.folder import SESSION_JSON, Participant, Session, list_sessions, read_session
+from effortface.core.session.folder import SESSION_JSON, Session, list_sessions, read_session
 from effortface.synth.catalog import Catalog, CatalogError, default_catalog
 from effortface.synth.exercise_log import ExerciseLog, exercise_log
 from effortface.synth.read_options import check_unit_m, check_up
@@ -195,12 +195,12 @@ def _fill_from_motion(s: Session, log: ExerciseLog, t: np.ndarray, w: np.ndarray
     for entry in read_motion_index(index):
         clip_path = index.parent / str(entry["path"])
         try:
-            _fill_from_clip(clip_path, entry, log, part, t, w, p, source, mapping)
+            _fill_from_clip(clip_path, entry, log, (part.mass_kg, part.sex), t, w, p, source, mapping)
         except UserError as exc:  # the clip named (a reader names it; a mapping or energy error may not)
             raise type(exc)(str(exc) if str(clip_path) in str(exc) else f"{clip_path}: {exc}") from None
 
 
-def _fill_from_clip(clip_path: Path, entry: dict, log: ExerciseLog, part: Participant, t: np.ndarray,
+def _fill_from_clip(clip_path: Path, entry: dict, log: ExerciseLog, body: tuple[float, str], t: np.ndarray,
                     w: np.ndarray, p: np.ndarray, source: list[str], mapping: str | os.PathLike | None) -> None:
     """:func:`_fill_from_motion` for one clip of motion.json (``entry``) read from ``clip_path`` with
     the entry's ``unit_m`` and ``up`` (kept by ``motion attach``)."""
@@ -213,7 +213,7 @@ def _fill_from_clip(clip_path: Path, entry: dict, log: ExerciseLog, part: Partic
         loads = [tuple(_log_load(log, label, t[i]) for label in LOG_LOAD_LABELS) for i in inside]
     for load in sorted(set(loads)):
         rows = inside[[k for k, x in enumerate(loads) if x == load]]
-        curves = _clip_curves(clip, part.mass_kg, part.sex, load, entry.get("mapping") or mapping, clip_path)
+        curves = _clip_curves(clip, *body, load, entry.get("mapping") or mapping, clip_path)
         w[rows] = np.interp(t[rows], curves.t_s + offset_s, curves.w_per_kg)
         p[rows] = np.interp(t[rows], curves.t_s + offset_s, curves.p_per_kg)
     for i in inside:
@@ -229,6 +229,7 @@ def read_clip(path: str | os.PathLike, *, unit_m: float | None = None, up: str |
 
     from effortface.synth.motion import read_motion
 
+    path = Path(path)
     if up is None:
         return read_motion(path, unit_m=unit_m)
     if "up" not in inspect.signature(read_motion).parameters:  # MERGE: read_motion(up=) comes with issue 34's readers

@@ -118,7 +118,9 @@ def test_mapping_template_is_complete_refuses_overwrite_and_maps_once_filled(tmp
     assert f"mapping template written to {out}" in capsys.readouterr().out
     template = json.loads(out.read_text())
     assert template["version"] == 2 and len(template) == 15
-    assert template["head"] == ["Neck", "Head_end"] and template["left_foot"] == ["LeftFoot", "<LeftToeBase_end>"]
+    assert template["head"] == ["Neck", "Head_end"]
+    assert template["left_foot"] == ["LeftFoot", "<left toe (toe joint or its End Site), e.g. LeftToeBase_end>"]
+    assert len(out.read_text().splitlines()) == 17  # one segment a line
     with pytest.raises(SegmentMappingError, match=r"template placeholders '<...>' in left_foot, right_foot"):
         read_mapping(out)
     before = out.read_text()
@@ -216,3 +218,29 @@ def test_work_names_the_clip_that_fails(tmp_path: Path, capsys) -> None:
     _write(session / "motion" / "motion.json", {"files": [{"path": WALK.name, "offset_s": 40,
                                                            "mapping": {"version": 2, **FEET}}]})
     assert main(["work", str(session)]) == 0
+
+
+@pytest.mark.parametrize(("doc", "message"), [
+    ({"version": 3, "files": []}, r"motion.json: version: expected 1 or 2, found 3$"),
+    ({"version": 2, "files": [{"path": "a.bvh", "unit_m": -1}]},
+     r"motion.json: files\[0\].unit_m: expected a length in metres above 0, found -1$"),
+    ({"version": 2, "files": [{"path": "a.bvh", "up": "up"}]},
+     r"motion.json: files\[0\].up: expected one of x, y, z, -x, -y, -z, found 'up'$"),
+    ({"version": 2, "files": [{"path": "a.bvh", "mapping": ["LeftFoot"]}]},
+     r"motion.json: files\[0\].mapping: expected a mapping \{segment: \[proximal, distal\]\}, found \['LeftFoot'\]$"),
+])
+def test_motion_json_entries_are_checked(tmp_path: Path, doc: dict, message: str) -> None:
+    from effortface.synth.work import WorkError, read_motion_index
+
+    path = _write(tmp_path / "motion.json", doc)
+    with pytest.raises(WorkError, match=message):
+        read_motion_index(path)
+
+
+def test_motion_json_version_1_entries_still_read(tmp_path: Path) -> None:
+    from effortface.synth.work import read_motion_index
+
+    old = {"files": [{"path": "a.bvh", "offset_s": 3, "mapping": {"head": ["Head_end", "Neck"]}}]}
+    entry = read_motion_index(_write(tmp_path / "motion.json", old))[0]
+    assert (entry["offset_s"], entry["unit_m"], entry["up"]) == (3.0, None, None)
+    assert mapping_from_json(entry["mapping"], "x")["head"] == ("Head_end", "Neck")  # v1: as written
