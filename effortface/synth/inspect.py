@@ -86,8 +86,7 @@ class Inspection:
                 ("frames", f"{self.n_frames} at {self.fps:g} Hz ({self.duration_s:.2f} s)"),
                 ("unit", f"{_fmt(self.unit_m, 'g')} m per file unit ({self.unit_from})"),
                 ("up axis", f"{self.up_axis or '?'} ({self.up_from})"),
-                ("height", f"{_fmt(self.height_m, '.2f')} m (standing: highest joint above the lowest, median "
-                           f"over frames)"),
+                ("height", f"{_fmt(self.height_m, '.2f')} m ({_height_how(self.plausibility)})"),
                 ("window", _window_text(self.window, self.fps))]
         if self.marker_set:
             rows.append(("marker set", self.marker_set))
@@ -143,15 +142,16 @@ def inspect_motion(path: str | os.PathLike[str], options: MotionReadOptions = Mo
     found = find_mapping(motion.joint_names, user)
     unit_m, unit_from = _unit(path, motion, options)
     up_axis, up_from = _up(path, motion, options)
+    figures = plausibility(motion, options.trust_skeleton)
     return Inspection(
         file=str(path), format=path.suffix.lower().lstrip("."), producer=motion.reading.get("producer"),
         fps=motion.fps, n_frames=motion.n_frames, unit_m=unit_m, unit_from=unit_from, up_axis=up_axis,
-        up_from=up_from, height_m=standing_height_m(motion), labels=motion.joint_names, joints=motion.joint_names,
+        up_from=up_from, height_m=_height_m(motion, figures), labels=motion.joint_names, joints=motion.joint_names,
         marker_set=motion.reading.get("marker_set"), convention=_convention(found),
         mapping=_mapping_names(found, motion.joint_names), unmapped=found.unmapped, gaps={},
         window=motion.reading.get("window") or {"first_frame": 0, "n_frames": motion.n_frames,
                                                  "of_frames": motion.n_frames},
-        reading=dict(motion.reading), plausibility=plausibility(motion, options.trust_skeleton), read_error=None)
+        reading=dict(motion.reading), plausibility=figures, read_error=None)
 
 
 def _inspect_c3d(path: Path, options: MotionReadOptions, user: SegmentMapping | None) -> Inspection:
@@ -168,6 +168,7 @@ def _inspect_c3d(path: Path, options: MotionReadOptions, user: SegmentMapping | 
         error = str(exc)
     names = motion.joint_names if motion is not None else points.labels
     found = find_mapping(names, user)
+    figures = plausibility(motion, options.trust_skeleton) if motion is not None else None
     reading = dict(motion.reading) if motion is not None else {}
     unit_m, unit_from = (reading["unit_m"], str(reading.get("unit_from", ""))) if "unit_m" in reading else \
         (options.unit_m, "--unit-m") if options.unit_m is not None else header["unit"]
@@ -177,12 +178,12 @@ def _inspect_c3d(path: Path, options: MotionReadOptions, user: SegmentMapping | 
     return Inspection(
         file=str(path), format="c3d", producer=reading.get("producer") or header["producer"], fps=points.rate_hz,
         n_frames=len(points.missing), unit_m=unit_m, unit_from=unit_from, up_axis=up_axis, up_from=up_from,
-        height_m=standing_height_m(motion) if motion is not None else None, labels=tuple(header["labels"]),
+        height_m=_height_m(motion, figures) if motion is not None else None, labels=tuple(header["labels"]),
         joints=names, marker_set=reading.get("marker_set") or marker_set(points.labels),
         convention=_convention(found), mapping=_mapping_names(found, names), unmapped=found.unmapped,
         gaps=marker_gaps(points.labels, points.missing, points.rate_hz),
         window=complete_window(points.missing), reading=reading,
-        plausibility=plausibility(motion, options.trust_skeleton) if motion is not None else None, read_error=error)
+        plausibility=figures, read_error=error)
 
 
 def c3d_header(path: Path) -> dict[str, Any]:
@@ -284,6 +285,13 @@ def standing_height_m(motion: Motion) -> float:
     """
     z = motion.positions_m[..., 2]
     return float(np.median(z.max(axis=1) - z.min(axis=1)))
+
+
+def _height_m(motion: Motion, figures: dict[str, Any] | None) -> float:
+    """The plausibility gate's standing height when the gate is there, else :func:`standing_height_m`."""
+    if figures is not None and figures.get("height_m") is not None:
+        return float(figures["height_m"])
+    return standing_height_m(motion)
 
 
 def plausibility(motion: Motion, trust: bool = False) -> dict[str, Any] | None:
@@ -438,6 +446,12 @@ def _window_text(window: dict[str, float], fps: float) -> str:
     if n == 0:
         return f"no frame of {of} has every marker"
     return f"frames {first}-{first + n - 1} of {of} ({n / fps:.2f} s) complete"
+
+
+def _height_how(figures: dict[str, Any] | None) -> str:
+    """How the standing height was measured."""
+    return "standing, by the plausibility gate" if figures and figures.get("height_m") is not None else \
+        "standing: highest joint above the lowest, median over frames"
 
 
 def _plausibility_text(figures: dict[str, Any]) -> str:

@@ -244,3 +244,13 @@ def test_motion_json_version_1_entries_still_read(tmp_path: Path) -> None:
     entry = read_motion_index(_write(tmp_path / "motion.json", old))[0]
     assert (entry["offset_s"], entry["unit_m"], entry["up"]) == (3.0, None, None)
     assert mapping_from_json(entry["mapping"], "x")["head"] == ("Head_end", "Neck")  # v1: as written
+
+
+def test_inspect_and_attach_use_the_plausibility_gate_once_merged(tmp_path: Path, capsys) -> None:
+    """Issue 34's gate (another branch): inspect shows its figures, attach passes a plausible walk."""
+    gate = pytest.importorskip("effortface.synth.plausibility")
+    found = _inspect(capsys, str(PYMO))
+    figures = gate.check_plausible(read_motion(PYMO), trust=True)
+    assert found["plausibility"]["ok"] is True and found["height_m"] == pytest.approx(figures["height_m"])
+    session = _session(tmp_path)
+    assert main(["motion", "attach", str(session), str(PYMO), "--offset", "20"]) == 0
