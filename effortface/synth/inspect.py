@@ -138,7 +138,10 @@ def inspect_motion(path: str | os.PathLike[str], options: MotionReadOptions = Mo
     user = read_mapping(options.mapping) if options.mapping is not None else None
     if path.suffix.lower() == ".c3d":
         return _inspect_c3d(path, options, user)
-    motion = read_clip(path, unit_m=options.unit_m, up=options.up)
+    try:
+        motion = read_clip(path, unit_m=options.unit_m, up=options.up)
+    except UserError as exc:
+        return _inspect_unscaled(path, options, user, exc)
     found = find_mapping(motion.joint_names, user)
     unit_m, unit_from = _unit(path, motion, options)
     up_axis, up_from = _up(path, motion, options)
@@ -152,6 +155,27 @@ def inspect_motion(path: str | os.PathLike[str], options: MotionReadOptions = Mo
         window=motion.reading.get("window") or {"first_frame": 0, "n_frames": motion.n_frames,
                                                  "of_frames": motion.n_frames},
         reading=dict(motion.reading), plausibility=figures, read_error=None)
+
+
+def _inspect_unscaled(path: Path, options: MotionReadOptions, user: SegmentMapping | None,
+                      error: UserError) -> Inspection:
+    """A BVH whose length unit cannot be decided (``error``): its joints and mapping, read in file units,
+    no unit or height; any other file that does not read: ``error`` raised."""
+    if path.suffix.lower() != ".bvh" or options.unit_m is not None:
+        raise error
+    try:
+        motion = read_clip(path, unit_m=1.0, up=options.up)  # the joints only: lengths stay in file units
+    except UserError:
+        raise error from None
+    found = find_mapping(motion.joint_names, user)
+    up_axis, up_from = _up(path, motion, options)
+    return Inspection(
+        file=str(path), format="bvh", producer=None, fps=motion.fps, n_frames=motion.n_frames, unit_m=None,
+        unit_from="not decided: give --unit-m", up_axis=up_axis, up_from=up_from, height_m=None,
+        labels=motion.joint_names, joints=motion.joint_names, marker_set=None, convention=_convention(found),
+        mapping=_mapping_names(found, motion.joint_names), unmapped=found.unmapped, gaps={},
+        window={"first_frame": 0, "n_frames": motion.n_frames, "of_frames": motion.n_frames},
+        reading={}, plausibility=None, read_error=str(error))
 
 
 def _inspect_c3d(path: Path, options: MotionReadOptions, user: SegmentMapping | None) -> Inspection:

@@ -254,3 +254,24 @@ def test_inspect_and_attach_use_the_plausibility_gate_once_merged(tmp_path: Path
     assert found["plausibility"]["ok"] is True and found["height_m"] == pytest.approx(figures["height_m"])
     session = _session(tmp_path)
     assert main(["motion", "attach", str(session), str(PYMO), "--offset", "20"]) == 0
+
+
+def test_a_bvh_whose_unit_cannot_be_decided_is_still_inspected(tmp_path: Path, capsys) -> None:
+    """The bvh-toolbox walk with every OFFSET and root position shrunk 1,000 times (no unit gives a human): its joints,
+    mapping and the reader's refusal are shown (exit 0); with --unit-m it reads."""
+    import re
+
+    head, frames = WALK.read_text().split("Frame Time:")
+    head = re.sub(r"OFFSET\s+(\S+)\s+(\S+)\s+(\S+)",
+                  lambda m: "OFFSET " + " ".join(f"{float(v) * 1e-3:.8f}" for v in m.groups()), head)
+    lines = frames.splitlines()
+    rows = [" ".join([f"{float(v) * 1e-3:.8f}" for v in row.split()[:3]] + row.split()[3:]) for row in lines[1:]]
+    text = head + "Frame Time:" + "\n".join([lines[0], *rows]) + "\n"  # the root's position channels too
+    clip = tmp_path / "tiny.bvh"
+    clip.write_text(text)
+    found = _inspect(capsys, str(clip))
+    assert found["unit_m"] is None and found["height_m"] is None and found["unit_from"] == "not decided: give --unit-m"
+    assert found["read_error"].startswith(f"{clip}: expected a skeleton whose rest pose is 1.1-2.3 m tall")
+    assert len(found["labels"]) == 24 and found["unmapped"] == ["left_foot", "right_foot"]
+    scaled = _inspect(capsys, str(clip), "--unit-m", "10")
+    assert scaled["unit_m"] == 10 and 1.6 < scaled["height_m"] < 1.9 and scaled["read_error"] is None
