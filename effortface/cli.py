@@ -35,7 +35,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "evaluate": ("effortface.train.commands.evaluate", "re-score a model bundle on sessions or a table"),
     "synth": ("effortface.synth.commands.synth", "synthesize face curves from a motion clip"),
     "work": ("effortface.synth.commands.work", "work.csv (w, p per second) from motion/ and the exercise log"),
-    "motion": ("effortface.synth.commands.motion", "motion attach SESSION CLIP: align a mocap clip to a session"),
+    "motion": ("effortface.synth.commands.motion", "motion attach SESSION CLIP: align a mocap clip to a session; motion inspect FILE: what a clip holds"),
     "import": ("effortface.interop.commands.import_data", "import xdf FILE: a LabRecorder recording -> a session"),
     "export": ("effortface.interop.commands.export_data", "export bids SESSIONS: sessions -> a BIDS dataset"),
     "serve": ("effortface.interop.commands.serve", "live face from an LSL or OSC stream to LSL, OSC or Live Link"),

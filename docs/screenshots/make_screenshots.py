@@ -12,7 +12,8 @@ training level 8 on the sample lab, whose P01 is a woman of 23 with 2.5, Record 
 ``fig3``, ``runlog`` after training in the stage; ``compare`` of two bundles made by
 ``effortface train``), ``synth`` (``rule``, ``trained``), ``machine`` (``annotate_machine_guide``:
 R1's keys over the machine rater's dashed curves (the real rater, run on the copy), 330-470 s; ``annotate_machine_accept``:
-a new rater after "Accept machine" over the whole session).
+a new rater after "Accept machine" over the whole session), ``fileinfo`` (``synth_fileinfo``: the
+Synthesize stage's File info panel on bvh-toolbox's walk, ``tests/data/bvh``, with a mapping of its two feet).
 
 The sample lab (``sample_sessions/``) is copied to a temporary folder first and never written to;
 the states are fixed (session P01 cardio, frame at 400 s for rater R1, new rater R7 in the blind
@@ -45,7 +46,7 @@ from effortface.core.fileio import atomic_write  # noqa: E402
 OUT = Path(__file__).resolve().parent
 SAMPLES = ROOT / "sample_sessions"
 SIZES = ((1280, 800), (1920, 1080))
-GROUPS = ("app", "capture", "participant", "annotate", "train", "synth", "machine")
+GROUPS = ("app", "capture", "participant", "annotate", "train", "synth", "machine", "fileinfo")
 #: the fixed states of the pictures
 SESSION = "P01_20260112-093000_cardio"
 KEYFRAME_T_S = 400.0            # P01's 3.4 m/s run
@@ -337,6 +338,26 @@ def shoot_synth(lab: Path, bundles: dict[str, Path], tmp: Path, out: Path) -> No
             grab(window, name, out)
 
 
+def shoot_fileinfo(lab: Path, tmp: Path, out: Path) -> None:
+    """The File info panel: bvh-toolbox's walk (the conventions map all but its feet) and a mapping of the feet."""
+    clip = tmp / "walk01.bvh"
+    shutil.copyfile(ROOT / "tests" / "data" / "bvh" / "bvhtoolbox_walk01.bvh", clip)
+    feet = tmp / "walk01-feet.json"
+    feet.write_text('{"version": 2, "left_foot": ["LeftFoot", "LeftFoot_end"], '
+                    '"right_foot": ["RightFoot", "RightFoot_end"]}\n', encoding="utf-8")
+    with main_window(lab, tmp, "synthesize") as window:
+        stage = window.stages["synthesize"]
+        for ok in (stage.load_model("default"), stage.load_clip(clip)):
+            if not ok:
+                raise RuntimeError(stage.status.text())
+        _settle(window)  # the clip's recompute (refused: its feet are unmapped) is done before the mapping
+        if not stage.set_mapping(feet):
+            raise RuntimeError(stage.status.text())
+        _settle(window)
+        stage.show_file_info()
+        grab(window, "synth_fileinfo", out)
+
+
 # ----------------------------------------------------------------------------------- main
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """``--only GROUP ...`` and ``--out DIR``."""
@@ -372,6 +393,8 @@ def main(argv: list[str] | None = None) -> int:
             shoot_synth(lab, bundles, tmp, args.out)
         if "machine" in args.only:
             shoot_machine(lab, tmp, args.out)
+        if "fileinfo" in args.only:
+            shoot_fileinfo(lab, tmp, args.out)
     finally:
         app.processEvents()
         shutil.rmtree(tmp, ignore_errors=True)

@@ -32,8 +32,9 @@ from effortface.core.errors import UserError
 from effortface.core.fileio import write_json_atomic
 from effortface.core.session.folder import read_session
 from effortface.synth.energy import butterworth_sos, filter_frames
-from effortface.synth.motion import Motion, read_motion
-from effortface.synth.work import MOTION_DIR, MOTION_JSON, read_motion_index
+from effortface.synth.inspect import check_plausible_clip
+from effortface.synth.motion import Motion
+from effortface.synth.work import MOTION_DIR, MOTION_JSON, MOTION_JSON_VERSION, read_clip, read_motion_index
 
 #: the kinds of clip ``motion attach`` copies (by suffix)
 CLIP_FORMATS = {".bvh": "bvh", ".c3d": "c3d", ".csv": "joint positions csv", ".npz": "npz"}
@@ -182,7 +183,8 @@ def _nearest(times: np.ndarray, t: float) -> float:
 
 def attach_clip(session: str | os.PathLike, clip: str | os.PathLike, *, offset_s: float | None = None,
                 sync: bool = False, sync_near_s: float | None = None,
-                mapping: str | os.PathLike | None = None) -> Alignment:
+                mapping: str | os.PathLike | None = None, unit_m: float | None = None, up: str | None = None,
+                trust_skeleton: bool = False) -> Alignment:
     """Copy ``clip`` into ``session/motion/`` and record its alignment in ``motion.json``.
 
     Parameters
@@ -198,8 +200,13 @@ def attach_clip(session: str | os.PathLike, clip: str | os.PathLike, *, offset_s
     sync_near_s : float, optional
         With ``sync``: use the sync event nearest this session time (when several fit equally).
     mapping : path-like, optional
-        A joint-to-segment mapping file: checked against the clip and kept in its motion.json
-        entry (``"mapping"``), so ``effortface work`` uses it.
+        A joint-to-segment mapping file (partial ones are filled by the built-in conventions):
+        kept in the clip's motion.json entry (``"mapping"``, version 2), so ``effortface work`` uses it.
+    unit_m, up : optional
+        The clip's length unit (m) and up axis (``--unit-m``, ``--up``; None: the file's own), used
+        to read it here and kept in its entry for ``effortface work``.
+    trust_skeleton : bool
+        Attach a body outside the plausibility gate's human ranges (kept in the entry).
 
     Returns
     -------
@@ -210,6 +217,10 @@ def attach_clip(session: str | os.PathLike, clip: str | os.PathLike, *, offset_s
     AttachError
         Unknown format, a clip of that name already in motion/ (never overwritten), a non-finite
         offset, or a sync jump that cannot be found or is ambiguous; nothing is written then.
+    UserError
+        A clip that cannot be read, whose joints cannot be mapped to the 14 segments (the clip and
+        the mapping file named), or outside the plausibility gate: nothing is copied, motion.json
+        is unchanged.
     """
     s = read_session(session)
     clip = Path(clip)
@@ -218,8 +229,9 @@ def attach_clip(session: str | os.PathLike, clip: str | os.PathLike, *, offset_s
     if (offset_s is None) == (not sync):
         raise AttachError("--offset / --sync: expected exactly one of the two, found "
                           + ("both" if sync else "neither"))
-    motion = read_motion(clip)
-    segments = _checked_mapping(motion, mapping) if mapping is not None else None
+    motion = read_clip(clip, unit_m=unit_m, up=up)
+    segments = _checked_mapping(motion, clip, mapping)
+    check_plausible_clip(motion, trust_skeleton)
     folder = s.path / MOTION_DIR
     target = folder / clip.name
     if target.exists():
@@ -233,22 +245,23 @@ def attach_clip(session: str | os.PathLike, clip: str | os.PathLike, *, offset_s
         alignment = Alignment(float(offset_s), "offset")  # type: ignore[arg-type]
     entries = read_motion_index(folder / MOTION_JSON) if (folder / MOTION_JSON).exists() else []
     entries.append(_entry(clip, motion, alignment))
-    if segments is not None:
-        entries[-1]["mapping"] = segments
+    read_as = {"unit_m": unit_m, "up": up, "mapping": segments, "trust_skeleton": trust_skeleton or None}
+    entries[-1].update({k: v for k, v in read_as.items() if v is not None})
     folder.mkdir(exist_ok=True)
     shutil.copyfile(clip, target)
-    write_json_atomic(folder / MOTION_JSON, {"files": entries})
+    write_json_atomic(folder / MOTION_JSON, {"version": MOTION_JSON_VERSION, "files": entries})
     return alignment
 
 
-def _checked_mapping(motion: Motion, mapping: str | os.PathLike) -> dict:
-    """The mapping file's ``{segment: [proximal, distal]}``, once it maps the clip's joints (a
-    UserError naming the file or the unmapped segments otherwise)."""
-    from effortface.synth.segments import build_body, read_mapping
+def _checked_mapping(motion: Motion, clip: Path, mapping: str | os.PathLike | None) -> dict | None:
+    """Map the clip's joints (the mapping file filling or overriding the built-in conventions) or raise
+    a UserError naming the clip and the mapping file; the file's JSON form (version 2) for motion.json."""
+    from effortface.synth.segments import build_body, mapping_to_json, read_mapping
 
-    segments = read_mapping(Path(mapping))
-    build_body(motion.joint_names, motion.parents, 70.0, "male", mapping=segments)
-    return {k: [list(e) if not isinstance(e, str) else e for e in v] for k, v in segments.items()}
+    segments = read_mapping(Path(mapping)) if mapping is not None else None
+    build_body(motion.joint_names, motion.parents, 70.0, "male", mapping=Path(mapping) if mapping else None,
+               source=clip)
+    return mapping_to_json(segments) if segments is not None else None
 
 
 def _entry(clip: Path, motion: Motion, alignment: Alignment) -> dict:

@@ -195,7 +195,7 @@ class FaceModel:
         step = max(1, skeleton.n_frames // REFERENCE_FRAMES)
         return build_body(skeleton.joint_names, skeleton.parents, character.mass_kg, character.sex,
                           loads=character.loads(), mapping=mapping,
-                          reference_positions_m=skeleton.positions_m[::step])
+                          reference_positions_m=skeleton.positions_m[::step], source=skeleton.source)
 
     def synthesize(self, motion: str | os.PathLike[str] | Motion, character: Character, *,
                    mapping: Any = None, causal: bool = False, filter_tau_s: Any = None

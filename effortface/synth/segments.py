@@ -241,10 +241,21 @@ class Loads:
 # mapping
 
 
-def read_mapping(path: str | Path) -> dict[str, tuple[EndPoint, EndPoint]]:
-    """Read a user mapping file: JSON ``{segment: [proximal joint, distal joint]}``.
+#: the mapping file format :func:`mapping_to_json` writes (``"version": 2``). Version 2 lists every
+#: segment's ends from the trunk outwards: the head ``[neck, head top]`` like a limb ``[hip, knee]``.
+#: Version 1 (a file without ``"version"``, the format before issue 34) lists the head ``[head top,
+#: neck]``; it is still read. The trunk is ``[neck, hips]`` in both.
+MAPPING_VERSION = 2
+#: a template's stand-in for a name the file lacks: ``"<...>"`` (refused until it is replaced or its entry removed)
+PLACEHOLDER_START = "<"
 
-    An end point may be a joint name, ``"A|B"`` (first present) or a list of names (their mean).
+
+def read_mapping(path: str | Path) -> dict[str, tuple[EndPoint, EndPoint]]:
+    """Read a user mapping file: JSON ``{"version": 2, segment: [proximal, distal], ...}``.
+
+    An end point may be a joint name, ``"A|B"`` (the first present) or a list of names (their mean);
+    a BVH End Site is ``<joint>_end``. A file may name only some segments: the built-in conventions
+    fill the rest (:func:`map_skeleton`). See :func:`mapping_from_json` for the versions.
 
     Parameters
     ----------
@@ -253,25 +264,70 @@ def read_mapping(path: str | Path) -> dict[str, tuple[EndPoint, EndPoint]]:
     Returns
     -------
     dict
+        segment -> (proximal, distal) in the internal order (the head from its top, as de Leva).
 
     Raises
     ------
     SegmentMappingError
-        Unreadable JSON, or entries that are not ``[proximal, distal]`` pairs (named).
+        Unreadable JSON, an unknown version, entries that are not ``[proximal, distal]`` pairs or
+        still hold a template placeholder (named, with the file).
     """
     path = Path(path)
     data = read_json(path, "a JSON mapping segment -> [proximal, distal]", SegmentMappingError)
+    return mapping_from_json(data, path)
+
+
+def mapping_from_json(data: object, source: str | Path) -> dict[str, tuple[EndPoint, EndPoint]]:
+    """A mapping in the internal order from its JSON form (a mapping file, a motion.json entry).
+
+    ``"version": 2`` (:data:`MAPPING_VERSION`): the head is ``[neck, head top]``, from the trunk
+    outwards like the limbs. No ``"version"`` (version 1): the head is ``[head top, neck]``. The
+    internal order keeps the head from its top, the end de Leva (1996) measures its centre of
+    mass from.
+
+    Raises
+    ------
+    SegmentMappingError
+        Naming ``source``: not an object, an unknown version, bad or unknown entries, placeholders.
+    """
     if not isinstance(data, dict):
         raise SegmentMappingError(
-            f"{path}: expected a JSON object segment -> [proximal, distal], got {type(data).__name__}")
-    bad = [k for k, v in data.items() if not _is_pair(v)]
-    unknown = [k for k in data if k not in SEGMENT_ROWS]
+            f"{source}: expected a JSON object segment -> [proximal, distal], got {type(data).__name__}")
+    version = data.get("version", 1)
+    if version not in (1, MAPPING_VERSION) or isinstance(version, bool):
+        raise SegmentMappingError(f"{source}: version: expected 1 or {MAPPING_VERSION}, found {version!r}")
+    entries = {k: v for k, v in data.items() if k != "version"}
+    bad = [k for k, v in entries.items() if not _is_pair(v)]
+    unknown = [k for k in entries if k not in SEGMENT_ROWS]
     if bad or unknown:
         raise SegmentMappingError(
-            f"{path}: expected [proximal, distal] joint names (a name or a list of names each) for "
+            f"{source}: expected [proximal, distal] joint names (a name or a list of names each) for "
             f"segments among {', '.join(REQUIRED_SEGMENTS)}; bad entries: {', '.join(bad + unknown)}"
         )
-    return {k: (v[0], v[1]) for k, v in data.items()}
+    holes = [k for k, v in entries.items() if any(n.startswith(PLACEHOLDER_START) for n in _names(v))]
+    if holes:
+        raise SegmentMappingError(
+            f"{source}: expected joint names, found template placeholders '<...>' in {', '.join(holes)}: "
+            f"replace them with names of the file (effortface motion inspect lists them) or delete the entries")
+    out = {k: (v[0], v[1]) for k, v in entries.items()}
+    if version == MAPPING_VERSION and "head" in out:
+        out["head"] = (out["head"][1], out["head"][0])
+    return out
+
+
+def mapping_to_json(mapping: SegmentMapping) -> dict[str, object]:
+    """The JSON form (:data:`MAPPING_VERSION`) of a mapping in the internal order (the inverse of
+    :func:`mapping_from_json`): ``{"version": 2, segment: [proximal, distal], ...}``."""
+    out: dict[str, object] = {"version": MAPPING_VERSION}
+    for seg, (prox, dist) in mapping.items():
+        ends = [dist, prox] if seg == "head" else [prox, dist]
+        out[seg] = [e if isinstance(e, str) else list(e) for e in ends]
+    return out
+
+
+def _names(ends: Sequence[EndPoint]) -> list[str]:
+    """Every joint name of a (proximal, distal) pair, ``A|B`` alternatives split."""
+    return [n for end in ends for e in ([end] if isinstance(end, str) else end) for n in e.split("|")]
 
 
 def _is_end(end: object) -> bool:
@@ -304,6 +360,13 @@ def _resolve_end(end: EndPoint, index: Mapping[str, int]) -> tuple[int, ...] | N
     return tuple(i for f in found for i in f)  # type: ignore[union-attr]  # no None: checked above
 
 
+def end_names(end: EndPoint, joint_names: Sequence[str]) -> list[str] | None:
+    """The joint names of ``joint_names`` one end point resolves to (``A|B``: the first present; a
+    list: all of them), or None if it cannot be found."""
+    found = _resolve_end(end, {_joint_key(n): i for i, n in enumerate(joint_names)})
+    return None if found is None else [joint_names[i] for i in found]
+
+
 def resolve_mapping(
     joint_names: Sequence[str], mapping: SegmentMapping
 ) -> tuple[dict[str, tuple[tuple[int, ...], tuple[int, ...]]], list[str]]:
@@ -328,8 +391,62 @@ def resolve_mapping(
     return resolved, missing
 
 
+@dataclasses.dataclass(frozen=True)
+class MappingFound:
+    """The best mapping of a skeleton's joints to the 14 segments, complete or not.
+
+    Attributes
+    ----------
+    convention : str
+        What mapped it: a built-in convention (``"CMU"``), ``"user"`` (a complete user mapping) or
+        ``"user + CMU"`` (a partial user mapping, the convention filling the rest).
+    segments : dict
+        segment -> (proximal joint indices, distal joint indices), the mapped segments only.
+    unmapped : tuple of str
+        The required segments left unmapped.
+    user_segments : tuple of str
+        The segments the user mapping named.
+    """
+
+    convention: str
+    segments: dict[str, tuple[tuple[int, ...], tuple[int, ...]]]
+    unmapped: tuple[str, ...]
+    user_segments: tuple[str, ...] = ()
+
+
+def find_mapping(joint_names: Sequence[str], mapping: SegmentMapping | None = None) -> MappingFound:
+    """The mapping with the fewest unmapped segments: a user mapping, alone or filled by a convention.
+
+    A user mapping complete on its own is ``"user"``; a partial one is merged over each built-in
+    convention (the segments it names override the convention's) and the merge with the fewest
+    unmapped segments wins (the first in :data:`CONVENTIONS` order on a tie). Without a user
+    mapping, the convention with the fewest unmapped segments. Never raises for unmapped segments
+    (``motion inspect`` shows them); :func:`map_skeleton` does.
+    """
+    if mapping is not None and not isinstance(mapping, Mapping):
+        raise SegmentMappingError(
+            f"mapping: expected a mapping segment -> (proximal, distal), found {type(mapping).__name__}")
+    user = dict(mapping) if mapping is not None else None
+    candidates: dict[str, SegmentMapping] = {}
+    if user is not None:
+        candidates["user"] = user
+        candidates.update({f"user + {name}": {**conv, **user} for name, conv in CONVENTIONS.items()})
+    else:
+        candidates.update(CONVENTIONS)
+    best: MappingFound | None = None
+    for name, conv in candidates.items():
+        resolved, missing = resolve_mapping(joint_names, conv)
+        found = MappingFound(name, resolved, tuple(missing), tuple(s for s in REQUIRED_SEGMENTS if user and s in user))
+        if not missing:
+            return found
+        if best is None or len(missing) < len(best.unmapped):
+            best = found
+    assert best is not None
+    return best
+
+
 def map_skeleton(
-    joint_names: Sequence[str], mapping: SegmentMapping | str | Path | None = None
+    joint_names: Sequence[str], mapping: SegmentMapping | str | Path | None = None, *, source: str | Path = "",
 ) -> tuple[str, dict[str, tuple[tuple[int, ...], tuple[int, ...]]]]:
     """Map a skeleton's joints to the 14 segments.
 
@@ -338,38 +455,40 @@ def map_skeleton(
     joint_names : sequence of str
         The skeleton's joints (names match case-insensitively, namespaces such as 'mixamorig:' ignored).
     mapping : mapping, str or Path, optional
-        A user mapping (or JSON file, see :func:`read_mapping`). When omitted, the built-in
-        conventions (CMU, Mixamo, Unreal, Unity, Biovision, SMPL, Xsens, AMP) are tried and the first
-        complete one is used.
+        A user mapping (or JSON file, see :func:`read_mapping`), complete or partial: the built-in
+        conventions (CMU, Mixamo, Unreal, Unity, Biovision, SMPL, Xsens, AMP) fill the segments it
+        does not name (:func:`find_mapping`). When omitted, the first complete convention is used.
+    source : str or Path
+        The clip, named in the refusal.
 
     Returns
     -------
     convention : str
-        The convention used ('user' for a user mapping).
+        What mapped it (see :attr:`MappingFound.convention`).
     segments : dict
         segment -> (proximal joint indices, distal joint indices).
 
     Raises
     ------
     SegmentMappingError
-        Some required segments are left unmapped; the message names every one.
+        Some required segments are left unmapped; the message names the clip, the mapping file
+        and every unmapped segment.
     """
-    if isinstance(mapping, (str, Path)):
-        mapping = read_mapping(mapping)
-    candidates = {"user": mapping} if mapping is not None else CONVENTIONS
-    best: tuple[str, list[str]] | None = None
-    for name, conv in candidates.items():
-        resolved, missing = resolve_mapping(joint_names, conv)
-        if not missing:
-            return name, resolved
-        if best is None or len(missing) < len(best[1]):
-            best = (name, missing)
-    assert best is not None
+    mapping_file = mapping if isinstance(mapping, (str, Path)) else None
+    if mapping_file is not None:
+        mapping = read_mapping(mapping_file)
+    found = find_mapping(joint_names, mapping)  # type: ignore[arg-type]  # a file was read above
+    if not found.unmapped:
+        return found.convention, found.segments
+    where = f"{source}: " if str(source) else ""
+    tried = f"mapping file {mapping_file} and the " if mapping_file is not None else \
+        ("the mapping given and the " if mapping is not None else "")
     raise SegmentMappingError(
-        f"skeleton joints: expected every segment mapped ({', '.join(candidates)} conventions tried, "
-        f"best {best[0]}); unmapped segments: {', '.join(best[1])}. Map them with --mapping FILE.json: "
-        f'{{"head": ["<head top joint>", "<neck joint>"], "left_thigh": ["<hip joint>", "<knee joint>"], ...}} '
-        f"(segment -> [proximal, distal] joint names of this skeleton)"
+        f"{where}skeleton joints: expected every segment mapped ({tried}{', '.join(CONVENTIONS)} conventions "
+        f"tried, best {found.convention}); unmapped segments: {', '.join(found.unmapped)}. Map them with "
+        f'--mapping FILE.json: {{"version": 2, "{found.unmapped[0]}": ["<proximal joint>", "<distal joint>"], ...}} '
+        f"naming only those (the conventions fill the rest; 'effortface motion inspect CLIP --mapping-template "
+        f"FILE.json' writes one with the clip's names)"
     )
 
 
@@ -488,6 +607,7 @@ def build_body(
     loads: Loads = Loads(),
     mapping: SegmentMapping | str | Path | None = None,
     reference_positions_m: np.ndarray | None = None,
+    source: str | Path = "",
 ) -> BodyModel:
     """Build the 14-segment body of a character from its skeleton.
 
@@ -508,6 +628,8 @@ def build_body(
     reference_positions_m : ndarray, shape (J, 3) or (T, J, 3), optional
         Joint positions giving the segment lengths (median over frames). When omitted the de Leva
         sample-mean lengths are used.
+    source : str or Path
+        The clip, named when its joints cannot be mapped.
 
     Returns
     -------
@@ -523,7 +645,7 @@ def build_body(
     if not isinstance(loads, Loads):
         raise UserError(f"loads: expected a Loads instance, got {type(loads).__name__}")
     parents = check_parents(np.asarray(parents, dtype=int), "skeleton")
-    convention, resolved = map_skeleton(joint_names, mapping)
+    convention, resolved = map_skeleton(joint_names, mapping, source=source)
     names = REQUIRED_SEGMENTS
     params = [table[SEGMENT_ROWS[s]] for s in names]
     prox_w = _end_weights([resolved[s][0] for s in names], len(joint_names))

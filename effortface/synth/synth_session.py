@@ -163,10 +163,11 @@ class SynthSession:
         """
         from effortface.synth.segments import build_body, read_mapping
 
-        mapping = None if path is None else read_mapping(Path(path))
-        if mapping is not None and self.motion is not None:
+        file = None if path is None else Path(path)
+        mapping = None if file is None else read_mapping(file)
+        if file is not None and self.motion is not None:
             build_body(self.motion.joint_names, self.motion.parents, self.character.mass_kg, self.character.sex,
-                       mapping=mapping)
+                       mapping=file, source=self.motion_path or self.motion.source)
         self.mapping, self.mapping_path = mapping, None if path is None else Path(path)
         self._work_cache = None
         self._recompute()

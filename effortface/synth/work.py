@@ -26,6 +26,7 @@ from effortface.core.fileio import atomic_write_text, read_json
 from effortface.core.session.folder import SESSION_JSON, Session, list_sessions, read_session
 from effortface.synth.catalog import Catalog, CatalogError, default_catalog
 from effortface.synth.exercise_log import ExerciseLog, exercise_log
+from effortface.synth.read_options import check_unit_m, check_up
 
 if TYPE_CHECKING:  # the energies load scipy: imported only when a session has motion
     from effortface.synth.energy import EnergyCurves
@@ -186,28 +187,54 @@ def _fill_from_motion(s: Session, log: ExerciseLog, t: np.ndarray, w: np.ndarray
     A clip's loads are its entry's ``load_*_kg`` keys when it has any (earlier releases), else the
     exercise log's ``load`` rows in force at each second: one energy computation per distinct set.
     """
-    from effortface.synth.motion import read_motion
-
     index = s.path / MOTION_DIR / MOTION_JSON
     part = s.participant
     if part.mass_kg is None or part.sex is None:
         raise WorkError(f"{s.path / 'session.json'}: expected the participant's mass_kg and sex to compute "
                         f"work from motion/, found {part.mass_kg!r} and {part.sex!r}")
     for entry in read_motion_index(index):
-        clip = read_motion(index.parent / str(entry["path"]))
-        offset_s = float(entry.get("offset_s", 0.0))
-        inside = np.flatnonzero((t >= offset_s) & (t <= offset_s + (clip.n_frames - 1) / clip.fps))
-        if any(k in entry for k in ENTRY_LOAD_KEYS):
-            loads = [tuple(float(entry.get(k, 0.0)) for k in ENTRY_LOAD_KEYS)] * len(inside)
-        else:
-            loads = [tuple(_log_load(log, label, t[i]) for label in LOG_LOAD_LABELS) for i in inside]
-        for load in sorted(set(loads)):
-            rows = inside[[k for k, x in enumerate(loads) if x == load]]
-            curves = _clip_curves(clip, part.mass_kg, part.sex, load, entry.get("mapping") or mapping)
-            w[rows] = np.interp(t[rows], curves.t_s + offset_s, curves.w_per_kg)
-            p[rows] = np.interp(t[rows], curves.t_s + offset_s, curves.p_per_kg)
-        for i in inside:
-            source[i] = f"motion:{entry['path']}"
+        clip_path = index.parent / str(entry["path"])
+        try:
+            _fill_from_clip(clip_path, entry, log, (part.mass_kg, part.sex), t, w, p, source, mapping)
+        except UserError as exc:  # the clip named (a reader names it; a mapping or energy error may not)
+            raise type(exc)(str(exc) if str(clip_path) in str(exc) else f"{clip_path}: {exc}") from None
+
+
+def _fill_from_clip(clip_path: Path, entry: dict, log: ExerciseLog, body: tuple[float, str], t: np.ndarray,
+                    w: np.ndarray, p: np.ndarray, source: list[str], mapping: str | os.PathLike | None) -> None:
+    """:func:`_fill_from_motion` for one clip of motion.json (``entry``) read from ``clip_path`` with
+    the entry's ``unit_m`` and ``up`` (kept by ``motion attach``)."""
+    clip = read_clip(clip_path, unit_m=entry.get("unit_m"), up=entry.get("up"))
+    offset_s = float(entry.get("offset_s", 0.0))
+    inside = np.flatnonzero((t >= offset_s) & (t <= offset_s + (clip.n_frames - 1) / clip.fps))
+    if any(k in entry for k in ENTRY_LOAD_KEYS):
+        loads = [tuple(float(entry.get(k, 0.0)) for k in ENTRY_LOAD_KEYS)] * len(inside)
+    else:
+        loads = [tuple(_log_load(log, label, t[i]) for label in LOG_LOAD_LABELS) for i in inside]
+    for load in sorted(set(loads)):
+        rows = inside[[k for k, x in enumerate(loads) if x == load]]
+        curves = _clip_curves(clip, *body, load, entry.get("mapping") or mapping, clip_path)
+        w[rows] = np.interp(t[rows], curves.t_s + offset_s, curves.w_per_kg)
+        p[rows] = np.interp(t[rows], curves.t_s + offset_s, curves.p_per_kg)
+    for i in inside:
+        source[i] = f"motion:{entry['path']}"
+
+
+def read_clip(path: str | os.PathLike, *, unit_m: float | None = None, up: str | None = None) -> Motion:
+    """:func:`effortface.synth.motion.read_motion` with the caller's unit and up axis (None: the file's own).
+
+    ``up`` is passed only when given, so this reads with a ``read_motion`` that has no ``up`` yet.
+    """
+    import inspect
+
+    from effortface.synth.motion import read_motion
+
+    path = Path(path)
+    if up is None:
+        return read_motion(path, unit_m=unit_m)
+    if "up" not in inspect.signature(read_motion).parameters:  # MERGE: read_motion(up=) comes with issue 34's readers
+        raise WorkError(f"{path}: up {up!r}: expected a reader that takes the up axis, found none in this build")
+    return read_motion(path, unit_m=unit_m, up=up)  # type: ignore[call-arg,unused-ignore]  # up: issue 34
 
 
 def _log_load(log: ExerciseLog, label: str, t_s: float) -> float:
@@ -217,19 +244,25 @@ def _log_load(log: ExerciseLog, label: str, t_s: float) -> float:
 
 
 def _clip_curves(clip: Motion, mass_kg: float, sex: str, load: tuple[float, ...],
-                 mapping: dict | str | os.PathLike | None = None) -> EnergyCurves:
+                 mapping: dict | str | os.PathLike | None = None, clip_path: Path | None = None) -> EnergyCurves:
     """Work and power of a clip for the participant's body carrying ``load`` (left, right, back kg);
-    ``mapping`` a segment mapping (dict or file) or None for the built-in conventions."""
+    ``mapping`` a segment mapping (a motion.json entry's JSON form, or a file) or None for the
+    built-in conventions."""
     from effortface.synth.energy import work_and_power
-    from effortface.synth.segments import Loads, build_body
+    from effortface.synth.segments import Loads, build_body, mapping_from_json
 
-    segments = {k: (v[0], v[1]) for k, v in mapping.items()} if isinstance(mapping, dict) else \
+    where = clip_path if clip_path is not None else clip.source
+    segments = mapping_from_json(mapping, f"{where}: motion.json mapping") if isinstance(mapping, dict) else \
         None if mapping is None else Path(mapping)
     body = build_body(clip.joint_names, clip.parents, mass_kg, sex, loads=Loads(*load), mapping=segments,
-                      reference_positions_m=clip.positions_m)
+                      reference_positions_m=clip.positions_m, source=where)
     return work_and_power(clip, body)
 
 
+#: the motion.json format ``motion attach`` writes: version 2 (issue 34) adds ``"version"`` and the
+#: entries' ``unit_m``, ``up``, ``trust_skeleton`` and a versioned ``mapping``; version 1 (no
+#: ``"version"``) is read as before
+MOTION_JSON_VERSION = 2
 MOTION_ENTRY_NUMBERS = {"offset_s": ("offset_s", 0.0), "load_left_kg": ("load_kg", 0.0),
                         "load_right_kg": ("load_kg", 0.0), "load_back_kg": ("load_kg", 0.0)}
 
@@ -237,12 +270,16 @@ MOTION_ENTRY_NUMBERS = {"offset_s": ("offset_s", 0.0), "load_left_kg": ("load_kg
 def read_motion_index(path: str | os.PathLike) -> list[dict]:
     """The entries of a session's ``motion/motion.json``: ``{"files": [{path, offset_s, load_*_kg}]}``.
 
+    Version 2 (:data:`MOTION_JSON_VERSION`, ``"version": 2``) entries may also give ``unit_m``,
+    ``up`` (read with them), ``trust_skeleton`` and ``mapping`` (a mapping file's JSON form,
+    :func:`effortface.synth.segments.mapping_from_json`); version 1 files (no ``"version"``) read as before.
+
     Returns
     -------
     list of dict
-        Each with ``path`` (str, relative to the file's folder), ``offset_s`` (default 0) and the
-        ``load_*_kg`` keys the entry gives (checked; absent ones stay absent, so that the exercise
-        log's loads apply), other keys as they are.
+        Each with ``path`` (str, relative to the file's folder), ``offset_s`` (default 0),
+        ``unit_m`` and ``up`` (None when not given) and the ``load_*_kg`` keys the entry gives
+        (checked; absent ones stay absent, so that the exercise log's loads apply), other keys as they are.
 
     Raises
     ------
@@ -252,6 +289,9 @@ def read_motion_index(path: str | os.PathLike) -> list[dict]:
     """
     path = Path(path)
     doc = read_json(path, 'JSON {"files": [{path, offset_s}]}', WorkError)
+    version = doc.get("version", 1) if isinstance(doc, dict) else 1
+    if version not in (1, MOTION_JSON_VERSION) or isinstance(version, bool):
+        raise WorkError(f"{path}: version: expected 1 or {MOTION_JSON_VERSION}, found {version!r}")
     files = doc.get("files") if isinstance(doc, dict) else None
     if not isinstance(files, list):
         raise WorkError(f'{path}: expected {{"files": [{{path, offset_s}}]}}, found {type(doc).__name__} '
@@ -272,6 +312,14 @@ def _motion_entry(path: Path, i: int, entry: object) -> dict:
             out[key] = bounds.check(bound, entry.get(key, default), f"{where}.{key}")
         except UserError as exc:
             raise WorkError(str(exc)) from None
+    try:
+        out["unit_m"] = check_unit_m(entry.get("unit_m"), f"{where}.unit_m")
+        out["up"] = check_up(entry.get("up"), f"{where}.up")
+    except UserError as exc:
+        raise WorkError(str(exc)) from None
+    if not isinstance(entry.get("mapping", {}), dict):
+        raise WorkError(f"{where}.mapping: expected a mapping {{segment: [proximal, distal]}}, "
+                        f"found {entry['mapping']!r:.60}")
     return out
 
 

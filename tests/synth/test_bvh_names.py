@@ -55,7 +55,8 @@ def test_unknown_skeleton_is_one_line_with_how_to_map(tmp_path):
                            str(tmp_path / "o.csv")], capture_output=True, text=True, timeout=600)
     assert done.returncode == 2 and "Traceback" not in done.stderr and len(done.stderr.strip().splitlines()) == 1
     assert "unmapped segments: trunk, left_upper_arm, left_thigh, right_thigh" in done.stderr, done.stderr
-    assert 'Map them with --mapping FILE.json: {"head": [' in done.stderr
+    assert 'Map them with --mapping FILE.json: {"version": 2, "trunk": [' in done.stderr
+    assert done.stderr.startswith(f"effortface: {clip}: skeleton joints:") or f"{clip}: skeleton joints:" in done.stderr
     with pytest.raises(SegmentMappingError):
         map_skeleton(read_motion(clip).joint_names)
 
@@ -87,7 +88,17 @@ def test_mapping_kept_by_motion_attach_and_used_by_work(tmp_path):
         shutil.copytree(src, session, ignore=shutil.ignore_patterns("video.avi", "serial"))
         done = run("motion", "attach", session, tmp_path / "renamed.bvh", "--offset", "60",
                    *(["--mapping", mapping] if attach_mapping else []))
-        assert done.returncode == 0, done.stderr
+        if attach_mapping:
+            assert done.returncode == 0, done.stderr
+        else:  # issue 34: an unmapped clip is refused before anything is copied (the clip named) ...
+            assert done.returncode == 2 and len(done.stderr.strip().splitlines()) == 1, done.stderr
+            assert f"{tmp_path / 'renamed.bvh'}: skeleton joints:" in done.stderr
+            assert not (session / "motion").exists()
+            # ... so the clip is put there as an earlier release's attach did (motion.json version 1)
+            (session / "motion").mkdir()
+            shutil.copyfile(tmp_path / "renamed.bvh", session / "motion" / "renamed.bvh")
+            (session / "motion" / "motion.json").write_text(json.dumps(
+                {"files": [{"path": "renamed.bvh", "offset_s": 60.0, "format": "bvh", "aligned": "offset"}]}))
         sessions.append(session)
     entry = json.loads((sessions[0] / "motion" / "motion.json").read_text())["files"][0]
     assert entry["mapping"]["left_thigh"] == ["Bone07", "LeftLeg"]
@@ -96,6 +107,7 @@ def test_mapping_kept_by_motion_attach_and_used_by_work(tmp_path):
     refused = run("work", sessions[1])
     assert refused.returncode == 2 and len(refused.stderr.strip().splitlines()) == 1
     assert "unmapped segments: trunk, left_thigh, right_thigh" in refused.stderr
+    assert f"{sessions[1] / 'motion' / 'renamed.bvh'}: skeleton joints:" in refused.stderr  # work names the clip
     assert not (sessions[1] / "work.csv").exists()
     done = run("work", sessions[1], "--mapping", mapping)
     assert done.returncode == 0 and "motion 9 s" in done.stdout, done.stdout + done.stderr

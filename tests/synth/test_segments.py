@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -109,15 +110,18 @@ def test_unknown_joints_name_every_unmapped_segment() -> None:
     names = [n for n in _names("Unreal") if n not in ("hand_l", "foot_r", "neck_01")]
     with pytest.raises(SegmentMappingError, match=(
             r"best Unreal\); unmapped segments: head, trunk, left_forearm, left_hand, right_shank, right_foot\. "
-            r"Map them with --mapping FILE.json: \{\"head\": \[")):
+            r"Map them with --mapping FILE.json: \{\"version\": 2, \"head\": \[")):
         map_skeleton(names)
 
 
 def test_user_mapping_missing_segment_is_named(tmp_path: Path) -> None:
+    """A partial mapping the conventions cannot complete: the clip, the mapping file and the segments named."""
     path = tmp_path / "partial.json"
     path.write_text(json.dumps({"head": ["Head_end", "Neck"]}))
-    with pytest.raises(SegmentMappingError, match=r"\(user conventions tried, best user\); unmapped segments: trunk, "):
-        map_skeleton(["Head_end", "Neck"], path)
+    with pytest.raises(SegmentMappingError, match=(
+            rf"^clip.bvh: skeleton joints: expected every segment mapped \(mapping file {re.escape(str(path))} and "
+            r"the CMU, .* conventions tried, best user\); unmapped segments: trunk, ")):
+        map_skeleton(["Head_end", "Neck"], path, source="clip.bvh")
 
 
 def test_loads_are_point_masses(shared_data: Path) -> None:

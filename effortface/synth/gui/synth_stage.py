@@ -501,7 +501,14 @@ class QtSynthStage(QtWidgets.QWidget):
         self.curve_row = QtWidgets.QHBoxLayout()
         self.curve_boxes: dict[str, QtWidgets.QCheckBox] = {}
         plots_box.addLayout(self.curve_row)
-        self.view_split.addWidget(plots_widget)
+        self.file_info = self._file_info_view()
+        self.bottom_tabs = QtWidgets.QTabWidget()   # the curves, or what the clip's file holds
+        self.bottom_tabs.addTab(plots_widget, "Curves")
+        self.bottom_tabs.addTab(self.file_info, "File info")
+        self.bottom_tabs.setTabToolTip(1, "What the clip's file holds and how it is read (as 'effortface "
+                                          "motion inspect FILE'): unit, up axis, labels, segment mapping, gaps")
+        self.bottom_tabs.currentChanged.connect(lambda _: self._refresh_file_info())
+        self.view_split.addWidget(self.bottom_tabs)
         self.view_split.setSizes([380, 420])
         self.character_scroll = QtWidgets.QScrollArea(widgetResizable=True)
         self.character_scroll.setWidget(self.character)
@@ -515,6 +522,46 @@ class QtSynthStage(QtWidgets.QWidget):
         layout.addLayout(body, 1)
         layout.addWidget(self.status)
         self._build_shortcuts()
+
+    def _file_info_view(self) -> QtWidgets.QPlainTextEdit:
+        """The File info panel: the aligned text report of :mod:`effortface.synth.inspect`, fixed-width."""
+        view = QtWidgets.QPlainTextEdit(readOnly=True)
+        view.setFont(QtGui.QFontDatabase.systemFont(QtGui.QFontDatabase.SystemFont.FixedFont))
+        view.setLineWrapMode(QtWidgets.QPlainTextEdit.LineWrapMode.NoWrap)
+        view.setPlainText("no clip yet: open one to see what its file holds")
+        self._file_info_for: tuple[Any, ...] | None = None   # (clip, mapping) the text describes
+        return view
+
+    def show_file_info(self) -> str:
+        """Bring the File info panel up (inspecting the clip if needed); its text."""
+        self.bottom_tabs.setCurrentWidget(self.file_info)
+        self._refresh_file_info()
+        return self.file_info.toPlainText()
+
+    def _refresh_file_info(self) -> None:
+        """Inspect the loaded clip when the panel is shown and the clip or mapping changed (the file is
+        read again: only on demand)."""
+        if self.bottom_tabs.currentWidget() is not self.file_info:
+            return
+        s = self.session
+        key = (s.motion_path, s.mapping_path, id(s.motion))
+        if key == self._file_info_for:
+            return
+        self._file_info_for = key
+        if s.motion is None:
+            return
+        if s.motion_path is None:
+            self.file_info.setPlainText("a motion given in memory: no file to inspect")
+            return
+        from effortface.synth.inspect import inspect_motion
+        from effortface.synth.read_options import MotionReadOptions
+
+        options = MotionReadOptions(mapping=None if s.mapping_path is None else str(s.mapping_path))
+        try:
+            text = "\n".join(inspect_motion(s.motion_path, options).lines())
+        except (UserError, OSError) as exc:
+            text = f"not inspected: {exc}"
+        self.file_info.setPlainText(text)
 
     def _build_shortcuts(self) -> None:
         """The player's keys (:data:`PLAYER_KEYS`), application-wide: they work whatever has focus.
@@ -707,7 +754,9 @@ class QtSynthStage(QtWidgets.QWidget):
 
     def set_mapping(self, path: str | Path | None) -> bool:
         """Use a mapping file for the clips, None for the built-in conventions (errors shown in the stage)."""
-        return self._guard(lambda: self.session.set_mapping(path))
+        done = self._guard(lambda: self.session.set_mapping(path))
+        self._refresh_file_info()
+        return done
 
     def _ask_mapping(self) -> None:
         path, _ = QtWidgets.QFileDialog.getOpenFileName(self, "Joint-to-segment mapping", str(self.motion_dir),
@@ -760,6 +809,7 @@ class QtSynthStage(QtWidgets.QWidget):
         self.clip_label.setToolTip(f"{self.session.motion_path or 'a motion given in memory'}: "
                                    f"{m.n_frames} frames at {m.fps:g} Hz")
         self._show_clip_in_combo(self.session.motion_path)
+        self._refresh_file_info()
         self.skeleton.set_skeleton(m)
         self.loops.blockSignals(True)
         self.loops.setValue(self.session.loops)     # a new clip starts at 1 repeat
