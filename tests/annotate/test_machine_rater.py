@@ -402,7 +402,8 @@ def test_ctrl_c_leaves_nothing_half_written(tmp_path: Path) -> None:
     session = _copy(source, tmp_path)
     proc = subprocess.Popen(effortface("preannotate", session), stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     seen = b""
-    while not re.search(rb" [1-9][0-9]*/[0-9]+ \[", seen) and proc.poll() is None:  # frames rated (not only loading)
+    # frames rated, not only loading (stderr is a pipe: plain progress lines, each tenth of the frames)
+    while not re.search(rb": +[1-9][0-9]*% frames rated", seen) and proc.poll() is None:
         seen += proc.stderr.read1(4096)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=120)
