@@ -1,0 +1,165 @@
+"""The plausibility gate: is the body a clip was read as a human body? (numpy only)
+
+A reader can give confident wrong physics with no error: doubled bones (BVH position channels added
+to the OFFSET), the wrong length unit, the wrong up axis. After reading, :func:`check_plausible`
+measures the standing height, the main segment lengths and the ground under the feet, and refuses in
+one line naming the file and the figure when one is outside the human ranges of
+:data:`effortface.core.physio_limits.BODY_M`; ``trust=True`` (``--trust-skeleton``) measures and
+proceeds (a child or a creature, on purpose). Every command that reads motion calls it.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from effortface.core.errors import UserError
+from effortface.core.physio_limits import BODY_M, GROUND_SPREAD_M, GROUND_TILT_DEG
+from effortface.synth.motion import Motion
+from effortface.synth.segments import SegmentMapping, SegmentMappingError, map_skeleton
+
+#: frames measured at most (evenly spaced): the figures are medians and percentiles, a few thousand
+#: frames give them to a millimetre
+MEASURED_FRAMES = 2000
+#: percentile of the per-frame height taken as the standing height: the clip's most upright frames
+#: (a squat, a bow or a fall in the rest of the clip does not lower it; arms raised do not count, the
+#: height is the head's)
+STANDING_PERCENTILE = 90.0
+#: the segments whose lengths are checked (each side), keys of :data:`BODY_M`
+CHECKED_SEGMENTS = ("thigh", "shank", "upper_arm", "forearm", "trunk")
+#: what a refusal tells the user to check
+ADVICE = "check --unit-m / --up or the skeleton's position channels (or --trust-skeleton for a child or a creature)"
+
+
+class ImplausibleBodyError(UserError):
+    """A clip's body is outside the human ranges; the message names the file and the figure."""
+
+
+def _sampled(motion: Motion) -> np.ndarray:
+    """At most :data:`MEASURED_FRAMES` evenly spaced frames of the positions, float64, (T, J, 3)."""
+    step = max(1, math.ceil(motion.n_frames / MEASURED_FRAMES))
+    return np.asarray(motion.positions_m[::step], dtype=float)
+
+
+def _mapped(motion: Motion, mapping: SegmentMapping | str | Path | None
+            ) -> dict[str, tuple[tuple[int, ...], tuple[int, ...]]]:
+    """The clip's segments (segment -> (proximal joints, distal joints)), empty if they do not map."""
+    try:
+        return map_skeleton(motion.joint_names, mapping)[1]
+    except SegmentMappingError:
+        return {}
+
+
+def _segment_lengths_m(pos: np.ndarray, segments: dict[str, tuple[tuple[int, ...], tuple[int, ...]]]
+                       ) -> dict[str, float]:
+    """Median length over the frames of every mapped segment (end points as joint means)."""
+    out = {}
+    for name, (prox, dist) in segments.items():
+        ends = pos[:, list(dist)].mean(axis=1) - pos[:, list(prox)].mean(axis=1)
+        out[name] = float(np.median(np.linalg.norm(ends, axis=-1)))
+    return out
+
+
+def _height_m(pos: np.ndarray, segments: dict[str, tuple[tuple[int, ...], tuple[int, ...]]]) -> float:
+    """Standing height: the top of the head (or the highest joint, unmapped) above the frame's lowest
+    joint, at :data:`STANDING_PERCENTILE` over the frames."""
+    z = pos[..., 2]
+    top = z[:, list(segments["head"][0])].mean(axis=1) if "head" in segments else z.max(axis=1)
+    return float(np.percentile(top - z.min(axis=1), STANDING_PERCENTILE))
+
+
+def _ground(pos: np.ndarray) -> dict[str, float]:
+    """The plane under the lowest joint of every frame: its level (median), tilt and the median
+    distance of the frames' lowest joints from it."""
+    lowest = pos[np.arange(len(pos)), pos[..., 2].argmin(axis=1)]
+    xy = lowest[:, :2] - lowest[:, :2].mean(axis=0)
+    if len(lowest) >= 3 and np.ptp(xy, axis=0).max() > 1.0:  # a path to fit a slope on
+        design = np.column_stack([xy, np.ones(len(xy))])
+        coef = np.linalg.lstsq(design, lowest[:, 2], rcond=None)[0]
+        residual = lowest[:, 2] - design @ coef
+        tilt_deg = math.degrees(math.atan(math.hypot(coef[0], coef[1])))
+    else:  # in place: a level floor
+        residual = lowest[:, 2] - np.median(lowest[:, 2])
+        tilt_deg = 0.0
+    return {"ground_m": float(np.median(lowest[:, 2])), "ground_tilt_deg": tilt_deg,
+            "ground_spread_m": float(np.median(np.abs(residual)))}
+
+
+def measure_body(motion: Motion, mapping: SegmentMapping | str | Path | None = None) -> dict[str, Any]:
+    """The figures the gate checks, measured on (up to :data:`MEASURED_FRAMES` frames of) a clip.
+
+    Parameters
+    ----------
+    motion : Motion
+        A clip as a reader returns it (metres, Z up).
+    mapping : mapping, str or Path, optional
+        The user's joint-to-segment mapping (default: the built-in conventions); a skeleton that does
+        not map gets no segment lengths and the height of its highest joint.
+
+    Returns
+    -------
+    dict
+        ``height_m`` (standing height), ``segments_m`` (segment -> median length, the mapped ones),
+        ``ground_m`` (the floor level), ``ground_tilt_deg``, ``ground_spread_m``.
+    """
+    pos = _sampled(motion)
+    segments = _mapped(motion, mapping)
+    return {"height_m": _height_m(pos, segments), "segments_m": _segment_lengths_m(pos, segments),
+            **_ground(pos)}
+
+
+def _outside(figures: dict[str, Any]) -> str | None:
+    """The first figure outside its range, as ``'standing height 2.85 m: expected 1.2-2.2 m'``."""
+    lo, hi = BODY_M["height_m"]
+    if not lo <= figures["height_m"] <= hi:
+        return f"standing height {figures['height_m']:.2f} m: expected {lo:g}-{hi:g} m"
+    for name, length_m in figures["segments_m"].items():
+        part = name.split("_", 1)[1] if name.startswith(("left_", "right_")) else name
+        if part in CHECKED_SEGMENTS:
+            lo, hi = BODY_M[part]
+            if not lo <= length_m <= hi:
+                return f"{name.replace('_', ' ')} {length_m:.2f} m: expected {lo:g}-{hi:g} m"
+    if figures["ground_tilt_deg"] > GROUND_TILT_DEG:
+        return (f"ground (the lowest joint over the clip) tilted {figures['ground_tilt_deg']:.0f} degrees: "
+                f"expected at most {GROUND_TILT_DEG:g}")
+    if figures["ground_spread_m"] > GROUND_SPREAD_M:
+        return (f"ground: the lowest joint a median {figures['ground_spread_m']:.2f} m off one plane: "
+                f"expected at most {GROUND_SPREAD_M:g} m")
+    return None
+
+
+def check_plausible(motion: Motion, *, trust: bool = False,
+                    mapping: SegmentMapping | str | Path | None = None) -> dict[str, Any]:
+    """Measure a clip's body and refuse it if it is not a plausible human one.
+
+    Parameters
+    ----------
+    motion : Motion
+        A clip as a reader returns it (metres, Z up); its ``source`` is named in the message.
+    trust : bool
+        ``--trust-skeleton``: measure, never refuse (a child, a creature).
+    mapping : mapping, str or Path, optional
+        The user's joint-to-segment mapping (default: the built-in conventions).
+
+    Returns
+    -------
+    dict
+        :func:`measure_body`'s figures (``height_m``, ``segments_m``, ``ground_m``,
+        ``ground_tilt_deg``, ``ground_spread_m``) and ``trusted`` (True when ``trust`` let a body
+        outside the ranges through).
+
+    Raises
+    ------
+    ImplausibleBodyError
+        One line: ``'<file>: standing height 2.85 m: expected 1.2-2.2 m; check --unit-m / --up or the
+        skeleton's position channels (or --trust-skeleton for a child or a creature)'``.
+    """
+    figures = measure_body(motion, mapping)
+    problem = _outside(figures)
+    if problem is not None and not trust:
+        raise ImplausibleBodyError(f"{motion.source or 'motion'}: {problem}; {ADVICE}")
+    figures["trusted"] = problem is not None
+    return figures
