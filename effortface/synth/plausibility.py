@@ -28,6 +28,12 @@ MEASURED_FRAMES = 2000
 #: (a squat, a bow or a fall in the rest of the clip does not lower it; arms raised do not count, the
 #: height is the head's)
 STANDING_PERCENTILE = 90.0
+#: a head segment (top of the head to the neck base) shorter than this has no head top (an End Site
+#: at the head joint, as in the Bandai Namco dataset): the height is then taken from the neck base
+SHORTEST_HEAD_M = 0.15
+#: neck base (cervicale) height as a fraction of the standing height: 0.87 (Drillis and Contini's
+#: body proportions; ANSUR II men 1519 / 1756 mm = 0.865)
+NECK_BASE_FRACTION = 0.87
 #: the segments whose lengths are checked (each side), keys of :data:`BODY_M`
 CHECKED_SEGMENTS = ("thigh", "shank", "upper_arm", "forearm", "trunk")
 #: what a refusal tells the user to check
@@ -63,11 +69,20 @@ def _segment_lengths_m(pos: np.ndarray, segments: dict[str, tuple[tuple[int, ...
     return out
 
 
-def _height_m(pos: np.ndarray, segments: dict[str, tuple[tuple[int, ...], tuple[int, ...]]]) -> float:
-    """Standing height: the top of the head (or the highest joint, unmapped) above the frame's lowest
-    joint, at :data:`STANDING_PERCENTILE` over the frames."""
+def _height_m(pos: np.ndarray, segments: dict[str, tuple[tuple[int, ...], tuple[int, ...]]],
+              lengths_m: dict[str, float]) -> float:
+    """Standing height: the top of the head above the frame's lowest joint, at
+    :data:`STANDING_PERCENTILE` over the frames. A skeleton whose head ends at its head joint (a head
+    shorter than :data:`SHORTEST_HEAD_M`) has its height from its neck base,
+    ``/`` :data:`NECK_BASE_FRACTION`; an unmapped one, from its highest joint."""
     z = pos[..., 2]
-    top = z[:, list(segments["head"][0])].mean(axis=1) if "head" in segments else z.max(axis=1)
+    if "head" not in segments:
+        top = z.max(axis=1)
+    elif lengths_m["head"] >= SHORTEST_HEAD_M:
+        top = z[:, list(segments["head"][0])].mean(axis=1)
+    else:
+        neck = z[:, list(segments["head"][1])].mean(axis=1)
+        top = z.min(axis=1) + (neck - z.min(axis=1)) / NECK_BASE_FRACTION
     return float(np.percentile(top - z.min(axis=1), STANDING_PERCENTILE))
 
 
@@ -107,8 +122,8 @@ def measure_body(motion: Motion, mapping: SegmentMapping | str | Path | None = N
     """
     pos = _sampled(motion)
     segments = _mapped(motion, mapping)
-    return {"height_m": _height_m(pos, segments), "segments_m": _segment_lengths_m(pos, segments),
-            **_ground(pos)}
+    lengths_m = _segment_lengths_m(pos, segments)
+    return {"height_m": _height_m(pos, segments, lengths_m), "segments_m": lengths_m, **_ground(pos)}
 
 
 def _outside(figures: dict[str, Any]) -> str | None:
