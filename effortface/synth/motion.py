@@ -1355,7 +1355,9 @@ def read_npz_motion(
     )
     pos, rot = forward_kinematics(parents, offsets, local_rot, root)
     check_positions(path, pos, names)
-    return Motion(tuple(names), parents, pos, rot, fps, str(path))
+    return Motion(tuple(names), parents, pos, rot, fps, str(path),
+                  reading={"unit_m": 1.0, "unit_from": "the format (metres)", "up_axis": "z",
+                           "up_from": "the format (Z up)"})
 
 
 def _float_array(path: Path, data: Mapping[str, np.ndarray], key: str) -> np.ndarray:

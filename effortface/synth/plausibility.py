@@ -18,7 +18,8 @@ import numpy as np
 
 from effortface.core.errors import UserError
 from effortface.core.physio_limits import BODY_M, GROUND_SPREAD_M, GROUND_TILT_DEG
-from effortface.synth.motion import Motion
+from effortface.synth.motion import READING_KEYS, UP_FRAMES, Motion, MotionBlocks, read_motion, read_motion_blocks
+from effortface.synth.read_options import MotionReadOptions
 from effortface.synth.segments import SegmentMapping, SegmentMappingError, map_skeleton
 
 #: frames measured at most (evenly spaced): the figures are medians and percentiles, a few thousand
@@ -178,3 +179,54 @@ def check_plausible(motion: Motion, *, trust: bool = False,
         raise ImplausibleBodyError(f"{motion.source or 'motion'}: {problem}; {ADVICE}")
     figures["trusted"] = problem is not None
     return figures
+
+
+def check_read(motion: Motion, options: MotionReadOptions) -> dict[str, Any]:
+    """A clip as a command reads it: mapped (the mapping's refusal first), then through the gate.
+
+    Parameters
+    ----------
+    motion : Motion
+        The clip (or a streamed clip's skeleton: its reference frames).
+    options : MotionReadOptions
+        The command's ``--mapping`` and ``--trust-skeleton``.
+
+    Returns
+    -------
+    dict
+        :func:`check_plausible`'s figures.
+
+    Raises
+    ------
+    SegmentMappingError
+        The skeleton does not map (named as :func:`effortface.synth.segments.map_skeleton` names it).
+    ImplausibleBodyError
+        A body outside the human ranges without ``trust_skeleton``.
+    """
+    map_skeleton(motion.joint_names, options.mapping)
+    return check_plausible(motion, trust=options.trust_skeleton, mapping=options.mapping)
+
+
+def read_checked(path: str | Path, options: MotionReadOptions) -> tuple[Motion, dict[str, Any]]:
+    """:func:`effortface.synth.motion.read_motion` with the command's options, then :func:`check_read`."""
+    motion = read_motion(path, unit_m=options.unit_m, up=options.up)
+    return motion, check_read(motion, options)
+
+
+def read_checked_blocks(path: str | Path, options: MotionReadOptions, *,
+                        reference_frames: int = UP_FRAMES) -> tuple[MotionBlocks, dict[str, Any]]:
+    """:func:`effortface.synth.motion.read_motion_blocks` with the command's options, then
+    :func:`check_read` on its reference frames."""
+    blocks = read_motion_blocks(path, unit_m=options.unit_m, up=options.up, reference_frames=reference_frames)
+    return blocks, check_read(blocks.skeleton, options)
+
+
+def reading_record(motion: Motion, body: dict[str, Any] | None = None) -> dict[str, Any]:
+    """How a clip was read, for ``.units.json`` and the BIDS sidecar: :attr:`Motion.reading` (unit and
+    up axis, each with how it was decided) and the gate's figures (``height_m``, ``segments_m``, ...)."""
+    record: dict[str, Any] = {k: motion.reading[k] for k in READING_KEYS if k in motion.reading}
+    if body is not None:
+        record["body"] = {k: (round(v, 4) if isinstance(v, float) else
+                              {s: round(x, 4) for s, x in v.items()} if isinstance(v, dict) else v)
+                          for k, v in body.items()}
+    return record

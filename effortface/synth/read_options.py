@@ -58,7 +58,8 @@ def check_unit_m(unit_m: float | None, option: str = "--unit-m") -> float | None
     if unit_m is None:
         return None
     if not (isinstance(unit_m, (int, float)) and math.isfinite(unit_m) and unit_m > 0):
-        raise UserError(f"{option}: expected a length in metres above 0, found {unit_m!r}")
+        shown = f"{unit_m:g}" if isinstance(unit_m, (int, float)) else repr(unit_m)
+        raise UserError(f"{option}: expected a length in metres above 0, found {shown}")
     bounds.check("unit_m", float(unit_m), option)
     return float(unit_m)
 
