@@ -171,3 +171,24 @@ def test_a_reader_registered_with_two_arguments_still_reads(tmp_path: Path, monk
     assert motion.reading["unit_m"] == 0.01
     with pytest.raises(UserError, match=r"walk\.bvhx: --up: the reader registered for \.bvhx takes no up axis"):
         read_motion(tmp_path / "walk.bvhx", up="z")
+
+
+#: Blender 5.0.1's BVH importer (``bpy.ops.import_anim.bvh``, global_scale 1, rotate_mode NATIVE) on
+#: HAND_BVH with all three position channels on Leg (``3 -45 0``): the armature's bone heads and the
+#: End Sites' tails at frame 1, in Blender's axes (x, -z, y of the file). Measured on 2026-11-28
+#: (pip install bpy, Python 3.11); bpy is not a dependency, so its numbers are kept here.
+BLENDER_HAND_FULL = {
+    "Hips": (1.0, -2.0, 100.0), "Chest": (-11.0, -5.0, 100.0), "Head": (-31.0, -5.0, 100.0),
+    "Leg": (46.0, -2.0, 103.0), "Head_end": (-36.0, -5.0, 100.0), "Leg_end": (46.0, 38.0, 103.0),
+}
+
+
+def test_blenders_importer_reads_the_same_bones(tmp_path: Path) -> None:
+    path = tmp_path / "hand_full.bvh"
+    path.write_text(HAND_BVH.replace("CHANNELS 4 Yposition Zrotation", "CHANNELS 6 Xposition Yposition Zposition "
+                                     "Zrotation").replace("0 0 0  -45 0 90 0", "0 0 0  3 -45 0 0 90 0"))
+    motion = read_bvh(path, unit_m=1.0, up_axis="y")
+    for name, (bx, by, bz) in BLENDER_HAND_FULL.items():
+        file_xyz = (bx, bz, -by)
+        np.testing.assert_allclose(motion.positions_m[0, motion.joint_names.index(name)], _z_up(file_xyz),
+                                   atol=1e-9, err_msg=name)
