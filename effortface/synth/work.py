@@ -26,6 +26,7 @@ from effortface.core.fileio import atomic_write_text, read_json
 from effortface.core.session.folder import SESSION_JSON, Session, list_sessions, read_session
 from effortface.synth.catalog import Catalog, CatalogError, default_catalog
 from effortface.synth.exercise_log import ExerciseLog, exercise_log
+from effortface.synth.read_options import MotionReadOptions, check_unit_m, check_up
 
 if TYPE_CHECKING:  # the energies load scipy: imported only when a session has motion
     from effortface.synth.energy import EnergyCurves
@@ -109,7 +110,8 @@ def session_seconds(s: Session) -> np.ndarray:
 
 
 def derive_work(session: Session | str | os.PathLike, t_s: np.ndarray | None = None,
-                catalog: Catalog | None = None, mapping: str | os.PathLike | None = None) -> WorkTable:
+                catalog: Catalog | None = None, mapping: str | os.PathLike | None = None,
+                read: MotionReadOptions | None = None) -> WorkTable:
     """w and p per second from ``motion/`` where clips cover the time, else from the exercise log.
 
     Parameters
@@ -123,6 +125,9 @@ def derive_work(session: Session | str | os.PathLike, t_s: np.ndarray | None = N
     mapping : path-like, optional
         Joint-to-segment mapping file for the clips of ``motion/`` whose motion.json entry has no
         ``mapping`` of its own (default: the built-in conventions).
+    read : MotionReadOptions, optional
+        ``--unit-m``, ``--up``, ``--trust-skeleton`` for the clips whose entry records no ``unit_m`` /
+        ``up`` of its own (default: detected); every clip goes through the plausibility gate.
 
     Returns
     -------
@@ -145,7 +150,7 @@ def derive_work(session: Session | str | os.PathLike, t_s: np.ndarray | None = N
     source = [""] * len(t)
     _fill_from_log(log, s.participant.mass_kg, t, w, p, source, catalog or default_catalog())
     if has_motion:
-        _fill_from_motion(s, log, t, w, p, source, mapping)
+        _fill_from_motion(s, log, t, w, p, source, mapping, read)
     return WorkTable(t, w, p, source)
 
 
@@ -177,24 +182,31 @@ LOG_LOAD_LABELS = ("left_kg", "right_kg", "back_kg")
 
 
 def _fill_from_motion(s: Session, log: ExerciseLog, t: np.ndarray, w: np.ndarray, p: np.ndarray,
-                      source: list[str], mapping: str | os.PathLike | None = None) -> None:
+                      source: list[str], mapping: str | os.PathLike | None = None,
+                      read: MotionReadOptions | None = None) -> None:
     """Overwrite the seconds that a clip of ``motion/motion.json`` covers with its energies.
 
     A clip's segments come from its entry's ``mapping`` (kept by ``motion attach --mapping``), else
-    ``mapping``, else the built-in conventions.
+    ``mapping``, else the built-in conventions; its unit and up axis from its entry's ``unit_m`` /
+    ``up`` (kept by ``motion attach``), else ``read``'s, else detected. Every clip goes through the
+    plausibility gate (:func:`effortface.synth.plausibility.check_read`).
 
     A clip's loads are its entry's ``load_*_kg`` keys when it has any (earlier releases), else the
     exercise log's ``load`` rows in force at each second: one energy computation per distinct set.
     """
-    from effortface.synth.motion import read_motion
+    from effortface.synth.plausibility import read_checked
 
     index = s.path / MOTION_DIR / MOTION_JSON
     part = s.participant
     if part.mass_kg is None or part.sex is None:
         raise WorkError(f"{s.path / 'session.json'}: expected the participant's mass_kg and sex to compute "
                         f"work from motion/, found {part.mass_kg!r} and {part.sex!r}")
+    read = read or MotionReadOptions()
     for entry in read_motion_index(index):
-        clip = read_motion(index.parent / str(entry["path"]))
+        clip_mapping = entry.get("mapping") or mapping
+        clip, _ = read_checked(index.parent / str(entry["path"]), MotionReadOptions(
+            unit_m=entry.get("unit_m", read.unit_m), up=entry.get("up", read.up),
+            mapping=_segment_mapping(clip_mapping), trust_skeleton=read.trust_skeleton))  # type: ignore[arg-type]
         offset_s = float(entry.get("offset_s", 0.0))
         inside = np.flatnonzero((t >= offset_s) & (t <= offset_s + (clip.n_frames - 1) / clip.fps))
         if any(k in entry for k in ENTRY_LOAD_KEYS):
@@ -203,7 +215,7 @@ def _fill_from_motion(s: Session, log: ExerciseLog, t: np.ndarray, w: np.ndarray
             loads = [tuple(_log_load(log, label, t[i]) for label in LOG_LOAD_LABELS) for i in inside]
         for load in sorted(set(loads)):
             rows = inside[[k for k, x in enumerate(loads) if x == load]]
-            curves = _clip_curves(clip, part.mass_kg, part.sex, load, entry.get("mapping") or mapping)
+            curves = _clip_curves(clip, part.mass_kg, part.sex, load, clip_mapping)
             w[rows] = np.interp(t[rows], curves.t_s + offset_s, curves.w_per_kg)
             p[rows] = np.interp(t[rows], curves.t_s + offset_s, curves.p_per_kg)
         for i in inside:
@@ -223,11 +235,16 @@ def _clip_curves(clip: Motion, mass_kg: float, sex: str, load: tuple[float, ...]
     from effortface.synth.energy import work_and_power
     from effortface.synth.segments import Loads, build_body
 
-    segments = {k: (v[0], v[1]) for k, v in mapping.items()} if isinstance(mapping, dict) else \
-        None if mapping is None else Path(mapping)
-    body = build_body(clip.joint_names, clip.parents, mass_kg, sex, loads=Loads(*load), mapping=segments,
-                      reference_positions_m=clip.positions_m)
+    body = build_body(clip.joint_names, clip.parents, mass_kg, sex, loads=Loads(*load),
+                      mapping=_segment_mapping(mapping), reference_positions_m=clip.positions_m)
     return work_and_power(clip, body)
+
+
+def _segment_mapping(mapping: dict | str | os.PathLike | None) -> dict | Path | None:
+    """A motion.json entry's (or ``--mapping``'s) mapping as :func:`~effortface.synth.segments.build_body`
+    takes it: a dict of (proximal, distal) pairs, a file, or None."""
+    return {k: (v[0], v[1]) for k, v in mapping.items()} if isinstance(mapping, dict) else \
+        None if mapping is None else Path(mapping)
 
 
 MOTION_ENTRY_NUMBERS = {"offset_s": ("offset_s", 0.0), "load_left_kg": ("load_kg", 0.0),
@@ -242,7 +259,8 @@ def read_motion_index(path: str | os.PathLike) -> list[dict]:
     list of dict
         Each with ``path`` (str, relative to the file's folder), ``offset_s`` (default 0) and the
         ``load_*_kg`` keys the entry gives (checked; absent ones stay absent, so that the exercise
-        log's loads apply), other keys as they are.
+        log's loads apply), ``unit_m`` and ``up`` when it gives them (checked as ``--unit-m`` and
+        ``--up``), other keys as they are.
 
     Raises
     ------
@@ -272,11 +290,17 @@ def _motion_entry(path: Path, i: int, entry: object) -> dict:
             out[key] = bounds.check(bound, entry.get(key, default), f"{where}.{key}")
         except UserError as exc:
             raise WorkError(str(exc)) from None
-    return out
+    try:  # how the clip was read when it was attached (None: detected)
+        out["unit_m"] = check_unit_m(entry.get("unit_m"), f"{where}.unit_m")
+        out["up"] = check_up(entry.get("up"), f"{where}.up")
+    except UserError as exc:
+        raise WorkError(str(exc)) from None
+    return {k: v for k, v in out.items() if v is not None or k not in ("unit_m", "up")}
 
 
 def plan_work(folder: str | os.PathLike, *, force: bool = False,
-              mapping: str | os.PathLike | None = None) -> tuple[Path, WorkTable]:
+              mapping: str | os.PathLike | None = None,
+              read: MotionReadOptions | None = None) -> tuple[Path, WorkTable]:
     """Derive a session's work without writing it: the work.csv path and the table.
 
     Raises
@@ -289,7 +313,7 @@ def plan_work(folder: str | os.PathLike, *, force: bool = False,
     if path.exists() and not force:
         raise WorkError(f"{path}: expected no work.csv (it may be hand-made), found one; "
                         f"use --force to replace it")
-    return path, derive_work(s, mapping=mapping)
+    return path, derive_work(s, mapping=mapping, read=read)
 
 
 def write_work(folder: str | os.PathLike, *, force: bool = False) -> tuple[Path, WorkTable]:
@@ -325,11 +349,12 @@ def work_folders(paths: Sequence[str | os.PathLike]) -> list[Path]:
 
 
 def write_works(folders: Sequence[str | os.PathLike], *, force: bool = False,
-                mapping: str | os.PathLike | None = None) -> list[tuple[Path, WorkTable]]:
+                mapping: str | os.PathLike | None = None,
+                read: MotionReadOptions | None = None) -> list[tuple[Path, WorkTable]]:
     """``effortface work``: derive every session's work first (so a refusal writes nothing), then
-    write each ``work.csv`` atomically; the paths and tables, in order (``mapping``: see
+    write each ``work.csv`` atomically; the paths and tables, in order (``mapping``, ``read``: see
     :func:`derive_work`)."""
-    planned = [plan_work(folder, force=force, mapping=mapping) for folder in folders]
+    planned = [plan_work(folder, force=force, mapping=mapping, read=read) for folder in folders]
     for target, table in planned:
         atomic_write_text(target, table.to_csv())
     return planned
