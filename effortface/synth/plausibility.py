@@ -230,3 +230,42 @@ def reading_record(motion: Motion, body: dict[str, Any] | None = None) -> dict[s
                               {s: round(x, 4) for s, x in v.items()} if isinstance(v, dict) else v)
                           for k, v in body.items()}
     return record
+
+
+#: a body faces along a horizontal axis when its facing is within this angle of it (degrees) ...
+FACING_WITHIN_DEG = 30.0
+#: ... in at least this share of the frames (a walk that turns back and forth faces no one axis)
+FACING_SHARE = 0.8
+
+
+def spatial_axes(motion: Motion, mapping: SegmentMapping | str | Path | None = None) -> str:
+    """The BIDS ``SpatialAxes`` of a clip as read (Z up): ``'A'``/``'P'``/``'L'``/``'R'`` for x and y
+    when the body faces along one horizontal axis, ``'_'`` when not, and ``'S'`` for z.
+
+    The facing is the horizontal direction at 90 degrees clockwise (seen from above) from the right
+    hip to the left hip (the first proximal joints of the thighs); without mapped thighs, ``'__S'``.
+
+    Parameters
+    ----------
+    motion : Motion
+        A clip as a reader returns it (metres, Z up).
+    mapping : mapping, str or Path, optional
+        The user's joint-to-segment mapping.
+
+    Returns
+    -------
+    str
+        E.g. ``'ALS'`` (the body faces +x, its left is +y) or ``'__S'``.
+    """
+    segments = _mapped(motion, mapping)
+    if "left_thigh" not in segments or "right_thigh" not in segments:
+        return "__S"
+    pos = _sampled(motion)
+    left = pos[:, segments["left_thigh"][0][0], :2] - pos[:, segments["right_thigh"][0][0], :2]
+    facing = np.column_stack([left[:, 1], -left[:, 0]])  # left turned 90 degrees clockwise
+    facing /= np.maximum(np.linalg.norm(facing, axis=1, keepdims=True), 1e-12)
+    for axis, sign, letters in ((0, 1, "ALS"), (0, -1, "PRS"), (1, 1, "RAS"), (1, -1, "LPS")):
+        share = float(np.mean(sign * facing[:, axis] >= math.cos(math.radians(FACING_WITHIN_DEG))))
+        if share >= FACING_SHARE:
+            return letters
+    return "__S"

@@ -19,7 +19,8 @@ import numpy as np
 CHANNELS_6 = "Xposition Yposition Zposition Zrotation Xrotation Yrotation"
 
 #: (name, parent, OFFSET in cm): bones along their joint's x axis, legs and arms along -x (they hang
-#: once the Hips turn +x up), shoulders and hips apart along z
+#: once the Hips turn +x up), shoulders and hips apart along z (the left ones at -z: the body faces
+#: +x, where it walks)
 BANDAI_LAYOUT: tuple[tuple[str, str | None, tuple[float, float, float]], ...] = (
     ("joint_Root", None, (0.0, 0.0, 0.0)),
     ("Hips", "joint_Root", (0.0, 93.0, 0.0)),
@@ -27,11 +28,11 @@ BANDAI_LAYOUT: tuple[tuple[str, str | None, tuple[float, float, float]], ...] = 
     ("Chest", "Spine", (10.0, 0.0, 0.0)),
     ("Neck", "Chest", (18.0, 0.0, 0.0)),
     ("Head", "Neck", (7.0, 0.0, 0.0)),
-    *((f"Shoulder_{s}", "Chest", (14.0, 0.0, z * 4.0)) for s, z in (("L", 1), ("R", -1))),
-    *((f"UpperArm_{s}", f"Shoulder_{s}", (0.0, 0.0, z * 13.0)) for s, z in (("L", 1), ("R", -1))),
+    *((f"Shoulder_{s}", "Chest", (14.0, 0.0, z * 4.0)) for s, z in (("L", -1), ("R", 1))),
+    *((f"UpperArm_{s}", f"Shoulder_{s}", (0.0, 0.0, z * 13.0)) for s, z in (("L", -1), ("R", 1))),
     *((f"LowerArm_{s}", f"UpperArm_{s}", (-28.0, 0.0, 0.0)) for s in "LR"),
     *((f"Hand_{s}", f"LowerArm_{s}", (-25.0, 0.0, 0.0)) for s in "LR"),
-    *((f"UpperLeg_{s}", "Hips", (0.0, 0.0, z * 9.0)) for s, z in (("L", 1), ("R", -1))),
+    *((f"UpperLeg_{s}", "Hips", (0.0, 0.0, z * 9.0)) for s, z in (("L", -1), ("R", 1))),
     *((f"LowerLeg_{s}", f"UpperLeg_{s}", (-42.0, 0.0, 0.0)) for s in "LR"),
     *((f"Foot_{s}", f"LowerLeg_{s}", (-42.0, 0.0, 0.0)) for s in "LR"),
     *((f"Toes_{s}", f"Foot_{s}", (-8.0, 12.0, 0.0)) for s in "LR"),

@@ -12,7 +12,7 @@ import pytest
 
 from effortface.cli import main
 from effortface.synth.motion import Motion, read_motion
-from effortface.synth.plausibility import ImplausibleBodyError, check_plausible, measure_body
+from effortface.synth.plausibility import ImplausibleBodyError, check_plausible, measure_body, spatial_axes
 from tests.synth.bvh_fixtures import bandai_layout_bvh, doubled_positions
 
 #: the real clips of tests/data that read as a whole body (C3D files without a full body or with gaps
@@ -97,3 +97,10 @@ def test_every_real_clip_passes_the_gate(shared_data: Path, clip: str) -> None:
     assert figures["ground_tilt_deg"] < 10 and figures["ground_spread_m"] < 0.05
     assert all(0.3 < figures["segments_m"][f"{s}_thigh"] < 0.5 for s in ("left", "right"))
     assert np.isfinite(figures["ground_m"])
+
+
+def test_spatial_axes_say_where_the_body_faces(shared_data: Path, tmp_path: Path) -> None:
+    """The generated walk faces +x of its Y-up file, which is +y once Z up: x is then its right."""
+    assert spatial_axes(read_motion(bandai_layout_bvh(tmp_path / "walk.bvh"))) == "RAS"
+    assert spatial_axes(read_motion(shared_data / "motion/cmu_13_29_squats_120fps.bvh")) == "ALS"
+    assert spatial_axes(read_motion(shared_data / "bvh/pymo_walk.bvh")) == "__S"  # it turns: no one facing
