@@ -11,6 +11,8 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+from collections.abc import Mapping
+from typing import Any
 
 from effortface.core import bounds
 from effortface.core.errors import UserError
@@ -29,15 +31,15 @@ class MotionReadOptions:
         Metres per file length unit (None: from the file or the skeleton's size).
     up : str or None
         The file's up axis, one of :data:`UP_AXES` (None: from the file or the motion).
-    mapping : str or None
-        A joint-to-segment mapping JSON file (None: the built-in conventions).
+    mapping : str, mapping or None
+        A joint-to-segment mapping JSON file, or one already read (None: the built-in conventions).
     trust_skeleton : bool
         Proceed with a body outside the human ranges of the plausibility gate.
     """
 
     unit_m: float | None = None
     up: str | None = None
-    mapping: str | None = None
+    mapping: str | Mapping[str, Any] | None = None
     trust_skeleton: bool = False
 
 
