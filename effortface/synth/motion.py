@@ -483,7 +483,14 @@ def _read_csv(path: Path, unit_m: float | None, up: str | None = None) -> Motion
 def _read_c3d(path: Path, unit_m: float | None, up: str | None = None) -> Motion:
     from effortface.synth.c3d_motion import read_c3d  # imports the c3d package when called
 
-    return read_c3d(path) if up is None else read_c3d(path, up=up)  # type: ignore[call-arg,unused-ignore]
+    if up is None:
+        return read_c3d(path)
+    takes = inspect.signature(read_c3d).parameters
+    if "up" in takes:
+        return read_c3d(path, up=up)  # type: ignore[call-arg,unused-ignore]
+    if up in ("y", "z"):  # the reader's older keyword
+        return read_c3d(path, up_axis=up)
+    raise UserError(f"{path}: --up: expected y or z for a C3D file, found {up}")
 
 
 def _csv_unit_and_up(motion: Motion, unit_m: float | None, up: str | None) -> Motion:
@@ -500,8 +507,7 @@ def _csv_unit_and_up(motion: Motion, unit_m: float | None, up: str | None) -> Mo
     reading["up_axis"] = up
     to_z_up(pos, None, up)
     if unit_m is not None:
-        reading["unit_m"], reading["unit_from"] = _bvh_scale(Path(motion.source), np.zeros((1, 3)),
-                                                             np.array([-1]), unit_m)
+        reading["unit_m"], reading["unit_from"] = _checked_unit_m(unit_m), "given (--unit-m)"
     elif not str(reading.get("unit_from", "")).startswith("the column names"):
         size = float(np.median(np.ptp(pos[::max(1, motion.n_frames // UP_FRAMES), :, 2], axis=1)))
         lo, hi = STATURE_RANGE_M
@@ -947,7 +953,7 @@ def detect_bvh_unit_m(rest_height_units: float) -> tuple[str, float]:
 UP_FRAMES = 600
 
 
-def _bvh_up(path: Path, up_axis: str | None, positions: np.ndarray, names: Sequence[str], offsets: np.ndarray,
+def _bvh_up(up_axis: str | None, positions: np.ndarray, names: Sequence[str], offsets: np.ndarray,
             parents: np.ndarray) -> tuple[str, str]:
     """The file's up axis and how it was decided: ``up_axis`` if given, else :func:`detect_up_axis`
     on posed frames in the file's axes (BVH's convention, y, when no head and feet are named)."""
@@ -1023,7 +1029,7 @@ def read_bvh(path: str | Path, *, unit_m: float | None = None, up_axis: str | No
         raise MotionFormatError(f"{path}: expected a readable BVH file, got {exc.strerror}") from None
     scale, unit_from = _bvh_scale(path, offsets, parents, unit_m)
     names = tuple(j.name for j in joints)
-    up, up_from = _bvh_up(path, up_axis, pos[::max(1, n_frames // UP_FRAMES)], names, offsets, parents)
+    up, up_from = _bvh_up(up_axis, pos[::max(1, n_frames // UP_FRAMES)], names, offsets, parents)
     to_z_up(pos, rot, up)
     pos *= scale
     check_positions(path, pos, names)
@@ -1117,7 +1123,7 @@ def read_motion_blocks(path: str | Path, *, unit_m: float | None = None, up: str
     header = _bvh_stream_header(path, unit_m)
     step = max(1, header.n_frames // reference_frames)
     ref_pos, ref_rot = _bvh_reference_frames(path, header, step)
-    up, up_from = _bvh_up(path, up, ref_pos, header.names, header.offsets, header.parents)
+    up, up_from = _bvh_up(up, ref_pos, header.names, header.offsets, header.parents)
     header = dataclasses.replace(header, up_axis=up)
     ref_pos, ref_rot = _scaled(header, ref_pos, ref_rot)
     reading = {"unit_m": header.scale, "unit_from": header.unit_from, "up_axis": up, "up_from": up_from}
@@ -1264,6 +1270,13 @@ def _fps_from_frame_time(frame_time_s: float) -> float:
     return float(round(fps)) if abs(fps - round(fps)) < 1e-4 * fps else fps
 
 
+def _checked_unit_m(unit_m: float) -> float:
+    """``unit_m`` as a float if it is a positive finite length in metres, else UserError."""
+    if isinstance(unit_m, bool) or not (isinstance(unit_m, (int, float)) and math.isfinite(unit_m) and unit_m > 0):
+        raise UserError(f"unit_m: expected a positive length in metres, got {unit_m!r}")
+    return float(unit_m)
+
+
 def rest_pose(offsets: np.ndarray, parents: np.ndarray) -> np.ndarray:
     """Joint positions (J, 3) of the rest pose: every OFFSET, no rotation, in file units and axes."""
     rest = np.zeros_like(offsets)
@@ -1277,10 +1290,7 @@ def _bvh_scale(path: Path, offsets: np.ndarray, parents: np.ndarray, unit_m: flo
     the rest pose's size along its longest axis (the OFFSETs, whatever way the rest pose lies: a body
     lying along x in its rest pose, or a T-pose whose arm span is its height, measure the same)."""
     if unit_m is not None:
-        if isinstance(unit_m, bool) or not (isinstance(unit_m, (int, float)) and math.isfinite(unit_m)
-                                            and unit_m > 0):
-            raise UserError(f"unit_m: expected a positive length in metres, got {unit_m!r}")
-        return float(unit_m), "given (--unit-m)"
+        return _checked_unit_m(unit_m), "given (--unit-m)"
     extent = np.ptp(rest_pose(offsets, parents), axis=0)
     size = float(extent.max())
     try:

@@ -12,6 +12,7 @@ import argparse
 import dataclasses
 import math
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
 from effortface.core import bounds
@@ -39,7 +40,7 @@ class MotionReadOptions:
 
     unit_m: float | None = None
     up: str | None = None
-    mapping: str | Mapping[str, Any] | None = None
+    mapping: str | Path | Mapping[str, Any] | None = None
     trust_skeleton: bool = False
 
 

@@ -206,7 +206,7 @@ def _fill_from_motion(s: Session, log: ExerciseLog, t: np.ndarray, w: np.ndarray
         clip_mapping = entry.get("mapping") or mapping
         clip, _ = read_checked(index.parent / str(entry["path"]), MotionReadOptions(
             unit_m=entry.get("unit_m", read.unit_m), up=entry.get("up", read.up),
-            mapping=_segment_mapping(clip_mapping), trust_skeleton=read.trust_skeleton))  # type: ignore[arg-type]
+            mapping=_segment_mapping(clip_mapping), trust_skeleton=read.trust_skeleton))
         offset_s = float(entry.get("offset_s", 0.0))
         inside = np.flatnonzero((t >= offset_s) & (t <= offset_s + (clip.n_frames - 1) / clip.fps))
         if any(k in entry for k in ENTRY_LOAD_KEYS):

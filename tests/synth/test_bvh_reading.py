@@ -192,3 +192,29 @@ def test_blenders_importer_reads_the_same_bones(tmp_path: Path) -> None:
         file_xyz = (bx, bz, -by)
         np.testing.assert_allclose(motion.positions_m[0, motion.joint_names.index(name)], _z_up(file_xyz),
                                    atol=1e-9, err_msg=name)
+
+
+def test_a_csv_without_units_in_centimetres_is_detected_and_given(shared_data: Path, tmp_path: Path) -> None:
+    """``<joint>_x`` columns hold the format's metres; a body 155 units tall is read as centimetres."""
+    npz = read_motion(shared_data / "motion" / "amp_humanoid_walk.npz").slice_s(0, 1)
+    names = npz.joint_names
+    header = "t_s," + ",".join(f"{n}_{a}" for n in names for a in "xyz")
+    rows = [",".join([f"{t:.6f}", *(f"{v * 100:.4f}" for v in frame.ravel())])
+            for t, frame in zip(npz.t_s, npz.positions_m)]
+    path = tmp_path / "cm.csv"
+    path.write_text("\n".join([header, *rows]) + "\n")
+    motion = read_motion(path)
+    assert motion.reading["unit_m"] == 0.01 and motion.reading["unit_from"].endswith("-> centimetre")
+    np.testing.assert_allclose(motion.positions_m, npz.positions_m, atol=1e-6)
+    given = read_motion(path, unit_m=0.01)
+    assert given.reading["unit_from"] == "given (--unit-m)"
+    np.testing.assert_allclose(given.positions_m, motion.positions_m)
+
+
+def test_a_c3d_takes_the_up_axis(shared_data: Path) -> None:
+    path = shared_data / "c3d" / "PiG_Calibration-FlatFoot-Full.c3d"
+    z_up = read_motion(path)
+    laid = read_motion(path, up="y")
+    assert not np.allclose(laid.positions_m, z_up.positions_m)
+    with pytest.raises(UserError, match=r"up_axis: expected one of"):
+        read_motion(path, up="q")
