@@ -104,13 +104,28 @@ def _axis_name(vector: np.ndarray) -> str:
     return ("-" if vector[a] < 0 else "") + "xyz"[a]
 
 
+#: the format's up axis is kept when the head is above the feet along it in this share of the frames ...
+CONVENTION_KEPT_SHARE = 0.7
+#: ... and the median rise along it is at least this fraction of the median head-feet distance (the
+#: head 9 degrees above the feet: a push-up's 15-25 degrees keeps it, a body standing along another
+#: axis does not)
+CONVENTION_KEPT_RISE = 0.15
+
+
+def _along(vectors: np.ndarray, axis: str) -> np.ndarray:
+    """The components of ``vectors`` (..., 3) along a signed axis (``'-y'``)."""
+    return (-1.0 if axis.startswith("-") else 1.0) * vectors[..., "xyz".index(axis[-1])]
+
+
 def detect_up_axis(positions: np.ndarray, joint_names: Sequence[str], default: str,
                    rest_positions: np.ndarray | None = None) -> tuple[str, str]:
     """A clip's up axis in its file's coordinates, from gravity over the clip, and how it was decided.
 
     Gravity: the head stays above the feet. With joints named like a head (:data:`HEAD_WORDS`) and
-    like feet (:data:`FOOT_WORDS`), the up axis is the signed axis of the median head-minus-feet
-    vector over the frames. Without them, ``default`` (the format's convention: a clip's extent does
+    like feet (:data:`FOOT_WORDS`), the format's convention ``default`` is kept when the head is
+    above the feet along it in most frames (:data:`CONVENTION_KEPT_SHARE`, by at least
+    :data:`CONVENTION_KEPT_RISE` of their distance: a push-up or a sit-up keeps it); otherwise the up
+    axis is the signed axis of the median head-minus-feet vector over the frames. Without them, ``default`` (the format's convention: a clip's extent does
     not tell up from sideways, a T-pose is as wide as it is tall). The rest
     pose (when given) is only reported: a rest pose need not be upright (a body lying along x, a
     T-pose whose arm span equals its height).
@@ -140,10 +155,15 @@ def detect_up_axis(positions: np.ndarray, joint_names: Sequence[str], default: s
         with np.errstate(all="ignore"):  # absurd values: refused by check_positions after this
             rise = pos[:, head].mean(axis=1) - pos[:, feet].mean(axis=1)
         rise = np.nan_to_num(rise, nan=0.0, posinf=0.0, neginf=0.0)
-        up = _axis_name(np.median(rise, axis=0))
-        a, sign = "xyz".index(up[-1]), -1.0 if up.startswith("-") else 1.0
-        share = float(np.mean(sign * rise[:, a] > 0))
-        how = f"gravity over the clip: the head above the feet along {up} in {share:.0%} of frames"
+        median = np.median(rise, axis=0)
+        along_default = _along(rise, default)
+        if np.mean(along_default > 0) >= CONVENTION_KEPT_SHARE and \
+                np.median(along_default) >= CONVENTION_KEPT_RISE * float(np.linalg.norm(median)):
+            up, note = default, "the format's convention"  # a push-up lies mostly along x, its head still up y
+        else:
+            up, note = _axis_name(median), f"not the format's {default}"
+        share = float(np.mean(_along(rise, up) > 0))
+        how = f"gravity over the clip: the head above the feet along {up} in {share:.0%} of frames ({note})"
     else:
         up = default
         how = f"the format's convention ({default} up): no head and feet named to check it against"

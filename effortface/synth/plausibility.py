@@ -38,7 +38,8 @@ NECK_BASE_FRACTION = 0.87
 #: the segments whose lengths are checked (each side), keys of :data:`BODY_M`
 CHECKED_SEGMENTS = ("thigh", "shank", "upper_arm", "forearm", "trunk")
 #: what a refusal tells the user to check
-ADVICE = "check --unit-m / --up or the skeleton's position channels (or --trust-skeleton for a child or a creature)"
+ADVICE = ("check --unit-m / --up or the skeleton's position channels (or --trust-skeleton for a child, a creature "
+          "or a clip that never stands up)")
 
 
 class ImplausibleBodyError(UserError):
@@ -171,7 +172,10 @@ def check_plausible(motion: Motion, *, trust: bool = False,
     ------
     ImplausibleBodyError
         One line: ``'<file>: standing height 2.85 m: expected 1.2-2.2 m; check --unit-m / --up or the
-        skeleton's position channels (or --trust-skeleton for a child or a creature)'``.
+        skeleton's position channels (or --trust-skeleton for a child, a creature or a clip that never
+        stands up)'``. The standing height is the clip's most upright frames': a clip of push-ups only
+        never stands and is refused like a body read with the wrong up axis (a choice: the two look
+        alike); ``trust=True`` reads it.
     """
     figures = measure_body(motion, mapping)
     problem = _outside(figures)

@@ -218,3 +218,12 @@ def test_a_c3d_takes_the_up_axis(shared_data: Path) -> None:
     assert not np.allclose(laid.positions_m, z_up.positions_m)
     with pytest.raises(UserError, match=r"up_axis: expected one of"):
         read_motion(path, up="q")
+
+
+def test_a_body_leaning_far_forward_keeps_the_formats_up_axis(tmp_path: Path) -> None:
+    """A push-up: the body lies mostly along x (25 degrees from it), its head above its feet: y stays up."""
+    path = bandai_layout_bvh(tmp_path / "pushup.bvh", root_rotation_zxy=(-65, 0, 0))
+    motion = read_motion(path)
+    assert motion.reading["up_axis"] == "y"
+    assert motion.reading["up_from"].endswith("(the format's convention); the rest pose lies along x "
+                                              "(not upright: not used)")

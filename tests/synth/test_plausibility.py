@@ -35,7 +35,8 @@ def test_the_old_readers_doubled_bones_are_refused_in_one_line(tmp_path: Path, c
     err = capsys.readouterr().err
     assert status == 2
     assert err == (f"effortface synth: error: {clip}: standing height 3.16 m: expected 1.2-2.2 m; check --unit-m "
-                   "/ --up or the skeleton's position channels (or --trust-skeleton for a child or a creature)\n")
+                   "/ --up or the skeleton's position channels (or --trust-skeleton for a child, a creature or a clip "
+                   "that never stands up)\n")
     assert not out.exists() and not (tmp_path / "out.units.json").exists()
 
 
