@@ -149,7 +149,7 @@ def _outside(figures: dict[str, Any]) -> str | None:
 
 
 def check_plausible(motion: Motion, *, trust: bool = False,
-                    mapping: SegmentMapping | str | Path | None = None) -> dict[str, Any]:
+                    mapping: SegmentMapping | str | Path | None = None, name: str | None = None) -> dict[str, Any]:
     """Measure a clip's body and refuse it if it is not a plausible human one.
 
     Parameters
@@ -160,6 +160,8 @@ def check_plausible(motion: Motion, *, trust: bool = False,
         ``--trust-skeleton``: measure, never refuse (a child, a creature).
     mapping : mapping, str or Path, optional
         The user's joint-to-segment mapping (default: the built-in conventions).
+    name : str, optional
+        The file named in the message (default: ``motion.source``, which may describe more).
 
     Returns
     -------
@@ -180,12 +182,12 @@ def check_plausible(motion: Motion, *, trust: bool = False,
     figures = measure_body(motion, mapping)
     problem = _outside(figures)
     if problem is not None and not trust:
-        raise ImplausibleBodyError(f"{motion.source or 'motion'}: {problem}; {ADVICE}")
+        raise ImplausibleBodyError(f"{name or motion.source or 'motion'}: {problem}; {ADVICE}")
     figures["trusted"] = problem is not None
     return figures
 
 
-def check_read(motion: Motion, options: MotionReadOptions) -> dict[str, Any]:
+def check_read(motion: Motion, options: MotionReadOptions, name: str | None = None) -> dict[str, Any]:
     """A clip as a command reads it: mapped (the mapping's refusal first), then through the gate.
 
     Parameters
@@ -194,6 +196,8 @@ def check_read(motion: Motion, options: MotionReadOptions) -> dict[str, Any]:
         The clip (or a streamed clip's skeleton: its reference frames).
     options : MotionReadOptions
         The command's ``--mapping`` and ``--trust-skeleton``.
+    name : str, optional
+        The file named in a refusal (default: ``motion.source``).
 
     Returns
     -------
@@ -208,13 +212,13 @@ def check_read(motion: Motion, options: MotionReadOptions) -> dict[str, Any]:
         A body outside the human ranges without ``trust_skeleton``.
     """
     map_skeleton(motion.joint_names, options.mapping)
-    return check_plausible(motion, trust=options.trust_skeleton, mapping=options.mapping)
+    return check_plausible(motion, trust=options.trust_skeleton, mapping=options.mapping, name=name)
 
 
 def read_checked(path: str | Path, options: MotionReadOptions) -> tuple[Motion, dict[str, Any]]:
     """:func:`effortface.synth.motion.read_motion` with the command's options, then :func:`check_read`."""
     motion = read_motion(path, unit_m=options.unit_m, up=options.up)
-    return motion, check_read(motion, options)
+    return motion, check_read(motion, options, str(path))
 
 
 def read_checked_blocks(path: str | Path, options: MotionReadOptions, *,
@@ -222,7 +226,7 @@ def read_checked_blocks(path: str | Path, options: MotionReadOptions, *,
     """:func:`effortface.synth.motion.read_motion_blocks` with the command's options, then
     :func:`check_read` on its reference frames."""
     blocks = read_motion_blocks(path, unit_m=options.unit_m, up=options.up, reference_frames=reference_frames)
-    return blocks, check_read(blocks.skeleton, options)
+    return blocks, check_read(blocks.skeleton, options, str(path))
 
 
 def reading_record(motion: Motion, body: dict[str, Any] | None = None) -> dict[str, Any]:

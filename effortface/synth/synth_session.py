@@ -156,7 +156,7 @@ class SynthSession:
             motion, self.reading = path, reading_record(path)
         else:  # the gate, not the mapping: an unmapped clip loads, to be mapped with Mapping...
             motion = read_motion(Path(path), unit_m=self.read.unit_m, up=self.read.up)
-            body = check_plausible(motion, trust=self.read.trust_skeleton, mapping=self.mapping)
+            body = check_plausible(motion, trust=self.read.trust_skeleton, mapping=self.mapping, name=str(path))
             self.reading = reading_record(motion, body)
         old_loops = self.loops
         self.motion = motion
@@ -206,7 +206,8 @@ class SynthSession:
             build_body(self.motion.joint_names, self.motion.parents, self.character.mass_kg, self.character.sex,
                        mapping=mapping)
         if self.motion is not None and self.motion_path is not None:  # the segments it maps, through the gate
-            body = check_plausible(self.motion, trust=self.read.trust_skeleton, mapping=mapping)
+            body = check_plausible(self.motion, trust=self.read.trust_skeleton, mapping=mapping,
+                                   name=str(self.motion_path))
             self.reading = reading_record(self.motion, body)
         self.mapping, self.mapping_path = mapping, None if path is None else Path(path)
         self._work_cache = None

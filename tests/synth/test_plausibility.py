@@ -5,6 +5,7 @@ clip of tests/data through."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -105,3 +106,22 @@ def test_spatial_axes_say_where_the_body_faces(shared_data: Path, tmp_path: Path
     assert spatial_axes(read_motion(bandai_layout_bvh(tmp_path / "walk.bvh"))) == "RAS"
     assert spatial_axes(read_motion(shared_data / "motion/cmu_13_29_squats_120fps.bvh")) == "ALS"
     assert spatial_axes(read_motion(shared_data / "bvh/pymo_walk.bvh")) == "__S"  # it turns: no one facing
+
+
+def test_a_c3d_refusal_names_the_file_alone(shared_data: Path, tmp_path: Path) -> None:
+    """MACsample.c3d's markers, mapped by hand, make a body 0.57 m tall: the message names the file,
+    not the reader's description of it (its Motion.source)."""
+    from effortface.synth.plausibility import read_checked
+    from effortface.synth.read_options import MotionReadOptions
+
+    clip = shared_data / "c3d" / "MACsample.c3d"
+    ends = {"head": ["RSHO", "LSHO"], "trunk": ["RSHO", ["RHIP", "LHIP"]]}
+    for s, S in (("left", "L"), ("right", "R")):
+        ends |= {f"{s}_upper_arm": [f"{S}SHO", f"{S}ELB"], f"{s}_forearm": [f"{S}ELB", f"{S}WRI"],
+                 f"{s}_hand": [f"{S}WRI", f"{S}WRI"], f"{s}_thigh": [f"{S}HIP", f"{S}SHA"],
+                 f"{s}_shank": [f"{S}SHA", f"{S}HEE"], f"{s}_foot": [f"{S}HEE", f"{S}TOE"]}
+    mapping = tmp_path / "mac.json"
+    mapping.write_text(json.dumps(ends))
+    assert read_motion(clip).source != str(clip)
+    with pytest.raises(ImplausibleBodyError, match=rf"^{re.escape(str(clip))}: standing height 0\.\d\d m: "):
+        read_checked(clip, MotionReadOptions(mapping=str(mapping)))
