@@ -440,8 +440,9 @@ def read_motion(path: str | Path, *, unit_m: float | None = None, up: str | None
     path : str or Path
         The motion file.
     unit_m : float, optional
-        Metres per file length unit (BVH, CSV with ``<joint>_x`` columns); None: from the file or the
-        skeleton's size. Ignored for ``.npz`` (metres) and C3D (the unit it declares).
+        Metres per file length unit; None: from the file (C3D ``POINT:UNITS``, ``.npz`` metres, CSV
+        ``<joint>_x_m`` columns) or the skeleton's size (BVH, CSV ``<joint>_x`` columns). Given, it
+        replaces the file's declaration.
     up : str, optional
         The file's up axis, one of x, y, z, -x, -y, -z; None: from the file (C3D ``X_SCREEN`` /
         ``Y_SCREEN``) or gravity over the clip (BVH, CSV: :func:`detect_up_axis`).
@@ -493,7 +494,23 @@ def _read_npz(path: Path, unit_m: float | None, up: str | None = None) -> Motion
     motion = read_npz_motion(path)
     if up not in (None, "z"):
         raise UserError(f"{path}: --up: a retargeted .npz clip is Z up by its format, found --up {up}")
-    return motion
+    return _given_unit(motion, unit_m)
+
+
+def _given_unit(motion: Motion, unit_m: float | None) -> Motion:
+    """A clip read in the unit its file declares (:attr:`Motion.reading` ``unit_m``) rescaled to the
+    caller's ``unit_m`` (``--unit-m`` overrides the declaration); refused if the reader said none."""
+    if unit_m is None:
+        return motion
+    declared = motion.reading.get("unit_m")
+    if not declared:
+        raise UserError(f"{motion.source}: --unit-m: expected a reader that says the unit it read, found "
+                        f"none to replace; leave --unit-m out (the file's own unit is used)")
+    pos = np.asarray(motion.positions_m) * (_checked_unit_m(unit_m) / float(declared))
+    check_positions(motion.source, pos, motion.joint_names)
+    reading = {**motion.reading, "unit_m": float(unit_m),
+               "unit_from": f"given (--unit-m; the file says {float(declared):g} m)"}
+    return dataclasses.replace(motion, positions_m=pos, reading=reading)
 
 
 def _read_csv(path: Path, unit_m: float | None, up: str | None = None) -> Motion:
@@ -504,13 +521,14 @@ def _read_c3d(path: Path, unit_m: float | None, up: str | None = None) -> Motion
     from effortface.synth.c3d_motion import read_c3d  # imports the c3d package when called
 
     if up is None:
-        return read_c3d(path)
-    takes = inspect.signature(read_c3d).parameters
-    if "up" in takes:
-        return read_c3d(path, up=up)  # type: ignore[call-arg,unused-ignore]
-    if up in ("y", "z"):  # the reader's older keyword
-        return read_c3d(path, up_axis=up)
-    raise UserError(f"{path}: --up: expected y or z for a C3D file, found {up}")
+        motion = read_c3d(path)
+    elif "up" in inspect.signature(read_c3d).parameters:
+        motion = read_c3d(path, up=up)  # type: ignore[call-arg,unused-ignore]
+    elif up in ("y", "z"):  # the reader's older keyword
+        motion = read_c3d(path, up_axis=up)
+    else:
+        raise UserError(f"{path}: --up: expected y or z for a C3D file, found {up}")
+    return _given_unit(motion, unit_m)
 
 
 def _csv_unit_and_up(motion: Motion, unit_m: float | None, up: str | None) -> Motion:

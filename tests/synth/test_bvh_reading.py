@@ -3,6 +3,7 @@ the rest pose's size, the up axis from gravity over the clip, and how it was rea
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -227,3 +228,20 @@ def test_a_body_leaning_far_forward_keeps_the_formats_up_axis(tmp_path: Path) ->
     assert motion.reading["up_axis"] == "y"
     assert motion.reading["up_from"].endswith("(the format's convention); the rest pose lies along x "
                                               "(not upright: not used)")
+
+
+def test_a_given_unit_replaces_a_declared_one(shared_data: Path, tmp_path: Path) -> None:
+    npz = read_motion(shared_data / "motion" / "amp_humanoid_walk.npz")
+    halved = read_motion(shared_data / "motion" / "amp_humanoid_walk.npz", unit_m=0.5)
+    np.testing.assert_allclose(halved.positions_m, npz.positions_m * 0.5)
+    assert halved.reading["unit_from"] == "given (--unit-m; the file says 1 m)"
+    # a reader that says no unit: the option is refused, not ignored
+    monkey = dict(motion_module._READERS)
+    try:
+        register_motion_reader(".npy3", lambda p, unit_m, up: motion_module._given_unit(
+            dataclasses.replace(npz, reading={}, source=str(p)), unit_m))
+        with pytest.raises(UserError, match=r"walk\.npy3: --unit-m: expected a reader that says the unit it read"):
+            read_motion(tmp_path / "walk.npy3", unit_m=0.01)
+    finally:
+        motion_module._READERS.clear()
+        motion_module._READERS.update(monkey)
