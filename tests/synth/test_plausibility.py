@@ -125,3 +125,19 @@ def test_a_c3d_refusal_names_the_file_alone(shared_data: Path, tmp_path: Path) -
     assert read_motion(clip).source != str(clip)
     with pytest.raises(ImplausibleBodyError, match=rf"^{re.escape(str(clip))}: standing height 0\.\d\d m: "):
         read_checked(clip, MotionReadOptions(mapping=str(mapping)))
+
+
+def test_a_folder_of_clips_skips_the_implausible_one(tmp_path: Path, capsys) -> None:
+    clips = tmp_path / "clips"
+    clips.mkdir()
+    bandai_layout_bvh(clips / "walk.bvh")
+    bandai_layout_bvh(clips / "child.bvh", scale=0.7)
+    status = main(["synth", "default", str(clips), "--out", str(tmp_path / "out"), "--unit-m", "0.01"])
+    err = capsys.readouterr().err
+    assert status == 1
+    assert f"effortface synth: failed: {clips / 'child.bvh'}: {clips / 'child.bvh'}: standing height 1.11 m" in err
+    assert (tmp_path / "out" / "walk.csv").exists() and not (tmp_path / "out" / "child.csv").exists()
+    reading = json.loads((tmp_path / "out" / "walk.units.json").read_text())["reading"]
+    assert reading["unit_from"] == "given (--unit-m)" and reading["up_axis"] == "y"
+    assert main(["synth", "default", str(clips), "--out", str(tmp_path / "out2"), "--unit-m", "0.01",
+                 "--trust-skeleton"]) == 0
