@@ -44,3 +44,24 @@ def rr_plausible(rr_ms: float) -> bool:
     bool
     """
     return RR_MS[0] <= rr_ms <= RR_MS[1]
+
+
+#: plausible adult body dimensions, metres: the standing height (top of the head above the lowest
+#: foot) and the main segment lengths between the joint centres a skeleton gives (hip to knee, knee
+#: to ankle, shoulder to elbow, elbow to wrist, neck base to mid-hips). Wide on purpose: they refuse
+#: the wrong unit (x 2.54, x 10), doubled bones and a wrong up axis, not a tall or a short adult;
+#: a child or a creature passes with ``--trust-skeleton``.
+BODY_M: dict[str, tuple[float, float]] = {
+    "height_m": (1.2, 2.2),
+    "thigh": (0.3, 0.6),
+    "shank": (0.28, 0.6),
+    "upper_arm": (0.18, 0.45),
+    "forearm": (0.15, 0.4),
+    "trunk": (0.3, 0.9),
+}
+#: the ground under a body, the plane the lowest joint of every frame lies on: at most this tilt
+#: (degrees; a ramp or a staircase is below it, a body read with the wrong up axis above) and half
+#: the frames within this distance (metres) of the plane (a hop leaves it, a body on its side does not
+#: touch it)
+GROUND_TILT_DEG = 45.0
+GROUND_SPREAD_M = 0.25

@@ -238,6 +238,7 @@ def _write_motion(folder: Path, target: Path, stem: str, task_keys: dict) -> Non
     """Each clip of ``motion/motion.json`` as the BIDS ``motion`` datatype: joint positions in metres
     (``tracksys-mocap``, ``run-<n>`` in the index's order), ``channels.tsv`` naming each column."""
     from effortface.synth.motion import read_motion
+    from effortface.synth.plausibility import spatial_axes
     from effortface.synth.work import MOTION_DIR, MOTION_JSON, read_motion_index
 
     index = folder / MOTION_DIR / MOTION_JSON
@@ -246,7 +247,7 @@ def _write_motion(folder: Path, target: Path, stem: str, task_keys: dict) -> Non
     entries = read_motion_index(index)
     target.mkdir(parents=True, exist_ok=True)
     for run, entry in enumerate(entries, start=1):
-        clip = read_motion(index.parent / str(entry["path"]))
+        clip = read_motion(index.parent / str(entry["path"]), unit_m=entry.get("unit_m"), up=entry.get("up"))
         name = f"{stem}_tracksys-{MOTION_TRACKSYS}" + (f"_run-{run}" if len(entries) > 1 else "")
         table = clip.positions_m.reshape(clip.n_frames, -1)
         text = _tsv([[_value(v) for v in row] for row in table], None)
@@ -257,13 +258,24 @@ def _write_motion(folder: Path, target: Path, stem: str, task_keys: dict) -> Non
         write_json_atomic(target / f"{name}_motion.json", {
             **task_keys, "SamplingFrequency": float(clip.fps), "TrackingSystemName": MOTION_TRACKSYS,
             "MotionChannelCount": 3 * len(clip.joint_names), "POSChannelCount": 3 * len(clip.joint_names),
-            "RecordingDuration": round(clip.n_frames / clip.fps, 4), "SpatialAxes": "FLU",
+            "RecordingDuration": round(clip.n_frames / clip.fps, 4),
+            "SpatialAxes": spatial_axes(clip, entry.get("mapping")),
             "TrackedPointsCount": len(clip.joint_names), "SamplingFrequencyEffective": float(clip.fps),
             "MissingValues": "n/a", "SubjectArtefactDescription": "n/a",
             **{f"{kind}ChannelCount": 0 for kind in ("ACCEL", "ANGACCEL", "GYRO", "JNTANG", "LATENCY", "MAGN",
                                                      "MISC", "ORNT", "VEL")},
-            "Description": f"joint positions of {entry['path']} (metres, Z up, as effortface reads it); "
-                          f"its first frame is at session time {float(entry.get('offset_s', 0.0)):g} s"})
+            "Description": f"joint positions of {entry['path']} (metres, Z up, as effortface reads it: "
+                          f"{_how_read(clip.reading)}); its first frame is at session time "
+                          f"{float(entry.get('offset_s', 0.0)):g} s"})
+
+
+def _how_read(reading: dict) -> str:
+    """How a clip was read, for its BIDS description: ``'unit 0.01 m (...), up axis y (...)'``."""
+    unit = f"unit {reading['unit_m']:g} m ({reading.get('unit_from', 'the file')})" if "unit_m" in reading \
+        else "unit: the file's"
+    up = f"up axis {reading['up_axis']} ({reading.get('up_from', 'the file')})" if "up_axis" in reading \
+        else "up axis: the file's"
+    return f"{unit}, {up}"
 
 
 def export_bids(sessions_dir: str | os.PathLike, out_dir: str | os.PathLike, *, name: str | None = None

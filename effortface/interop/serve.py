@@ -51,9 +51,11 @@ import numpy as np
 from effortface.core.bounds import BOUNDS
 from effortface.core.errors import UserError
 from effortface.synth.face import apply_expressiveness
-from effortface.synth.motion import motion_from_positions
+from effortface.synth.motion import UP_TO_Z_UP, detect_up_axis, motion_from_positions
 from effortface.synth.motion_csv import read_skeleton
 from effortface.synth.physiology import PhysiologyState
+from effortface.synth.plausibility import check_read
+from effortface.synth.read_options import MotionReadOptions
 from effortface.synth.runtime import Character, FaceModel
 
 EFFORT_WORK_TYPE = "EffortWork"
@@ -225,26 +227,46 @@ class FaceProcessor:
     mapping : str, optional
         A joint-to-segment mapping file for the skeleton's joints (MoCap input; default: the
         built-in conventions).
+    read : MotionReadOptions, optional
+        ``--unit-m``, ``--up`` and ``--trust-skeleton`` for the skeleton and its frames (default:
+        metres, the up axis from the rest pose's head and feet, Z when it names none). The rest
+        pose goes through the plausibility gate.
     """
 
     def __init__(self, model: FaceModel, character: Character, skeleton: str | None = None,
-                 fps: float = 120.0, mapping: str | None = None) -> None:
+                 fps: float = 120.0, mapping: str | None = None, read: MotionReadOptions | None = None) -> None:
         self.model = model
         self.character = character
         self.mapping = mapping
         self.fps = fps
         self.n_joints = 0
         self._rest: Any = None
+        self._turn = np.eye(3)  # file axes and unit -> metres, Z up (each frame: positions @ turn.T)
+        self.reading: dict[str, Any] = {}
+        self.body: dict[str, Any] = {}
         if skeleton is not None:
-            skel = read_skeleton(skeleton)
-            if skel["rest_positions_m"] is None:
-                raise UserError(f"--skeleton {skeleton}: expected rest_positions_m (a reference pose), found none")
-            self._rest = motion_from_positions(skel["rest_positions_m"][None], skel["joints"], skel["parents"], fps,
-                                               source=str(skeleton))
-            self.n_joints = len(skel["joints"])
+            self._read_skeleton(skeleton, read or MotionReadOptions(mapping=mapping))
         self._stream: Any = self._new_stream()
         self.resets = 0
         self.columns = tuple(model.blendshapes.names) + ("nhr", "hr_bpm")
+
+    def _read_skeleton(self, skeleton: str, read: MotionReadOptions) -> None:
+        """The rest pose turned to metres and Z up (and the turn every frame gets), through the gate."""
+        skel = read_skeleton(skeleton)
+        if skel["rest_positions_m"] is None:
+            raise UserError(f"--skeleton {skeleton}: expected rest_positions_m (a reference pose), found none")
+        rest = np.asarray(skel["rest_positions_m"], dtype=float)
+        up, up_from = (read.up, "given (--up)") if read.up is not None else \
+            detect_up_axis(rest[None], skel["joints"], "z")
+        unit_m, unit_from = (read.unit_m, "given (--unit-m)") if read.unit_m is not None else \
+            (1.0, "the skeleton file (rest_positions_m: metres)")
+        self._turn = UP_TO_Z_UP[up] * unit_m
+        self.reading = {"unit_m": unit_m, "unit_from": unit_from, "up_axis": up, "up_from": up_from}
+        self._rest = dataclasses.replace(
+            motion_from_positions((rest @ self._turn.T)[None], skel["joints"], skel["parents"], self.fps,
+                                  source=str(skeleton)), reading=self.reading)
+        self.body = check_read(self._rest, dataclasses.replace(read, mapping=read.mapping or self.mapping))
+        self.n_joints = len(skel["joints"])
 
     def _new_stream(self) -> Any:
         """A fresh character state (work input: :class:`WorkStream`; MoCap: the runtime's stream)."""
@@ -262,7 +284,7 @@ class FaceProcessor:
             dt_s = 1.0 / self.fps
         with np.errstate(all="ignore"):
             if self.n_joints:
-                weights = self._stream.step(np.asarray(values, float).reshape(self.n_joints, 3), dt_s)
+                weights = self._stream.step(np.asarray(values, float).reshape(self.n_joints, 3) @ self._turn.T, dt_s)
             else:
                 weights = self._stream.step_work(float(values[0]), float(values[1]), dt_s)
             row = [*map(float, np.clip(weights, 0.0, 1.0)), float(self._stream.last["nhr"]),

@@ -231,7 +231,7 @@ def attach_clip(session: str | os.PathLike, clip: str | os.PathLike, *, offset_s
                           + ("both" if sync else "neither"))
     motion = read_clip(clip, unit_m=unit_m, up=up)
     segments = _checked_mapping(motion, clip, mapping)
-    check_plausible_clip(motion, trust_skeleton)
+    check_plausible_clip(motion, trust_skeleton, _read_mapping(mapping))
     folder = s.path / MOTION_DIR
     target = folder / clip.name
     if target.exists():
@@ -251,6 +251,13 @@ def attach_clip(session: str | os.PathLike, clip: str | os.PathLike, *, offset_s
     shutil.copyfile(clip, target)
     write_json_atomic(folder / MOTION_JSON, {"version": MOTION_JSON_VERSION, "files": entries})
     return alignment
+
+
+def _read_mapping(mapping: str | os.PathLike | None) -> dict | None:
+    """The ``--mapping`` file read (None: the built-in conventions)."""
+    from effortface.synth.segments import read_mapping
+
+    return read_mapping(Path(mapping)) if mapping is not None else None
 
 
 def _checked_mapping(motion: Motion, clip: Path, mapping: str | os.PathLike | None) -> dict | None:

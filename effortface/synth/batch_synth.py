@@ -21,7 +21,9 @@ from typing import Any
 
 from effortface.core.errors import UserError
 from effortface.synth.curves_io import output_files, write_curves
-from effortface.synth.motion import MOTION_SUFFIXES, read_motion
+from effortface.synth.motion import MOTION_SUFFIXES
+from effortface.synth.plausibility import read_checked, reading_record
+from effortface.synth.read_options import MotionReadOptions
 from effortface.synth.parallel import ComputeSettings, compute_backend, map_unordered
 from effortface.synth.runtime import Character, FaceModel, load_model
 
@@ -40,6 +42,8 @@ class SynthOptions:
     mapping: Any = None
     unit_m: float | None = None
     filter_tau_s: Any = None
+    up: str | None = None
+    trust_skeleton: bool = False
 
 
 @dataclasses.dataclass(frozen=True)
@@ -122,10 +126,11 @@ def synth_clip(task: tuple[Path, Path, SynthOptions]) -> ClipResult:
     clip, out, opts = task
     try:
         model = _model(opts.model_dir)
-        motion = read_motion(clip, unit_m=opts.unit_m)
+        motion, body = read_checked(clip, MotionReadOptions(opts.unit_m, opts.up, opts.mapping,
+                                                            opts.trust_skeleton))
         curves = model.synthesize(motion, opts.character, mapping=opts.mapping,
                                   filter_tau_s=opts.filter_tau_s)
-        write_curves(out, curves, model, fmt=opts.fmt, force=opts.force)
+        write_curves(out, curves, model, fmt=opts.fmt, force=opts.force, reading=reading_record(motion, body))
         return ClipResult(clip, out, motion.n_frames, motion.n_frames / motion.fps)
     except Exception as exc:  # a bad clip is reported and skipped, never stops the batch
         text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__

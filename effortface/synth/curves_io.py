@@ -17,7 +17,7 @@ import io
 import json
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
-from typing import IO
+from typing import IO, Any
 
 import numpy as np
 
@@ -135,11 +135,15 @@ def units_path(path: Path) -> Path:
     return path.with_name(path.stem + ".units.json")
 
 
-def units_json(columns: Sequence[str], motion: str | None = None) -> str:
-    """The sidecar text: ``{"units": {column: unit}}`` for ``columns`` (blendshapes: a weight), and
-    ``"motion"``: where the motion came from and what was done to it (gaps filled...), when given."""
+def units_json(columns: Sequence[str], motion: str | None = None,
+               reading: Mapping[str, Any] | None = None) -> str:
+    """The sidecar text: ``{"units": {column: unit}}`` for ``columns`` (blendshapes: a weight),
+    ``"motion"``: where the motion came from and what was done to it (gaps filled...), and
+    ``"reading"``: how it was read (``unit_m``, ``unit_from``, ``up_axis``, ``up_from``, the body the
+    plausibility gate measured: :func:`effortface.synth.plausibility.reading_record`), when given."""
     units = {c: CURVE_UNITS.get(c, WEIGHT_UNIT) for c in columns}
-    return json.dumps({"units": units, **({"motion": motion} if motion else {})}, indent=2) + "\n"
+    return json.dumps({"units": units, **({"motion": motion} if motion else {}),
+                       **({"reading": dict(reading)} if reading else {})}, indent=2) + "\n"
 
 
 def output_files(path: Path, fmt: str) -> list[Path]:
@@ -264,7 +268,8 @@ def curves_text(curves: Mapping[str, np.ndarray], model: FaceModel, fmt: str = "
 
 def write_curves(path: str | Path, curves: Mapping[str, np.ndarray], model: FaceModel, *,
                  fmt: str = "csv", force: bool = False, digits: int = CSV_DIGITS,
-                 provenance: str | None = None, every_frame: bool = False) -> Path:
+                 provenance: str | None = None, every_frame: bool = False,
+                 reading: Mapping[str, Any] | None = None) -> Path:
     """Write the curves of ``model`` as a ``fmt`` file (atomically; see :func:`curves_text`).
 
     Parameters
@@ -279,6 +284,8 @@ def write_curves(path: str | Path, curves: Mapping[str, np.ndarray], model: Face
         The motion's :attr:`~effortface.synth.motion.Motion.source`, kept in the units sidecar.
     every_frame : bool
         Live Link: keep every motion frame (see :func:`livelink_csv`).
+    reading : mapping, optional
+        How the motion was read (unit, up axis, body figures), kept in the units sidecar.
 
     Returns
     -------
@@ -291,7 +298,7 @@ def write_curves(path: str | Path, curves: Mapping[str, np.ndarray], model: Face
         As :func:`curves_text` and :func:`write_output`.
     """
     write_curve_chunks(path, [curves], model, fmt=fmt, force=force, digits=digits, provenance=provenance,
-                       every_frame=every_frame)  # one writer for whole and streamed curves
+                       every_frame=every_frame, reading=reading)  # one writer for whole and streamed curves
     return Path(path)
 
 
@@ -325,7 +332,8 @@ class LivelinkResampler:
 
 def write_curve_chunks(path: str | Path, chunks: Iterable[Mapping[str, np.ndarray]], model: FaceModel, *,
                        fmt: str = "csv", force: bool = False, digits: int = CSV_DIGITS,
-                       provenance: str | None = None, every_frame: bool = False) -> tuple[int, float]:
+                       provenance: str | None = None, every_frame: bool = False,
+                       reading: Mapping[str, Any] | None = None) -> tuple[int, float]:
     """:func:`write_curves` for curves given piece by piece (e.g.
     :func:`effortface.synth.chunked.synthesize_chunks`): each piece is written as it comes.
 
@@ -370,7 +378,7 @@ def write_curve_chunks(path: str | Path, chunks: Iterable[Mapping[str, np.ndarra
     except OSError as exc:
         raise UserError(f"--out {out}: expected a writable file, found {exc.strerror or exc}") from None
     if fmt == "csv":
-        write_output(units_path(out), units_json(model.columns, provenance), force=True)
+        write_output(units_path(out), units_json(model.columns, provenance, reading), force=True)
     return int(seen["frames"]), seen["last"] - seen["first"]
 
 

@@ -27,7 +27,7 @@ import numpy as np
 
 from effortface.core.errors import UserError
 from effortface.core.fileio import atomic_write_text
-from effortface.synth.motion import BVH_UNITS_M, Motion
+from effortface.synth.motion import Motion
 from effortface.synth.read_options import MotionReadOptions
 from effortface.synth.segments import (CONVENTIONS, REQUIRED_SEGMENTS, MappingFound, SegmentMapping,
                                        end_names, find_mapping, mapping_to_json, read_mapping)
@@ -145,11 +145,11 @@ def inspect_motion(path: str | os.PathLike[str], options: MotionReadOptions = Mo
     found = find_mapping(motion.joint_names, user)
     unit_m, unit_from = _unit(path, motion, options)
     up_axis, up_from = _up(path, motion, options)
-    figures = plausibility(motion, options.trust_skeleton)
+    figures = plausibility(motion, options.trust_skeleton, user)
     return Inspection(
         file=str(path), format=path.suffix.lower().lstrip("."), producer=motion.reading.get("producer"),
         fps=motion.fps, n_frames=motion.n_frames, unit_m=unit_m, unit_from=unit_from, up_axis=up_axis,
-        up_from=up_from, height_m=_height_m(motion, figures), labels=motion.joint_names, joints=motion.joint_names,
+        up_from=up_from, height_m=figures["height_m"], labels=motion.joint_names, joints=motion.joint_names,
         marker_set=motion.reading.get("marker_set"), convention=_convention(found),
         mapping=_mapping_names(found, motion.joint_names), unmapped=found.unmapped, gaps={},
         window=motion.reading.get("window") or {"first_frame": 0, "n_frames": motion.n_frames,
@@ -192,7 +192,7 @@ def _inspect_c3d(path: Path, options: MotionReadOptions, user: SegmentMapping | 
         error = str(exc)
     names = motion.joint_names if motion is not None else points.labels
     found = find_mapping(names, user)
-    figures = plausibility(motion, options.trust_skeleton) if motion is not None else None
+    figures = plausibility(motion, options.trust_skeleton, user) if motion is not None else None
     reading = dict(motion.reading) if motion is not None else {}
     unit_m, unit_from = (reading["unit_m"], str(reading.get("unit_from", ""))) if "unit_m" in reading else \
         (options.unit_m, "--unit-m") if options.unit_m is not None else header["unit"]
@@ -202,11 +202,11 @@ def _inspect_c3d(path: Path, options: MotionReadOptions, user: SegmentMapping | 
     return Inspection(
         file=str(path), format="c3d", producer=reading.get("producer") or header["producer"], fps=points.rate_hz,
         n_frames=len(points.missing), unit_m=unit_m, unit_from=unit_from, up_axis=up_axis, up_from=up_from,
-        height_m=_height_m(motion, figures) if motion is not None else None, labels=tuple(header["labels"]),
+        height_m=figures["height_m"] if figures is not None else None, labels=tuple(header["labels"]),
         joints=names, marker_set=reading.get("marker_set") or marker_set(points.labels),
         convention=_convention(found), mapping=_mapping_names(found, names), unmapped=found.unmapped,
         gaps=marker_gaps(points.labels, points.missing, points.rate_hz),
-        window=complete_window(points.missing), reading=reading,
+        window=reading.get("window") or complete_window(points.missing), reading=reading,
         plausibility=figures, read_error=error)
 
 
@@ -268,81 +268,43 @@ def _clean(value: object) -> str:
 
 
 def _unit(path: Path, motion: Motion, options: MotionReadOptions) -> tuple[float | None, str]:
-    """The clip's metres per file unit and how it was decided (the reader's word when it gives one)."""
+    """The clip's metres per file unit and how it was decided (the reader's word: every built-in reader
+    fills :attr:`Motion.reading`; a registered reader may not)."""
     if "unit_m" in motion.reading:
         return float(motion.reading["unit_m"]), str(motion.reading.get("unit_from", ""))
     if options.unit_m is not None:
         return options.unit_m, "--unit-m"
-    if path.suffix.lower() == ".bvh":
-        return _bvh_unit(path)
-    return 1.0, f"{path.suffix.lower()} format: metres"
-
-
-def _bvh_unit(path: Path) -> tuple[float, str]:
-    """A BVH's detected unit and the rest-pose height that decided it."""
-    from effortface.synth.motion import _bvh_stream_header  # the reader's own header parse
-
-    header = _bvh_stream_header(path, None)
-    rest = np.zeros_like(header.offsets)
-    for j, p in enumerate(header.parents):
-        rest[j] = header.offsets[j] + (rest[p] if p >= 0 else 0.0)
-    height = float(np.ptp(rest[:, 1]))
-    name = next((n for n, u in BVH_UNITS_M if u == header.scale), f"{header.scale:g} m")
-    return header.scale, f"rest pose {height:.4g} file units tall: {name}"
+    return None, f"not stated by the {path.suffix.lower()} reader"
 
 
 def _up(path: Path, motion: Motion, options: MotionReadOptions) -> tuple[str | None, str]:
-    """The file's up axis and how it was decided."""
+    """The file's up axis and how it was decided (the reader's word, as :func:`_unit`)."""
     if "up_axis" in motion.reading:
         return str(motion.reading["up_axis"]), str(motion.reading.get("up_from", ""))
     if options.up is not None:
         return options.up, "--up"
-    if path.suffix.lower() == ".bvh":
-        return "y", "BVH convention: Y up"
-    return "z", f"{path.suffix.lower()} format: Z up"
+    return None, f"not stated by the {path.suffix.lower()} reader"
 
 
-def standing_height_m(motion: Motion) -> float:
-    """Standing height (m): the highest joint above the lowest, median over frames (Z up).
+def plausibility(motion: Motion, trust: bool = False, mapping: SegmentMapping | None = None) -> dict[str, Any]:
+    """The plausibility gate's figures (:func:`effortface.synth.plausibility.measure_body`) and verdict:
+    ``{"height_m", "segments_m", "ground_m", ...}`` plus ``"ok"`` (False with ``"refusal"``, the one
+    line the gate gives, when it refuses) and ``"trusted"``."""
+    from effortface.synth.plausibility import check_plausible
 
-    The plausibility gate's ``height_m`` replaces it when the gate is present (:func:`plausibility`).
-    """
-    z = motion.positions_m[..., 2]
-    return float(np.median(z.max(axis=1) - z.min(axis=1)))
-
-
-def _height_m(motion: Motion, figures: dict[str, Any] | None) -> float:
-    """The plausibility gate's standing height when the gate is there, else :func:`standing_height_m`."""
-    if figures is not None and figures.get("height_m") is not None:
-        return float(figures["height_m"])
-    return standing_height_m(motion)
-
-
-def plausibility(motion: Motion, trust: bool = False) -> dict[str, Any] | None:
-    """The plausibility gate's figures and verdict, when the gate is part of this build (else None).
-
-    MERGE: ``effortface.synth.plausibility.check_plausible(motion, *, trust=False) -> dict`` (issue 34)
-    is connected here, the one call site: ``{"height_m", "segments_m", "ground_m", ...}`` plus
-    ``"ok"`` (False with ``"refusal"``, the one line the gate gives, when it refuses).
-    """
     try:
-        from effortface.synth.plausibility import check_plausible  # type: ignore[import-not-found,import-untyped,unused-ignore]
-    except ImportError:
-        return None
-    figures: dict[str, Any] = dict(check_plausible(motion, trust=True))
-    try:
-        check_plausible(motion, trust=trust)
+        figures: dict[str, Any] = dict(check_plausible(motion, trust=trust, mapping=mapping))
         figures["ok"] = True
     except UserError as exc:
-        figures["ok"], figures["refusal"] = False, str(exc)
+        figures = {**check_plausible(motion, trust=True, mapping=mapping), "ok": False, "refusal": str(exc)}
     return figures
 
 
-def check_plausible_clip(motion: Motion, trust: bool = False) -> None:
-    """Refuse (UserError, one line) a clip outside the human ranges unless ``trust``; nothing without the gate."""
-    figures = plausibility(motion, trust)
-    if figures is not None and not figures["ok"]:
-        raise UserError(figures["refusal"])
+def check_plausible_clip(motion: Motion, trust: bool = False, mapping: SegmentMapping | None = None) -> None:
+    """Refuse (UserError, one line) a clip outside the human ranges unless ``trust``."""
+    from effortface.synth.plausibility import check_plausible
+
+    check_plausible(motion, trust=trust, mapping=mapping)
 
 
 def marker_gaps(labels: Sequence[str], missing: np.ndarray, rate_hz: float) -> dict[str, dict[str, float]]:

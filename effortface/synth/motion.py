@@ -11,6 +11,7 @@ why the BVH reader is hand-written instead of using a third-party BVH package.
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import itertools
 import math
 import zipfile
@@ -63,10 +64,20 @@ BVH_CHUNK_FRAMES = 8192
 #: float32 keeps 0.1 mm on a 10 m stage, far below mocap noise).
 FLOAT32_ABOVE_FRAMES = 72_000
 
-#: Y-up (BVH) to Z-up: x' = z, y' = x, z' = y (a proper rotation, so handedness is kept).
-_Y_UP_TO_Z_UP = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-#: the same rotation as a permutation: new coordinate i is old coordinate _Y_UP_TO_Z_UP_ORDER[i]
-_Y_UP_TO_Z_UP_ORDER = np.argmax(_Y_UP_TO_Z_UP, axis=1)
+#: a file's up axis (one of x, y, z, -x, -y, -z) -> the rotation turning its coordinates to Z up:
+#: ``p_z_up = UP_TO_Z_UP[up] @ p_file``. Each is a proper rotation (determinant 1, handedness kept)
+#: and a signed permutation of the axes; Y up is x' = z, y' = x, z' = y (the cyclic turn).
+UP_TO_Z_UP: dict[str, np.ndarray] = {
+    "z": np.eye(3),
+    "y": np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]),
+    "x": np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]]),
+    "-z": np.diag([1.0, -1.0, -1.0]),
+    "-y": np.array([[0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]),
+    "-x": np.array([[0.0, 1.0, 0.0], [0.0, 0.0, -1.0], [-1.0, 0.0, 0.0]]),
+}
+#: words in joint names that mark the head and the feet, for the direction of gravity over a clip
+HEAD_WORDS = ("head",)
+FOOT_WORDS = ("foot", "toe", "ankle", "heel")
 
 
 #: what :attr:`Motion.reading` may hold (every key optional):
@@ -80,6 +91,89 @@ READING_KEYS = ("unit_m", "unit_from", "up_axis", "up_from", "producer", "marker
 
 class MotionFormatError(UserError):
     """A motion file does not follow its format; the message names the file (and line)."""
+
+
+def _named(joint_names: Sequence[str], words: Sequence[str]) -> list[int]:
+    """The joints whose name holds one of ``words`` (case-insensitive)."""
+    return [j for j, n in enumerate(joint_names) if any(w in n.lower() for w in words)]
+
+
+def _axis_name(vector: np.ndarray) -> str:
+    """The signed axis (x, -y, ...) along which ``vector`` (3,) is longest."""
+    a = int(np.argmax(np.abs(vector)))
+    return ("-" if vector[a] < 0 else "") + "xyz"[a]
+
+
+#: the format's up axis is kept when the head is above the feet along it in this share of the frames ...
+CONVENTION_KEPT_SHARE = 0.7
+#: ... and the median rise along it is at least this fraction of the median head-feet distance (the
+#: head 9 degrees above the feet: a push-up's 15-25 degrees keeps it, a body standing along another
+#: axis does not)
+CONVENTION_KEPT_RISE = 0.15
+
+
+def _along(vectors: np.ndarray, axis: str) -> np.ndarray:
+    """The components of ``vectors`` (..., 3) along a signed axis (``'-y'``)."""
+    return (-1.0 if axis.startswith("-") else 1.0) * vectors[..., "xyz".index(axis[-1])]
+
+
+def detect_up_axis(positions: np.ndarray, joint_names: Sequence[str], default: str,
+                   rest_positions: np.ndarray | None = None) -> tuple[str, str]:
+    """A clip's up axis in its file's coordinates, from gravity over the clip, and how it was decided.
+
+    Gravity: the head stays above the feet. With joints named like a head (:data:`HEAD_WORDS`) and
+    like feet (:data:`FOOT_WORDS`), the format's convention ``default`` is kept when the head is
+    above the feet along it in most frames (:data:`CONVENTION_KEPT_SHARE`, by at least
+    :data:`CONVENTION_KEPT_RISE` of their distance: a push-up or a sit-up keeps it); otherwise the up
+    axis is the signed axis of the median head-minus-feet vector over the frames. Without them, ``default`` (the format's convention: a clip's extent does
+    not tell up from sideways, a T-pose is as wide as it is tall). The rest
+    pose (when given) is only reported: a rest pose need not be upright (a body lying along x, a
+    T-pose whose arm span equals its height).
+
+    Parameters
+    ----------
+    positions : ndarray, shape (T, J, 3)
+        World joint positions in the file's axes (any unit), e.g. a clip's reference frames.
+    joint_names : sequence of str
+        J joint names.
+    default : str
+        The format's convention (``"y"`` for BVH, ``"z"`` for a positions CSV).
+    rest_positions : ndarray, shape (J, 3), optional
+        The rest pose, to say whether it agrees.
+
+    Returns
+    -------
+    up : str
+        One of x, y, z, -x, -y, -z.
+    how : str
+        E.g. ``'gravity over the clip: the head above the feet along y in 100% of frames; the rest
+        pose agrees'``.
+    """
+    pos = np.asarray(positions, dtype=float)
+    head, feet = _named(joint_names, HEAD_WORDS), _named(joint_names, FOOT_WORDS)
+    if head and feet and pos.size:
+        with np.errstate(all="ignore"):  # absurd values: refused by check_positions after this
+            rise = pos[:, head].mean(axis=1) - pos[:, feet].mean(axis=1)
+        rise = np.nan_to_num(rise, nan=0.0, posinf=0.0, neginf=0.0)
+        median = np.median(rise, axis=0)
+        along_default = _along(rise, default)
+        if np.mean(along_default > 0) >= CONVENTION_KEPT_SHARE and \
+                np.median(along_default) >= CONVENTION_KEPT_RISE * float(np.linalg.norm(median)):
+            up, note = default, "the format's convention"  # a push-up lies mostly along x, its head still up y
+        else:
+            up, note = _axis_name(median), f"not the format's {default}"
+        share = float(np.mean(_along(rise, up) > 0))
+        how = f"gravity over the clip: the head above the feet along {up} in {share:.0%} of frames ({note})"
+    else:
+        up = default
+        how = f"the format's convention ({default} up): no head and feet named to check it against"
+    if rest_positions is not None and len(rest_positions):
+        rest = np.asarray(rest_positions, dtype=float)
+        rest_up = _axis_name(rest[head].mean(axis=0) - rest[feet].mean(axis=0)) if head and feet else \
+            "xyz"[int(np.argmax(np.ptp(rest, axis=0)))]
+        how += "; the rest pose agrees" if rest_up.lstrip("-") == up.lstrip("-") else \
+            f"; the rest pose lies along {rest_up.lstrip('-')} (not upright: not used)"
+    return up, how
 
 
 def check_parents(parents: np.ndarray, source: str | Path) -> np.ndarray:
@@ -295,8 +389,9 @@ def motion_from_positions(
 
 #: motion file suffixes :func:`read_motion` reads out of the box (:func:`motion_suffixes` adds registered ones)
 MOTION_SUFFIXES = (".bvh", ".npz", ".c3d", ".csv")
-#: a motion reader: (path, unit_m) -> Motion; ``unit_m`` is the caller's length unit (None: the file's own)
-MotionReader = Callable[[Path, float | None], Motion]
+#: a motion reader: (path, unit_m) -> Motion or (path, unit_m, up) -> Motion; ``unit_m`` is the
+#: caller's length unit and ``up`` the file's up axis (None: the file's own)
+MotionReader = Callable[..., Motion]
 _READERS: dict[str, MotionReader] = {}
 
 
@@ -309,7 +404,8 @@ def register_motion_reader(suffix: str, reader: MotionReader) -> None:
         The file suffix, with its dot (``".trc"``); compared without case. A suffix registered
         again gets the new reader.
     reader : callable
-        ``reader(path, unit_m) -> Motion``: raise :class:`MotionFormatError` naming the file, what
+        ``reader(path, unit_m) -> Motion``, or ``reader(path, unit_m, up) -> Motion`` to take the
+        caller's up axis (one of x, y, z, -x, -y, -z, or None): raise :class:`MotionFormatError` naming the file, what
         was expected and what was found for a file it cannot read (:func:`motion_from_positions`
         builds a checked Motion from joint positions).
 
@@ -328,7 +424,7 @@ def motion_suffixes() -> tuple[str, ...]:
     return tuple(_READERS)
 
 
-def read_motion(path: str | Path, *, unit_m: float | None = None) -> Motion:
+def read_motion(path: str | Path, *, unit_m: float | None = None, up: str | None = None) -> Motion:
     """Read a motion file, choosing the reader by suffix (:func:`motion_suffixes`, :func:`register_motion_reader`).
 
     ``.bvh`` (:func:`read_bvh`), ``.npz`` (:func:`read_npz_motion`), ``.csv`` joint positions in
@@ -344,17 +440,24 @@ def read_motion(path: str | Path, *, unit_m: float | None = None) -> Motion:
     path : str or Path
         The motion file.
     unit_m : float, optional
-        BVH length unit in metres (see :func:`read_bvh`); ignored for the others (in metres, or
-        in the units a C3D file declares).
+        Metres per file length unit; None: from the file (C3D ``POINT:UNITS``, ``.npz`` metres, CSV
+        ``<joint>_x_m`` columns) or the skeleton's size (BVH, CSV ``<joint>_x`` columns). Given, it
+        replaces the file's declaration.
+    up : str, optional
+        The file's up axis, one of x, y, z, -x, -y, -z; None: from the file (C3D ``X_SCREEN`` /
+        ``Y_SCREEN``) or gravity over the clip (BVH, CSV: :func:`detect_up_axis`).
 
     Returns
     -------
     Motion
+        Metres, Z up; :attr:`Motion.reading` says how the unit and the up axis were decided.
 
     Raises
     ------
     MotionFormatError
         Unknown suffix, missing file or malformed content.
+    UserError
+        A bad ``unit_m`` or ``up``, or an ``up`` given to a registered reader that takes none.
     """
     path = Path(path)
     suffix = path.suffix.lower()
@@ -364,25 +467,89 @@ def read_motion(path: str | Path, *, unit_m: float | None = None) -> Motion:
                                 f"got suffix {suffix!r}")
     if path.exists():  # a FIFO or device would block or read forever
         check_regular_file(path, f"a motion file ({suffix})", MotionFormatError)
+    up = _check_up_axis(up)
+    if _takes_up(reader):
+        return reader(path, unit_m, up)
+    if up is not None:
+        raise UserError(f"{path}: --up: the reader registered for {suffix} takes no up axis (it reads the "
+                        f"file's own), found --up {up}")
     return reader(path, unit_m)
 
 
-def _read_bvh(path: Path, unit_m: float | None) -> Motion:
-    return read_bvh(path, unit_m=unit_m)
+def _takes_up(reader: MotionReader) -> bool:
+    """Whether a registered reader takes the caller's up axis (a third argument or ``up``)."""
+    try:
+        params = list(inspect.signature(reader).parameters.values())
+    except (TypeError, ValueError):
+        return False
+    positional = [p for p in params if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
+    return len(positional) >= 3 or any(p.kind is p.VAR_POSITIONAL for p in params)
 
 
-def _read_npz(path: Path, unit_m: float | None) -> Motion:
-    return read_npz_motion(path)
+def _read_bvh(path: Path, unit_m: float | None, up: str | None = None) -> Motion:
+    return read_bvh(path, unit_m=unit_m, up_axis=up)
 
 
-def _read_csv(path: Path, unit_m: float | None) -> Motion:
-    return read_positions_csv(path)
+def _read_npz(path: Path, unit_m: float | None, up: str | None = None) -> Motion:
+    motion = read_npz_motion(path)
+    if up not in (None, "z"):
+        raise UserError(f"{path}: --up: a retargeted .npz clip is Z up by its format, found --up {up}")
+    return _given_unit(motion, unit_m)
 
 
-def _read_c3d(path: Path, unit_m: float | None) -> Motion:
+def _given_unit(motion: Motion, unit_m: float | None) -> Motion:
+    """A clip read in the unit its file declares (:attr:`Motion.reading` ``unit_m``) rescaled to the
+    caller's ``unit_m`` (``--unit-m`` overrides the declaration); refused if the reader said none."""
+    if unit_m is None:
+        return motion
+    declared = motion.reading.get("unit_m")
+    if not declared:
+        raise UserError(f"{motion.source}: --unit-m: expected a reader that says the unit it read, found "
+                        f"none to replace; leave --unit-m out (the file's own unit is used)")
+    pos = np.asarray(motion.positions_m) * (_checked_unit_m(unit_m) / float(declared))
+    check_positions(motion.source, pos, motion.joint_names)
+    reading = {**motion.reading, "unit_m": float(unit_m),
+               "unit_from": f"given (--unit-m; the file says {float(declared):g} m)"}
+    return dataclasses.replace(motion, positions_m=pos, reading=reading)
+
+
+def _read_csv(path: Path, unit_m: float | None, up: str | None = None) -> Motion:
+    return _csv_unit_and_up(read_positions_csv(path), unit_m, up)
+
+
+def _read_c3d(path: Path, unit_m: float | None, up: str | None = None) -> Motion:
     from effortface.synth.c3d_motion import read_c3d  # imports the c3d package when called
 
-    return read_c3d(path)
+    return read_c3d(path, up=up, unit_m=unit_m)  # the file's POINT:UNITS and axes unless given
+
+
+def _csv_unit_and_up(motion: Motion, unit_m: float | None, up: str | None) -> Motion:
+    """A positions CSV turned to its up axis (given, or :func:`detect_up_axis` with the format's Z
+    up as the default) and scaled by its unit (given; ``<joint>_x`` columns: detected from the body's
+    size when it is not a human size in metres)."""
+    reading = dict(motion.reading)
+    pos = np.array(motion.positions_m, dtype=float)
+    sample = pos[::max(1, motion.n_frames // UP_FRAMES)]
+    if up is None:
+        up, reading["up_from"] = detect_up_axis(sample, motion.joint_names, "z")
+    else:
+        reading["up_from"] = "given (--up)"
+    reading["up_axis"] = up
+    to_z_up(pos, None, up)
+    if unit_m is not None:
+        reading["unit_m"], reading["unit_from"] = _checked_unit_m(unit_m), "given (--unit-m)"
+    elif not str(reading.get("unit_from", "")).startswith("the column names"):
+        size = float(np.median(np.ptp(pos[::max(1, motion.n_frames // UP_FRAMES), :, 2], axis=1)))
+        lo, hi = STATURE_RANGE_M
+        if not lo <= size <= hi:
+            try:
+                name, reading["unit_m"] = detect_bvh_unit_m(size)
+                reading["unit_from"] = f"body {size:.4g} units tall (median over the clip) -> {name}"
+            except UserError:
+                pass  # left in metres: the plausibility gate names the height
+    pos *= reading["unit_m"]
+    check_positions(motion.source, pos, motion.joint_names)
+    return dataclasses.replace(motion, positions_m=pos, reading=reading)
 
 
 for _suffix, _reader in zip(MOTION_SUFFIXES, (_read_bvh, _read_npz, _read_c3d, _read_csv)):
@@ -456,17 +623,19 @@ def forward_kinematics(
     local = np.ascontiguousarray(np.moveaxis(np.asarray(local_rotations, dtype=float), 0, -1))
     trans = None if local_translations is None else \
         np.ascontiguousarray(np.moveaxis(np.asarray(local_translations, dtype=float), 0, -1))
+    offsets = np.asarray(offsets, dtype=float)
     pos, rot = _pose_components(parents, offsets, list(local),
                                 np.ascontiguousarray(np.asarray(root_positions, dtype=float).T),
-                                [None] * len(parents) if trans is None else list(trans))
+                                [None] * len(parents) if trans is None else
+                                [offsets[j][:, None] + t for j, t in enumerate(trans)])
     return np.ascontiguousarray(np.moveaxis(pos, -1, 0)), np.ascontiguousarray(np.moveaxis(rot, -1, 0))
 
 
 def _pose_components(parents: np.ndarray, offsets: np.ndarray, local: Sequence[np.ndarray | None],
                      root: np.ndarray, trans: Sequence[np.ndarray | None]) -> tuple[np.ndarray, np.ndarray]:
     """:func:`forward_kinematics` with frames last: local rotations (3, 3, T) per joint (None: the
-    identity), root positions (3, T), per-frame translations (3, T) per joint (None: none) ->
-    positions (J, 3, T) and rotations (J, 3, 3, T).
+    identity), root positions (3, T), per-frame local translations (3, T) per joint that REPLACE its
+    offset (BVH position channels; None: the offset) -> positions (J, 3, T) and rotations (J, 3, 3, T).
 
     Frames last, every product is a few whole-array operations per joint (a batched 3 x 3 ``@``
     over frames runs one tiny product per frame, about 8x slower).
@@ -481,7 +650,7 @@ def _pose_components(parents: np.ndarray, offsets: np.ndarray, local: Sequence[n
             continue
         t_j = trans[j]
         arm = np.einsum("ikt,k->it", rot[p], offsets[j]) if t_j is None else \
-            np.einsum("ikt,kt->it", rot[p], offsets[j][:, None] + t_j)
+            np.einsum("ikt,kt->it", rot[p], t_j)
         np.add(pos[p], arm, out=pos[j])
         local_j = local[j]
         if local_j is None:
@@ -739,8 +908,13 @@ _MIXED_COLUMNS = {"X": (1, 2), "Y": (2, 0), "Z": (0, 1)}
 def _local_rotations(
     joints: list[_BvhJoint], channels: np.ndarray
 ) -> tuple[list[np.ndarray | None], list[np.ndarray | None]]:
-    """Per joint, frames last: local rotation (3, 3, T) (None without rotation channels) and position
-    channels (3, T) (None without), from the channel values (channels, T)."""
+    """Per joint, frames last: local rotation (3, 3, T) (None without rotation channels) and local
+    translation (3, T) (None without position channels), from the channel values (channels, T).
+
+    Position channels REPLACE the joint's OFFSET, as in Blender's importer and the BVH convention
+    (root and child joints alike: a file with 6 channels on every joint gives each bone's vector in
+    every frame); a component without a channel keeps the OFFSET's value.
+    """
     n_frames = channels.shape[1]
     rotations: list[np.ndarray | None] = []
     translations: list[np.ndarray | None] = []
@@ -756,7 +930,7 @@ def _local_rotations(
                 _rotate_columns(rot, _MIXED_COLUMNS[ch[0]], np.cos(angle), np.sin(angle))
             else:
                 if trans is None:
-                    trans = np.zeros((3, n_frames))
+                    trans = np.repeat(joint.offset[:, None], n_frames, axis=1)
                 trans["XYZ".index(ch[0])] = column
         rotations.append(rot)
         translations.append(trans)
@@ -804,7 +978,28 @@ def detect_bvh_unit_m(rest_height_units: float) -> tuple[str, float]:
     )
 
 
-def read_bvh(path: str | Path, *, unit_m: float | None = None, up_axis: str = "y",
+#: a BVH's up axis is detected on every ``max(1, n_frames // UP_FRAMES)``-th frame (the whole-clip
+#: and the streamed readers detect it on the same frames)
+UP_FRAMES = 600
+
+
+def _bvh_up(up_axis: str | None, positions: np.ndarray, names: Sequence[str], offsets: np.ndarray,
+            parents: np.ndarray) -> tuple[str, str]:
+    """The file's up axis and how it was decided: ``up_axis`` if given, else :func:`detect_up_axis`
+    on posed frames in the file's axes (BVH's convention, y, when no head and feet are named)."""
+    if up_axis is not None:
+        return up_axis, "given (--up)"
+    return detect_up_axis(positions, names, "y", rest_pose(offsets, parents))
+
+
+def _check_up_axis(up_axis: str | None) -> str | None:
+    """``up_axis`` checked (one of :data:`effortface.synth.read_options.UP_AXES`, or None)."""
+    from effortface.synth.read_options import check_up  # the one check of an up axis
+
+    return check_up(up_axis, "up_axis")
+
+
+def read_bvh(path: str | Path, *, unit_m: float | None = None, up_axis: str | None = None,
              dtype: Any = None) -> Motion:
     """Read a BVH file into a :class:`Motion` (metres, Z up), any joint names and channel orders.
 
@@ -816,10 +1011,12 @@ def read_bvh(path: str | Path, *, unit_m: float | None = None, up_axis: str = "y
     path : str or Path
         The ``.bvh`` file.
     unit_m : float, optional
-        Length of one file unit in metres. When omitted it is detected from the rest-pose height
-        by :func:`detect_bvh_unit_m` (CMU cgspeed files: 0.05644 m per unit).
-    up_axis : {'y', 'z'}
-        The file's up axis: BVH is Y-up by convention; Y-up is converted to Z-up.
+        Length of one file unit in metres. When omitted it is detected from the rest pose's size
+        along its longest axis by :func:`detect_bvh_unit_m` (CMU cgspeed files: 0.05644 m per unit).
+    up_axis : {'x', 'y', 'z', '-x', '-y', '-z'}, optional
+        The file's up axis. When omitted it is detected from gravity over the clip
+        (:func:`detect_up_axis`; BVH's convention, y, when no head and feet are named). The
+        positions come out Z up whatever it is.
     dtype : numpy dtype, optional
         Of the positions and rotations. Default: float64, and float32 for clips longer than
         :data:`FLOAT32_ABOVE_FRAMES` (a 1 h 120 Hz clip then holds 0.8 GB instead of 1.6 GB).
@@ -829,6 +1026,7 @@ def read_bvh(path: str | Path, *, unit_m: float | None = None, up_axis: str = "y
     Returns
     -------
     Motion
+        With :attr:`Motion.reading` ``unit_m``, ``unit_from``, ``up_axis``, ``up_from``.
 
     Raises
     ------
@@ -836,10 +1034,14 @@ def read_bvh(path: str | Path, *, unit_m: float | None = None, up_axis: str = "y
         Missing file or malformed content; the message names the file and the line number.
     UserError
         Bad ``unit_m`` / ``up_axis``, or a unit that cannot be detected.
+
+    Notes
+    -----
+    Position channels replace the joint's OFFSET (root and child joints alike), as Blender's
+    importer does; a component without a channel keeps the OFFSET's.
     """
     path = Path(path)
-    if up_axis not in ("y", "z"):
-        raise UserError(f"up_axis: expected 'y' or 'z', got {up_axis!r}")
+    up_axis = _check_up_axis(up_axis)
     try:
         with path.open(encoding="utf-8", errors="replace") as f:
             lines = _read_bvh_header(f)
@@ -852,33 +1054,36 @@ def read_bvh(path: str | Path, *, unit_m: float | None = None, up_axis: str = "y
                 np.dtype(np.float32 if n_frames > FLOAT32_ABOVE_FRAMES else np.float64)
             pos = np.empty((n_frames, len(joints), 3), dtype=out_dtype)
             rot = np.empty((n_frames, len(joints), 3, 3), dtype=out_dtype)
-            _pose_frames(path, f, motion_at + 3, joints, parents, offsets, n_channels, up_axis, (pos, rot))
+            _pose_frames(path, f, motion_at + 3, joints, parents, offsets, n_channels, (pos, rot))
     except OSError as exc:
         raise MotionFormatError(f"{path}: expected a readable BVH file, got {exc.strerror}") from None
-    pos *= _bvh_scale(path, offsets, parents, up_axis, unit_m)
+    scale, unit_from = _bvh_scale(path, offsets, parents, unit_m)
     names = tuple(j.name for j in joints)
+    up, up_from = _bvh_up(up_axis, pos[::max(1, n_frames // UP_FRAMES)], names, offsets, parents)
+    to_z_up(pos, rot, up)
+    pos *= scale
     check_positions(path, pos, names)
-    return Motion(names, parents, pos, rot, _fps_from_frame_time(frame_time_s), str(path))
+    return Motion(names, parents, pos, rot, _fps_from_frame_time(frame_time_s), str(path),
+                  reading={"unit_m": scale, "unit_from": unit_from, "up_axis": up, "up_from": up_from})
 
 
 def _pose_frames(path: Path, f: TextIO, first: int, joints: list[_BvhJoint], parents: np.ndarray,
-                 offsets: np.ndarray, n_channels: int, up_axis: str,
-                 out: tuple[np.ndarray, np.ndarray]) -> None:
+                 offsets: np.ndarray, n_channels: int, out: tuple[np.ndarray, np.ndarray]) -> None:
     """Parse and pose the frame lines of ``f`` about :data:`BVH_CHUNK_FRAMES` at a time into ``out``
-    (positions in file units, Z up; rotations), so the working memory does not grow with the clip."""
+    (positions in file units and axes; rotations), so the working memory does not grow with the clip."""
     pos_out, rot_out = out
     done = 0
-    for pos, rot in _posed_blocks(path, f, first, joints, parents, offsets, n_channels, up_axis, len(pos_out)):
+    for pos, rot in _posed_blocks(path, f, first, joints, parents, offsets, n_channels, len(pos_out)):
         pos_out[done:done + len(pos)] = pos
         rot_out[done:done + len(pos)] = rot
         done += len(pos)
 
 
 def _posed_blocks(path: Path, f: TextIO, first: int, joints: list[_BvhJoint], parents: np.ndarray,
-                  offsets: np.ndarray, n_channels: int, up_axis: str,
+                  offsets: np.ndarray, n_channels: int,
                   n_frames: int) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     """The frame lines of ``f`` parsed and posed about :data:`BVH_CHUNK_FRAMES` at a time: positions
-    (T, J, 3) in file units, Z up, and rotations (T, J, 3, 3), float64 views; the frame count is
+    (T, J, 3) in file units and axes, and rotations (T, J, 3, 3), float64 views; the frame count is
     checked against ``n_frames`` (the ``Frames:`` line)."""
     done = 0
     chunks = _frame_chunks(f)
@@ -890,7 +1095,7 @@ def _posed_blocks(path: Path, f: TextIO, first: int, joints: list[_BvhJoint], pa
         except MotionFormatError:
             _check_frame_count(path, first, n_frames, done + len(chunk) + sum(len(c) for c in chunks))
             raise
-        pos, rot = _pose_chunk(joints, parents, offsets, frames, up_axis)
+        pos, rot = _pose_chunk(joints, parents, offsets, frames)
         yield pos.transpose(2, 0, 1), rot.transpose(3, 0, 1, 2)
         done += len(chunk)
     _check_frame_count(path, first, n_frames, done)
@@ -919,8 +1124,8 @@ class MotionBlocks:
     blocks: Callable[[], Iterator[tuple[np.ndarray, np.ndarray | None]]]
 
 
-def read_motion_blocks(path: str | Path, *, unit_m: float | None = None,
-                       reference_frames: int = 600) -> MotionBlocks:
+def read_motion_blocks(path: str | Path, *, unit_m: float | None = None, up: str | None = None,
+                       reference_frames: int = UP_FRAMES) -> MotionBlocks:
     """A motion file as :class:`MotionBlocks`: BVH streamed from the file, other formats read whole.
 
     A BVH file is read twice: a first pass counts the frame lines and poses the reference frames
@@ -928,7 +1133,10 @@ def read_motion_blocks(path: str | Path, *, unit_m: float | None = None,
     hour at 120 Hz (432,000 frames, 0.8 GB as float32 positions and rotations) never sits in memory.
     The values are :func:`read_bvh`'s (float32 above :data:`FLOAT32_ABOVE_FRAMES`, the same scaling).
     The other formats (.npz, .csv, .c3d, registered readers, a registered ``.bvh`` reader) are read whole by :func:`read_motion`
-    and handed out in slices: their readers hold the clip.
+    and handed out in slices: their readers hold the clip. ``unit_m`` and ``up`` are
+    :func:`read_motion`'s; the skeleton's :attr:`Motion.reading` says how the clip was read (a BVH's
+    up axis is detected on its reference frames, the frames :func:`read_bvh` uses with the default
+    ``reference_frames``).
 
     Raises
     ------
@@ -937,14 +1145,19 @@ def read_motion_blocks(path: str | Path, *, unit_m: float | None = None,
     """
     path = Path(path)
     if path.suffix.lower() != ".bvh" or _READERS.get(".bvh") is not _read_bvh:  # not ours: read whole
-        motion = read_motion(path, unit_m=unit_m)
+        motion = read_motion(path, unit_m=unit_m, up=up)
         return _blocks_of(motion, reference_frames)
     if path.exists():
         check_regular_file(path, "a motion file (.bvh)", MotionFormatError)
+    up = _check_up_axis(up)
     header = _bvh_stream_header(path, unit_m)
     step = max(1, header.n_frames // reference_frames)
     ref_pos, ref_rot = _bvh_reference_frames(path, header, step)
-    skeleton = Motion(header.names, header.parents, ref_pos, ref_rot, header.fps, str(path))
+    up, up_from = _bvh_up(up, ref_pos, header.names, header.offsets, header.parents)
+    header = dataclasses.replace(header, up_axis=up)
+    ref_pos, ref_rot = _scaled(header, ref_pos, ref_rot)
+    reading = {"unit_m": header.scale, "unit_from": header.unit_from, "up_axis": up, "up_from": up_from}
+    skeleton = Motion(header.names, header.parents, ref_pos, ref_rot, header.fps, str(path), reading)
     return MotionBlocks(skeleton, header.n_frames, lambda: _bvh_blocks(path, header))
 
 
@@ -976,10 +1189,11 @@ class _BvhHeader:
     fps: float
     dtype: np.dtype
     scale: float
-    up_axis: str
+    unit_from: str
+    up_axis: str = "z"  # until detected from the reference frames
 
 
-def _bvh_stream_header(path: Path, unit_m: float | None, up_axis: str = "y") -> _BvhHeader:
+def _bvh_stream_header(path: Path, unit_m: float | None) -> _BvhHeader:
     """Parse the hierarchy and motion header of a BVH file (as :func:`read_bvh`)."""
     try:
         with path.open(encoding="utf-8", errors="replace") as f:
@@ -993,19 +1207,21 @@ def _bvh_stream_header(path: Path, unit_m: float | None, up_axis: str = "y") -> 
     offsets = np.array([j.offset for j in joints])
     dtype = np.dtype(np.float32 if n_frames > FLOAT32_ABOVE_FRAMES else np.float64)
     return _BvhHeader(joints, tuple(j.name for j in joints), parents, offsets, n_channels, motion_at + 3,
-                      n_frames, _fps_from_frame_time(frame_time_s), dtype,
-                      _bvh_scale(path, offsets, parents, up_axis, unit_m), up_axis)
+                      n_frames, _fps_from_frame_time(frame_time_s), dtype, *_bvh_scale(path, offsets, parents, unit_m))
 
 
 def _scaled(header: _BvhHeader, pos: np.ndarray, rot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Posed frames in :func:`read_bvh`'s dtype and metres (the same operations, the same values)."""
+    """Posed frames in :func:`read_bvh`'s dtype, metres and Z up (the same operations, the same values)."""
     pos = pos.astype(header.dtype, copy=False)  # a float64 block: the posed arrays themselves
+    rot = rot.astype(header.dtype, copy=False)
+    to_z_up(pos, rot, header.up_axis)
     pos *= header.scale
-    return pos, rot.astype(header.dtype, copy=False)
+    return pos, rot
 
 
 def _bvh_reference_frames(path: Path, header: _BvhHeader, step: int) -> tuple[np.ndarray, np.ndarray]:
-    """First pass: count the frame lines (raise on a wrong count) and pose every ``step``-th frame."""
+    """First pass: count the frame lines (raise on a wrong count) and pose every ``step``-th frame
+    (file units and axes, float64)."""
     rows: list[str] = []
     numbers: list[int] = []
     done = 0
@@ -1022,8 +1238,8 @@ def _bvh_reference_frames(path: Path, header: _BvhHeader, step: int) -> tuple[np
     _check_frame_count(path, header.first, header.n_frames, done)
     frames = np.concatenate([_parse_chunk(path, [row], header.first + k, header.n_channels)
                              for row, k in zip(rows, numbers)]) if rows else np.zeros((0, header.n_channels))
-    pos, rot = _pose_chunk(header.joints, header.parents, header.offsets, frames, header.up_axis)
-    return _scaled(header, pos.transpose(2, 0, 1), rot.transpose(3, 0, 1, 2))  # checked by blocks()
+    pos, rot = _pose_chunk(header.joints, header.parents, header.offsets, frames)
+    return np.ascontiguousarray(pos.transpose(2, 0, 1)), np.ascontiguousarray(rot.transpose(3, 0, 1, 2))
 
 
 def _bvh_blocks(path: Path, header: _BvhHeader) -> Iterator[tuple[np.ndarray, np.ndarray]]:
@@ -1033,7 +1249,7 @@ def _bvh_blocks(path: Path, header: _BvhHeader) -> Iterator[tuple[np.ndarray, np
             _read_bvh_header(f)
             done = 0
             for pos, rot in _posed_blocks(path, f, header.first, header.joints, header.parents, header.offsets,
-                                          header.n_channels, header.up_axis, header.n_frames):
+                                          header.n_channels, header.n_frames):
                 pos, rot = _scaled(header, pos, rot)
                 check_positions(path, pos, header.names, first_frame=done)
                 yield pos, rot
@@ -1042,21 +1258,33 @@ def _bvh_blocks(path: Path, header: _BvhHeader) -> Iterator[tuple[np.ndarray, np
         raise MotionFormatError(f"{path}: expected a readable BVH file, got {exc.strerror}") from None
 
 
-def _pose_chunk(joints: list[_BvhJoint], parents: np.ndarray, offsets: np.ndarray, frames: np.ndarray,
-                up_axis: str) -> tuple[np.ndarray, np.ndarray]:
-    """World positions (J, 3, T) in file units and rotations (J, 3, 3, T), Z up, of some frames (T, channels).
-
-    Y up is turned to Z up at the root(s) (:data:`_Y_UP_TO_Z_UP` permutes the rows of their position and
-    rotation), so every world position and rotation comes out Z up with no pass over them.
-    """
+def _pose_chunk(joints: list[_BvhJoint], parents: np.ndarray, offsets: np.ndarray,
+                frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World positions (J, 3, T) in file units and axes, and rotations (J, 3, 3, T), of some frames
+    (T, channels). The root's position channels replace its OFFSET, as every joint's do."""
     local, trans = _local_rotations(joints, np.ascontiguousarray(frames.T))
-    rows = _Y_UP_TO_Z_UP_ORDER if up_axis == "y" else np.arange(3)
-    root = offsets[0][:, None] + (trans[0] if trans[0] is not None else np.zeros((3, 1)))
-    for j in np.flatnonzero(parents < 0):
-        root_rot = local[j]
-        local[j] = (np.eye(3)[:, :, None] if root_rot is None else root_rot)[rows]
-    return _pose_components(parents, offsets, local, np.broadcast_to(root[rows], (3, len(frames))),
+    root = trans[0] if trans[0] is not None else offsets[0][:, None]
+    return _pose_components(parents, offsets, local, np.broadcast_to(root, (3, len(frames))),
                             [None, *trans[1:]])
+
+
+def to_z_up(positions: np.ndarray, rotations: np.ndarray | None, up: str) -> None:
+    """Turn world positions (..., 3) and rotations (..., 3, 3) from a file's axes to Z up, in place.
+
+    The turn is :data:`UP_TO_Z_UP` ``[up]``, a signed permutation of the axes, so the values are
+    exact (the same numbers, moved and maybe negated), and it is done :data:`BVH_CHUNK_FRAMES` frames
+    at a time (a long clip's working memory does not double).
+    """
+    turn = UP_TO_Z_UP[up]
+    if up == "z":
+        return
+    order = np.argmax(np.abs(turn), axis=1)
+    sign = turn[np.arange(3), order].astype(positions.dtype)
+    for at in range(0, len(positions), BVH_CHUNK_FRAMES):
+        keep = slice(at, at + BVH_CHUNK_FRAMES)
+        positions[keep] = positions[keep][..., order] * sign
+        if rotations is not None:
+            rotations[keep] = rotations[keep][..., order, :] * sign[:, None]
 
 
 def _check_frame_count(path: Path, first: int, n_frames: int, n_rows: int) -> None:
@@ -1072,28 +1300,39 @@ def _fps_from_frame_time(frame_time_s: float) -> float:
     return float(round(fps)) if abs(fps - round(fps)) < 1e-4 * fps else fps
 
 
-def _bvh_scale(
-    path: Path, offsets: np.ndarray, parents: np.ndarray, up_axis: str, unit_m: float | None
-) -> float:
-    """Metres per file unit: ``unit_m`` if given (checked), else detected from the rest pose."""
-    if unit_m is not None:
-        if isinstance(unit_m, bool) or not (isinstance(unit_m, (int, float)) and math.isfinite(unit_m)
-                                            and unit_m > 0):
-            raise UserError(f"unit_m: expected a positive length in metres, got {unit_m!r}")
-        return float(unit_m)
+def _checked_unit_m(unit_m: float) -> float:
+    """``unit_m`` as a float if it is a positive finite length in metres, else UserError."""
+    if isinstance(unit_m, bool) or not (isinstance(unit_m, (int, float)) and math.isfinite(unit_m) and unit_m > 0):
+        raise UserError(f"unit_m: expected a positive length in metres, got {unit_m!r}")
+    return float(unit_m)
+
+
+def rest_pose(offsets: np.ndarray, parents: np.ndarray) -> np.ndarray:
+    """Joint positions (J, 3) of the rest pose: every OFFSET, no rotation, in file units and axes."""
     rest = np.zeros_like(offsets)
     for j, p in enumerate(parents):
         rest[j] = offsets[j] + (rest[p] if p >= 0 else 0.0)
-    up = rest[:, 1 if up_axis == "y" else 2]
-    height = float(up.max() - up.min())
+    return rest
+
+
+def _bvh_scale(path: Path, offsets: np.ndarray, parents: np.ndarray, unit_m: float | None) -> tuple[float, str]:
+    """Metres per file unit and how it was decided: ``unit_m`` if given (checked), else detected from
+    the rest pose's size along its longest axis (the OFFSETs, whatever way the rest pose lies: a body
+    lying along x in its rest pose, or a T-pose whose arm span is its height, measure the same)."""
+    if unit_m is not None:
+        return _checked_unit_m(unit_m), "given (--unit-m)"
+    extent = np.ptp(rest_pose(offsets, parents), axis=0)
+    size = float(extent.max())
     try:
-        return detect_bvh_unit_m(height)[1]
+        name, scale = detect_bvh_unit_m(size)
     except UserError:
         lo, hi = STATURE_RANGE_M
         raise MotionFormatError(
             f"{path}: expected a skeleton whose rest pose is {lo}-{hi} m tall in one of the units "
-            f"{', '.join(n for n, _ in BVH_UNITS_M)}, found a rest-pose height of {height:.4g} file units (give the unit: --unit-m M)"
+            f"{', '.join(n for n, _ in BVH_UNITS_M)}, found a rest-pose height of {size:.4g} file units "
+            f"(its longest axis; give the unit: --unit-m M)"
         ) from None
+    return scale, f"rest pose {size:.4g} units along {'xyz'[int(extent.argmax())]} -> {name} ({scale:g} m)"
 
 
 # --------------------------------------------------------------------------------------------
@@ -1156,7 +1395,9 @@ def read_npz_motion(
     )
     pos, rot = forward_kinematics(parents, offsets, local_rot, root)
     check_positions(path, pos, names)
-    return Motion(tuple(names), parents, pos, rot, fps, str(path))
+    return Motion(tuple(names), parents, pos, rot, fps, str(path),
+                  reading={"unit_m": 1.0, "unit_from": "the format (metres)", "up_axis": "z",
+                           "up_from": "the format (Z up)"})
 
 
 def _float_array(path: Path, data: Mapping[str, np.ndarray], key: str) -> np.ndarray:

@@ -201,7 +201,9 @@ def read_positions_csv(path: str | os.PathLike[str]) -> Motion:
     Returns
     -------
     Motion
-        Without rotations; the frame rate is 1 / the median step of ``t_s``.
+        Without rotations; the frame rate is 1 / the median step of ``t_s``. As the file holds it
+        (metres, Z up: the format's); :func:`effortface.synth.motion.read_motion` checks its up axis
+        and, for ``<joint>_x`` columns, its unit.
 
     Raises
     ------
@@ -225,7 +227,10 @@ def read_positions_csv(path: str | os.PathLike[str]) -> Motion:
     step_s = _check_times(path, table[:, 0])
     parents = _tree(path, names, dialect, comments)
     positions_m = table[:, 1:].reshape(len(table), len(names), 3)
-    return motion_from_positions(positions_m, names, parents, 1.0 / step_s, source=str(path))
+    motion = motion_from_positions(positions_m, names, parents, 1.0 / step_s, source=str(path))
+    unit_from = "the column names (<joint>_x_m: metres)" if dialect is DIALECTS[0] else "the format (metres)"
+    return dataclasses.replace(motion, reading={"unit_m": 1.0, "unit_from": unit_from, "up_axis": "z",
+                                                "up_from": "the format (Z up)"})
 
 
 def _numbered_data_lines(fh: IO[str], comments: list[tuple[int, str]]) -> Iterator[tuple[int, str]]:

@@ -11,6 +11,9 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
 
 from effortface.core import bounds
 from effortface.core.errors import UserError
@@ -29,15 +32,15 @@ class MotionReadOptions:
         Metres per file length unit (None: from the file or the skeleton's size).
     up : str or None
         The file's up axis, one of :data:`UP_AXES` (None: from the file or the motion).
-    mapping : str or None
-        A joint-to-segment mapping JSON file (None: the built-in conventions).
+    mapping : str, mapping or None
+        A joint-to-segment mapping JSON file, or one already read (None: the built-in conventions).
     trust_skeleton : bool
         Proceed with a body outside the human ranges of the plausibility gate.
     """
 
     unit_m: float | None = None
     up: str | None = None
-    mapping: str | None = None
+    mapping: str | Path | Mapping[str, Any] | None = None
     trust_skeleton: bool = False
 
 
@@ -58,7 +61,8 @@ def check_unit_m(unit_m: float | None, option: str = "--unit-m") -> float | None
     if unit_m is None:
         return None
     if not (isinstance(unit_m, (int, float)) and math.isfinite(unit_m) and unit_m > 0):
-        raise UserError(f"{option}: expected a length in metres above 0, found {unit_m!r}")
+        shown = f"{unit_m:g}" if isinstance(unit_m, (int, float)) else repr(unit_m)
+        raise UserError(f"{option}: expected a length in metres above 0, found {shown}")
     bounds.check("unit_m", float(unit_m), option)
     return float(unit_m)
 

@@ -221,6 +221,14 @@ class FaceModel:
         -------
         dict of ndarray, each (T,)
             :data:`CURVE_COLUMNS` then one weight curve per blendshape.
+
+        Notes
+        -----
+        No plausibility gate here (a choice): game code feeds its own characters, children and
+        creatures among them, and a refusal inside a game loop helps no one. A file is read with its
+        unit and up axis detected (:func:`effortface.synth.motion.read_motion`); to refuse a body
+        outside the human ranges as the commands do, call
+        :func:`effortface.synth.plausibility.check_plausible` on the clip first.
         """
         e = self.expressiveness(character)
         motion = motion if isinstance(motion, Motion) else read_motion(Path(motion))

@@ -132,6 +132,19 @@ CONVENTIONS: dict[str, dict[str, tuple[EndPoint, EndPoint]]] = {
             "foot": ("{S}Foot", "{S}Toe_end|{S}Toe"),
         }, "Left", "Right"),
     },
+    # Bandai Namco Research motion dataset (6 channels on every joint): Hips, Spine, Chest, Neck, Head,
+    # Shoulder_L, UpperArm_L, LowerArm_L, Hand_L, UpperLeg_L, LowerLeg_L, Foot_L, Toes_L (its head's
+    # End Site sits at the Head joint: the head segment runs from there)
+    "Bandai Namco": {
+        "head": ("Head_end|Head", "Neck"),
+        "trunk": ("Neck", ["UpperLeg_L", "UpperLeg_R"]),
+        **_limbs({
+            "upper_arm": ("UpperArm_{S}", "LowerArm_{S}"), "forearm": ("LowerArm_{S}", "Hand_{S}"),
+            "hand": ("Hand_{S}", "Hand_{S}_end"),
+            "thigh": ("UpperLeg_{S}", "LowerLeg_{S}"), "shank": ("LowerLeg_{S}", "Foot_{S}"),
+            "foot": ("Foot_{S}", "Toes_{S}_end|Toes_{S}"),
+        }, "L", "R"),
+    },
     "AMP": {
         "head": ("head_end", "head"),
         "trunk": ("head", ["left_thigh", "right_thigh"]),
@@ -456,7 +469,8 @@ def map_skeleton(
         The skeleton's joints (names match case-insensitively, namespaces such as 'mixamorig:' ignored).
     mapping : mapping, str or Path, optional
         A user mapping (or JSON file, see :func:`read_mapping`), complete or partial: the built-in
-        conventions (CMU, Mixamo, Unreal, Unity, Biovision, SMPL, Xsens, AMP) fill the segments it
+        conventions (CMU, Mixamo, Unreal, Unity, Biovision, SMPL, Xsens,
+        Bandai Namco, AMP) fill the segments it
         does not name (:func:`find_mapping`). When omitted, the first complete convention is used.
     source : str or Path
         The clip, named in the refusal.

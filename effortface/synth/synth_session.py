@@ -30,6 +30,8 @@ from effortface.core.jobs import JobResult, Jobs
 from effortface.synth.curves_io import CURVE_FORMATS, write_curves
 from effortface.synth.energy import EnergyCurves, looped, work_and_power
 from effortface.synth.motion import MOTION_SUFFIXES, Motion, read_motion
+from effortface.synth.plausibility import check_plausible, reading_record
+from effortface.synth.read_options import MotionReadOptions, check_unit_m, check_up
 from effortface.synth.motion_csv import is_positions_csv
 from effortface.synth.runtime import Character, FaceModel, load_model
 from effortface.core.events import Emitter
@@ -105,6 +107,10 @@ class SynthSession:
         #: a user joint-to-segment mapping (``--mapping``), or None for the built-in conventions
         self.mapping: dict | None = None
         self.mapping_path: Path | None = None
+        #: how clips are read: ``--unit-m``, ``--up``, ``--trust-skeleton`` (None: from the file)
+        self.read = MotionReadOptions()
+        #: how the clip was read and the body the plausibility gate measured (``.units.json``'s "reading")
+        self.reading: dict[str, Any] = {}
         self.curves: dict[str, np.ndarray] = {}
         self.position_s = 0.0
         self.playing = False
@@ -138,8 +144,20 @@ class SynthSession:
 
         The repeat count goes back to 1: a count chosen for one clip would silently stretch the
         next (40 repeats of a 38 s clip are 1,520 s); the status line says so when it was above 1.
+        A file is read with :attr:`read` (unit, up axis) and goes through the plausibility gate.
+
+        Raises
+        ------
+        UserError
+            An unreadable clip, or a body outside the human ranges without ``trust_skeleton``
+            (one line naming the file and the figure; the old clip is kept).
         """
-        motion = path if isinstance(path, Motion) else read_motion(Path(path))
+        if isinstance(path, Motion):
+            motion, self.reading = path, reading_record(path)
+        else:  # the gate, not the mapping: an unmapped clip loads, to be mapped with Mapping...
+            motion = read_motion(Path(path), unit_m=self.read.unit_m, up=self.read.up)
+            body = check_plausible(motion, trust=self.read.trust_skeleton, mapping=self.mapping, name=str(path))
+            self.reading = reading_record(motion, body)
         old_loops = self.loops
         self.motion = motion
         self.motion_path = None if isinstance(path, Motion) else Path(path)
@@ -151,6 +169,26 @@ class SynthSession:
         self.status_changed.emit(f"clip: {self.motion_path or 'motion'}: {motion.n_frames} frames "
                                  f"at {motion.fps:g} Hz ({motion.n_frames / motion.fps:.1f} s){reset}",
                                  False)
+
+    def set_reading(self, *, unit_m: float | None = None, up: str | None = None,
+                    trust_skeleton: bool = False) -> None:
+        """Read clips with this unit and up axis (None: from the file), and ``trust_skeleton`` past the
+        plausibility gate; the loaded clip is read again with them.
+
+        Raises
+        ------
+        UserError
+            A bad unit or axis, or the clip refused with them (the old options and clip are kept).
+        """
+        old = self.read
+        self.read = MotionReadOptions(unit_m=check_unit_m(unit_m, "unit"), up=check_up(up, "up axis"),
+                                      trust_skeleton=bool(trust_skeleton))
+        if self.motion_path is not None:
+            try:
+                self.load_motion(self.motion_path)
+            except UserError:
+                self.read = old
+                raise
 
     def set_mapping(self, path: str | os.PathLike | None) -> None:
         """Use a joint-to-segment mapping file for the clips (None: the built-in conventions).
@@ -168,6 +206,10 @@ class SynthSession:
         if file is not None and self.motion is not None:
             build_body(self.motion.joint_names, self.motion.parents, self.character.mass_kg, self.character.sex,
                        mapping=file, source=self.motion_path or self.motion.source)
+        if self.motion is not None and self.motion_path is not None:  # the segments it maps, through the gate
+            body = check_plausible(self.motion, trust=self.read.trust_skeleton, mapping=mapping,
+                                   name=str(self.motion_path))
+            self.reading = reading_record(self.motion, body)
         self.mapping, self.mapping_path = mapping, None if path is None else Path(path)
         self._work_cache = None
         self._recompute()
@@ -336,6 +378,6 @@ class SynthSession:
         if not self.n_frames:
             raise UserError("export: expected curves, found none (load a motion clip first)")
         out = refuse_overwrite(path, overwrite=overwrite)
-        write_curves(out, self.curves, self.model, fmt=fmt, force=True)
+        write_curves(out, self.curves, self.model, fmt=fmt, force=True, reading=self.reading)
         self.status_changed.emit(f"exported {self.n_frames} frames to {out}", False)
         return out

@@ -26,7 +26,7 @@ from effortface.core.fileio import atomic_write_text, read_json
 from effortface.core.session.folder import SESSION_JSON, Session, list_sessions, read_session
 from effortface.synth.catalog import Catalog, CatalogError, default_catalog
 from effortface.synth.exercise_log import ExerciseLog, exercise_log
-from effortface.synth.read_options import check_unit_m, check_up
+from effortface.synth.read_options import MotionReadOptions, check_unit_m, check_up
 
 if TYPE_CHECKING:  # the energies load scipy: imported only when a session has motion
     from effortface.synth.energy import EnergyCurves
@@ -110,7 +110,8 @@ def session_seconds(s: Session) -> np.ndarray:
 
 
 def derive_work(session: Session | str | os.PathLike, t_s: np.ndarray | None = None,
-                catalog: Catalog | None = None, mapping: str | os.PathLike | None = None) -> WorkTable:
+                catalog: Catalog | None = None, mapping: str | os.PathLike | None = None,
+                read: MotionReadOptions | None = None) -> WorkTable:
     """w and p per second from ``motion/`` where clips cover the time, else from the exercise log.
 
     Parameters
@@ -124,6 +125,9 @@ def derive_work(session: Session | str | os.PathLike, t_s: np.ndarray | None = N
     mapping : path-like, optional
         Joint-to-segment mapping file for the clips of ``motion/`` whose motion.json entry has no
         ``mapping`` of its own (default: the built-in conventions).
+    read : MotionReadOptions, optional
+        ``--unit-m``, ``--up``, ``--trust-skeleton`` for the clips whose entry records no ``unit_m`` /
+        ``up`` of its own (default: detected); every clip goes through the plausibility gate.
 
     Returns
     -------
@@ -146,7 +150,7 @@ def derive_work(session: Session | str | os.PathLike, t_s: np.ndarray | None = N
     source = [""] * len(t)
     _fill_from_log(log, s.participant.mass_kg, t, w, p, source, catalog or default_catalog())
     if has_motion:
-        _fill_from_motion(s, log, t, w, p, source, mapping)
+        _fill_from_motion(s, log, t, w, p, source, mapping, read)
     return WorkTable(t, w, p, source)
 
 
@@ -178,11 +182,14 @@ LOG_LOAD_LABELS = ("left_kg", "right_kg", "back_kg")
 
 
 def _fill_from_motion(s: Session, log: ExerciseLog, t: np.ndarray, w: np.ndarray, p: np.ndarray,
-                      source: list[str], mapping: str | os.PathLike | None = None) -> None:
+                      source: list[str], mapping: str | os.PathLike | None = None,
+                      read: MotionReadOptions | None = None) -> None:
     """Overwrite the seconds that a clip of ``motion/motion.json`` covers with its energies.
 
     A clip's segments come from its entry's ``mapping`` (kept by ``motion attach --mapping``), else
-    ``mapping``, else the built-in conventions.
+    ``mapping``, else the built-in conventions; its unit and up axis from its entry's ``unit_m`` /
+    ``up`` (kept by ``motion attach``), else ``read``'s, else detected. Every clip goes through the
+    plausibility gate (:func:`effortface.synth.plausibility.check_read`).
 
     A clip's loads are its entry's ``load_*_kg`` keys when it has any (earlier releases), else the
     exercise log's ``load`` rows in force at each second: one energy computation per distinct set.
@@ -192,19 +199,29 @@ def _fill_from_motion(s: Session, log: ExerciseLog, t: np.ndarray, w: np.ndarray
     if part.mass_kg is None or part.sex is None:
         raise WorkError(f"{s.path / 'session.json'}: expected the participant's mass_kg and sex to compute "
                         f"work from motion/, found {part.mass_kg!r} and {part.sex!r}")
+    read = read or MotionReadOptions()
     for entry in read_motion_index(index):
         clip_path = index.parent / str(entry["path"])
         try:
-            _fill_from_clip(clip_path, entry, log, (part.mass_kg, part.sex), t, w, p, source, mapping)
+            _fill_from_clip(clip_path, entry, log, (part.mass_kg, part.sex), t, w, p, source, mapping, read)
         except UserError as exc:  # the clip named (a reader names it; a mapping or energy error may not)
             raise type(exc)(str(exc) if str(clip_path) in str(exc) else f"{clip_path}: {exc}") from None
 
 
 def _fill_from_clip(clip_path: Path, entry: dict, log: ExerciseLog, body: tuple[float, str], t: np.ndarray,
-                    w: np.ndarray, p: np.ndarray, source: list[str], mapping: str | os.PathLike | None) -> None:
-    """:func:`_fill_from_motion` for one clip of motion.json (``entry``) read from ``clip_path`` with
-    the entry's ``unit_m`` and ``up`` (kept by ``motion attach``)."""
-    clip = read_clip(clip_path, unit_m=entry.get("unit_m"), up=entry.get("up"))
+                    w: np.ndarray, p: np.ndarray, source: list[str], mapping: str | os.PathLike | None,
+                    read: MotionReadOptions) -> None:
+    """:func:`_fill_from_motion` for one clip of motion.json (``entry``) read from ``clip_path`` with the
+    entry's ``unit_m``, ``up`` and ``trust_skeleton`` (kept by ``motion attach``), else ``read``'s,
+    through the plausibility gate."""
+    from effortface.synth.plausibility import read_checked
+
+    segments = _segment_mapping(entry.get("mapping") or mapping, clip_path)
+    options = MotionReadOptions(
+        unit_m=entry["unit_m"] if entry.get("unit_m") is not None else read.unit_m,
+        up=entry["up"] if entry.get("up") is not None else read.up,
+        mapping=segments, trust_skeleton=bool(entry.get("trust_skeleton")) or read.trust_skeleton)
+    clip, _ = read_checked(clip_path, options)
     offset_s = float(entry.get("offset_s", 0.0))
     inside = np.flatnonzero((t >= offset_s) & (t <= offset_s + (clip.n_frames - 1) / clip.fps))
     if any(k in entry for k in ENTRY_LOAD_KEYS):
@@ -213,7 +230,7 @@ def _fill_from_clip(clip_path: Path, entry: dict, log: ExerciseLog, body: tuple[
         loads = [tuple(_log_load(log, label, t[i]) for label in LOG_LOAD_LABELS) for i in inside]
     for load in sorted(set(loads)):
         rows = inside[[k for k, x in enumerate(loads) if x == load]]
-        curves = _clip_curves(clip, *body, load, entry.get("mapping") or mapping, clip_path)
+        curves = _clip_curves(clip, *body, load, segments, clip_path)
         w[rows] = np.interp(t[rows], curves.t_s + offset_s, curves.w_per_kg)
         p[rows] = np.interp(t[rows], curves.t_s + offset_s, curves.p_per_kg)
     for i in inside:
@@ -221,20 +238,10 @@ def _fill_from_clip(clip_path: Path, entry: dict, log: ExerciseLog, body: tuple[
 
 
 def read_clip(path: str | os.PathLike, *, unit_m: float | None = None, up: str | None = None) -> Motion:
-    """:func:`effortface.synth.motion.read_motion` with the caller's unit and up axis (None: the file's own).
-
-    ``up`` is passed only when given, so this reads with a ``read_motion`` that has no ``up`` yet.
-    """
-    import inspect
-
+    """:func:`effortface.synth.motion.read_motion` with the caller's unit and up axis (None: the file's own)."""
     from effortface.synth.motion import read_motion
 
-    path = Path(path)
-    if up is None:
-        return read_motion(path, unit_m=unit_m)
-    if "up" not in inspect.signature(read_motion).parameters:  # MERGE: read_motion(up=) comes with issue 34's readers
-        raise WorkError(f"{path}: up {up!r}: expected a reader that takes the up axis, found none in this build")
-    return read_motion(path, unit_m=unit_m, up=up)  # type: ignore[call-arg,unused-ignore]  # up: issue 34
+    return read_motion(Path(path), unit_m=unit_m, up=up)
 
 
 def _log_load(log: ExerciseLog, label: str, t_s: float) -> float:
@@ -249,14 +256,25 @@ def _clip_curves(clip: Motion, mass_kg: float, sex: str, load: tuple[float, ...]
     ``mapping`` a segment mapping (a motion.json entry's JSON form, or a file) or None for the
     built-in conventions."""
     from effortface.synth.energy import work_and_power
-    from effortface.synth.segments import Loads, build_body, mapping_from_json
+    from effortface.synth.segments import Loads, build_body
 
     where = clip_path if clip_path is not None else clip.source
-    segments = mapping_from_json(mapping, f"{where}: motion.json mapping") if isinstance(mapping, dict) else \
-        None if mapping is None else Path(mapping)
-    body = build_body(clip.joint_names, clip.parents, mass_kg, sex, loads=Loads(*load), mapping=segments,
-                      reference_positions_m=clip.positions_m, source=where)
+    body = build_body(clip.joint_names, clip.parents, mass_kg, sex, loads=Loads(*load),
+                      mapping=_segment_mapping(mapping, where), reference_positions_m=clip.positions_m,
+                      source=where)
     return work_and_power(clip, body)
+
+
+def _segment_mapping(mapping: dict | str | os.PathLike | None, where: str | os.PathLike) -> dict | Path | None:
+    """A motion.json entry's mapping (its JSON form, versioned: :func:`~effortface.synth.segments.mapping_from_json`),
+    an already read mapping, or ``--mapping``'s file, as :func:`~effortface.synth.segments.build_body` takes it."""
+    from effortface.synth.segments import mapping_from_json
+
+    if isinstance(mapping, dict):
+        if all(isinstance(v, tuple) for v in mapping.values()):  # read already
+            return mapping
+        return mapping_from_json(mapping, f"{where}: motion.json mapping")
+    return None if mapping is None else Path(mapping)
 
 
 #: the motion.json format ``motion attach`` writes: version 2 (issue 34) adds ``"version"`` and the
@@ -312,7 +330,7 @@ def _motion_entry(path: Path, i: int, entry: object) -> dict:
             out[key] = bounds.check(bound, entry.get(key, default), f"{where}.{key}")
         except UserError as exc:
             raise WorkError(str(exc)) from None
-    try:
+    try:  # how the clip was read when it was attached (None: detected)
         out["unit_m"] = check_unit_m(entry.get("unit_m"), f"{where}.unit_m")
         out["up"] = check_up(entry.get("up"), f"{where}.up")
     except UserError as exc:
@@ -324,7 +342,8 @@ def _motion_entry(path: Path, i: int, entry: object) -> dict:
 
 
 def plan_work(folder: str | os.PathLike, *, force: bool = False,
-              mapping: str | os.PathLike | None = None) -> tuple[Path, WorkTable]:
+              mapping: str | os.PathLike | None = None,
+              read: MotionReadOptions | None = None) -> tuple[Path, WorkTable]:
     """Derive a session's work without writing it: the work.csv path and the table.
 
     Raises
@@ -337,7 +356,7 @@ def plan_work(folder: str | os.PathLike, *, force: bool = False,
     if path.exists() and not force:
         raise WorkError(f"{path}: expected no work.csv (it may be hand-made), found one; "
                         f"use --force to replace it")
-    return path, derive_work(s, mapping=mapping)
+    return path, derive_work(s, mapping=mapping, read=read)
 
 
 def write_work(folder: str | os.PathLike, *, force: bool = False) -> tuple[Path, WorkTable]:
@@ -373,11 +392,12 @@ def work_folders(paths: Sequence[str | os.PathLike]) -> list[Path]:
 
 
 def write_works(folders: Sequence[str | os.PathLike], *, force: bool = False,
-                mapping: str | os.PathLike | None = None) -> list[tuple[Path, WorkTable]]:
+                mapping: str | os.PathLike | None = None,
+                read: MotionReadOptions | None = None) -> list[tuple[Path, WorkTable]]:
     """``effortface work``: derive every session's work first (so a refusal writes nothing), then
-    write each ``work.csv`` atomically; the paths and tables, in order (``mapping``: see
+    write each ``work.csv`` atomically; the paths and tables, in order (``mapping``, ``read``: see
     :func:`derive_work`)."""
-    planned = [plan_work(folder, force=force, mapping=mapping) for folder in folders]
+    planned = [plan_work(folder, force=force, mapping=mapping, read=read) for folder in folders]
     for target, table in planned:
         atomic_write_text(target, table.to_csv())
     return planned

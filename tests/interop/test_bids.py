@@ -186,6 +186,10 @@ def test_lab_after_work_exports_with_no_validator_error(worked_lab, tmp_path):
     assert table.shape[1] == len(channels) == sidecar["MotionChannelCount"] and sidecar["SamplingFrequency"] > 0
     assert {c["units"] for c in channels} == {"m"} and {c["type"] for c in channels} == {"POS"}
     assert abs(len(table) / sidecar["SamplingFrequency"] - sidecar["RecordingDuration"]) < 1e-3
+    # issue 34: the axes as written (Z up; the CMU squatter faces +x, its left is +y) and how it was read
+    assert sidecar["SpatialAxes"] == "ALS"
+    assert "unit 0.05644 m (rest pose 27.46 units along x -> CMU cgspeed unit" in sidecar["Description"]
+    assert "up axis y (gravity over the clip: the head above the feet along y" in sidecar["Description"]
     # the work written by `effortface work` is what is exported (1 Hz, the source column dropped)
     from effortface.synth.work import read_work_csv
 

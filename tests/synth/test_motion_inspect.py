@@ -246,9 +246,10 @@ def test_motion_json_version_1_entries_still_read(tmp_path: Path) -> None:
     assert mapping_from_json(entry["mapping"], "x")["head"] == ("Head_end", "Neck")  # v1: as written
 
 
-def test_inspect_and_attach_use_the_plausibility_gate_once_merged(tmp_path: Path, capsys) -> None:
-    """Issue 34's gate (another branch): inspect shows its figures, attach passes a plausible walk."""
-    gate = pytest.importorskip("effortface.synth.plausibility")
+def test_inspect_and_attach_use_the_plausibility_gate(tmp_path: Path, capsys) -> None:
+    """The gate's figures in inspect; attach passes a plausible walk."""
+    from effortface.synth import plausibility as gate
+
     found = _inspect(capsys, str(PYMO))
     figures = gate.check_plausible(read_motion(PYMO), trust=True)
     assert found["plausibility"]["ok"] is True and found["height_m"] == pytest.approx(figures["height_m"])

@@ -40,7 +40,15 @@ def test_synth_default_model_end_to_end(shared_data: Path, tmp_path: Path) -> No
     rows = _rows(out)
     assert list(rows[0]) == COLUMNS and len(rows) == 439
     # issue 16, 14: it says what it wrote and the clip's duration (it printed nothing before)
-    assert done.stdout == f"wrote {out}: 439 frames, 3.65 s of motion, units in {tmp_path / 'x.units.json'}\n"
+    wrote, read = done.stdout.splitlines()
+    assert wrote == f"wrote {out}: 439 frames, 3.65 s of motion, units in {tmp_path / 'x.units.json'}"
+    # issue 34: and how it read the clip (CMU cgspeed unit, Y up, the standing height)
+    assert read.startswith(f"read {shared_data / JJ}: unit 0.05644 m (rest pose 27.46 units along x -> CMU "
+                           "cgspeed unit (0.05644 m)), up y (gravity over the clip: the head above the feet")
+    assert read.endswith("standing height 1.57 m")
+    reading = json.loads((tmp_path / "x.units.json").read_text())["reading"]
+    assert reading["unit_m"] == 0.05644 and reading["up_axis"] == "y"
+    assert 1.5 < reading["body"]["height_m"] < 1.65 and not reading["body"]["trusted"]
     t = np.array([float(r["t_s"]) for r in rows])
     np.testing.assert_allclose(np.diff(t), 1 / 120, atol=1e-8)
     assert max(float(r["eye_squint"]) for r in rows) > 0.3

@@ -18,6 +18,7 @@ from effortface.core.errors import UserError
 from effortface.synth.character_options import add_character_arguments, character_from_args
 from effortface.interop.serve import (EFFORT_WORK_TYPE, MOCAP_TYPE, FaceProcessor, LslInput, OscInput,
                                             Outputs, input_names, make_input, output_names, parse_host_port, serve)
+from effortface.synth.read_options import add_motion_read_arguments, read_options_from_args
 from effortface.synth.runtime import load_model
 
 
@@ -30,8 +31,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--input-name", default=None, help="LSL stream name (default: the first of its type)")
     parser.add_argument("--skeleton", default=None, metavar="JSON",
                         help="skeleton file with rest_positions_m (MoCap input)")
-    parser.add_argument("--mapping", default=None, metavar="JSON",
-                        help="joint-to-segment mapping for the --skeleton joints (default: built-in conventions)")
+    add_motion_read_arguments(parser, what="the --skeleton joints and the MoCap frames")
     parser.add_argument("--osc-in-port", type=int, default=9000, metavar="PORT", help="OSC input port (default 9000)")
     parser.add_argument("--output", action="append", choices=output_names(),
                         help="where weights go (repeatable; default lsl)")
@@ -85,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     model = load_model(args.model_dir)
     processor = FaceProcessor(model, character_from_args(args, model),
                               args.skeleton if args.input_type == MOCAP_TYPE else None, fps=args.fps,
-                              mapping=args.mapping)
+                              mapping=args.mapping, read=read_options_from_args(args))
     outputs = Outputs(model, args.output or ["lsl"], name=args.name, osc_to=addresses["osc_to"],
                       livelink_to=addresses["livelink_to"], rate_hz=args.fps)
     source: Any

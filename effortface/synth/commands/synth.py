@@ -16,12 +16,10 @@ a progress bar and a summary; exit status 1 when some clips failed (they are nam
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
-from effortface.core import bounds
 from effortface.core.docs import DESIGN, SCIENCE
 from effortface.core.errors import UserError
 from effortface.core.progress import ProgressBar
@@ -30,7 +28,9 @@ from effortface.synth.c3d_motion import window_line
 from effortface.synth.character_options import add_character_arguments, character_from_args
 from effortface.synth.chunked import synthesize_chunks
 from effortface.synth.curves_io import CURVE_FORMATS, check_output, units_path, write_curve_chunks
-from effortface.synth.motion import read_motion_blocks
+from effortface.synth.motion import Motion
+from effortface.synth.plausibility import read_checked_blocks, reading_record
+from effortface.synth.read_options import add_motion_read_arguments, read_options_from_args
 from effortface.synth.parallel import ComputeSettings, add_compute_arguments
 from effortface.synth.runtime import REFERENCE_FRAMES, load_model
 
@@ -55,14 +55,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="with --format livelink: one row per motion frame instead of resampling to 60 fps")
     parser.add_argument("--force", action="store_true", help="replace an existing --out file")
     add_character_arguments(parser)
-    parser.add_argument("--mapping", default=None, metavar="JSON",
-                        help="joint-to-segment mapping file (default: built-in conventions)")
+    add_motion_read_arguments(parser, what="the clip (every clip of a folder)")
     parser.add_argument("--filter-tau-s", type=float, default=None, metavar="S",
                         help="output filter time constant on the weights, seconds (default: the "
                              "model's, 0.15; 0 writes the raw, unfiltered weights)")
-    parser.add_argument("--unit-m", type=float, default=None, metavar="M",
-                        help="BVH length unit in metres (default: detected from the rest pose; "
-                             "CMU cgspeed 0.05644)")
     add_compute_arguments(parser, "a folder of clips")
 
 
@@ -75,12 +71,9 @@ def run(args: argparse.Namespace) -> int:
     check_apart("--out", out, [model_dir, args.motion, args.mapping])
     if not batch:
         check_output(out, args.force, args.format)  # fail before the work
+    reading = read_options_from_args(args)
     model = load_model(args.model_dir)
     character = character_from_args(args, model)
-    if args.unit_m is not None and not (math.isfinite(args.unit_m) and args.unit_m > 0):
-        raise UserError(f"--unit-m: expected a length in metres above 0, found {args.unit_m:g}")
-    if args.unit_m is not None:
-        bounds.check("unit_m", args.unit_m, "--unit-m")
     try:
         taus = model.filter_taus(args.filter_tau_s)
     except UserError as exc:
@@ -89,22 +82,36 @@ def run(args: argparse.Namespace) -> int:
         from effortface.synth.batch_synth import SynthOptions
 
         options = SynthOptions(args.model_dir, character, args.format, args.force, args.mapping,
-                               args.unit_m, taus)
+                               args.unit_m, taus, reading.up, reading.trust_skeleton)
         return _run_batch(Path(args.motion), out, options, compute)
-    motion = read_motion_blocks(args.motion, unit_m=args.unit_m, reference_frames=REFERENCE_FRAMES)
+    motion, body = read_checked_blocks(args.motion, reading, reference_frames=REFERENCE_FRAMES)
     chunks = synthesize_chunks(model, motion, character, mapping=args.mapping, filter_tau_s=taus)
     n_frames, duration_s = write_curve_chunks(out, chunks, model, fmt=args.format, force=args.force,
-                                              provenance=motion.skeleton.source, every_frame=args.every_frame)
+                                              provenance=motion.skeleton.source, every_frame=args.every_frame,
+                                              reading=reading_record(motion.skeleton, body))
     print(written_line(out, n_frames, duration_s, args.format))
+    print(read_line(motion.skeleton, body))
     if line := window_line(motion.skeleton.reading, args.motion):  # a trial read over its longest complete window
         print(line, file=sys.stderr)
     return 0
+
+
+def read_line(motion: Motion, body: dict[str, Any]) -> str:
+    """How the clip was read, one line: ``read as centimetre (rest pose ...), up y (gravity ...);
+    standing height 1.62 m``."""
+    r = motion.reading
+    unit = f"unit {r['unit_m']:g} m ({r.get('unit_from', '?')})" if "unit_m" in r else "unit: the file's"
+    up = f"up {r['up_axis']} ({r.get('up_from', '?')})" if "up_axis" in r else "up: the file's"
+    trusted = " (outside the human ranges: --trust-skeleton)" if body.get("trusted") else ""
+    return f"read {motion.source}: {unit}, {up}; standing height {body['height_m']:.2f} m{trusted}"
 
 
 def written_line(out: Path, n_frames: int, duration_s: float, fmt: str) -> str:
     """What ``synth`` wrote: the file, its frames and the clip's duration (and the units sidecar)."""
     units = f", units in {units_path(out)}" if fmt == "csv" else ""
     return f"wrote {out}: {n_frames} frames, {duration_s:.2f} s of motion{units}"
+
+
 def _run_batch(clips_dir: Path, out: Path, options: SynthOptions, compute: ComputeSettings) -> int:
     """A folder of clips with a progress bar on stderr and a summary; 1 when some failed."""
     from effortface.synth.batch_synth import list_clips, synth_batch

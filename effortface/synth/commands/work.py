@@ -13,6 +13,7 @@ import sys
 import numpy as np
 
 from effortface.core.docs import DESIGN, SCIENCE_NOTES
+from effortface.synth.read_options import add_motion_read_arguments, read_options_from_args
 from effortface.synth.work import WorkTable, work_folders, write_works
 
 
@@ -24,9 +25,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``effortface work``."""
     parser.add_argument("sessions", nargs="+", metavar="SESSION", help="session folders (or folders of sessions)")
     parser.add_argument("--force", action="store_true", help="replace an existing (maybe hand-made) work.csv")
-    parser.add_argument("--mapping", default=None, metavar="JSON",
-                        help="joint-to-segment mapping for clips attached without one (default: built-in "
-                             "conventions and marker sets)")
+    add_motion_read_arguments(parser, what="clips attached without one")
 
 
 def summary(table: WorkTable) -> str:
@@ -40,6 +39,8 @@ def summary(table: WorkTable) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Derive every session's work, then write the work.csv files (one line each on stdout)."""
-    for target, table in write_works(work_folders(args.sessions), force=args.force, mapping=args.mapping):
+    read = read_options_from_args(args)
+    for target, table in write_works(work_folders(args.sessions), force=args.force, mapping=args.mapping,
+                                     read=read):
         print(f"{target}: {summary(table)}", file=sys.stdout)
     return 0

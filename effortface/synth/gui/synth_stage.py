@@ -24,6 +24,8 @@ from effortface.core.gui.qt_compat import guard_none_refcount
 from effortface.core.errors import UserError
 from effortface.core.gui.widgets import QtElidedComboBox, QtElidedLabel, caption
 from effortface.core.participant import SEXES
+from effortface.synth.motion import CMU_UNIT_M
+from effortface.synth.read_options import UP_AXES
 from effortface.synth.runtime import AGE_RANGE, HEIGHT_RANGE_M, MASS_RANGE_KG, TRAINING_LEVEL_RANGE
 from effortface.synth.synth_session import (
     MAX_LOOPS,
@@ -39,6 +41,9 @@ FRAME_MS = 15          # play timer period: about 66 Hz, above the 60 fps target
 POLL_MS = 30           # how often finished background recomputes are applied
 FACE_SIZE = (320, 240)  # the face preview's smallest size; it grows with the window (4:3)
 VIEWS = ("front", "side")
+#: the unit choices beside Mapping... (text, metres per file unit; None: from the file)
+READ_UNITS: tuple[tuple[str, float | None], ...] = (
+    ("unit: file", None), ("m", 1.0), ("cm", 0.01), ("mm", 0.001), ("inch", 0.0254), ("CMU", CMU_UNIT_M))
 _WEIGHT_PENS = ("#d62728", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#17becf")
 #: weights curves are drawn in order, each thinner and dashed differently, half transparent, so a
 #: curve lying on another (two blendshapes at 0) still shows along its edges
@@ -626,6 +631,7 @@ class QtSynthStage(QtWidgets.QWidget):
         self.mapping_button.setToolTip("a joint-to-segment mapping (JSON) for a skeleton the built-in "
                                        "conventions and marker sets do not know")
         self.mapping_button.clicked.connect(self._ask_mapping)
+        self._reading_controls()
         self.open_model_button = QtWidgets.QPushButton("Open model...")
         self.open_model_button.clicked.connect(self._ask_model)
         self.default_model_button = QtWidgets.QPushButton("Built-in rule model")
@@ -640,12 +646,50 @@ class QtSynthStage(QtWidgets.QWidget):
         self.export_livelink_button.clicked.connect(lambda: self._ask_export("livelink"))
         bar = QtWidgets.QHBoxLayout()
         for w, stretch in ((self.open_clip_button, 0), (self.clip_combo, 0), (self.clip_label, 1),
-                           (self.mapping_button, 0),
-                           (QtWidgets.QLabel("Model:"), 0), (self.model_label, 1),
+                           (self.mapping_button, 0), (self.unit_combo, 0), (self.up_combo, 0),
+                           (self.trust_check, 0), (QtWidgets.QLabel("Model:"), 0), (self.model_label, 1),
                            (self.last_model_button, 0), (self.open_model_button, 0),
                            (self.default_model_button, 0)):
             bar.addWidget(w, stretch)     # the two names share the room left (elided if short of it)
         return bar
+
+    def _reading_controls(self) -> None:
+        """Unit, up axis and trust beside Mapping... (``--unit-m``, ``--up``, ``--trust-skeleton``)."""
+        self.unit_combo = QtWidgets.QComboBox()
+        self.unit_combo.setToolTip("the clip's length unit (--unit-m; CMU: cgspeed BVH, 0.05644 m); 'unit: "
+                                   "file' decides from the file or the skeleton's size")
+        for text, unit_m in READ_UNITS:
+            self.unit_combo.addItem(text, unit_m)
+        self.up_combo = QtWidgets.QComboBox()
+        self.up_combo.setToolTip("the clip's up axis (--up); 'up: file' decides from the file or gravity "
+                                 "over the clip")
+        self.up_combo.addItem("up: file", None)
+        for axis in UP_AXES:
+            self.up_combo.addItem(f"up {axis}", axis)
+        self.trust_check = QtWidgets.QCheckBox("Trust")
+        self.trust_check.setToolTip("trust the skeleton: read a body outside the human ranges (a child, a "
+                                    "creature) on purpose (--trust-skeleton)")
+        for combo in (self.unit_combo, self.up_combo):
+            combo.activated.connect(lambda _index: self._on_reading())
+        self.trust_check.toggled.connect(lambda _on: self._on_reading())
+
+    def set_reading(self, unit_m: float | None = None, up: str | None = None, trust_skeleton: bool = False) -> bool:
+        """Read clips with this unit and up axis, trusted or not (errors shown in the stage; the
+        controls show the options in force)."""
+        done = self._guard(lambda: self.session.set_reading(unit_m=unit_m, up=up, trust_skeleton=trust_skeleton))
+        read = self.session.read
+        for combo, value in ((self.unit_combo, read.unit_m), (self.up_combo, read.up)):
+            at = combo.findData(value)
+            if at < 0:  # a unit the list does not name
+                combo.addItem(f"{value:g} m", value)
+                at = combo.count() - 1
+            combo.setCurrentIndex(at)
+        with QtCore.QSignalBlocker(self.trust_check):
+            self.trust_check.setChecked(read.trust_skeleton)
+        return done
+
+    def _on_reading(self) -> None:
+        self.set_reading(self.unit_combo.currentData(), self.up_combo.currentData(), self.trust_check.isChecked())
 
     def _clip_combo(self) -> QtWidgets.QComboBox:
         """The clips of the motion folder after a neutral entry; its width does not follow the names.
