@@ -19,7 +19,7 @@ import dataclasses
 import json
 import os
 import textwrap
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -98,7 +98,9 @@ class Inspection:
         for key, value in self.reading.items():
             if key not in ("unit_m", "unit_from", "up_axis", "up_from", "producer", "window"):
                 rows.append((f"reading.{key}", str(value)))
-        out = [f"{k:<11} {v}" for k, v in rows]
+        out = [line for k, v in rows  # long values (how the up axis was decided...) wrap under themselves
+               for line in textwrap.wrap(f"{k:<11} {v}", REPORT_WIDTH + 2, subsequent_indent=" " * 12,
+                                         break_on_hyphens=False, break_long_words=False)]
         shown = [k or "''" for k in self.labels]  # an empty label shown as ''
         out.extend(_wrapped(f"labels ({len(self.labels)}, as in the file):", shown))
         if self.joints != self.labels:
@@ -135,7 +137,8 @@ def inspect_motion(path: str | os.PathLike[str], options: MotionReadOptions = Mo
         The file cannot be read at all (one line naming it), or the mapping file is not a mapping.
     """
     path = Path(path)
-    user = read_mapping(options.mapping) if options.mapping is not None else None
+    user = None if options.mapping is None else dict(options.mapping) if isinstance(options.mapping, Mapping) \
+        else read_mapping(options.mapping)
     if path.suffix.lower() == ".c3d":
         return _inspect_c3d(path, options, user)
     try:

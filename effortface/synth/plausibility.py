@@ -211,7 +211,7 @@ def check_read(motion: Motion, options: MotionReadOptions, name: str | None = No
     ImplausibleBodyError
         A body outside the human ranges without ``trust_skeleton``.
     """
-    map_skeleton(motion.joint_names, options.mapping)
+    map_skeleton(motion.joint_names, options.mapping, source=name or motion.source)
     return check_plausible(motion, trust=options.trust_skeleton, mapping=options.mapping, name=name)
 
 

@@ -218,7 +218,7 @@ def test_a_trial_trimmed_to_a_walkway_is_read_over_its_window() -> None:
 def test_synth_states_the_window_on_stderr_and_in_units_json(shared_data: Path, tmp_path: Path) -> None:
     """A full-body clip (the CMU squats, labelled points with the CMU joint names) with a 0.25 s
     occlusion: synth reads the longest window after it, says so in one line and in .units.json."""
-    from tests.train.test_motion_c3d import write_c3d
+    from tests.synth.test_motion_c3d import write_c3d
 
     bvh = read_motion(shared_data / "motion" / "cmu_13_29_squats_120fps.bvh")
     clip = write_c3d(bvh, tmp_path / "squats.c3d", occlude=(40, 3), n_occluded=30)
@@ -299,7 +299,7 @@ def test_the_qualisys_cast_layout_reads_as_the_plug_in_gait_capture(tmp_path: Pa
 def test_labelled_points_without_y_screen_are_turned_by_their_head_and_feet(shared_data: Path, tmp_path: Path) -> None:
     """A Y-up export of labelled joints (the CMU squats' joint names) with no POINT:Y_SCREEN: the
     Head is above the feet along +y, so it is read Y up."""
-    from tests.train.test_motion_c3d import write_c3d
+    from tests.synth.test_motion_c3d import write_c3d
 
     bvh = read_motion(shared_data / "motion" / "cmu_13_29_squats_120fps.bvh")
     file_frame = Z_UP_TO_FILE                                               # Z up -> the file's Y up

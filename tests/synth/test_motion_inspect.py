@@ -55,7 +55,9 @@ def test_inspect_text_report_is_aligned(capsys) -> None:
     lines = capsys.readouterr().out.splitlines()
     assert lines[0] == f"file        {PYMO}"
     assert "frames      1064 at 120 Hz (8.87 s)" in lines
-    assert "unit        0.0254 m per file unit (rest pose 60.56 file units tall: inch)" in lines
+    unit = next(line for line in lines if line.startswith("unit "))
+    assert unit.startswith("unit        0.0254 m per file unit (rest pose") and "inch" in unit
+    assert max(map(len, lines)) <= 98  # long values wrap (the File info panel shows the report whole)
     assert "  left_foot       LeftFoot -> LeftToeBase_end" in lines and "unmapped   none" in lines
 
 
@@ -133,25 +135,28 @@ def test_mapping_template_is_complete_refuses_overwrite_and_maps_once_filled(tmp
     assert json.loads(out.read_text())["left_foot"] == ["LeftFoot", "LeftFoot_end"]
 
 
-def test_inspect_c3d_that_cannot_become_joints_is_still_inspected(capsys) -> None:
-    """A marker gap too long to fill: labels, gaps and the longest complete window, exit 0."""
+def test_inspect_c3d_trimmed_to_its_complete_window_lists_its_points(capsys) -> None:
+    """A marker gap too long to fill: read over the longest complete window (the reader's), labels and
+    gaps of the whole file, no body to map, exit 0."""
     found = _inspect(capsys, str(C3D / "Eb015pi.c3d"))
-    assert found["read_error"].startswith(f"{C3D / 'Eb015pi.c3d'}: point 'PV2': expected gaps of at most 0.2 s")
+    assert found["read_error"] is None
     assert (found["fps"], found["n_frames"], found["unit_m"], found["up_axis"]) == (50.0, 450, 0.001, "z")
     assert len(found["labels"]) == 48 and found["labels"][:3] == ["RFT1", "RFT2", "RFT3"]
     assert found["gaps"]["PV2"] == {"missing_frames": 59, "gaps": 2, "longest_gap_s": 0.94}
-    assert found["window"] == {"first_frame": 47, "n_frames": 296, "of_frames": 450}
-    assert found["height_m"] is None and len(found["unmapped"]) == 14
+    window = dict(found["window"])
+    assert window.pop("why").startswith("the longest window where every needed marker is present: 'PV2'")
+    assert window == {"first_frame": 47, "n_frames": 296, "of_frames": 450}
+    assert len(found["unmapped"]) == 14
 
 
 def test_inspect_c3d_plug_in_gait_producer_and_mapping(capsys) -> None:
     found = _inspect(capsys, str(C3D / "PiG_Calibration-FlatFoot-Full.c3d"))
-    assert found["producer"] == "Vicon Vicon Nexus" and found["marker_set"] == "plug-in-gait"
+    assert found["producer"].startswith("Vicon Vicon Nexus") and found["marker_set"].startswith("plug-in-gait")
     assert found["convention"] == "CMU" and found["unmapped"] == [] and found["read_error"] is None
     assert "LASI" in found["labels"] and "LeftUpLeg" in found["joints"]
-    assert "POINT:UNITS 'mm'" in found["unit_from"] and 1.3 < found["height_m"] < 1.9
+    assert "POINT:UNITS mm" in found["unit_from"] and 1.3 < found["height_m"] < 1.9
     motion_analysis = _inspect(capsys, str(C3D / "sample21.c3d"))
-    assert motion_analysis["producer"] == "Motion Analysis Corp. EVa RealTime"
+    assert motion_analysis["producer"].startswith("Motion Analysis Corp. EVa RealTime")
     assert motion_analysis["labels"].count("RTHI") == 2  # as in the file (the reader makes them unique)
 
 

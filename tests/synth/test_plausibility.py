@@ -17,7 +17,7 @@ from effortface.synth.plausibility import ImplausibleBodyError, check_plausible,
 from tests.synth.bvh_fixtures import bandai_layout_bvh, doubled_positions
 
 #: the real clips of tests/data that read as a whole body (C3D files without a full body or with gaps
-#: are refused by their reader before the gate; see tests/train/test_motion_c3d_real.py)
+#: are refused by their reader before the gate; see tests/synth/test_motion_c3d_real.py)
 REAL_CLIPS = ("bvh/pymo_walk.bvh", "motion/cmu_13_29_full_30fps.bvh", "motion/cmu_13_29_jumping_jacks_120fps.bvh",
               "motion/cmu_13_29_squats_120fps.bvh", "motion/amp_humanoid_walk.npz", "motion/amp_humanoid_run.npz",
               "motion/amp_humanoid_hop.npz", "c3d/PiG_Calibration-FlatFoot-Full.c3d")
@@ -116,10 +116,10 @@ def test_a_c3d_refusal_names_the_file_alone(shared_data: Path, tmp_path: Path) -
 
     clip = shared_data / "c3d" / "MACsample.c3d"
     ends = {"head": ["RSHO", "LSHO"], "trunk": ["RSHO", ["RHIP", "LHIP"]]}
-    for s, S in (("left", "L"), ("right", "R")):
+    for s, S, shank in (("left", "L", "LSHA (point 17)"), ("right", "R", "RSHA (point 6)")):  # labels the file repeats
         ends |= {f"{s}_upper_arm": [f"{S}SHO", f"{S}ELB"], f"{s}_forearm": [f"{S}ELB", f"{S}WRI"],
-                 f"{s}_hand": [f"{S}WRI", f"{S}WRI"], f"{s}_thigh": [f"{S}HIP", f"{S}SHA"],
-                 f"{s}_shank": [f"{S}SHA", f"{S}HEE"], f"{s}_foot": [f"{S}HEE", f"{S}TOE"]}
+                 f"{s}_hand": [f"{S}WRI", f"{S}WRI"], f"{s}_thigh": [f"{S}HIP", shank],
+                 f"{s}_shank": [shank, f"{S}HEE"], f"{s}_foot": [f"{S}HEE", f"{S}TOE"]}
     mapping = tmp_path / "mac.json"
     mapping.write_text(json.dumps(ends))
     assert read_motion(clip).source != str(clip)

@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     options = read_options_from_args(args)
     near = None if args.sync in (None, "auto") else _seconds("--sync", args.sync)
     alignment = attach_clip(args.session, args.clip, offset_s=args.offset, sync=args.sync is not None,
-                            sync_near_s=near, mapping=options.mapping, unit_m=options.unit_m, up=options.up,
+                            sync_near_s=near, mapping=args.mapping, unit_m=options.unit_m, up=options.up,
                             trust_skeleton=options.trust_skeleton)
     print(f"{args.clip} -> {args.session}/motion: {alignment.describe()}")
     return 0
