@@ -42,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from effortface.capture_tool.importers.session import copy_video
 from effortface.core.hr_sample import HrSample
 from effortface.core.session.folder import (EVENTS_CSV, HEART_RATE_CSV, VIDEO_AVI, VIDEO_FRAMES_CSV, Event,
                                              EventWriter, FrameTimeWriter, HrWriter, Participant, SessionInfo,
@@ -50,7 +51,7 @@ from effortface.core.bounds import BOUNDS
 from effortface.core.errors import UserError
 from effortface.core.opencv import import_cv2
 from effortface.core.fileio import atomic_write_text, fsync_folder
-from effortface.core.physio_limits import HR_BPM
+from effortface.core.physio_limits import IMPORT_HR_BPM
 from effortface.core.version import __version__
 
 XdfStream = dict[str, Any]
@@ -58,7 +59,7 @@ XdfStream = dict[str, Any]
 #: the heart rates an imported sample may have to be valid (bpm): the strap readers' ceiling
 #: (:data:`effortface.core.physio_limits.HR_BPM`) with a stricter floor, since a stream from another
 #: app may hold anything under its name (25 bpm: below it, an imported value is not taken as a rate)
-HR_RANGE_BPM = (25.0, HR_BPM[1])
+HR_RANGE_BPM = IMPORT_HR_BPM
 #: names, types and channel labels (lower case, letters and digits only) that say heart rate
 HR_KEYS = frozenset({"heartrate", "hr", "hrbpm", "bpm", "pulse", "pulserate"})
 #: ... and R-R (inter-beat) intervals
@@ -488,7 +489,7 @@ def import_xdf(path: str | os.PathLike, out_dir: str | os.PathLike, participant:
         if mocap is not None:
             _write_mocap(path, folder, mocap, t0)
         if video_path is not None and frames is not None:
-            _copy_video(video_path, folder / VIDEO_AVI)
+            copy_video(video_path, folder / VIDEO_AVI)
             writer = FrameTimeWriter(folder / VIDEO_FRAMES_CSV)
             for k, stamp in enumerate(frames):
                 writer.write(k, float(stamp - t0))
@@ -506,25 +507,3 @@ def _write_rows(writer: Any, rows: Sequence[Any]) -> None:
     for row in rows:
         writer.write(row)
     writer.close()
-
-
-def _copy_video(src: Path, dst: Path) -> None:
-    """An AVI is copied as is; another container is re-encoded to MJPG AVI with OpenCV."""
-    if src.suffix.lower() == ".avi":
-        shutil.copyfile(src, dst)
-        return
-    cv2 = import_cv2()
-
-    cap = cv2.VideoCapture(str(src))
-    fps = cap.get(cv2.CAP_PROP_FPS) or 30.0
-    writer = None
-    while True:
-        ok, frame = cap.read()
-        if not ok:
-            break
-        if writer is None:
-            writer = cv2.VideoWriter(str(dst), cv2.VideoWriter.fourcc(*"MJPG"), fps, frame.shape[1::-1])
-        writer.write(frame)
-    cap.release()
-    if writer is not None:
-        writer.release()
