@@ -225,3 +225,13 @@ def test_invalid_rows_marked(tmp_path):
     (folder,) = _import(tmp_path, tmp_path / "gaps.csv")
     rows = read_session(folder).heart_rate
     assert [(r.hr_bpm, r.valid) for r in rows] == [(80, True), (None, False), (None, False), (82, True)]
+
+
+def test_files_match_their_sha256sums():
+    import hashlib
+
+    lines = (DATA / "SHA256SUMS").read_text().splitlines()
+    assert {line.split()[1] for line in lines} >= set(SAMPLES) | {"laps-only-fr60.fit"}
+    for line in lines:
+        digest, name = line.split()
+        assert hashlib.sha256((DATA / name).read_bytes()).hexdigest() == digest, name
