@@ -19,6 +19,8 @@ import secrets
 import shutil
 from pathlib import Path
 
+from collections.abc import Mapping, Sequence
+
 from effortface.capture_tool.importers.recording import HrImportError, HrRecording, to_samples
 from effortface.core.opencv import import_cv2, index_video
 from effortface.core.session.folder import (EVENTS_CSV, HEART_RATE_CSV, VIDEO_AVI, VIDEO_FRAMES_CSV, EventWriter,
@@ -99,6 +101,12 @@ def import_info(rec: HrRecording) -> dict[str, object]:
             "samples": len(rec.t_s), "rr_kept": rec.has_rr, "laps": rec.laps}
 
 
+def session_id_for(rec: HrRecording, code: str, label: str | None) -> str:
+    """The session id of an imported file: the participant and the file's start (now, when it has none)."""
+    stamp = rec.start_utc.replace(tzinfo=None) if rec.start_utc is not None else dt.datetime.now()
+    return make_session_id(code, stamp, label)
+
+
 def write_hr_session(rec: HrRecording, out_dir: str | os.PathLike, participant: Participant, *,
                      video: Path | None = None, video_offset_s: float | None = None,
                      label: str | None = None) -> Path:
@@ -125,8 +133,7 @@ def write_hr_session(rec: HrRecording, out_dir: str | os.PathLike, participant: 
     """
     device = rec.device or rec.kind
     rows = to_samples(rec, device)
-    stamp = rec.start_utc.replace(tzinfo=None) if rec.start_utc is not None else dt.datetime.now()
-    info = SessionInfo(session_id=make_session_id(participant.code, stamp, label), participant=participant,
+    info = SessionInfo(session_id=session_id_for(rec, participant.code, label), participant=participant,
                        devices={"heart_rate": {"protocol": rec.kind, "port": str(rec.path), "device": device,
                                                "producer": rec.producer}},
                        complete=False, created_utc=utc_now_iso(),
@@ -168,3 +175,62 @@ def _write_video(folder: Path, video: Path, offset_s: float, info: SessionInfo) 
         writer.write(k, offset_s + k / fps)
     writer.close()
     info.devices["camera"] = {"source": str(video), "fps": fps, "offset_s": offset_s, "frames": n_frames}
+
+
+def import_hr_files(paths: Sequence[str | os.PathLike], out_dir: str | os.PathLike, code: str,
+                    options: Mapping[str, object], *, update: bool = False, label: str | None = None,
+                    video: Path | None = None, video_offset_s: float | None = None,
+                    time_col: str | None = None, hr_col: str | None = None, rr_col: str | None = None,
+                    hint: str | None = None) -> list[Path]:
+    """Import heart-rate files into the lab ``out_dir``, one session each (``import hr``, *Import heart rate...*).
+
+    The participant is resolved as ``capture`` resolves it (the options completed from the lab's
+    registry, a contradiction refused unless ``update``); every file is read and checked before any
+    session is written; a new or changed participant is saved to the registry at the end.
+
+    Parameters
+    ----------
+    paths : sequence of path-like
+        The files.
+    out_dir : path-like
+        The lab folder.
+    code : str
+        Participant code.
+    options : mapping
+        Participant fields given (None: not given), as :func:`resolve_participant` takes them.
+    update, label, video, video_offset_s, time_col, hr_col, rr_col, hint
+        As the command's options (``hint``: what a refusal tells the user to do).
+
+    Returns
+    -------
+    list of Path
+        The new session folders.
+
+    Raises
+    ------
+    UserError
+        One line: a bad file, a bad option, a participant refused.
+    """
+    from effortface.capture_tool.importers import read_hr_file
+    from effortface.capture_tool.participants import REGISTRY_TSV, UPDATE_HINT, resolve_participant, save_participant
+
+    check_video(video, video_offset_s)
+    if video is not None and len(paths) != 1:
+        raise HrImportError(f"--video: expected one heart-rate file with it, found {len(paths)}")
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise HrImportError(f"--out {out}: expected a lab folder, found a file")
+    participant, new = resolve_participant(code, options, out / REGISTRY_TSV, update=update,
+                                           hint=hint or UPDATE_HINT)
+    recordings = [read_hr_file(p, time_col=time_col, hr_col=hr_col, rr_col=rr_col) for p in paths]
+    ids = [session_id_for(rec, participant.code, label) for rec in recordings]
+    for rec, sid in zip(recordings, ids):
+        if ids.count(sid) > 1 or (out / sid).exists():
+            raise HrImportError(f"{rec.path}: expected a new session folder, found {out / sid} "
+                                f"{'already there' if (out / sid).exists() else 'named by another file too'} "
+                                "(import it again with --label)")
+    folders = [write_hr_session(rec, out, participant, video=video, video_offset_s=video_offset_s, label=label)
+               for rec in recordings]
+    if new:
+        save_participant(out / REGISTRY_TSV, participant)
+    return folders

@@ -76,35 +76,23 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_hr(args: argparse.Namespace) -> int:
     """``import hr``: read and check every file, resolve the participant, then write one session each."""
-    from effortface.capture_tool.importers import read_hr_file
-    from effortface.capture_tool.importers.session import check_video, write_hr_session
-    from effortface.capture_tool.participants import REGISTRY_TSV, resolve_participant, save_participant
+    from effortface.capture_tool.importers.session import import_hr_files
 
     for option in ("hr_stream", "work_stream", "mocap_stream", "video_stream"):
         if getattr(args, option) is not None:
             raise UserError(f"--{option.replace('_', '-')}: only for 'import xdf', found with 'import hr'")
     if args.marker_stream:
         raise UserError("--marker-stream: only for 'import xdf', found with 'import hr'")
-    video = Path(args.video) if args.video is not None else None
-    check_video(video, args.video_offset)
-    if video is not None and len(args.file) != 1:
-        raise UserError(f"--video: expected one heart-rate file with it, found {len(args.file)}")
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise UserError(f"--out {out}: expected a lab folder, found a file")
     try:
         code = Participant(code=args.participant).code
     except UserError as exc:
         raise UserError(f"--participant: {exc}") from None
     options = {"sex": args.sex, "age": args.age, "height_m": args.height, "mass_kg": args.mass,
                "training_level": args.training_level}
-    participant, new = resolve_participant(code, options, out / REGISTRY_TSV, update=args.update_participant)
-    recordings = [read_hr_file(f, time_col=args.time_col, hr_col=args.hr_col, rr_col=args.rr_col)
-                  for f in args.file]
-    folders = [write_hr_session(rec, out, participant, video=video, video_offset_s=args.video_offset,
-                                label=args.label) for rec in recordings]
-    if new:
-        save_participant(out / REGISTRY_TSV, participant)
+    folders = import_hr_files(args.file, args.out, code, options, update=args.update_participant, label=args.label,
+                              video=Path(args.video) if args.video is not None else None,
+                              video_offset_s=args.video_offset, time_col=args.time_col, hr_col=args.hr_col,
+                              rr_col=args.rr_col)
     for folder in folders:
         print(folder)
     return 0
