@@ -164,3 +164,41 @@ def test_capture_ble_bad_options(capsys, tmp_path):
     assert "a --ble strap speaks ble_hrm" in capsys.readouterr().err
     assert main([*argv, "--port", "loop://"]) == 2
     assert "--protocol: expected one of" in capsys.readouterr().err
+
+
+def test_lost_strap_is_a_gap_and_a_reconnect(tmp_path):
+    """The strap goes out of range (the replay's reads fail as a lost BLE link's do): the recorder logs a
+    gap, re-opens the same strap and carries on, as for a pulled serial strap."""
+    log = h10_log(tmp_path / "h10.serlog", n_beats=120)
+    done = subprocess.run(effortface("capture", "--ble", f"replay://{log}?speed=20&unplug_after=40",
+                                     "--participant", "P01", *BODY, "--out", tmp_path / "lab", "--no-video",
+                                     "--duration", "5"), capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0 and "Traceback" not in done.stderr, done.stderr
+    folder = Path(done.stdout.splitlines()[0])
+    stats = json.loads((folder / "session.json").read_text())["stats"]
+    assert stats["serial_gaps"] >= 1 and stats["serial_reconnects"] >= 1
+    kinds = {(e.kind, e.label) for e in read_session(folder).events}
+    assert {("device_gap", "ble_hrm"), ("reconnect", "ble_hrm")} <= kinds
+
+
+def test_ble_port_reads_notifications_then_raises_when_lost():
+    """The BLE port's own buffer: each notification one frame, readable in any chunking; a lost link
+    raises as a pulled serial port does, once what arrived before is read."""
+    import serial
+
+    from effortface.capture_tool.ble_link import BlePort
+
+    port = BlePort(timeout=0.05)   # not opened on a radio: fed as bleak's notify callback feeds it
+    port.is_open = True
+    notes = [build_measurement(70, (850.0,)), build_measurement(71, (840.0, 845.0))]
+    for n in notes:
+        port._notified(bytearray(n))
+    assert port.in_waiting == sum(len(frame(n)) for n in notes)
+    data = port.read(5) + port.read(100)
+    assert data == b"".join(frame(n) for n in notes)
+    assert port.read(10) == b""                      # nothing new: the read times out empty
+    port._notified(bytearray(notes[0]))
+    port._set_lost("BLE link lost")
+    assert port.read(100) == frame(notes[0])         # what arrived before the loss is kept
+    with pytest.raises(serial.SerialException, match="BLE link lost"):
+        port.read(1)

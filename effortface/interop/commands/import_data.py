@@ -33,6 +33,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="xdf: marker stream (repeatable; default: every stream of type Markers or StringMarker)")
     parser.add_argument("--work-stream", metavar="NAME|TYPE", help="xdf: EffortWork stream -> work.csv")
     parser.add_argument("--mocap-stream", metavar="NAME|TYPE", help="xdf: mocap stream -> motion/mocap.csv")
+    parser.add_argument("--hr-json-key", metavar="PATH",
+                        help="xdf: key path of the heart rate (bpm) in a stream of JSON text, e.g. hr or data.hr "
+                             "(default: a top-level key named hr, heart_rate, bpm...)")
+    parser.add_argument("--rr-json-key", metavar="PATH", help="xdf: key path of the R-R intervals (ms, a number or a "
+                                                                "list) in that JSON")
+    parser.add_argument("--keep-ecg", action="store_true",
+                        help="xdf: copy the ECG stream (a Polar H10's) into the session as ecg.csv; an ECG stream "
+                             "is never taken as heart rate")
     parser.add_argument("--time-col", metavar="NAME", help="hr, CSV/TSV: the time column (seconds or ISO 8601)")
     parser.add_argument("--hr-col", metavar="NAME", help="hr, CSV/TSV: the heart-rate column (bpm)")
     parser.add_argument("--rr-col", metavar="NAME", help="hr, CSV/TSV: the R-R interval column (ms, or s)")
@@ -69,7 +77,8 @@ def run(args: argparse.Namespace) -> int:
     folder = import_xdf(args.file[0], args.out, participant, hr_stream=args.hr_stream,
                         marker_streams=args.marker_stream, work_stream=args.work_stream,
                         mocap_stream=args.mocap_stream, video=args.video, video_stream=args.video_stream,
-                        video_offset_s=args.video_offset, label=args.label)
+                        video_offset_s=args.video_offset, label=args.label, hr_json_key=args.hr_json_key,
+                        rr_json_key=args.rr_json_key, keep_ecg=args.keep_ecg)
     print(folder)
     return 0
 
@@ -78,9 +87,11 @@ def _run_hr(args: argparse.Namespace) -> int:
     """``import hr``: read and check every file, resolve the participant, then write one session each."""
     from effortface.capture_tool.importers.session import import_hr_files
 
-    for option in ("hr_stream", "work_stream", "mocap_stream", "video_stream"):
+    for option in ("hr_stream", "work_stream", "mocap_stream", "video_stream", "hr_json_key", "rr_json_key"):
         if getattr(args, option) is not None:
             raise UserError(f"--{option.replace('_', '-')}: only for 'import xdf', found with 'import hr'")
+    if args.keep_ecg:
+        raise UserError("--keep-ecg: only for 'import xdf', found with 'import hr'")
     if args.marker_stream:
         raise UserError("--marker-stream: only for 'import xdf', found with 'import hr'")
     try:
