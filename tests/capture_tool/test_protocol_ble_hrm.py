@@ -202,3 +202,21 @@ def test_ble_port_reads_notifications_then_raises_when_lost():
     assert port.read(100) == frame(notes[0])         # what arrived before the loss is kept
     with pytest.raises(serial.SerialException, match="BLE link lost"):
         port.read(1)
+
+
+def test_effortface_replay_serves_a_ble_log(tmp_path):
+    """``effortface replay`` plays a BLE strap's log on a pseudo-terminal, as a serial strap's."""
+    from .capture_helpers import start_replay
+
+    log = h10_log(tmp_path / "h10.serlog", n_beats=60)
+    from effortface.capture_tool.serlog import read_serlog
+
+    expected = decode(list(read_serlog(log).data_chunks()), "ble_hrm")
+    replay, pty = start_replay(log, "--speed", "20")
+    done = subprocess.run(effortface("capture", "--port", pty, "--protocol", "ble_hrm", "--participant", "P01", *BODY,
+                                     "--out", tmp_path / "lab", "--no-video", "--duration", "6"),
+                          capture_output=True, text=True, timeout=120)
+    replay.wait(20)
+    assert done.returncode == 0, done.stderr
+    rows = read_session(Path(done.stdout.splitlines()[0])).heart_rate
+    assert content(rows) == content(expected)
