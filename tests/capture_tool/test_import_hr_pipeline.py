@@ -107,3 +107,40 @@ def test_bad_video_options(capsys, tmp_path, extra, match):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and match in err[0]
     assert not (tmp_path / "lab").exists()
+
+
+def _flash_video(path: Path, flash_frame: int | None, n_frames: int = 80, fps: float = 10.0) -> Path:
+    """A dark MJPG clip whose frames from ``flash_frame`` on, for five frames, are bright (a torch filmed)."""
+    import cv2
+    import numpy as np
+
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*"MJPG"), fps, (64, 48))
+    for k in range(n_frames):
+        lit = flash_frame is not None and flash_frame <= k < flash_frame + 5
+        writer.write(np.full((48, 64, 3), 200 if lit else 30 + k % 3, np.uint8))
+    writer.release()
+    return path
+
+
+def test_video_placed_by_a_flash(tmp_path):
+    """--video-flash-at S: the video's first bright frame lands at S seconds of the heart-rate file."""
+    video = _flash_video(tmp_path / "torch.avi", flash_frame=43)
+    fit = ROOT / "tests" / "data" / "hr" / "garmin-fenix5-run.fit"
+    assert main(["import", "hr", str(fit), "--out", str(tmp_path / "lab"), "--participant", "P01", "--sex", "male",
+                 "--age", "30", "--height", "1.8", "--mass", "80", "--training-level", "5", "--video", str(video),
+                 "--video-flash-at", "20"]) == 0
+    (folder,) = [p for p in (tmp_path / "lab").iterdir() if p.is_dir()]
+    frames = read_session(folder).frame_times_s
+    assert len(frames) == 80 and frames[43] == pytest.approx(20.0, abs=1e-4)
+    assert frames[0] == pytest.approx(20.0 - 4.3, abs=1e-4)
+
+
+def test_video_without_a_flash_is_refused(capsys, tmp_path):
+    video = _flash_video(tmp_path / "dark.avi", flash_frame=None)
+    argv = ["import", "hr", str(FIT), "--out", str(tmp_path / "lab"), "--participant", "P01", "--sex", "male",
+            "--age", "30", "--height", "1.8", "--mass", "80", "--training-level", "5", "--video", str(video),
+            "--video-flash-at", "20"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "dark.avi: expected a flash" in err[0] and "found none" in err[0]
+    assert not (tmp_path / "lab").exists() or not any((tmp_path / "lab").iterdir())

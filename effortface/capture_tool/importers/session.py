@@ -93,6 +93,24 @@ def video_fps(video: Path) -> float:
     return fps
 
 
+def flash_offset(video: Path, flash_at_s: float) -> float:
+    """``--video-offset`` from a flash: the first bright frame (:func:`first_flash_frame`) is at ``flash_at_s``.
+
+    Raises
+    ------
+    HrImportError
+        No frame brightens (one line naming the video).
+    """
+    from effortface.capture_tool.sync import MIN_STEP, first_flash_frame, video_brightness
+
+    fps = video_fps(video)
+    frame = first_flash_frame(video_brightness(video, 0, 10**7), fps)
+    if frame is None:
+        raise HrImportError(f"--video {video}: expected a flash (a frame {MIN_STEP:g} grey levels brighter than the "
+                            "second before it) for --video-flash-at, found none")
+    return flash_at_s - frame / fps
+
+
 def import_info(rec: HrRecording) -> dict[str, object]:
     """The ``import`` block of ``session.json``."""
     return {"file": rec.path.name, "format": rec.kind, "sha256": sha256(rec.path),
@@ -180,7 +198,8 @@ def _write_video(folder: Path, video: Path, offset_s: float, info: SessionInfo) 
 def import_hr_files(paths: Sequence[str | os.PathLike], out_dir: str | os.PathLike, code: str,
                     options: Mapping[str, object], *, update: bool = False, label: str | None = None,
                     video: Path | None = None, video_offset_s: float | None = None,
-                    time_col: str | None = None, hr_col: str | None = None, rr_col: str | None = None,
+                    video_flash_at_s: float | None = None, time_col: str | None = None,
+                    hr_col: str | None = None, rr_col: str | None = None,
                     hint: str | None = None) -> list[Path]:
     """Import heart-rate files into the lab ``out_dir``, one session each (``import hr``, *Import heart rate...*).
 
@@ -198,8 +217,9 @@ def import_hr_files(paths: Sequence[str | os.PathLike], out_dir: str | os.PathLi
         Participant code.
     options : mapping
         Participant fields given (None: not given), as :func:`resolve_participant` takes them.
-    update, label, video, video_offset_s, time_col, hr_col, rr_col, hint
-        As the command's options (``hint``: what a refusal tells the user to do).
+    update, label, video, video_offset_s, video_flash_at_s, time_col, hr_col, rr_col, hint
+        As the command's options (``hint``: what a refusal tells the user to do; ``video_flash_at_s``:
+        the heart-rate file's time of a flash filmed by the video, which then gives the offset).
 
     Returns
     -------
@@ -215,6 +235,13 @@ def import_hr_files(paths: Sequence[str | os.PathLike], out_dir: str | os.PathLi
     from effortface.capture_tool.participants import REGISTRY_TSV, UPDATE_HINT, resolve_participant, save_participant
 
     check_video(video, video_offset_s)
+    if video_flash_at_s is not None:
+        if video is None or video_offset_s is not None:
+            raise HrImportError("--video-flash-at: expected --video FILE and no --video-offset with it, found "
+                                f"{'no --video' if video is None else '--video-offset too'}")
+        if not (math.isfinite(video_flash_at_s) and abs(video_flash_at_s) <= 86400):
+            raise HrImportError(f"--video-flash-at: expected seconds within a day of the heart-rate start, found "
+                                f"{video_flash_at_s:g}")
     if video is not None and len(paths) != 1:
         raise HrImportError(f"--video: expected one heart-rate file with it, found {len(paths)}")
     out = Path(out_dir)
@@ -223,6 +250,8 @@ def import_hr_files(paths: Sequence[str | os.PathLike], out_dir: str | os.PathLi
     participant, new = resolve_participant(code, options, out / REGISTRY_TSV, update=update,
                                            hint=hint or UPDATE_HINT)
     recordings = [read_hr_file(p, time_col=time_col, hr_col=hr_col, rr_col=rr_col) for p in paths]
+    if video is not None and video_flash_at_s is not None:
+        video_offset_s = flash_offset(video, video_flash_at_s)
     ids = [session_id_for(rec, participant.code, label) for rec in recordings]
     for rec, sid in zip(recordings, ids):
         if ids.count(sid) > 1 or (out / sid).exists():

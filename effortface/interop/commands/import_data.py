@@ -49,6 +49,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--video-offset", type=float, metavar="S",
                         help="xdf: LSL time of the video's first frame; hr: seconds of the video's first frame "
                              "after the file's first heart-rate sample (default 0; negative: the video started first)")
+    parser.add_argument("--video-flash-at", type=float, metavar="S",
+                        help="hr: instead of --video-offset, the heart-rate file's time (s after its first sample) of "
+                             "a flash the video filmed (a phone's torch, a lap pressed with the watch's light): its "
+                             "first bright frame is put there")
     parser.add_argument("--participant", required=True, metavar="CODE", help="participant code (never a name)")
     parser.add_argument("--age", type=float)
     parser.add_argument("--sex", help="female or male")
@@ -64,6 +68,8 @@ def run(args: argparse.Namespace) -> int:
     """Import and print the session folder(s)."""
     if args.format == "hr":
         return _run_hr(args)
+    if args.video_flash_at is not None:
+        raise UserError("--video-flash-at: only for 'import hr', found with 'import xdf'")
     if len(args.file) != 1:
         raise UserError(f"import xdf: expected one .xdf file, found {len(args.file)}: {' '.join(args.file)}")
     for option in ("time_col", "hr_col", "rr_col"):
@@ -102,7 +108,8 @@ def _run_hr(args: argparse.Namespace) -> int:
                "training_level": args.training_level}
     folders = import_hr_files(args.file, args.out, code, options, update=args.update_participant, label=args.label,
                               video=Path(args.video) if args.video is not None else None,
-                              video_offset_s=args.video_offset, time_col=args.time_col, hr_col=args.hr_col,
+                              video_offset_s=args.video_offset, video_flash_at_s=args.video_flash_at,
+                              time_col=args.time_col, hr_col=args.hr_col,
                               rr_col=args.rr_col)
     for folder in folders:
         print(folder)
