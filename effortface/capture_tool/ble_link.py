@@ -16,6 +16,7 @@ stick's do, and the link re-opens it with back-off), and the log replayed by ``r
 from __future__ import annotations
 
 import asyncio
+import re
 import threading
 import time
 from typing import TYPE_CHECKING, Any
@@ -32,6 +33,8 @@ HR_MEASUREMENT_UUID = "00002a37-0000-1000-8000-00805f9b34fb"
 #: how long to look for the strap, and to wait for its connection, seconds
 SCAN_TIMEOUT_S = 10.0
 CONNECT_TIMEOUT_S = 20.0
+#: a device address: a MAC (Linux, Windows) or the UUID macOS gives a device
+ADDRESS_RE = re.compile(r"([0-9A-Fa-f]{2}:){5}[0-9A-Fa-f]{2}|[0-9A-Fa-f]{8}(-[0-9A-Fa-f]{4}){3}-[0-9A-Fa-f]{12}")
 
 
 class BleUnavailable(Exception):
@@ -119,9 +122,11 @@ class BlePort(SerialBase):
         self._loop = asyncio.get_running_loop()
         self._stop = asyncio.Event()
         target = self.target
-        device = (await BleakScanner.find_device_by_address(target, timeout=SCAN_TIMEOUT_S) if ":" in target or
-                  "-" in target else await BleakScanner.find_device_by_filter(
-                      lambda d, adv: target.lower() in (d.name or adv.local_name or "").lower(), timeout=SCAN_TIMEOUT_S))
+        if ADDRESS_RE.fullmatch(target):
+            device = await BleakScanner.find_device_by_address(target, timeout=SCAN_TIMEOUT_S)
+        else:  # a part of the advertised name, any case
+            device = await BleakScanner.find_device_by_filter(
+                lambda d, adv: target.lower() in (d.name or adv.local_name or "").lower(), timeout=SCAN_TIMEOUT_S)
         if device is None:
             failure.append(f"expected a BLE device {target!r} in range, found none")
             return

@@ -220,3 +220,13 @@ def test_effortface_replay_serves_a_ble_log(tmp_path):
     assert done.returncode == 0, done.stderr
     rows = read_session(Path(done.stdout.splitlines()[0])).heart_rate
     assert content(rows) == content(expected)
+
+
+@pytest.mark.parametrize(("target", "is_address"), [
+    ("C4:7C:8D:6A:1B:2E", True), ("c4:7c:8d:6a:1b:2e", True), ("5B1F0E2A-9C3D-4E8F-A1B2-C3D4E5F60718", True),
+    ("Polar H10 8A2C1D3E", False), ("TICKR-1A2B", False), ("C4:7C:8D", False),
+])
+def test_ble_target_is_an_address_or_a_name(target, is_address):
+    from effortface.capture_tool.ble_link import ADDRESS_RE
+
+    assert bool(ADDRESS_RE.fullmatch(target)) is is_address

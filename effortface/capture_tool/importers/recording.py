@@ -125,7 +125,3 @@ def to_samples(rec: HrRecording, device: str) -> list[HrSample]:
         rows.append(HrSample(round(t - t0, 4), hr if ok else None, rr_ok, None, device, ok))
     return rows
 
-
-def utc(seconds: float) -> dt.datetime:
-    """UTC datetime of epoch seconds."""
-    return dt.datetime.fromtimestamp(seconds, dt.timezone.utc)
