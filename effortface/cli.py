@@ -36,7 +36,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "synth": ("effortface.synth.commands.synth", "synthesize face curves from a motion clip"),
     "work": ("effortface.synth.commands.work", "work.csv (w, p per second) from motion/ and the exercise log"),
     "motion": ("effortface.synth.commands.motion", "motion attach SESSION CLIP: align a mocap clip to a session; motion inspect FILE: what a clip holds"),
-    "import": ("effortface.interop.commands.import_data", "import xdf FILE: a LabRecorder recording -> a session"),
+    "import": ("effortface.interop.commands.import_data", "import xdf FILE | hr FILE...: a LabRecorder recording, or watch/app heart-rate files -> sessions"),
     "export": ("effortface.interop.commands.export_data", "export bids SESSIONS: sessions -> a BIDS dataset"),
     "serve": ("effortface.interop.commands.serve", "live face from an LSL or OSC stream to LSL, OSC or Live Link"),
     "demo": ("effortface.commands.demo", "the whole pipeline on the sample lab"),

@@ -63,7 +63,18 @@ def _seed_streams() -> dict[str, bytes]:
         "hxm": (SERIAL / "zephyr-bt" / "120-second-bt-stream-hxm.dat").read_bytes()[:3000],
         "hrmi": hrmi[:3000],
         "lines": b"".join(encode_line(hr, rr) for hr, rr in ((60 + i % 90, 600 + 7 * i) for i in range(80))),
+        "ble_hrm": _ble_notifications(),
     }
+
+
+def _ble_notifications() -> bytes:
+    """Framed 0x2A37 notifications carrying the real R-R intervals of tests/data/hr (one beat each)."""
+    from effortface.capture_tool.protocols.ble_hrm import build_measurement, frame
+
+    lines = (ROOT / "tests" / "data" / "hr" / "polar-h10-sensor-logger_RR.txt").read_text().splitlines()[1:200]
+    rr = [float(line.split(";")[1]) for line in lines]
+    return b"".join(frame(build_measurement(round(60000 / r), (r,), contact=True, energy_kj=k if k % 7 == 0 else None,
+                                            hr16=k % 5 == 0)) for k, r in enumerate(rr))[:3000]
 
 
 STREAMS = _seed_streams()

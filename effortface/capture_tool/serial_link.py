@@ -68,6 +68,9 @@ def _device_error(port: str, exc: BaseException) -> DeviceError:
     """Map an open failure to a DeviceError with a reason and a one-line message."""
     code = getattr(exc, "errno", None)
     text = str(exc)
+    if port.startswith("ble://"):
+        return DeviceError(f"--ble {port[6:]}: expected a BLE heart-rate strap in range, found "
+                           f"{text.splitlines()[0] if text else type(exc).__name__}", DeviceErrorReason.NOT_FOUND)
     if code == errno.ENOENT or "[Errno 2]" in text or "No such file" in text:
         return DeviceError(f"--port {port}: expected a serial port, found no such device", DeviceErrorReason.NOT_FOUND)
     if code in (errno.EACCES, errno.EPERM) or "[Errno 13]" in text:

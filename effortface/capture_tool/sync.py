@@ -52,6 +52,32 @@ def flash_offset_s(
     return float(t[after[0]] - t_flash_s)
 
 
+def first_flash_frame(brightness: Sequence[float], fps: float) -> int | None:
+    """The first frame at least :data:`MIN_STEP` brighter than the median of the second before it.
+
+    For a video filmed beside a watch or phone: a flash (a phone's torch, a screen turned white)
+    shown at a moment the heart-rate file marks.
+
+    Parameters
+    ----------
+    brightness : sequence of float
+        Mean grey level (0-255) of each frame, from the first.
+    fps : float
+        The video's frame rate (how many frames make the second before).
+
+    Returns
+    -------
+    int or None
+        The frame number, or None when no frame brightens so.
+    """
+    b = np.asarray(brightness, dtype=float)
+    span = max(1, int(round(fps)))
+    for k in range(1, len(b)):
+        if b[k] > float(np.median(b[max(0, k - span):k])) + MIN_STEP:
+            return k
+    return None
+
+
 def video_brightness(video_path: str | os.PathLike, first: int, last: int) -> list[float]:
     """Mean grey level of frames ``first`` to ``last`` (inclusive) of an MJPG file.
 

@@ -14,6 +14,9 @@ HR_BPM = (20.0, 250.0)
 #: plausible R-R interval, ms: up to 60000 / 20 bpm; down to 200 ms, shorter than 60000 / 250 bpm
 #: because a premature beat gives one short interval (the ANT reference recording holds 200.2 ms)
 RR_MS = (200.0, 60_000.0 / HR_BPM[0])
+#: heart rate an imported sample (a watch file, another app's stream) may have to be valid, bpm: the
+#: ceiling of :data:`HR_BPM` with a stricter floor, since a file may hold anything under its name
+IMPORT_HR_BPM = (25.0, HR_BPM[1])
 
 
 def hr_plausible(hr_bpm: float | None) -> bool:

@@ -42,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from effortface.capture_tool.importers.session import copy_video
 from effortface.core.hr_sample import HrSample
 from effortface.core.session.folder import (EVENTS_CSV, HEART_RATE_CSV, VIDEO_AVI, VIDEO_FRAMES_CSV, Event,
                                              EventWriter, FrameTimeWriter, HrWriter, Participant, SessionInfo,
@@ -50,7 +51,7 @@ from effortface.core.bounds import BOUNDS
 from effortface.core.errors import UserError
 from effortface.core.opencv import import_cv2
 from effortface.core.fileio import atomic_write_text, fsync_folder
-from effortface.core.physio_limits import HR_BPM
+from effortface.core.physio_limits import IMPORT_HR_BPM
 from effortface.core.version import __version__
 
 XdfStream = dict[str, Any]
@@ -58,7 +59,7 @@ XdfStream = dict[str, Any]
 #: the heart rates an imported sample may have to be valid (bpm): the strap readers' ceiling
 #: (:data:`effortface.core.physio_limits.HR_BPM`) with a stricter floor, since a stream from another
 #: app may hold anything under its name (25 bpm: below it, an imported value is not taken as a rate)
-HR_RANGE_BPM = (25.0, HR_BPM[1])
+HR_RANGE_BPM = IMPORT_HR_BPM
 #: names, types and channel labels (lower case, letters and digits only) that say heart rate
 HR_KEYS = frozenset({"heartrate", "hr", "hrbpm", "bpm", "pulse", "pulserate"})
 #: ... and R-R (inter-beat) intervals
@@ -198,6 +199,25 @@ def heart_rate_streams(streams: Sequence[XdfStream]) -> list[XdfStream]:
     return hr or [s for s in streams if _says(s)[1]]
 
 
+#: names, types and channel labels (keyed) that say ECG: a Polar H10's 130 Hz electrocardiogram
+ECG_KEYS = ("ecg", "ekg", "electrocardiogram")
+
+
+def is_ecg(stream: XdfStream) -> bool:
+    """True for an ECG stream (its name, type or a channel label says ECG/EKG): not heart rate."""
+    words = [_key(_field(stream, "name")), _key(_field(stream, "type")), *map(_key, channel_labels(stream))]
+    return any(k in w for w in words for k in ECG_KEYS)
+
+
+def _refuse_ecg(path: Path, stream: XdfStream) -> None:
+    stamps = _samples(stream)[0]
+    rate = f", {(len(stamps) - 1) / (stamps[-1] - stamps[0]):.0f} Hz" if len(stamps) > 1 and stamps[-1] > stamps[0] \
+        else ""
+    raise XdfImportError(f"{path}: stream {_field(stream, 'name')!r} ({_field(stream, 'type')}{rate}): ECG, not "
+                         "heart rate (import the app's HR or RR stream with --hr-stream; --keep-ecg copies the ECG "
+                         "into the session as ecg.csv)")
+
+
 def pick_hr_stream(path: Path, streams: Sequence[XdfStream], wanted: str | None) -> XdfStream:
     """The heart-rate stream: ``wanted`` by name or type, else the one :func:`heart_rate_streams` finds.
 
@@ -207,9 +227,14 @@ def pick_hr_stream(path: Path, streams: Sequence[XdfStream], wanted: str | None)
         None or several found (naming the streams and ``--hr-stream``).
     """
     if wanted:
-        return pick_stream(path, streams, wanted, "HeartRate", "--hr-stream")
-    typed = [s for s in streams if _field(s, "type") == "HeartRate"]
-    found = typed or heart_rate_streams(streams)
+        chosen = pick_stream(path, streams, wanted, "HeartRate", "--hr-stream")
+        if is_ecg(chosen):
+            _refuse_ecg(path, chosen)
+        return chosen
+    typed = [s for s in streams if _field(s, "type") == "HeartRate" and not is_ecg(s)]
+    found = typed or [s for s in heart_rate_streams(streams) if not is_ecg(s)]
+    if not found and any(is_ecg(s) for s in streams):
+        _refuse_ecg(path, next(s for s in streams if is_ecg(s)))
     if not found:
         raise XdfImportError(f"{path}: expected a heart-rate stream (named or typed HeartRate, HR or RR, or a "
                              f"channel labelled so or in bpm; or name one with --hr-stream), found {describe(streams)}")
@@ -241,6 +266,8 @@ def hr_channels(path: Path, stream: XdfStream) -> tuple[int | None, int | None, 
     rr_col = next((i for i, (k, u) in enumerate(zip(keys, ukeys))
                    if i != hr_col and (k in RR_KEYS or (u in MS_UNITS | S_UNITS and k not in HR_KEYS))), None)
     if hr_col is None and rr_col is None:
+        if unlabelled_rr(stream):
+            return None, 0, 1.0
         if len(labels) != 1:
             raise XdfImportError(f"{name}: expected a channel labelled hr_bpm, HeartRate or HR (or in bpm) or rr_ms, "
                                  f"RR or IBI (in ms), found labels {labels}")
@@ -255,6 +282,26 @@ def hr_channels(path: Path, stream: XdfStream) -> tuple[int | None, int | None, 
                                  f"{units[col]!r}: not imported as heart rate (convert it, or choose another "
                                  "stream with --hr-stream)")
     return hr_col, rr_col, 1000.0 if rr_col is not None and ukeys[rr_col] in S_UNITS else 1.0
+
+
+#: values (ms) that unlabelled channels must all hold to be taken as R-R intervals
+UNLABELLED_RR_MS = (250.0, 2000.0)
+
+
+def unlabelled_rr(stream: XdfStream) -> bool:
+    """True for a numeric stream whose channels say nothing (no label, no unit) and whose every finite,
+    non-zero value is an R-R interval in ms (:data:`UNLABELLED_RR_MS`): a phone app's R-R channels
+    (0 or NaN where a sample has fewer intervals)."""
+    said = [t for t in (*channel_labels(stream), *channel_units(stream)) if t not in ("", "None")]  # pyxdf: <label/>
+    if said or _field(stream, "channel_format") == "string":
+        return False
+    try:
+        values = np.asarray(stream["time_series"], dtype=float)
+    except (ValueError, TypeError):
+        return False
+    seen = values[np.isfinite(values) & (values != 0)]
+    low, high = UNLABELLED_RR_MS
+    return bool(seen.size) and bool(np.all((seen >= low) & (seen <= high)))
 
 
 def _check_hr_range(path: Path, stream: XdfStream, hr_bpm: np.ndarray, what: str) -> None:
@@ -289,6 +336,8 @@ def hr_rows(path: Path, stream: XdfStream, t0: float) -> list[HrSample]:
         raise XdfImportError(f"{path}: stream {device!r}: expected heart-rate samples, found an empty stream")
     hr_col, rr_col, rr_to_ms = hr_channels(path, stream)
     values = _numeric(path, stream, "heart-rate", 1)
+    if hr_col is None and rr_col == 0 and unlabelled_rr(stream) and values.shape[1] > 1:
+        return _rr_channel_rows(path, stream, stamps, values, t0, device)
     rr_ms = values[:, rr_col] * rr_to_ms if rr_col is not None else None
     with np.errstate(divide="ignore", invalid="ignore"):
         hr_all: np.ndarray = values[:, hr_col] if hr_col is not None else 60000.0 / np.asarray(rr_ms)
@@ -307,6 +356,111 @@ def hr_rows(path: Path, stream: XdfStream, t0: float) -> list[HrSample]:
         ok = math.isfinite(hr) and low <= hr <= high
         rows.append(HrSample(round(float(stamp) - t0, 4), hr if ok else None, rr, None, device, ok))
     return rows
+
+
+def _rr_channel_rows(path: Path, stream: XdfStream, stamps: np.ndarray, values: np.ndarray, t0: float,
+                     device: str) -> list[HrSample]:
+    """Rows of a stream of unlabelled R-R channels: each sample's finite non-zero values are its R-R
+    intervals (ms), its heart rate 60000 / the last of them; samples sharing a stamp make one row."""
+    rr_per_sample = [tuple(float(v) for v in row if math.isfinite(v) and v != 0) for row in values]
+    last = np.array([rr[-1] if rr else np.nan for rr in rr_per_sample])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        _check_hr_range(path, stream, 60000.0 / last, "60000 / its R-R intervals in ms")
+    low, high = HR_RANGE_BPM
+    rows: list[HrSample] = []
+    for stamp in np.unique(stamps):
+        idx = np.flatnonzero(stamps == stamp)
+        rr = tuple(v for i in idx for v in rr_per_sample[i])
+        hr = 60000.0 / rr[-1] if rr else math.nan
+        ok = math.isfinite(hr) and low <= hr <= high
+        rows.append(HrSample(round(float(stamp) - t0, 4), hr if ok else None, rr, None, device, ok))
+    return rows
+
+
+def _json_path(doc: Any, key_path: str) -> Any:
+    """``doc["a"]["b"]`` for ``a.b`` (None where a step is missing)."""
+    for step in key_path.split("."):
+        if not isinstance(doc, dict) or step not in doc:
+            return None
+        doc = doc[step]
+    return doc
+
+
+def _json_docs(stream: XdfStream) -> list[Any] | None:
+    """The JSON value of each sample's first channel of a string stream, or None when the first is not JSON."""
+    if _field(stream, "channel_format") != "string" or len(_samples(stream)[0]) == 0:
+        return None
+    docs = []
+    for sample in stream["time_series"]:
+        try:
+            docs.append(json.loads(str(sample[0]) if len(sample) else ""))
+        except (ValueError, RecursionError):
+            docs.append(None)
+    return docs if isinstance(docs[0], dict) else None
+
+
+def _json_key(docs: list[Any], hr_key: str | None) -> str | None:
+    """The key path of the heart rate: ``hr_key``, else a top-level key of the first sample that says heart rate."""
+    if hr_key is not None:
+        return hr_key
+    return next((k for k in docs[0] if _key(str(k)) in HR_KEYS), None)
+
+
+def json_hr_stream(path: Path, stream: XdfStream, hr_key: str | None, rr_key: str | None) -> XdfStream | None:
+    """A string stream of JSON text holding heart rate (``hr_key``, e.g. ``hr`` or ``data.hr``) as a numeric
+    stream with channels ``hr_bpm`` (bpm) and ``rr_ms`` (ms; a list of R-R intervals at ``rr_key`` gives
+    one sample per interval at the same time stamp), or None when the stream is not such JSON.
+
+    Raises
+    ------
+    XdfImportError
+        ``hr_key`` given but found in no sample (naming the keys the first sample has).
+    """
+    docs = _json_docs(stream)
+    if docs is None:
+        return None
+    key = _json_key(docs, hr_key)
+    if key is None:
+        return None
+    stamps_in = _samples(stream)[0]
+    stamps, rows = [], []
+    for stamp, doc in zip(stamps_in, docs):
+        hr = _json_path(doc, key)
+        rr = _json_path(doc, rr_key) if rr_key else None
+        rr_list = rr if isinstance(rr, list) else ([rr] if rr is not None else [None])
+        for value in rr_list:
+            stamps.append(stamp)
+            rows.append([_as_float(hr), _as_float(value)])
+    if all(math.isnan(r[0]) for r in rows):
+        if hr_key is None:
+            return None
+        raise XdfImportError(f"{path}: stream {_field(stream, 'name')!r}: --hr-json-key {hr_key}: expected a number "
+                             f"at that key path, found none (the first sample's keys: {sorted(docs[0])[:10]})")
+    info = dict(stream["info"], channel_format=["float32"], channel_count=["2"],
+                desc=[{"channels": [{"channel": [{"label": ["hr_bpm"], "unit": ["bpm"]},
+                                                 {"label": ["rr_ms"], "unit": ["ms"]}]}]}])
+    return {"info": info, "time_stamps": np.asarray(stamps, float), "time_series": np.asarray(rows, float)}
+
+
+def _as_float(value: Any) -> float:
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        return math.nan
+    return out if math.isfinite(out) else math.nan
+
+
+def _with_json_streams(path: Path, streams: list[XdfStream], hr_key: str | None,
+                       rr_key: str | None) -> list[XdfStream]:
+    """``streams`` with each JSON text stream holding heart rate replaced by its numeric form."""
+    out = []
+    for stream in streams:
+        if _key(_field(stream, "type")) in MARKER_TYPES:
+            out.append(stream)
+            continue
+        converted = json_hr_stream(path, stream, hr_key, rr_key)
+        out.append(converted if converted is not None else stream)
+    return out
 
 
 def check_stamps(path: Path, streams: Sequence[XdfStream], extra: np.ndarray | None = None) -> float:
@@ -388,6 +542,16 @@ def _write_mocap(path: Path, folder: Path, stream: XdfStream, t0: float) -> None
     atomic_write_text(folder / "motion" / "mocap.csv", "\n".join(rows) + "\n")
 
 
+def _write_ecg(path: Path, folder: Path, stream: XdfStream, t0: float, info: SessionInfo) -> None:
+    """``ecg.csv`` (``t_s,ecg``): the ECG stream's first channel as recorded; its unit in ``session.json``."""
+    stamps = _samples(stream)[0]
+    values = _numeric(path, stream, "ECG", 1)[:, 0]
+    lines = ["t_s,ecg"] + [f"{t - t0:.4f},{v:.6g}" for t, v in zip(stamps, values)]
+    atomic_write_text(folder / "ecg.csv", "\n".join(lines) + "\n")
+    info.devices["ecg"] = {"stream": _field(stream, "name"), "unit": channel_units(stream)[0] or "unknown",
+                           "samples": int(len(stamps))}
+
+
 def _frame_times(path: Path, streams: Sequence[XdfStream], video: Path, video_stream: str | None,
                  video_offset_s: float | None) -> np.ndarray:
     """LSL times of the video's frames: from a stream (one sample per frame) or an offset + fps."""
@@ -417,7 +581,8 @@ def import_xdf(path: str | os.PathLike, out_dir: str | os.PathLike, participant:
                hr_stream: str | None = None, marker_streams: Sequence[str] = (),
                work_stream: str | None = None, mocap_stream: str | None = None,
                video: str | os.PathLike | None = None, video_stream: str | None = None,
-               video_offset_s: float | None = None, label: str | None = None) -> Path:
+               video_offset_s: float | None = None, label: str | None = None,
+               hr_json_key: str | None = None, rr_json_key: str | None = None, keep_ecg: bool = False) -> Path:
     """Turn an XDF recording into a new session folder in ``out_dir``; return it.
 
     Parameters
@@ -440,6 +605,12 @@ def import_xdf(path: str | os.PathLike, out_dir: str | os.PathLike, participant:
         (LSL time of frame 0) gives its frame times.
     label : str, optional
         Appended to the session id.
+    hr_json_key, rr_json_key : str, optional
+        Key paths (``hr``, ``data.hr``) of the heart rate and R-R intervals (ms, a number or a list)
+        in a string stream of JSON text (default: a top-level key that says heart rate, no R-R).
+    keep_ecg : bool
+        Copy an ECG stream (a Polar H10's) into the session as ``ecg.csv`` (``t_s,ecg``, its unit in
+        ``session.json``); without it an ECG stream is never taken as heart rate.
 
     Raises
     ------
@@ -450,8 +621,12 @@ def import_xdf(path: str | os.PathLike, out_dir: str | os.PathLike, participant:
     if video_offset_s is not None and not (math.isfinite(video_offset_s) and abs(video_offset_s) <= 1e10):
         raise XdfImportError(f"--video-offset: expected a finite LSL time in seconds (at most 1e10), "
                              f"found {video_offset_s:g}")
-    streams = load_xdf(path)
+    streams = _with_json_streams(path, load_xdf(path), hr_json_key, rr_json_key)
     hr = pick_hr_stream(path, streams, hr_stream)
+    ecg = [s for s in streams if is_ecg(s)] if keep_ecg else []
+    if keep_ecg and len(ecg) != 1:
+        raise XdfImportError(f"{path}: --keep-ecg: expected one ECG stream, found {len(ecg)}"
+                             f"{': ' + describe(ecg) if ecg else ''}")
     markers = ([pick_stream(path, streams, m, "Markers", "--marker-stream") for m in marker_streams]
                or [s for s in streams if _key(_field(s, "type")) in MARKER_TYPES])
     work = (pick_stream if work_stream else find_stream)(path, streams, work_stream, "EffortWork", "--work-stream")
@@ -460,7 +635,7 @@ def import_xdf(path: str | os.PathLike, out_dir: str | os.PathLike, participant:
     if video_path is not None and not video_path.is_file():
         raise XdfImportError(f"--video {video_path}: expected a video file, found no such file")
     frames = _frame_times(path, streams, video_path, video_stream, video_offset_s) if video_path else None
-    used = [s for s in (hr, *markers, work, mocap) if s is not None]
+    used = [s for s in (hr, *markers, work, mocap, *ecg) if s is not None]
     if len(_samples(hr)[0]) == 0:  # named before the stamps of all streams are checked
         raise XdfImportError(f"{path}: stream {_field(hr, 'name') or 'xdf'!r}: expected heart-rate samples, "
                              "found an empty stream")
@@ -487,8 +662,10 @@ def import_xdf(path: str | os.PathLike, out_dir: str | os.PathLike, participant:
             _write_work(path, folder, work, t0)
         if mocap is not None:
             _write_mocap(path, folder, mocap, t0)
+        for stream in ecg:
+            _write_ecg(path, folder, stream, t0, info)
         if video_path is not None and frames is not None:
-            _copy_video(video_path, folder / VIDEO_AVI)
+            copy_video(video_path, folder / VIDEO_AVI)
             writer = FrameTimeWriter(folder / VIDEO_FRAMES_CSV)
             for k, stamp in enumerate(frames):
                 writer.write(k, float(stamp - t0))
@@ -506,25 +683,3 @@ def _write_rows(writer: Any, rows: Sequence[Any]) -> None:
     for row in rows:
         writer.write(row)
     writer.close()
-
-
-def _copy_video(src: Path, dst: Path) -> None:
-    """An AVI is copied as is; another container is re-encoded to MJPG AVI with OpenCV."""
-    if src.suffix.lower() == ".avi":
-        shutil.copyfile(src, dst)
-        return
-    cv2 = import_cv2()
-
-    cap = cv2.VideoCapture(str(src))
-    fps = cap.get(cv2.CAP_PROP_FPS) or 30.0
-    writer = None
-    while True:
-        ok, frame = cap.read()
-        if not ok:
-            break
-        if writer is None:
-            writer = cv2.VideoWriter(str(dst), cv2.VideoWriter.fourcc(*"MJPG"), fps, frame.shape[1::-1])
-        writer.write(frame)
-    cap.release()
-    if writer is not None:
-        writer.release()

@@ -113,7 +113,7 @@ def test_recover_blames_the_serlog_header_not_protocol_option(tmp_path, capsys) 
     log.unlink()
     SerlogWriter(log, {"protocol": "zzz"}).close()
     line = _one_error_line(capsys, ["recover", folder])
-    assert f"{log}: header field 'protocol': expected one of ant, hrmi, hxm, lines, found 'zzz'" in line
+    assert f"{log}: header field 'protocol': expected one of ant, ble_hrm, hrmi, hxm, lines, found 'zzz'" in line
     assert "--protocol" not in line
 
 
@@ -225,7 +225,7 @@ def test_decode_bad_protocol_before_note(tmp_path, capsys) -> None:
     log = tmp_path / "a.serlog"
     SerlogWriter(log, {"protocol": "ant"}).close()
     line = _one_error_line(capsys, ["decode", "--protocol", "bogus", log])
-    assert "--protocol: expected one of ant, hrmi, hxm, lines, found 'bogus'" in line
+    assert "--protocol: expected one of ant, ble_hrm, hrmi, hxm, lines, found 'bogus'" in line
 
 
 @pytest.mark.parametrize("special", ["/dev/zero", "fifo"])

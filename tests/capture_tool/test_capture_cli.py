@@ -134,7 +134,7 @@ def busy_port():
 
 ERRORS = {
     "unknown protocol": (["capture", "--port", "loop://", "--protocol", "polar", "--participant", "P01", "--no-video"],
-                         "--protocol: expected one of ant, hrmi, hxm, lines, found 'polar'"),
+                         "--protocol: expected one of ant, ble_hrm, hrmi, hxm, lines, found 'polar'"),
     "missing port": (["capture", "--port", "{tmp}/ttyUSB9", "--protocol", "hxm", "--participant", "P01", "--no-video"],
                      "--port {tmp}/ttyUSB9: expected a serial port, found no such device"),
     "port in use": (["capture", "--port", "{busy}", "--protocol", "hxm", "--participant", "P01", "--no-video"],

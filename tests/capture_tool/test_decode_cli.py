@@ -95,7 +95,7 @@ def test_libant_pcap_decodes_to_no_rows(shared_data, capsys):
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["--protocol", "polar", "{hxm}"], "--protocol: expected one of ant, hrmi, hxm, lines, found 'polar'"),
+    (["--protocol", "polar", "{hxm}"], "--protocol: expected one of ant, ble_hrm, hrmi, hxm, lines, found 'polar'"),
     (["--protocol", "hxm", "{missing}"], "missing.dat: expected a readable capture file"),
     (["--protocol", "hxm", "--device-type", "120", "{hxm}"], "--device-type: expected only with"),
     (["--protocol", "ant", "--device-type", "300", "{hxm}"], "--device-type: expected an ANT device"),

@@ -42,8 +42,13 @@ HELP_DOCS = (DESIGN,)
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of DESIGN.md's capture line."""
-    parser.add_argument("--port", required=True, help="serial port, e.g. /dev/ttyUSB0, or a pyserial URL")
-    parser.add_argument("--protocol", required=True, help=f"one of {', '.join(sorted(PROTOCOLS))}")
+    strap = parser.add_mutually_exclusive_group(required=True)
+    strap.add_argument("--port", help="serial port, e.g. /dev/ttyUSB0, or a pyserial URL (with --protocol)")
+    strap.add_argument("--ble", metavar="ADDRESS|NAME|replay://LOG",
+                       help="a Bluetooth Low Energy heart-rate strap (Heart Rate Service 0x180D) by address or a part "
+                            "of its name ('effortface ports' lists them), or replay://LOG of one recorded before; "
+                            "protocol ble_hrm")
+    parser.add_argument("--protocol", help=f"with --port: one of {', '.join(sorted(PROTOCOLS))}")
     video = parser.add_mutually_exclusive_group()
     video.add_argument("--camera", type=int, metavar="N", help="camera index")
     video.add_argument("--video", metavar="FILE", help="a video file played at its real rate (tests, demos)")
@@ -82,6 +87,23 @@ def _participant(args: argparse.Namespace) -> tuple[Participant, bool]:
                                update=bool(getattr(args, "update_participant", False)))
 
 
+def _strap(args: argparse.Namespace) -> None:
+    """``--ble X`` as the port and protocol the recorder opens (``ble://X``, or the replay URL, with ble_hrm);
+    ``--port`` needs ``--protocol``."""
+    if args.ble is not None:
+        if args.protocol not in (None, "ble_hrm"):
+            raise UserError(f"--protocol {args.protocol}: a --ble strap speaks ble_hrm, found --protocol with --ble")
+        target = args.ble.strip()
+        if not target:
+            raise UserError("--ble: expected a device address or name, found an empty value")
+        args.port = target if target.startswith("replay://") else f"ble://{target}"
+        args.protocol = "ble_hrm"
+        return
+    if args.protocol is None:
+        raise UserError(f"--protocol: expected one of {', '.join(sorted(PROTOCOLS))} with --port, found none")
+    check_protocol(args.protocol)
+
+
 def _video_source(args: argparse.Namespace) -> int | str | None:
     if args.camera is not None:
         return args.camera
@@ -94,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
     """Record until the duration or a stop signal; print the session folder."""
     if args.duration is not None and not args.duration > 0:
         raise UserError(f"--duration: expected seconds above 0, found {args.duration}")
-    check_protocol(args.protocol)
+    _strap(args)
     if args.camera is not None and args.camera < 0:
         raise UserError(f"--camera: expected a camera index >= 0, found {args.camera}")
     _check_out(args.out)

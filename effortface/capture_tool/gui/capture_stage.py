@@ -11,6 +11,7 @@ window adds too, so they work from every stage while recording.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -139,6 +140,10 @@ class QtCaptureStage(QtWidgets.QWidget):
         font.setPointSize(font.pointSize() + 5)
         font.setBold(True)
         self.record_button.setFont(font)
+        self.import_button = QtWidgets.QPushButton("Import heart rate...")
+        self.import_button.setToolTip("Import watch or app heart-rate files (FIT, TCX, GPX, Polar HRM, PWX, CSV/TSV) "
+                                      "for the participant in the form: one session each, as "
+                                      "'effortface import hr' does")
         self.session_label = QtWidgets.QLabel(wordWrap=True)
         self.session_label.setTextInteractionFlags(QtCore.Qt.TextInteractionFlag.TextSelectableByMouse)
         self.sync_label = QtWidgets.QLabel(wordWrap=True)
@@ -172,7 +177,8 @@ class QtCaptureStage(QtWidgets.QWidget):
         self.flash.setAttribute(QtCore.Qt.WidgetAttribute.WA_StyledBackground, True)
         self.flash.hide()
         left = QtWidgets.QVBoxLayout()
-        for widget in (self.preflight, self.form, self.lsl_box, self.record_button, self.session_label,
+        for widget in (self.preflight, self.form, self.lsl_box, self.record_button, self.import_button,
+                       self.session_label,
                        self.sync_label, self._events_box(), self.notes):
             left.addWidget(widget)
         left.addStretch(1)
@@ -204,6 +210,7 @@ class QtCaptureStage(QtWidgets.QWidget):
 
     def _connect(self) -> None:
         self.record_button.clicked.connect(self.toggle_recording)
+        self.import_button.clicked.connect(lambda: self.import_heart_rate())
         p = self.phases
         p.phase_requested.connect(lambda exercise, params: self._guarded(self.session.start_phase, exercise, params))
         p.end_requested.connect(lambda: self._guarded(self.session.end_phase))
@@ -306,6 +313,49 @@ class QtCaptureStage(QtWidgets.QWidget):
         self.preflight.remember()
         self.session.start_in_background(participant, choice, label, self.lsl_box.isChecked(), update)
         return True
+
+    def import_heart_rate(self, paths: list[str] | None = None) -> bool:
+        """Import heart-rate files for the participant in the form (a file dialog when ``paths`` is None).
+
+        The form must be complete, as for Record; the import runs in the background and its result
+        (the sessions written, or the one-line refusal) is said in the banner.
+
+        Returns
+        -------
+        bool
+            True if an import was started.
+        """
+        if self.form.validate():
+            self.show_banner("Import refused: " + self.form.message.text(), "error")
+            return False
+        if paths is None:
+            paths, _ = QtWidgets.QFileDialog.getOpenFileNames(
+                self, "Import heart rate", str(self.session.out_dir),
+                "Heart-rate files (*.fit *.FIT *.tcx *.gpx *.hrm *.pwx *.csv *.tsv *.txt);;All files (*)")
+        if not paths:
+            return False
+        from effortface.capture_tool.importers.session import import_hr_files
+
+        person = self.form.participant()
+        options = {f: getattr(person, f) for f in ("sex", "age", "height_m", "mass_kg", "training_level",
+                                                     "hr_rest_bpm", "hr_max_bpm")}
+        self.import_button.setEnabled(False)
+        self.show_banner(f"Importing {len(paths)} heart-rate file(s)...")
+        work = functools.partial(import_hr_files, update=self.form.update_record,
+                                 label=self.form.session_label() or None,
+                                 hint="choose 'Use the record' or 'Change the record'")
+        self.preflight.jobs.submit("import", work, list(paths), self.session.out_dir, person.code, options,
+                                   done=self._imported)
+        return True
+
+    def _imported(self, result: Any) -> None:
+        self.import_button.setEnabled(self.session.state == "idle")
+        if result.error is not None:
+            self.show_banner(f"Import refused: {str(result.error).splitlines()[0]}", "error")
+            return
+        names = ", ".join(p.name for p in result.value)
+        self.show_banner(f"Imported {len(result.value)} session(s) into {self.session.out_dir}: {names}")
+        self.refresh_participants()
 
     def _confirm_devices(self, choice: DeviceChoice) -> DeviceChoice | None:
         """Ask before recording without a ready strap, or with a chosen camera that is not ready.
@@ -639,6 +689,8 @@ class QtCaptureStage(QtWidgets.QWidget):
         self.record_button.setEnabled(state not in BUSY_STATES)
         self.preflight.setEnabled(state == "idle")
         self.form.setEnabled(state == "idle")
+        self.import_button.setEnabled(state == "idle")
+        self.import_button.setVisible(state not in ("recording", "stopping"))
         # while recording, devices and participant are fixed: their room goes to the events and notes
         self.preflight.setVisible(state not in ("recording", "stopping"))
         self.form.setVisible(state not in ("recording", "stopping"))

@@ -65,6 +65,22 @@ def found_ports() -> list[str]:
     return [p["device"] for p in list_ports()]
 
 
+def found_ble_straps(scan_s: float = 3.0) -> tuple[list[str], str]:
+    """BLE heart-rate straps in range as ``ble://ADDRESS`` ports, and a one-line note for the form.
+
+    No adapter (or no ``bleak``) is not an error: no ports, and the note says why.
+    """
+    from effortface.capture_tool.ble_link import BleUnavailable, scan_heart_rate_devices
+
+    try:
+        devices = scan_heart_rate_devices(scan_s)
+    except BleUnavailable as exc:
+        return [], f"no straps listed: {exc}"
+    names = ", ".join(f"{d['name'] or '?'} ({d['address']}, {d['rssi']} dBm)" for d in devices)
+    return [f"ble://{d['address']}" for d in devices], (f"{len(devices)} heart-rate strap(s): {names}" if devices
+                                                         else "no heart-rate strap in range")
+
+
 def found_cameras() -> list[int]:
     """Camera indices from ``/dev/video*``."""
     from effortface.capture_tool.camera import list_cameras
@@ -106,6 +122,8 @@ class QtPreflight(QtWidgets.QGroupBox):
         self.release_strap = release_strap or (lambda: (lambda: None))
         self.jobs = Jobs(name="preflight")
         self.state = {"strap": MISSING, "camera": MISSING}
+        self.ble_ports: list[str] = []  # BLE straps found by the last scan (``ble://ADDRESS``)
+        self.ble_scan_s = 3.0
         #: the strap's one state: the Strap line, the stage's banner and HR readout all draw it
         self.strap = StrapStatus()
         self.detect_seconds = 2.5  # how long Detect listens to the port
@@ -119,7 +137,7 @@ class QtPreflight(QtWidgets.QGroupBox):
     def _build(self) -> None:
         self.port = QtWidgets.QComboBox(editable=True)
         self.port.lineEdit().setPlaceholderText(  # type: ignore[union-attr]  # editable: it has one
-            "/dev/ttyUSB0 or replay://file.serlog")
+            "/dev/ttyUSB0, ble://ADDRESS or replay://file.serlog")
         self.port.setMinimumContentsLength(22)
         self.protocol = QtWidgets.QComboBox()
         self.protocol.addItems(sorted(PROTOCOLS))
@@ -132,12 +150,16 @@ class QtPreflight(QtWidgets.QGroupBox):
         self.refresh_button = QtWidgets.QPushButton("Refresh devices")
         self.strap_status = QtWidgets.QLabel()
         self.camera_status = QtWidgets.QLabel()
-        for label in (self.strap_status, self.camera_status):
+        self.ble_status = QtWidgets.QLabel("scanning...")
+        self.ble_status.setToolTip("Bluetooth Low Energy heart-rate straps (Heart Rate Service 0x180D) in range: "
+                                   "choose one as ble://ADDRESS in Strap port")
+        for label in (self.strap_status, self.camera_status, self.ble_status):
             label.setWordWrap(True)
         form = QtWidgets.QFormLayout(self)
         form.addRow("Strap port", self.port)
         form.addRow("Protocol", _row(self.protocol, self.detect_button))
         form.addRow("Strap", self.strap_status)
+        form.addRow("Bluetooth", self.ble_status)
         form.addRow("Camera", self.camera)
         form.addRow("", _row(self.video_path, self.browse))
         form.addRow("Camera state", self.camera_status)
@@ -147,11 +169,19 @@ class QtPreflight(QtWidgets.QGroupBox):
         self.browse.clicked.connect(self._browse)
         self._debounce = QtCore.QTimer(self, singleShot=True, interval=400)
         self._debounce.timeout.connect(self.check)
-        self.port.currentTextChanged.connect(lambda _: self._debounce.start())
+        self.port.currentTextChanged.connect(self._on_port_changed)
         self.camera.currentIndexChanged.connect(lambda _: self._on_camera_changed())
         self.video_path.editingFinished.connect(self.check)
         self.video_path.textChanged.connect(self.video_path.setToolTip)
         self.protocol.currentTextChanged.connect(self._on_protocol_changed)
+
+    def _on_port_changed(self, port: str) -> None:
+        """A BLE strap speaks ble_hrm: chosen with it; then the check after a pause in typing."""
+        if port.strip().startswith("ble://") and self.protocol.currentText() != "ble_hrm":
+            self.protocol.blockSignals(True)
+            self.protocol.setCurrentText("ble_hrm")
+            self.protocol.blockSignals(False)
+        self._debounce.start()
 
     def _on_protocol_changed(self, protocol: str) -> None:
         self.settings.setValue("capture/protocol", protocol)
@@ -166,6 +196,7 @@ class QtPreflight(QtWidgets.QGroupBox):
     def refresh(self) -> None:
         """List the ports and cameras found (in the background), then check the chosen ones."""
         self.jobs.submit("ports", found_ports, done=self._ports_found)
+        self.jobs.submit("ble", found_ble_straps, self.ble_scan_s, done=self._ble_found)
         self.jobs.submit("cameras", found_cameras, done=self._cameras_found)
 
     def choice(self) -> DeviceChoice:
@@ -246,7 +277,7 @@ class QtPreflight(QtWidgets.QGroupBox):
 
     def _ports_found(self, result: JobResult) -> None:
         current = self.port.currentText() or str(self.settings.value("capture/port", ""))
-        ports = list(result.value or [])
+        ports = list(result.value or []) + [p for p in self.ble_ports if p not in (result.value or [])]
         if current and current not in ports:
             ports.insert(0, current)
         self.port.blockSignals(True)
@@ -255,6 +286,20 @@ class QtPreflight(QtWidgets.QGroupBox):
         self.port.setCurrentText(current)
         self.port.blockSignals(False)
         self.check()
+
+    def _ble_found(self, result: JobResult) -> None:
+        if result.error is not None:
+            self.ble_status.setText(f"no straps listed: {str(result.error).splitlines()[0]}")
+            return
+        self.ble_ports, note = result.value
+        self.ble_status.setText(note)
+        for port in self.ble_ports:
+            if self.port.findText(port) < 0:
+                self.port.blockSignals(True)
+                current = self.port.currentText()
+                self.port.addItem(port)
+                self.port.setCurrentText(current)
+                self.port.blockSignals(False)
 
     def _cameras_found(self, result: JobResult) -> None:
         current = self.camera.currentText()

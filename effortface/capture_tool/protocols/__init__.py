@@ -24,6 +24,7 @@ PROTOCOLS: dict[str, str] = {
     "hxm": "effortface.capture_tool.protocols.hxm",
     "hrmi": "effortface.capture_tool.protocols.hrmi",
     "lines": "effortface.capture_tool.protocols.lines",
+    "ble_hrm": "effortface.capture_tool.protocols.ble_hrm",
 }
 
 

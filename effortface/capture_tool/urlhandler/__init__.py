@@ -1,4 +1,4 @@
-"""pyserial URL handlers of effortface (``replay://``), found through ``serial.protocol_handler_packages``."""
+"""pyserial URL handlers of effortface (``replay://``, ``ble://``), found through ``serial.protocol_handler_packages``."""
 
 from __future__ import annotations
 
