@@ -47,7 +47,7 @@ from effortface.core.gui.qt_compat import guard_none_refcount
 from effortface.annotate.gui.reliability_panel import QtReliabilityPanel
 from effortface.annotate.gui.timeline import QtTimeline
 from effortface.annotate.annotate_session import AnnotateSession, check_rater
-from effortface.annotate.machine_guide import ACCEPT_TOLERANCE
+from effortface.annotate.machine_guide import ACCEPT_TOLERANCE, KeyFit
 from effortface.annotate.preannotate_run import PreannotateRun, has_track
 from effortface.annotate.video_index import VideoIndex
 from effortface.core.errors import UserError
@@ -181,6 +181,7 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         column.addLayout(toggles)
         column.addWidget(machine_row)
         column.addLayout(row, 1)
+        machine_row.setVisible(self.session.machine is not None)  # it has a parent now: never a window
         self._show_history()
         return pane
 
@@ -204,8 +205,9 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         self.accept_tolerance = QtWidgets.QDoubleSpinBox(minimum=0.0, maximum=0.5, value=ACCEPT_TOLERANCE,
                                                          decimals=3, singleStep=0.005)
         self.accept_tolerance.setFocusPolicy(QtCore.Qt.FocusPolicy.ClickFocus)
-        self.accept_tolerance.setToolTip("Accept machine keeps the machine curve within this weight at every frame "
-                                         "(Ramer-Douglas-Peucker): larger, fewer keys")
+        self.accept_tolerance.setToolTip("Accept machine smooths the machine curve (1 s running median) and adds "
+                                         "keys where it moves most, at most one per 3 s, until within this weight: "
+                                         "larger, fewer keys. The keys stay the machine's (grey) until you edit them")
         row.addWidget(self.accept_tolerance)
         self.accept_button = QtWidgets.QPushButton("Accept machine (A)")
         self.accept_button.setFocusPolicy(QtCore.Qt.FocusPolicy.NoFocus)
@@ -216,7 +218,9 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         row.addWidget(self.accept_button)
         self.machine_row = QtWidgets.QWidget()
         self.machine_row.setLayout(row)
-        self.machine_row.setVisible(self.session.machine is not None)
+        # hidden until it has a parent: setVisible(True) on a parentless widget opens it as a window of its
+        # own, which takes the keyboard from the main window (_build_curves_pane shows it once laid out)
+        self.machine_row.hide()
         return self.machine_row
 
     def accept_range(self) -> tuple[int, int]:
@@ -228,8 +232,8 @@ class QtKeyframeEditor(QtWidgets.QWidget):
             return chosen[0], chosen[-1]
         return self.timeline.visible_frames()
 
-    def accept_machine(self) -> int:
-        """Turn the machine curve into key-frames over :meth:`accept_range` (one undo step)."""
+    def accept_machine(self) -> KeyFit:
+        """Turn the machine curve into sparse key-frames over :meth:`accept_range` (one undo step)."""
         first, last = self.accept_range()
         return self.session.accept_machine(first, last, self.accept_tolerance.value())
 

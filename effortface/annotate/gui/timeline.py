@@ -14,8 +14,13 @@
 - the machine guide (``machine/face_landmarker.csv``): each blendshape's machine curve dashed under the
   rater's own curves (shown or hidden per blendshape with :meth:`QtTimeline.set_machine_shown`), and the
   frames where the machine found no face shaded grey and labelled "no face";
+- keys the rater accepted from the machine and has not edited are grey diamonds (the machine's
+  colour, :data:`MACHINE_KEY_COLOUR`); the rater's own (typed or edited) are dots in the curve's colour;
 - zoom: :meth:`QtTimeline.zoom` (the editor binds + and -) about the cursor, :meth:`frame_all` (F);
-- a cursor line at the current frame's time in both plots; dragging it scrubs the video.
+  the view never shows time before the session's start nor after its end;
+- a cursor line at the current frame's time in both plots; dragging it scrubs the video; the view
+  follows the cursor (:attr:`QtTimeline.follow`: ``"page"`` turns the page when the cursor leaves the
+  view, ``"centre"`` keeps it in the middle, ``"off"`` leaves the view alone).
 
 Everything is written back through the model's methods (the rule: a view writes back only through model methods and keeps widget state only); the widget keeps only the
 selection and the drag preview.
@@ -37,6 +42,11 @@ _KEY_BRUSH = pg.mkBrush("#1f5fbf")
 _SELECTED_BRUSH = pg.mkBrush("#e07000")
 _PHASE_BRUSHES = (pg.mkBrush(90, 140, 220, 40), pg.mkBrush(230, 150, 60, 40))
 _NO_FACE_BRUSH = pg.mkBrush(120, 120, 120, 60)
+_MACHINE_BRUSH = pg.mkBrush("#707070")
+#: keys accepted from the machine (not edited) are drawn in the machine's colour, as diamonds
+MACHINE_KEY_COLOUR = "#707070"
+#: how the view follows the play head
+FOLLOW_MODES = ("page", "centre", "off")
 #: "no face" labels drawn at most (every stretch is shaded)
 _MAX_NO_FACE_LABELS = 30
 
@@ -137,6 +147,8 @@ class QtTimeline(pg.GraphicsLayoutWidget):
         self.machine_hidden: set[str] = set()  # blendshapes whose machine guide the rater switched off
         self.t_s = session.times.t_s
         self.phase_labels: list[tuple[pg.LinearRegionItem, pg.InfLineLabel, str]] = []
+        #: how the view follows the current frame (one of :data:`FOLLOW_MODES`)
+        self.follow = "page"
         self.hr_plot = self.addPlot(row=0, col=0)
         self._curve_box = _ClickViewBox()
         self.curve_plot = self.addPlot(row=1, col=0, viewBox=self._curve_box)
@@ -169,6 +181,8 @@ class QtTimeline(pg.GraphicsLayoutWidget):
             plot.setYRange(np.nanmin(bpm) - 5, np.nanmax(bpm) + 12, padding=0)
         self._add_phases(plot)
         self._add_marks(plot)
+        start_s, end_s = min(float(self.t_s[0]), 0.0), float(self.t_s[-1])
+        plot.setLimits(xMin=start_s, xMax=end_s + 0.01 * max(end_s - start_s, 1.0))  # no negative time
         plot.setXRange(self.t_s[0], self.t_s[-1], padding=0.01)
 
     def _add_marks(self, plot: pg.PlotItem) -> None:
@@ -298,8 +312,7 @@ class QtTimeline(pg.GraphicsLayoutWidget):
         lo, hi = self.curve_plot.viewRange()[0]
         t = float(self.t_s[self.session.frame])
         span = max((hi - lo) / factor, 0.5)
-        span = min(span, float(self.t_s[-1] - self.t_s[0]) * 1.02)
-        self.curve_plot.setXRange(t - span / 2, t + span / 2, padding=0)
+        self._show_span(t - span / 2, span)
 
     def frame_all(self) -> None:
         """Show the whole session (F)."""
@@ -352,16 +365,20 @@ class QtTimeline(pg.GraphicsLayoutWidget):
         self.current_curve.setPen(pg.mkPen(self.colour(self.session.blendshape), width=2.5))
         self.current_curve.setData(self.t_s, self.session.track.evaluate(frames), connect="finite")
         kf, kw, _ = self.session.track.arrays()
+        machine = np.array([not k.human for k in self.session.track.keys], dtype=bool)
         keyed = set(kf.tolist())
         if self.selected is not None and self.selected not in keyed:
             self.selected = None
         self.extra &= keyed
         chosen = set(self.selection)
-        brushes = [_SELECTED_BRUSH if f in chosen else pg.mkBrush(self.colour(self.session.blendshape)) for f in kf]
-        self.keys.setData(x=self.t_s[kf], y=kw, data=kf, brush=brushes, size=key_size(len(kf)))
+        own = pg.mkBrush(self.colour(self.session.blendshape))
+        brushes = [_SELECTED_BRUSH if f in chosen else _MACHINE_BRUSH if m else own for f, m in zip(kf, machine)]
+        self.keys.setData(x=self.t_s[kf], y=kw, data=kf, brush=brushes, size=key_size(len(kf)),
+                          symbol=["d" if m else "o" for m in machine])
         picked = f", {len(chosen)} selected" if len(chosen) > 1 else ""
+        accepted = f" ({int(machine.sum())} the machine's, grey)" if machine.any() else ""
         self.title.setColor(self.colour(self.session.blendshape))
-        self.title.setText(f"{self.session.blendshape} ({self.session.rater}): {len(kf)} keys{picked}")
+        self.title.setText(f"{self.session.blendshape} ({self.session.rater}): {len(kf)} keys{accepted}{picked}")
         self.title.setPos(self.t_s[0], 1.05)
 
     def _on_frame(self, frame: int) -> None:
@@ -373,6 +390,24 @@ class QtTimeline(pg.GraphicsLayoutWidget):
                 line.blockSignals(True)
                 line.setValue(t)
                 line.blockSignals(False)
+        self.follow_cursor(t)
+
+    def follow_cursor(self, t_s: float) -> None:
+        """Bring time ``t_s`` into view as :attr:`follow` says (page: a new page when it leaves the view)."""
+        lo, hi = self.curve_plot.viewRange()[0]
+        span = hi - lo
+        if self.follow == "centre":
+            self._show_span(t_s - span / 2, span)
+        elif self.follow == "page" and not lo <= t_s <= hi:
+            self._show_span(t_s - 0.05 * span if t_s > hi else t_s - 0.95 * span, span)
+
+    def _show_span(self, lo: float, span: float) -> None:
+        """Show ``span`` seconds from ``lo``, shifted to stay within the session (never negative time)."""
+        first_s, end_s = min(float(self.t_s[0]), 0.0), float(self.t_s[-1])
+        last_s = end_s + 0.01 * max(end_s - first_s, 1.0)
+        span = min(span, last_s - first_s)
+        lo = max(min(lo, last_s - span), first_s)
+        self.curve_plot.setXRange(lo, lo + span, padding=0)
 
     def _on_blendshape(self, _name: str) -> None:
         self.selected = None
