@@ -92,6 +92,7 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         self.loop: tuple[int, int] | None = None  # frames played over and over (L)
         self._build()
         self._add_shortcuts()
+        self._return_focus_from_boxes()
         session.frame_changed.connect(self._show_frame)
         session.keys_changed.connect(lambda *_: self._show_face())
         session.file_changed.connect(self._show_saved)
@@ -129,11 +130,12 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         self.splitter.setChildrenCollapsible(False)
         self.splitter.addWidget(top)
         self.splitter.addWidget(self._build_curves_pane())
-        self.splitter.setStretchFactor(0, 6)
-        self.splitter.setStretchFactor(1, 4)
+        self.splitter.setStretchFactor(0, 1)
+        self.splitter.setStretchFactor(1, 2)  # a taller window mostly grows the curve editor
         # the curves' size hints would take half the height: start at 55:45 (the protocol panel fits
         # unscrolled at 1280x800 with room to spare, the video gets the rest)
         self.splitter.setSizes([500, 500])  # a tall curve editor; the splitter moves either way
+        self._grown_from: int | None = None
         help_label = QtWidgets.QLabel(HELP_TEXT, wordWrap=True)
         help_label.setStyleSheet("color:#505050;")
         layout = QtWidgets.QVBoxLayout(self)
@@ -370,6 +372,17 @@ class QtKeyframeEditor(QtWidgets.QWidget):
             action.triggered.connect(lambda *_, s=slot: self._guarded(s))
             self.addAction(action)
 
+    def _return_focus_from_boxes(self) -> None:
+        """Enter (or Esc) in the weight or tolerance box hands the keyboard back to the video, as the frame
+        and time boxes do: Right and the digits key frames again at once."""
+        for box in (self.protocol.number, self.accept_tolerance):
+            box.editingFinished.connect(functools.partial(self._focus_video_from, box))
+            box.installEventFilter(self)
+
+    def _focus_video_from(self, box: QtWidgets.QWidget) -> None:
+        if box.hasFocus():
+            self.video_view.setFocus()
+
     def _select_frame_box(self) -> None:
         """Ctrl+G: type the frame to go to."""
         self.frame_box.setFocus()
@@ -390,16 +403,21 @@ class QtKeyframeEditor(QtWidgets.QWidget):
     def eventFilter(self, watched: QtCore.QObject, event: QtCore.QEvent) -> bool:  # noqa: N802 - Qt override
         """Esc in the frame or time box cancels the go-to and hands the keys back to the video."""
         if (isinstance(event, QtGui.QKeyEvent) and event.type() == QtCore.QEvent.Type.KeyPress
-                and event.key() == QtCore.Qt.Key.Key_Escape
-                and watched in (self.frame_box, self.time_box)):
-            self.cancel_go_to()
-            return True
+                and event.key() == QtCore.Qt.Key.Key_Escape):
+            if watched in (self.frame_box, self.time_box):
+                self.cancel_go_to()
+                return True
+            if watched in (self.protocol.number, self.accept_tolerance):
+                self.video_view.setFocus()
+                return True
         return super().eventFilter(watched, event)
 
     def _escape(self) -> None:
-        """Esc: cancel a go-to being typed, else clear the key selection."""
+        """Esc: cancel a go-to being typed, leave the weight or tolerance box, else clear the key selection."""
         if self.frame_box.hasFocus() or self.time_box.hasFocus():
             self.cancel_go_to()
+        elif self.protocol.number.hasFocus() or self.accept_tolerance.hasFocus():
+            self.video_view.setFocus()
         else:
             self.timeline.select_key(None)
 
