@@ -99,6 +99,8 @@ def test_accept_machine_by_keyboard_then_edit_one_key(qtbot, stage, lab: Path) -
     assert f"({len(track)} the machine's, grey)" in editor.timeline.title.toPlainText()
     symbols = editor.timeline.keys.data["symbol"]
     assert set(symbols) == {"d"}  # drawn as the machine's
+    assert not np.isfinite(editor.timeline.current_curve.getData()[1]).any()  # the whole curve grey
+    assert np.isfinite(editor.timeline.machine_keyed_curve.getData()[1]).sum() > 0.8 * t.size
     doc = json.loads((lab / SESSION / "annotations" / "R7.json").read_text())
     saved = doc["tracks"]["mouth_stretch"]
     assert doc["schema_version"] == 2 and len(saved) == len(track)
@@ -119,3 +121,5 @@ def test_accept_machine_by_keyboard_then_edit_one_key(qtbot, stage, lab: Path) -
     assert counts["edited"] > 0 and counts["typed"] == 0 and counts["machine"] > counts["edited"]
     assert symbols is not editor.timeline.keys.data["symbol"]
     assert list(editor.timeline.keys.data["symbol"]).count("o") == 1  # the edited key in the rater's colour
+    own = np.flatnonzero(np.isfinite(editor.timeline.current_curve.getData()[1]))
+    assert own.size > 0 and own.min() < target < own.max()  # its stretch in the rater's colour

@@ -14,8 +14,9 @@
 - the machine guide (``machine/face_landmarker.csv``): each blendshape's machine curve dashed under the
   rater's own curves (shown or hidden per blendshape with :meth:`QtTimeline.set_machine_shown`), and the
   frames where the machine found no face shaded grey and labelled "no face";
-- keys the rater accepted from the machine and has not edited are grey diamonds (the machine's
-  colour, :data:`MACHINE_KEY_COLOUR`); the rater's own (typed or edited) are dots in the curve's colour;
+- keys the rater accepted from the machine and has not edited are grey diamonds, and the curve is grey
+  where its nearest key is one of them (the machine's colour, :data:`MACHINE_KEY_COLOUR`); the rater's
+  own keys (typed or edited) and their stretches are in the curve's colour;
 - zoom: :meth:`QtTimeline.zoom` (the editor binds + and -) about the cursor, :meth:`frame_all` (F);
   the view never shows time before the session's start nor after its end;
 - a cursor line at the current frame's time in both plots; dragging it scrubs the video; the view
@@ -42,9 +43,9 @@ _KEY_BRUSH = pg.mkBrush("#1f5fbf")
 _SELECTED_BRUSH = pg.mkBrush("#e07000")
 _PHASE_BRUSHES = (pg.mkBrush(90, 140, 220, 40), pg.mkBrush(230, 150, 60, 40))
 _NO_FACE_BRUSH = pg.mkBrush(120, 120, 120, 60)
-_MACHINE_BRUSH = pg.mkBrush("#707070")
+_MACHINE_BRUSH = pg.mkBrush("#6e6e6e")
 #: keys accepted from the machine (not edited) are drawn in the machine's colour, as diamonds
-MACHINE_KEY_COLOUR = "#707070"
+MACHINE_KEY_COLOUR = "#6e6e6e"
 #: how the view follows the play head
 FOLLOW_MODES = ("page", "centre", "off")
 #: "no face" labels drawn at most (every stretch is shaded)
@@ -251,6 +252,8 @@ class QtTimeline(pg.GraphicsLayoutWidget):
             item.setZValue(-5)  # under the rater's own curves and keys
         self.others = {n: plot.plot(pen=pg.mkPen(self.colour(n), width=1.2)) for n in self.session.blendshape_names}
         self.current_curve = plot.plot(pen=pg.mkPen(self.colour(self.session.blendshape), width=2.5))
+        #: the stretches of the current curve whose nearest key is the machine's (accepted, not edited)
+        self.machine_keyed_curve = plot.plot(pen=pg.mkPen(MACHINE_KEY_COLOUR, width=2.5))
         self.keys = _KeyPoints()
         plot.addItem(self.keys)
         self.keys.on_select = self.select_key
@@ -363,7 +366,12 @@ class QtTimeline(pg.GraphicsLayoutWidget):
             colour.setAlpha(255 if current else 110)  # the other blendshapes' guides faint
             item.setPen(pg.mkPen(colour, width=2.0 if current else 1.0, style=QtCore.Qt.PenStyle.DashLine))
         self.current_curve.setPen(pg.mkPen(self.colour(self.session.blendshape), width=2.5))
-        self.current_curve.setData(self.t_s, self.session.track.evaluate(frames), connect="finite")
+        values = self.session.track.evaluate(frames)
+        human = self.session.track.human_mask(frames) | ~np.isfinite(values)
+        # a frame on each side of a change belongs to both curves, so that they join
+        edge = np.convolve(human.astype(int), [1, 1, 1], mode="same")
+        self.current_curve.setData(self.t_s, np.where(edge > 0, values, np.nan), connect="finite")
+        self.machine_keyed_curve.setData(self.t_s, np.where(edge < 3, values, np.nan), connect="finite")
         kf, kw, _ = self.session.track.arrays()
         machine = np.array([not k.human for k in self.session.track.keys], dtype=bool)
         keyed = set(kf.tolist())
@@ -373,8 +381,9 @@ class QtTimeline(pg.GraphicsLayoutWidget):
         chosen = set(self.selection)
         own = pg.mkBrush(self.colour(self.session.blendshape))
         brushes = [_SELECTED_BRUSH if f in chosen else _MACHINE_BRUSH if m else own for f, m in zip(kf, machine)]
-        self.keys.setData(x=self.t_s[kf], y=kw, data=kf, brush=brushes, size=key_size(len(kf)),
-                          symbol=["d" if m else "o" for m in machine])
+        size = key_size(len(kf))
+        self.keys.setData(x=self.t_s[kf], y=kw, data=kf, brush=brushes, symbol=["d" if m else "o" for m in machine],
+                          size=[size + 3 if m else size for m in machine])
         picked = f", {len(chosen)} selected" if len(chosen) > 1 else ""
         accepted = f" ({int(machine.sum())} the machine's, grey)" if machine.any() else ""
         self.title.setColor(self.colour(self.session.blendshape))
