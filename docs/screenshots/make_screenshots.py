@@ -4,7 +4,8 @@
 
 Writes ``<name>_<w>x<h>.png`` at 1280x800 and 1920x1080 into this folder (or ``--out``), replacing
 the previous ones (that is what the script is for; each path is printed). Groups (``--only``, default
-all): ``app`` (the main window as it opens), ``capture`` (``before``, ``during``, ``strap_lost``: P01's
+all): ``app`` (the main window as it opens), ``capture`` (``before``, ``during``, ``strap_lost``,
+``after`` (Stop: the last recording's summary and plot): P01's
 ANT+ serial log replayed on a pseudo-terminal, the session video played as the camera, recorded into
 an empty lab), ``participant`` (``capture_participant_refused``: P01 typed as a man of 45 with
 training level 8 on the sample lab, whose P01 is a woman of 23 with 2.5, Record refused;
@@ -170,7 +171,13 @@ def shoot_capture(tmp: Path, out: Path) -> None:
             _wait(1.5)
             grab(window, "capture_strap_lost", out)
             stage.phases.marker_text.clear()
-            stage.stop_now()
+            stage.sync_test()  # the flash (the session video is no camera facing the screen: not seen)
+            _wait(20, lambda: stage.session.recorder.link.state == "connected")
+            stage.stop_recording()  # as the operator does: in the background, the summary stays after it
+            if not _wait(60, lambda: not stage.session.recording and stage.settled()):
+                raise RuntimeError("the recording did not stop")
+            _wait(3.5)  # the strap watched again meanwhile: the summary and the plot stay
+            grab(window, "capture_after", out)
     finally:
         replay.stop()
         thread.join(5)
