@@ -82,3 +82,45 @@ def test_the_curve_editor_grows_with_the_window(qtbot, stage, editor) -> None:
     stage.resize(1920, 1080)
     qtbot.waitUntil(lambda: editor.timeline.height() > small)
     assert editor.timeline.height() - small >= 0.5 * (1080 - 800) * 2 / 3 - 10
+
+
+def test_reopening_goes_back_where_the_rater_stopped(qtbot, tmp_path: Path, lab: Path) -> None:
+    from effortface.annotate.gui.annotate_stage import QtAnnotateStage
+
+    settings = QtCore.QSettings(str(tmp_path / "settings.ini"), QtCore.QSettings.Format.IniFormat)
+    view = QtAnnotateStage(lab, settings=settings, cache_frames=64)
+    qtbot.addWidget(view)
+    view.resize(*STAGE_SIZE)
+    view.show()
+    try:
+        editor = view.open_session(lab / SESSION, "R2")
+        editor.session.set_blendshape("eye_squint")
+        editor.session.set_frame(612)
+        view.close_session()
+        editor = view.open_session(lab / SESSION, "R2")
+        assert (editor.session.blendshape, editor.session.frame) == ("eye_squint", 612)
+        assert _in_view(editor, 612)
+        other = view.open_session(lab / SESSION, "R3")  # another rater starts at the beginning
+        assert (other.session.blendshape, other.session.frame) == ("mouth_stretch", 0)
+    finally:
+        view.shutdown()
+
+
+def test_preannotate_progress_is_a_bar_with_the_time_left(qtbot, stage) -> None:
+    from effortface.annotate.gui.annotate_stage import time_left
+
+    assert time_left(30.0, 0.25) == "about 1 min 30 s left" and time_left(1.0, 0.5).startswith("estimating")
+    import time
+
+    stage._pre_started = time.perf_counter() - 20.0  # 20 s into a run, half done
+    stage.pre_progress.show()
+    stage._show_preannotate_progress(0.5, "P01 frame 476 of 953")
+    assert stage.pre_progress.value() == 500
+    assert stage.pre_progress.text() in ("50 %, about 20 s left", "50 %, about 21 s left")
+    assert stage.status.text() == "pre-annotate: P01 frame 476 of 953"
+
+
+def test_the_session_list_elides_at_the_end_with_the_whole_line_in_the_tooltip(stage) -> None:
+    assert stage.sessions.textElideMode() == QtCore.Qt.TextElideMode.ElideRight
+    item = stage.sessions.item(0)
+    assert SESSION in item.toolTip() and "R1:" in item.toolTip()

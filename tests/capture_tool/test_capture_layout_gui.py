@@ -20,10 +20,15 @@ pytestmark = pytest.mark.qt_log_ignore("This plugin does not support propagateSi
 
 
 @pytest.fixture(params=[(1280, 800), (1920, 1080)], ids=["1280x800", "1920x1080"])
-def stage(request, qtbot, tmp_path: Path):
+def size(request) -> tuple[int, int]:
+    return request.param
+
+
+@pytest.fixture
+def stage(qtbot, tmp_path: Path, size: tuple[int, int]):
     settings = QtCore.QSettings(str(tmp_path / "settings.ini"), QtCore.QSettings.Format.IniFormat)
     win = MainWindow(copy_sample_lab(tmp_path / "lab"), settings)
-    win.resize(*request.param)
+    win.resize(*size)
     win.show()
     qtbot.waitExposed(win)
     stage = win.show_stage("capture")
@@ -45,7 +50,7 @@ def _in_sight(widget: QtWidgets.QWidget) -> bool:
         and widget.visibleRegion().boundingRect().size() == widget.size()
 
 
-def test_record_stays_in_sight_and_the_summary_stays_after_stop(qtbot, stage) -> None:
+def test_record_stays_in_sight_and_the_summary_stays_after_stop(qtbot, stage, size: tuple[int, int]) -> None:
     replay = _strap(60.0)
     _choose(qtbot, stage, replay.path)
     stage.form.registry.setCurrentText("P01")  # a registered participant: the form grows
@@ -59,6 +64,8 @@ def test_record_stays_in_sight_and_the_summary_stays_after_stop(qtbot, stage) ->
     stage.phases.marker_text.setText("water")
     path = _stop(qtbot, stage)
     recorded = stage.live.n_samples()
+    qtbot.wait(50)
+    assert stage.window().size() == QtCore.QSize(*size)  # the summary never makes the window taller
     assert stage.summary.isVisible() and _in_sight(stage.summary) and _in_sight(stage.record_button)
     summary = stage.summary_text.text()
     assert f"Saved, complete: <b>{path.name}</b>" in summary and "heart-rate samples" in summary

@@ -555,6 +555,15 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         self.video.close()
 
 
+def time_left(elapsed_s: float, fraction: float) -> str:
+    """``"about 2 min 10 s left"`` at the pace so far (``"estimating..."`` before 2 % or 2 s)."""
+    if fraction < 0.02 or elapsed_s < 2.0:
+        return "estimating time left..."
+    left_s = elapsed_s * (1.0 - fraction) / fraction
+    minutes, seconds = divmod(int(round(left_s)), 60)
+    return f"about {minutes} min {seconds:02d} s left" if minutes else f"about {seconds} s left"
+
+
 def timecode(t_s: float) -> str:
     """``h:mm:ss.mmm`` of a session time."""
     ms = int(round(max(t_s, 0.0) * 1000))
@@ -589,8 +598,8 @@ class QtAnnotateStage(QtWidgets.QWidget):
         self.cache_frames = cache_frames
         self.editor: QtKeyframeEditor | None = None
         self.preannotate = PreannotateRun()
-        self.preannotate.progress_changed.connect(lambda f, text: self.show_message(
-            f"pre-annotate {100 * f:.0f} %: {text}"))
+        self.preannotate.progress_changed.connect(self._show_preannotate_progress)
+        self._pre_started = 0.0
         self.preannotate.finished.connect(self._preannotated)
         self._pre_timer = QtCore.QTimer(self, interval=100)
         self._pre_timer.timeout.connect(self.preannotate.poll)
@@ -667,6 +676,11 @@ class QtAnnotateStage(QtWidgets.QWidget):
         left.addWidget(self.rater)
         left.addLayout(buttons)
         left.addWidget(self.preannotate_button)
+        self.pre_progress = QtWidgets.QProgressBar(maximum=1000, textVisible=True)
+        self.pre_progress.setToolTip("Pre-annotate: the share of the chosen sessions' frames rated, and the time "
+                                     "left at the pace so far")
+        self.pre_progress.hide()
+        left.addWidget(self.pre_progress)
         left.addWidget(self._build_toolbar())
         left.addWidget(self.status)
         side = QtWidgets.QWidget()
@@ -674,7 +688,8 @@ class QtAnnotateStage(QtWidgets.QWidget):
         side.setMinimumWidth(SIDE_MIN_WIDTH)
         side.setMaximumWidth(SIDE_WIDTH)
         side.setSizePolicy(QtWidgets.QSizePolicy.Policy.Preferred, QtWidgets.QSizePolicy.Policy.Preferred)
-        self.sessions.setTextElideMode(QtCore.Qt.TextElideMode.ElideMiddle)
+        self.sessions.setTextElideMode(QtCore.Qt.TextElideMode.ElideRight)  # the id's date stays readable;
+        # the whole line (and each rater's tracks) is in the item's tooltip
         self.sessions.setHorizontalScrollBarPolicy(QtCore.Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
         return side
 
@@ -719,6 +734,10 @@ class QtAnnotateStage(QtWidgets.QWidget):
         existing = sum(has_track(s) for s in chosen)
         force = bool(existing) and self.confirm_replace(existing)
         self.preannotate.start(chosen, force=force)
+        self._pre_started = time.perf_counter()
+        self.pre_progress.setValue(0)
+        self.pre_progress.setFormat("starting...")
+        self.pre_progress.show()
         self.preannotate_button.setText("Cancel pre-annotate")
         self.show_message(f"pre-annotate: {len(chosen)} session{'s' * (len(chosen) != 1)} started")
         self._pre_timer.start()
@@ -728,7 +747,15 @@ class QtAnnotateStage(QtWidgets.QWidget):
             self, "Pre-annotate", f"{n} of the chosen sessions have a machine track already. Replace them?")
         return answer == QtWidgets.QMessageBox.StandardButton.Yes
 
+    def _show_preannotate_progress(self, fraction: float, text: str) -> None:
+        """The bar: share done and the time left at the pace so far; the status line: what is being rated."""
+        elapsed_s = time.perf_counter() - self._pre_started
+        self.pre_progress.setValue(int(round(1000 * min(max(fraction, 0.0), 1.0))))
+        self.pre_progress.setFormat(f"{100 * fraction:.0f} %, {time_left(elapsed_s, fraction)}")
+        self.show_message(f"pre-annotate: {text}")
+
     def _preannotated(self, text: str, is_error: bool, outcome: Any) -> None:
+        self.pre_progress.hide()
         self._pre_timer.stop()
         self.preannotate_button.setText("Pre-annotate")
         self.show_message(text, is_error)
@@ -905,6 +932,7 @@ class QtAnnotateStage(QtWidgets.QWidget):
         self.editor.video_view.setFocus()
         if self.settings is not None:
             self.settings.setValue("annotate/rater", rater)
+            self._resume(self.editor)
         keys = sum(len(t) for t in session.annotations.tracks.values())
         self.show_message(f"{session.session.info.session_id}: rater {rater}, {keys} keys "
                           f"({'file ' + session.path.name if session.path.exists() else 'new file on first key'})")
@@ -928,8 +956,25 @@ class QtAnnotateStage(QtWidgets.QWidget):
             if Path(self.sessions.item(row).data(QtCore.Qt.ItemDataRole.UserRole)) == folder:
                 self.sessions.setCurrentRow(row)
 
+    def _place_key(self, session: AnnotateSession) -> str:
+        return f"annotate/place/{session.session.info.session_id}/{session.rater}"
+
+    def _resume(self, editor: QtKeyframeEditor) -> None:
+        """Go back to the blendshape and frame where this rater left this session (remembered at close)."""
+        assert self.settings is not None
+        place = str(self.settings.value(self._place_key(editor.session), ""))
+        name, _, frame = place.rpartition("@")
+        if name in editor.session.blendshape_names and frame.isdigit():
+            editor.session.set_blendshape(name)
+            editor.session.set_frame(int(frame))
+            editor.timeline.follow_cursor(editor.session.t_s)
+
     def close_session(self) -> None:
-        """Close the open session (nothing to save: every edit is already on disk)."""
+        """Close the open session (nothing to save: every edit is already on disk; the place the rater
+        stopped at is remembered for the next opening)."""
+        if self.editor is not None and self.settings is not None:
+            m = self.editor.session
+            self.settings.setValue(self._place_key(m), f"{m.blendshape}@{m.frame}")
         if self.editor is not None:
             self.editor.shutdown()
             self.editor_host.removeWidget(self.editor)

@@ -46,6 +46,8 @@ _NO_FACE_BRUSH = pg.mkBrush(120, 120, 120, 60)
 _MACHINE_BRUSH = pg.mkBrush("#6e6e6e")
 #: keys accepted from the machine (not edited) are drawn in the machine's colour, as diamonds
 MACHINE_KEY_COLOUR = "#6e6e6e"
+#: width of both plots' left axes (their time axes line up; the HR title fits)
+LEFT_AXIS_PX = 48
 #: how the view follows the play head
 FOLLOW_MODES = ("page", "centre", "off")
 #: "no face" labels drawn at most (every stretch is shaded)
@@ -171,7 +173,8 @@ class QtTimeline(pg.GraphicsLayoutWidget):
     # -------------------------------------------------------------------------------- building
     def _build_hr(self) -> None:
         plot = self.hr_plot
-        plot.setLabel("left", "heart rate", units="bpm")
+        plot.setLabel("left", "HR", units="bpm")  # short: "heart rate (bpm)" was clipped at 1280x800
+        plot.getAxis("left").setWidth(LEFT_AXIS_PX)
         plot.showGrid(x=True, y=True, alpha=0.2)
         plot.setMouseEnabled(x=True, y=False)
         hr = self.session.session.heart_rate
@@ -236,6 +239,7 @@ class QtTimeline(pg.GraphicsLayoutWidget):
     def _build_curves(self) -> None:
         plot = self.curve_plot
         plot.setLabel("left", "weight")
+        plot.getAxis("left").setWidth(LEFT_AXIS_PX)  # as wide as the HR plot's: the time axes line up
         plot.setLabel("bottom", "session time", units="s")
         plot.showGrid(x=True, y=True, alpha=0.2)
         plot.setMouseEnabled(x=True, y=False)

@@ -196,8 +196,9 @@ class QtCaptureStage(QtWidgets.QWidget):
         self.flash.setAttribute(QtCore.Qt.WidgetAttribute.WA_StyledBackground, True)
         self.flash.hide()
         left = QtWidgets.QVBoxLayout()
-        for widget in (self.preflight, self.form, self.session_label, self.sync_label, self._events_box(),
-                       self.notes):
+        # the last recording's summary first: in sight after Stop, above the devices and the emptied form
+        for widget in (self._summary_panel(), self.preflight, self.form, self.session_label, self.sync_label,
+                       self._events_box(), self.notes):
             left.addWidget(widget)
         left.addStretch(1)
         left_box = QtWidgets.QWidget()
@@ -216,7 +217,6 @@ class QtCaptureStage(QtWidgets.QWidget):
         right = QtWidgets.QVBoxLayout()
         right.addWidget(self.banner)
         right.addWidget(self.recovery_bar)
-        right.addWidget(self._summary_panel())
         right.addWidget(self.live, 1)
         right.addWidget(self.phases)
         layout = QtWidgets.QHBoxLayout(self)
@@ -235,8 +235,9 @@ class QtCaptureStage(QtWidgets.QWidget):
         return self.action_bar
 
     def _summary_panel(self) -> QtWidgets.QGroupBox:
-        """What the last recording saved (path, length, samples, events, dropped frames, sync): shown
-        from Stop until the next Record, with its plot kept above the live strap readout."""
+        """What the last recording saved (path, length, samples, events, dropped frames, sync): shown at the
+        top of the left column from Stop until the next Record, its plot kept on the right (the strap
+        watched again meanwhile shows only in the live readout)."""
         self.summary = QtWidgets.QGroupBox("Last recording")
         self.summary_text = QtWidgets.QLabel(wordWrap=True)
         self.summary_text.setTextInteractionFlags(QtCore.Qt.TextInteractionFlag.TextSelectableByMouse)
