@@ -155,7 +155,7 @@ def shoot_capture(tmp: Path, out: Path) -> None:
     lab.mkdir()
     register(lab / "participants.tsv", read_session_info(session).participant)
     replay = PtyReplay(load_timed_chunks(session / "serial" / "ant.serlog"), speed=STRAP_SPEED,
-                       unplug_after_s=150.0)
+                       unplug_after_s=200.0)  # after the "during" picture, even on a busy machine
     thread = start_replay_thread(replay)
     try:
         with main_window(lab, tmp) as window:

@@ -54,6 +54,7 @@ def test_reliability_panel_shows_the_machine_apart_once_the_round_is_rated(qtbot
     assert panel.report is not None and panel.machine_box.isVisible()
     assert "machine rater" in panel.machine_box.title().lower()
     assert "MediaPipe face landmarker" in panel.machine_note.text()
+    assert panel.machine_note.text().startswith("<b>Machine against the human mean, all blendshapes:</b> n ")
     assert "machine" not in panel.report.raters
     ratings, _ = gather_ratings(lab)
     machine, no_face = machine_ratings(lab, gather_poses(lab))
