@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import heapq
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -223,7 +224,7 @@ class MachineGuide:
         """``(first, last)`` frames of each stretch without a face."""
         return runs(self.no_face)
 
-    def keys(self, name: str, first: int, last: int, t_s: np.ndarray,
+    def keys(self, name: str, first: int, last: int, t_s: Sequence[float] | np.ndarray,
              tolerance: float = ACCEPT_TOLERANCE) -> KeyFit | None:
         """Sparse key-frames following blendshape ``name`` over frames ``first..last`` (:func:`fit_keys`;
         ``t_s`` the times of every video frame); None when the machine does not rate ``name``."""
