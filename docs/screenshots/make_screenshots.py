@@ -11,7 +11,7 @@ an empty lab), ``participant`` (``capture_participant_refused``: P01 typed as a 
 training level 8 on the sample lab, whose P01 is a woman of 23 with 2.5, Record refused;
 ``capture_participant_record``: the code P01 alone, the lab's record taken), ``annotate`` (``keyframes``, ``blind_round``, ``reliability``), ``train`` (``fig2``,
 ``fig3``, ``runlog`` after training in the stage; ``compare`` of two bundles made by
-``effortface train``), ``synth`` (``rule``, ``trained``), ``machine`` (``annotate_machine_guide``:
+``effortface train``; ``card``: the Card tab after exporting the stage's model), ``synth`` (``rule``, ``trained``), ``machine`` (``annotate_machine_guide``:
 R1's keys over the machine rater's dashed curves (the real rater, run on the copy), 330-470 s; ``annotate_machine_accept``:
 a new rater after "Accept machine" over the whole session).
 
@@ -326,6 +326,12 @@ def shoot_train(lab: Path, bundles: dict[str, Path], tmp: Path, out: Path) -> No
         if not _wait(120, lambda: stage.settled() and stage.session.comparison is not None):
             raise RuntimeError(f"the comparison did not finish: {stage.status.text()}")
         grab(window, "train_compare", out)
+        if not stage.export(tmp / "card_model"):  # the Card tab shows the exported MODEL_CARD.md
+            raise RuntimeError(f"export failed: {stage.status.text()}")
+        if not _wait(300, lambda: stage.settled() and bool(stage.card.toPlainText())):
+            raise RuntimeError(f"the export did not finish: {stage.status.text()}")
+        stage.tabs.setCurrentWidget(stage.card)
+        grab(window, "train_card", out)
 
 
 def shoot_synth(lab: Path, bundles: dict[str, Path], tmp: Path, out: Path) -> None:
