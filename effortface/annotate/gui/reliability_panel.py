@@ -49,6 +49,35 @@ _PICTURE_MIN = (130, 98)
 _ROW_PX = 22
 
 
+class _TablesFirstSplitter(QtWidgets.QSplitter):
+    """A vertical splitter whose extra height, when the window grows, goes to its tables (every pane but
+    the Bland-Altman plot) once the plot has :data:`_PLOT_ENOUGH_PX`; a smaller window shrinks all."""
+
+    plot_index = 2
+
+    def resizeEvent(self, event: QtGui.QResizeEvent) -> None:  # noqa: N802 - Qt override
+        before = self.sizes()
+        super().resizeEvent(event)
+        grown = event.size().height() - event.oldSize().height()
+        if event.oldSize().height() <= 0 or grown <= 0 or len(before) <= self.plot_index:
+            return
+        plot_gain = max(0, min(grown, _PLOT_ENOUGH_PX - before[self.plot_index]))
+        tables = [i for i, w in enumerate(before) if i != self.plot_index and w > 0
+                  and (pane := self.widget(i)) is not None and pane.isVisible()]
+        if not tables:
+            return
+        sizes = list(before)
+        sizes[self.plot_index] += plot_gain
+        share, rest = divmod(grown - plot_gain, len(tables))
+        for n, i in enumerate(tables):
+            sizes[i] += share + (1 if n < rest else 0)
+        self.setSizes(sizes)
+
+
+#: the Bland-Altman plot grows up to this height before a taller window goes to the tables
+_PLOT_ENOUGH_PX = 240
+
+
 def machine_summary(rep: MachineReport) -> str:
     """One line like the humans' overall row: the machine against the human mean, every blendshape pooled."""
     pooled = next((st for st in rep.stats if st.reference == HUMAN_MEAN and st.name == "all"), None)
@@ -215,7 +244,7 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         lower_widget = QtWidgets.QWidget()
         lower_widget.setLayout(lower)
         _fit_rows(self.pairs, 3)  # three raters' pairs unscrolled (the worst poses come first above them)
-        results = QtWidgets.QSplitter(QtCore.Qt.Orientation.Vertical)
+        results = _TablesFirstSplitter(QtCore.Qt.Orientation.Vertical)
         results.setChildrenCollapsible(False)
         results.addWidget(self.per_shape)
         results.addWidget(lower_widget)
