@@ -50,10 +50,13 @@ _ROW_PX = 22
 
 
 class _TablesFirstSplitter(QtWidgets.QSplitter):
-    """A vertical splitter whose extra height, when the window grows, goes to its tables (every pane but
-    the Bland-Altman plot) once the plot has :data:`_PLOT_ENOUGH_PX`; a smaller window shrinks all."""
+    """A vertical splitter whose extra height, when the window grows, goes to its growing tables (poses and
+    pairs, the machine's rows) once the Bland-Altman plot has :data:`_PLOT_ENOUGH_PX`; a smaller window
+    shrinks all."""
 
     plot_index = 2
+    #: the blendshape table shows its five rows at its minimum: it never needs more
+    fixed_index = 0
 
     def resizeEvent(self, event: QtGui.QResizeEvent) -> None:  # noqa: N802 - Qt override
         before = self.sizes()
@@ -62,7 +65,7 @@ class _TablesFirstSplitter(QtWidgets.QSplitter):
         if event.oldSize().height() <= 0 or grown <= 0 or len(before) <= self.plot_index:
             return
         plot_gain = max(0, min(grown, _PLOT_ENOUGH_PX - before[self.plot_index]))
-        tables = [i for i, w in enumerate(before) if i != self.plot_index and w > 0
+        tables = [i for i, w in enumerate(before) if i not in (self.plot_index, self.fixed_index) and w > 0
                   and (pane := self.widget(i)) is not None and pane.isVisible()]
         if not tables:
             return
