@@ -4,13 +4,14 @@
 
 Writes ``<name>_<w>x<h>.png`` at 1280x800 and 1920x1080 into this folder (or ``--out``), replacing
 the previous ones (that is what the script is for; each path is printed). Groups (``--only``, default
-all): ``app`` (the main window as it opens), ``capture`` (``before``, ``during``, ``strap_lost``: P01's
+all): ``app`` (the main window as it opens), ``capture`` (``before``, ``during``, ``strap_lost``,
+``after`` (Stop: the last recording's summary and plot): P01's
 ANT+ serial log replayed on a pseudo-terminal, the session video played as the camera, recorded into
 an empty lab), ``participant`` (``capture_participant_refused``: P01 typed as a man of 45 with
 training level 8 on the sample lab, whose P01 is a woman of 23 with 2.5, Record refused;
 ``capture_participant_record``: the code P01 alone, the lab's record taken), ``annotate`` (``keyframes``, ``blind_round``, ``reliability``), ``train`` (``fig2``,
 ``fig3``, ``runlog`` after training in the stage; ``compare`` of two bundles made by
-``effortface train``), ``synth`` (``rule``, ``trained``), ``machine`` (``annotate_machine_guide``:
+``effortface train``; ``card``: the Card tab after exporting the stage's model), ``synth`` (``rule``, ``trained``), ``machine`` (``annotate_machine_guide``:
 R1's keys over the machine rater's dashed curves (the real rater, run on the copy), 330-470 s; ``annotate_machine_accept``:
 a new rater after "Accept machine" over the whole session), ``fileinfo`` (``synth_fileinfo``: the
 Synthesize stage's File info panel on bvh-toolbox's walk, ``tests/data/bvh``, with a mapping of its two feet).
@@ -155,7 +156,7 @@ def shoot_capture(tmp: Path, out: Path) -> None:
     lab.mkdir()
     register(lab / "participants.tsv", read_session_info(session).participant)
     replay = PtyReplay(load_timed_chunks(session / "serial" / "ant.serlog"), speed=STRAP_SPEED,
-                       unplug_after_s=150.0)
+                       unplug_after_s=200.0)  # after the "during" picture, even on a busy machine
     thread = start_replay_thread(replay)
     try:
         with main_window(lab, tmp) as window:
@@ -171,7 +172,13 @@ def shoot_capture(tmp: Path, out: Path) -> None:
             _wait(1.5)
             grab(window, "capture_strap_lost", out)
             stage.phases.marker_text.clear()
-            stage.stop_now()
+            stage.sync_test()  # the flash (the session video is no camera facing the screen: not seen)
+            _wait(20, lambda: stage.session.recorder.link.state == "connected")
+            stage.stop_recording()  # as the operator does: in the background, the summary stays after it
+            if not _wait(60, lambda: not stage.session.recording and stage.settled()):
+                raise RuntimeError("the recording did not stop")
+            _wait(3.5)  # the strap watched again meanwhile: the summary and the plot stay
+            grab(window, "capture_after", out)
     finally:
         replay.stop()
         thread.join(5)
@@ -320,6 +327,12 @@ def shoot_train(lab: Path, bundles: dict[str, Path], tmp: Path, out: Path) -> No
         if not _wait(120, lambda: stage.settled() and stage.session.comparison is not None):
             raise RuntimeError(f"the comparison did not finish: {stage.status.text()}")
         grab(window, "train_compare", out)
+        if not stage.export(tmp / "card_model"):  # the Card tab shows the exported MODEL_CARD.md
+            raise RuntimeError(f"export failed: {stage.status.text()}")
+        if not _wait(300, lambda: stage.settled() and bool(stage.card.toPlainText())):
+            raise RuntimeError(f"the export did not finish: {stage.status.text()}")
+        stage.tabs.setCurrentWidget(stage.card)
+        grab(window, "train_card", out)
 
 
 def shoot_synth(lab: Path, bundles: dict[str, Path], tmp: Path, out: Path) -> None:

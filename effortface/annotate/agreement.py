@@ -45,7 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
-from effortface.annotate.keyframes import read_annotations
+from effortface.annotate.keyframes import ORIGINS, origin_seconds, read_annotations
 from effortface.annotate.reliability import (Pose, Rating, mean_abs_disagreement_pct, read_poses, read_ratings)
 from effortface.annotate.video_index import FrameTimes
 from effortface.core.errors import UserError
@@ -623,7 +623,8 @@ def ratings_from_keyframes(folder: str | os.PathLike, poses: Sequence[Pose]) -> 
     Returns
     -------
     list of Rating
-        Blendshapes a rater has not keyed are left out (missing, not zero).
+        Blendshapes a rater has not keyed are left out (missing, not zero), and so is a pose whose
+        label is a key the rater accepted from the machine and did not edit (the machine's, not theirs).
     """
     folder = Path(folder)
     sid = read_session(folder).info.session_id
@@ -633,10 +634,34 @@ def ratings_from_keyframes(folder: str | os.PathLike, poses: Sequence[Pose]) -> 
         ann = read_annotations(path, session_id=sid, rater=path.stem)  # not a copy of another's file
         frames = np.array([p.frame for p in mine], dtype=float)
         for name in ann.blendshapes.names:
-            values = ann.tracks[name].evaluate(frames)
+            values = ann.tracks[name].evaluate_human(frames)
             out += [Rating(p.pose_id, ann.rater, name, float(round(w, 4)))
                     for p, w in zip(mine, values) if np.isfinite(w)]
     return out
+
+
+def origin_seconds_by_rater(sessions: Sequence[str | os.PathLike]) -> dict[str, dict[str, int]]:
+    """Seconds of each rater's labels by key origin (typed, machine, edited), over every blendshape of
+    the sessions' ``annotations/<rater>.json`` (see :func:`effortface.annotate.keyframes.origin_seconds`)."""
+    out: dict[str, dict[str, int]] = {}
+    for folder in map(Path, sessions):
+        session = read_session(folder)
+        for path in sorted((folder / "annotations").glob("*.json")):
+            ann = read_annotations(path, session_id=session.info.session_id, rater=path.stem)
+            counts = out.setdefault(ann.rater, {o: 0 for o in ORIGINS})
+            for track in ann.tracks.values():
+                for origin, n in origin_seconds(track, session.frame_times_s).items():
+                    counts[origin] += n
+    return out
+
+
+def format_origins(counts: dict[str, dict[str, int]]) -> str:
+    """One line: each rater's label seconds by origin, e.g. ``R1 typed 2556 s; R4 machine 2552 s (left out)``."""
+    parts = []
+    for rater, n in counts.items():
+        kinds = [f"{o} {n[o]} s" for o in ORIGINS if n[o]]
+        parts.append(f"{rater} {', '.join(kinds) or 'no key'}" + (" (machine: left out)" if n["machine"] else ""))
+    return "label seconds by key origin: " + "; ".join(parts)
 
 
 def read_round(folder: str | os.PathLike) -> list[Rating]:
@@ -687,8 +712,10 @@ def gather_ratings(target: str | os.PathLike, *, n_poses: int = N_POSES) -> tupl
     poses = _poses_for(target, sessions, n_poses)
     ratings = [r for s in sessions for r in ratings_from_keyframes(s, poses)]
     if not ratings:
-        raise UserError(f"{target}: expected annotations/<rater>.json files, found none")
-    return ratings, f"raters' key-frames at {len(poses)} pose frames in {target}"
+        raise UserError(f"{target}: expected annotations/<rater>.json files with keys a person typed or "
+                        f"edited, found none")
+    return ratings, (f"raters' key-frames at {len(poses)} pose frames in {target}; "
+                     f"{format_origins(origin_seconds_by_rater(sessions))}")
 
 
 def _poses_for(target: Path, sessions: list[Path], n_poses: int) -> list[Pose]:

@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any
 
 from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
 from effortface.annotate.completeness import TrackStatus, rater_status
-from effortface.annotate.machine_guide import ACCEPT_TOLERANCE, MachineGuide, load_guide
+from effortface.annotate.machine_guide import ACCEPT_TOLERANCE, KeyFit, MachineGuide, load_guide
 from effortface.annotate.keyframes import INTERPOLATIONS, Keyframe, KeyframeTrack, RaterAnnotations, read_annotations
 from effortface.annotate.video_index import FrameTimes
 from effortface.core.errors import UserError
@@ -159,7 +159,7 @@ class AnnotateSession:
                 n for n, st in rater_status(self.annotations, self.session.frame_times_s).items() if st.complete}
         self._undo: list[UndoStep] = []
         self._redo: list[UndoStep] = []
-        self._clipboard: list[tuple[int, float, str]] = []
+        self._clipboard: list[tuple[int, Keyframe]] = []  # (frame offset, key): a pasted key keeps its origin
         self.frame_changed, self.blendshape_changed = Emitter(), Emitter()
         self.keys_changed, self.file_changed, self.passes_changed = Emitter(), Emitter(), Emitter()
         self.history_changed, self.status_changed = Emitter(), Emitter()
@@ -322,7 +322,8 @@ class AnnotateSession:
         w = round(float(weight), 4)
         label = (f"set {self.blendshape} key at frame {frame} to {w:.2f}" if old is None
                  else f"change {self.blendshape} key at frame {frame} from {old.weight:.2f} to {w:.2f}")
-        return self._edit(lambda: self.track.add(frame, w, interp), label, frame)
+        key = old.edited(weight=w, interp=interp) if old is not None else Keyframe(frame, w, interp)
+        return self._edit(lambda: self.track.put(key), label, frame)
 
     def delete_key(self, frame: int | None = None) -> Keyframe | None:
         """Remove the current track's key on ``frame`` (default current); None if there was none."""
@@ -351,7 +352,7 @@ class AnnotateSession:
         self.interp = interp
         key = self.key_at(frame)
         if key is not None and key.interp != interp:
-            self._edit(lambda: self.track.add(key.frame, key.weight, interp),
+            self._edit(lambda: self.track.put(key.edited(interp=interp)),
                        f"set {self.blendshape} key at frame {key.frame} to {interp}", key.frame)
 
     # ----------------------------------------------------------------------- copy and paste
@@ -360,15 +361,15 @@ class AnnotateSession:
         first = self.frame if first is None else int(first)
         last = first if last is None else int(last)
         keys = [k for k in self.track.keys if first <= k.frame <= last]
-        self._clipboard = [(k.frame - first, k.weight, k.interp) for k in keys]
+        self._clipboard = [(k.frame - first, k) for k in keys]
         return len(keys)
 
     def paste(self, frame: int | None = None) -> int:
         """Paste the copied keys into the current track from ``frame`` (default current); one undo step."""
         at = self.frame if frame is None else int(frame)
-        keys = [(at + off, w, i) for off, w, i in self._clipboard if 0 <= at + off < self.n_frames]
+        keys = [dataclasses.replace(k, frame=at + off) for off, k in self._clipboard if 0 <= at + off < self.n_frames]
         if keys:
-            self._edit(lambda: [self.track.add(f, w, i) for f, w, i in keys],
+            self._edit(lambda: [self.track.put(k) for k in keys],
                        f"paste {len(keys)} {self.blendshape} key{'s' * (len(keys) != 1)} at frame {at}", at)
         return len(keys)
 
@@ -446,10 +447,10 @@ class AnnotateSession:
                             f"{abs(int(d_frames))} frame{'s' * (abs(int(d_frames)) != 1)} of the {edge}: "
                             f"nothing moved")
         pivot = sum(k.weight for k in chosen) / len(chosen)
-        moved = [(self.times.clamp(k.frame + int(d_frames)),
-                  round(min(max(pivot + scale * (k.weight - pivot) + d_weight, 0.0), 1.0), 4), k.interp)
+        moved = [k.edited(frame=self.times.clamp(k.frame + int(d_frames)),
+                          weight=round(min(max(pivot + scale * (k.weight - pivot) + d_weight, 0.0), 1.0), 4))
                  for k in chosen]
-        targets = [f for f, _, _ in moved]
+        targets = [k.frame for k in moved]
         others = {k.frame for k in self.track.keys} - {k.frame for k in chosen}
         if len(set(targets)) < len(targets) or others & set(targets):
             raise UserError(f"move keys: expected free frames, found a {self.blendshape} key in the way")
@@ -457,8 +458,8 @@ class AnnotateSession:
         def change() -> None:
             for k in chosen:
                 self.track.delete(k.frame)
-            for f, w, i in moved:
-                self.track.add(f, w, i)
+            for k in moved:
+                self.track.put(k)
         self._edit(change, f"move {len(chosen)} {self.blendshape} key{'s' * (len(chosen) != 1)}"
                    + (f" by {d_frames:+d} frames" if d_frames else "")
                    + (f" by {d_weight:+.2f}" if d_weight else "")
@@ -479,11 +480,17 @@ class AnnotateSession:
         self.__dict__.pop("_machine", None)
         return self.machine
 
-    def accept_machine(self, first: int, last: int, tolerance: float = ACCEPT_TOLERANCE) -> int:
-        """Replace the current track's keys on ``first..last`` by the machine curve's (one undo step).
+    def accept_machine(self, first: int, last: int, tolerance: float = ACCEPT_TOLERANCE) -> KeyFit:
+        """Replace the current track's keys on ``first..last`` by sparse keys following the machine curve.
 
-        The keys are the Ramer-Douglas-Peucker simplification of the machine curve within ``tolerance``
-        (:meth:`MachineGuide.keys`); frames without a face get none. Returns the keys set.
+        The keys (:func:`~effortface.annotate.machine_guide.fit_keys`: running median, then at most one
+        key per 3 s, more where the curve moves, until within ``tolerance``) are marked as the machine's,
+        accepted by this rater, until the rater edits one; frames without a face get none. One undo step.
+
+        Returns
+        -------
+        KeyFit
+            The keys set, the budget and the error to the smoothed curve.
 
         Raises
         ------
@@ -497,21 +504,22 @@ class AnnotateSession:
         if not 0.0 <= tolerance <= 1.0:
             raise UserError(f"accept tolerance: expected a weight from 0 to 1, found {tolerance}")
         first, last = sorted((self.times.clamp(first), self.times.clamp(last)))
-        if guide.curve(self.blendshape) is None:
+        fit = guide.keys(self.blendshape, first, last, self.session.frame_times_s, tolerance)
+        if fit is None:
             raise UserError(f"accept machine: expected a blendshape the machine rates, found {self.blendshape!r}")
-        keys = guide.keys(self.blendshape, first, last, tolerance)
-        if not keys:
+        if not fit.keys:
             raise UserError(f"accept machine: expected frames with a face in {first}..{last}, found none")
         old = [k.frame for k in self.track.keys if first <= k.frame <= last]
 
         def change() -> None:
             for f in old:
                 self.track.delete(f)
-            for f, w in keys:
-                self.track.add(f, w, "linear")
-        self._edit(change, f"accept machine {self.blendshape} on frames {first}-{last}: {len(keys)} key"
-                   f"{'s' * (len(keys) != 1)} within {tolerance:g}", keys[0][0])
-        return len(keys)
+            for f, w in fit.keys:
+                self.track.add(f, w, "linear", "machine", self.rater)
+        n = len(fit.keys)
+        self._edit(change, f"accept machine {self.blendshape} on frames {first}-{last}: {n} key{'s' * (n != 1)} "
+                   f"(at most {fit.budget}), RMS {fit.rms:.3f} to the smoothed curve", fit.keys[0][0])
+        return fit
 
     def completeness(self) -> dict[str, TrackStatus]:
         """This rater's completeness per blendshape (:mod:`effortface.annotate.completeness`)."""

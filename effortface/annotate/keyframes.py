@@ -3,11 +3,13 @@
 One file per rater and session::
 
     {
-      "schema_version": 1,
+      "schema_version": 2,
       "rater": "R1",
       "session_id": "P01_20260105-101500_cardio",
       "blendshapes": [{"name": "mouth_stretch", "drives": "...", "arkit": [...]}, ...],
-      "tracks": {"mouth_stretch": [{"frame": 0, "weight": 0.0, "interp": "linear"}, ...], ...},
+      "tracks": {"mouth_stretch": [{"frame": 0, "weight": 0.0, "interp": "linear", "origin": "typed"},
+                                   {"frame": 90, "weight": 0.3, "interp": "linear", "origin": "machine",
+                                    "accepted_by": "R1"}, ...], ...},
       "passes_done": ["mouth_stretch"]
     }
 
@@ -22,6 +24,13 @@ finished a pass of the video (see :mod:`effortface.annotate.completeness`).
 - ``smooth``: smoothstep ``3u^2 - 2u^3`` to the next key (zero slope at both keys, monotone on the
   segment, so it never overshoots [0, 1]).
 
+``origin`` (schema version 2) says who set the key:
+
+- ``typed``: the rater typed it (every key of a version 1 file, which had no origins, loads as typed);
+- ``machine``: "Accept machine" set it from the machine track, ``accepted_by`` names the rater who
+  accepted it; it stays the machine's label (left out of human-only training and the human mean);
+- ``edited``: a machine key the rater then changed (weight, frame or interpolation): the rater's.
+
 Before the first key the curve holds the first weight, after the last key the last weight; a track
 with no key is "not annotated" and evaluates to NaN.
 """
@@ -30,9 +39,11 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import os
 from collections.abc import Iterable, Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -40,8 +51,14 @@ from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
 from effortface.core.errors import SessionFormatError, UserError
 from effortface.core.fileio import atomic_write_text, read_json, refuse_overwrite
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+#: versions :func:`read_annotations` reads (version 1 had no key origins: its keys load as typed)
+READABLE_VERSIONS = (1, 2)
 INTERPOLATIONS = ("hold", "linear", "smooth")
+#: who set a key: typed by the rater, accepted from the machine, or the machine's then edited by the rater
+ORIGINS = ("typed", "machine", "edited")
+#: origins that count as a person's label (human-only training, the human mean)
+HUMAN_ORIGINS = ("typed", "edited")
 
 
 class AnnotationFormatError(SessionFormatError):
@@ -50,18 +67,41 @@ class AnnotationFormatError(SessionFormatError):
 
 @dataclasses.dataclass(frozen=True)
 class Keyframe:
-    """One key: video ``frame`` index, ``weight`` in [0, 1], ``interp`` towards the next key."""
+    """One key: video ``frame`` index, ``weight`` in [0, 1], ``interp`` towards the next key, its
+    ``origin`` (one of :data:`ORIGINS`) and, for a machine key, the rater who accepted it."""
 
     frame: int
     weight: float
     interp: str = "linear"
+    origin: str = "typed"
+    accepted_by: str | None = None
 
     def __post_init__(self) -> None:
         _check_key(self.frame, self.weight, self.interp)
+        if self.origin not in ORIGINS:
+            raise UserError(f"key-frame origin: expected one of {', '.join(ORIGINS)}, found {self.origin!r}")
+        if (self.origin == "machine") != isinstance(self.accepted_by, str) or self.accepted_by == "":
+            raise UserError(f"key-frame accepted_by: expected the accepting rater's code on a machine key "
+                            f"(and only there), found {self.accepted_by!r} on a {self.origin} key")
+
+    @property
+    def human(self) -> bool:
+        """Whether a person set this key (typed, or a machine key they edited)."""
+        return self.origin in HUMAN_ORIGINS
+
+    def edited(self, **changes: Any) -> Keyframe:
+        """This key changed by the rater: a machine key becomes ``edited`` (the rater's)."""
+        if self.origin == "machine":
+            changes = {"origin": "edited", "accepted_by": None, **changes}
+        return dataclasses.replace(self, **changes)
 
     def to_dict(self) -> dict:
-        """JSON-ready dict ``{frame, weight, interp}``."""
-        return {"frame": self.frame, "weight": self.weight, "interp": self.interp}
+        """JSON-ready dict ``{frame, weight, interp, origin[, accepted_by]}``."""
+        doc: dict[str, Any] = {"frame": self.frame, "weight": self.weight, "interp": self.interp,
+                               "origin": self.origin}
+        if self.accepted_by is not None:
+            doc["accepted_by"] = self.accepted_by
+        return doc
 
 
 def _check_key(frame: object, weight: object, interp: object) -> None:
@@ -110,10 +150,16 @@ class KeyframeTrack:
         """An independent copy (keys are immutable, so a shallow copy suffices)."""
         return KeyframeTrack(self.keys)
 
-    def add(self, frame: int, weight: float, interp: str = "linear") -> Keyframe:
+    def add(self, frame: int, weight: float, interp: str = "linear", origin: str = "typed",
+            accepted_by: str | None = None) -> Keyframe:
         """Add a key, replacing any key already on ``frame``; return the new key."""
-        key = Keyframe(int(frame), float(weight), interp)
+        key = Keyframe(int(frame), float(weight), interp, origin, accepted_by)
         self._keys[key.frame] = key
+        return key
+
+    def put(self, key: Keyframe) -> Keyframe:
+        """Add ``key`` as it is (origin included), replacing any key on its frame; return it."""
+        self._keys[int(key.frame)] = key
         return key
 
     def get(self, frame: int) -> Keyframe | None:
@@ -142,7 +188,7 @@ class KeyframeTrack:
             raise KeyError(f"no key-frame on frame {frame}")
         if int(new_frame) != old.frame and int(new_frame) in self._keys:
             raise ValueError(f"cannot move key-frame {frame} to {new_frame}: frame already keyed")
-        new = Keyframe(int(new_frame), old.weight if weight is None else float(weight), old.interp)
+        new = old.edited(frame=int(new_frame), weight=old.weight if weight is None else float(weight))
         del self._keys[old.frame]
         self._keys[new.frame] = new
         return new
@@ -183,6 +229,57 @@ class KeyframeTrack:
     def to_list(self) -> list[dict]:
         """JSON-ready list of key dicts, sorted by frame."""
         return [k.to_dict() for k in self.keys]
+
+    def origins(self, frames: Iterable[float] | np.ndarray) -> np.ndarray:
+        """The origin of the label at each of ``frames``: that of the nearest key (the earlier on a tie).
+
+        Returns
+        -------
+        numpy.ndarray of str
+            One of :data:`ORIGINS` per frame; ``""`` everywhere when the track has no key.
+        """
+        x = np.asarray(frames, dtype=float)
+        keys = self.keys
+        if not keys:
+            return np.full(x.shape, "", dtype=object)
+        kf = np.array([k.frame for k in keys], dtype=float)
+        i = np.clip(np.searchsorted(kf, x), 1, max(kf.size - 1, 1)) if kf.size > 1 else np.zeros(x.shape, int)
+        if kf.size > 1:
+            i = np.where(np.abs(x - kf[i - 1]) <= np.abs(kf[i] - x), i - 1, i)
+        return np.array([k.origin for k in keys], dtype=object)[i]
+
+    def human_mask(self, frames: Iterable[float] | np.ndarray) -> np.ndarray:
+        """True at the frames whose label a person set (nearest key typed or edited, see :meth:`origins`)."""
+        return np.isin(self.origins(frames), HUMAN_ORIGINS)
+
+    def evaluate_human(self, frames: Iterable[float] | np.ndarray) -> np.ndarray:
+        """:meth:`evaluate`, NaN where the label is the machine's (nearest key accepted, not edited)."""
+        x = np.asarray(frames, dtype=float)
+        return np.where(self.human_mask(x), self.evaluate(x), np.nan)
+
+
+def origin_seconds(track: KeyframeTrack, frame_times_s: Iterable[float] | np.ndarray) -> dict[str, int]:
+    """Seconds of the video whose label is of each origin (the frame nearest each whole second).
+
+    Parameters
+    ----------
+    track : KeyframeTrack
+        One blendshape's keys.
+    frame_times_s : array-like of float
+        Arrival time of each video frame (``video_frames.csv``), increasing.
+
+    Returns
+    -------
+    dict of str to int
+        ``{"typed": n, "machine": n, "edited": n}``; all 0 for a track with no key.
+    """
+    t = np.asarray(frame_times_s, dtype=float)
+    if t.size == 0 or not len(track):
+        return {o: 0 for o in ORIGINS}
+    seconds = np.arange(math.ceil(t[0]), math.floor(t[-1]) + 1.0)
+    frames = np.clip(np.searchsorted(t, seconds), 0, t.size - 1)
+    found = track.origins(frames)
+    return {o: int(np.count_nonzero(found == o)) for o in ORIGINS}
 
 
 @dataclasses.dataclass
@@ -285,7 +382,7 @@ def read_annotations(path: str | os.PathLike, *, session_id: str | None = None,
     Raises
     ------
     AnnotationFormatError
-        If the file is not JSON, has another schema version, or a field or key is malformed;
+        If the file is not JSON, has a schema version other than 1 or 2, or a field or key is malformed;
         the message names the file and the field.
     """
     path = Path(path)
@@ -306,9 +403,10 @@ def _from_dict(doc: object) -> RaterAnnotations:
     """Build annotations from a parsed document; UserError naming the bad field."""
     if not isinstance(doc, Mapping):
         raise UserError(f"expected a JSON object, found {type(doc).__name__}")
-    if isinstance(doc.get("schema_version"), bool) or doc.get("schema_version") != SCHEMA_VERSION:
+    version = doc.get("schema_version")
+    if isinstance(version, bool) or version not in READABLE_VERSIONS:
         raise UserError(
-            f"schema_version: expected {SCHEMA_VERSION}, found {doc.get('schema_version')!r}"
+            f"schema_version: expected {' or '.join(map(str, READABLE_VERSIONS))}, found {version!r}"
         )
     for field in ("rater", "session_id"):
         if not isinstance(doc.get(field), str) or not doc[field]:
@@ -317,7 +415,7 @@ def _from_dict(doc: object) -> RaterAnnotations:
     tracks_doc = doc.get("tracks")
     if not isinstance(tracks_doc, Mapping):
         raise UserError(f"tracks: expected an object of blendshape -> keys, found {tracks_doc!r}")
-    tracks = {name: _read_track(name, keys) for name, keys in tracks_doc.items()}
+    tracks = {name: _read_track(name, keys, with_origin=version >= 2) for name, keys in tracks_doc.items()}
     done = doc.get("passes_done")
     if done is not None and (not isinstance(done, list) or not set(done) <= set(shapes.names)):
         raise UserError(f"passes_done: expected a list of blendshapes of the set, found {done!r}")
@@ -336,19 +434,23 @@ def _read_blendshapes(items: object) -> BlendshapeSet:
     return shapes
 
 
-def _read_track(name: str, keys: object) -> KeyframeTrack:
-    """One track from its JSON list; UserError naming the blendshape and the key index."""
+def _read_track(name: str, keys: object, *, with_origin: bool = True) -> KeyframeTrack:
+    """One track from its JSON list; UserError naming the blendshape and the key index.
+
+    ``with_origin`` False (a version 1 file): the keys carry no origin and load as typed.
+    """
     if not isinstance(keys, list):
         raise UserError(f"tracks.{name}: expected a list of key-frames, found {keys!r}")
     out = KeyframeTrack()
     for i, item in enumerate(keys):
         if not isinstance(item, Mapping) or not {"frame", "weight"} <= set(item):
             raise UserError(f"tracks.{name}[{i}]: expected {{frame, weight, interp}}, found {item!r}")
+        origin = (item.get("origin", "typed"), item.get("accepted_by")) if with_origin else ("typed", None)
         try:
-            key = Keyframe(item["frame"], item["weight"], item.get("interp", "linear"))
+            key = Keyframe(item["frame"], item["weight"], item.get("interp", "linear"), *origin)
         except UserError as exc:
             raise UserError(f"tracks.{name}[{i}]: {exc}") from None
         if out.get(key.frame) is not None:
             raise UserError(f"tracks.{name}[{i}]: expected one key per frame, found frame {key.frame} twice")
-        out.add(key.frame, key.weight, key.interp)
+        out.put(key)
     return out

@@ -386,7 +386,8 @@ class CaptureSession:
         self.plan_changed.emit("")  # the plan was for that recording (stop() emptied it)
         self.recording_changed.emit(None)
         self.sync_changed.emit(sync)
-        if sync is None:  # said first: the banner shows two lines, the rest is in its tooltip
+        if sync is None and (Path(_path) / VIDEO_AVI).exists():  # said first: the banner shows two lines,
+            # the rest is in its tooltip; without video there is nothing to synchronise
             summary = ("No sync test was measured: press F8 (the screen flashes) while the camera sees it. "
                        + summary)
         self.status_changed.emit(summary, False)

@@ -19,7 +19,13 @@ From a session folder (:func:`session_table`), each second ``t_s = 0, 1, 2, ...`
   the rater policy is ``"mean"`` (mean over the raters who annotated that blendshape) or one rater's
   name. Under either policy only **complete** tracks count (:mod:`effortface.annotate.completeness`:
   keys cover the video with no gap over 30 s and the rater finished the pass); a half-finished track
-  is left out, never averaged in as a constant.
+  is left out, never averaged in as a constant. Only the seconds a **person** labelled count as
+  human labels: keys a rater accepted from the machine and did not edit (origin ``machine``,
+  :mod:`effortface.annotate.keyframes`) are the machine's; a second whose nearest key is one of them
+  has no human label. A session whose complete tracks hold nothing else is left out of the table
+  (:class:`MachineLabelsOnly`), and the table says which (``table.attrs["left_out"]``) and how many
+  seconds of each origin its labels have (``table.attrs["label_origins"]``: ``typed``, ``edited``,
+  and ``machine`` left out).
   The raters are ``"humans"`` (default) or ``"humans+machine"``: then, per second and blendshape where
   no human label exists (no complete human track), the machine track's weight at the nearest frame
   (``machine/face_landmarker.csv`` from ``effortface preannotate``; none where it found no face) is the
@@ -42,7 +48,7 @@ import pandas as pd
 
 from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
 from effortface.annotate.completeness import RULE_TEXT, rater_status
-from effortface.annotate.keyframes import read_annotations
+from effortface.annotate.keyframes import HUMAN_ORIGINS, ORIGINS, read_annotations
 from effortface.core.errors import UserError
 from effortface.core import bounds
 from effortface.core.fileio import check_regular_file, read_json, refuse_overwrite
@@ -301,6 +307,17 @@ def expand_paths(paths: Iterable[str | os.PathLike]) -> list[Path]:
     return out
 
 
+class MachineLabelsOnly(DatasetError):
+    """A session whose complete tracks are all keys accepted from the machine: no human label.
+
+    ``reason`` says so in a few words (the model card's line for the session).
+    """
+
+    def __init__(self, message: str, reason: str) -> None:
+        super().__init__(message)
+        self.reason = reason
+
+
 def sessions_table(paths: Iterable[str | os.PathLike], blendshapes: BlendshapeSet = DEFAULT_SET,
                    rater_policy: str = "mean", raters: str = "humans") -> pd.DataFrame:
     """The long table of several sessions (or folders of sessions), checked for contradictions.
@@ -319,16 +336,28 @@ def sessions_table(paths: Iterable[str | os.PathLike], blendshapes: BlendshapeSe
     Returns
     -------
     DataFrame
-        The text columns (:data:`STRING_COLUMNS`) as categoricals, as :func:`read_table` gives them.
+        The text columns (:data:`STRING_COLUMNS`) as categoricals, as :func:`read_table` gives them;
+        ``attrs["left_out"]``: ``"<session>: <why>"`` of the sessions left out (labelled only by keys
+        accepted from the machine), ``attrs["label_origins"]``: seconds of rater labels by origin.
 
     Raises
     ------
     DatasetError
         For a session without heart rate, without work, without annotations (or without the named
-        rater), or a participant whose data differ between sessions.
+        rater), or a participant whose data differ between sessions; or when every session was left out.
     """
     folders = expand_paths(paths)
-    table = pd.concat([session_table(f, blendshapes, rater_policy, raters) for f in folders], ignore_index=True)
+    origins = {o: 0 for o in ORIGINS}
+    parts, left_out = [], []
+    for f in folders:
+        try:
+            parts.append(session_table(f, blendshapes, rater_policy, raters, origins))
+        except MachineLabelsOnly as exc:
+            left_out.append(f"{f.name}: {exc.reason}")
+    if not parts:
+        raise DatasetError(f"{', '.join(map(str, folders))}: expected sessions with human labels, found "
+                           f"only keys accepted from the machine ({'; '.join(left_out)})")
+    table = pd.concat(parts, ignore_index=True)
     for col in (*PARTICIPANT_COLUMNS[1:], "hr_rest_bpm", "hr_max_bpm"):
         table[col] = pd.to_numeric(table[col]).astype(float)  # None (not recorded) -> NaN
     source = ", ".join(str(f.parent) for f in folders[:1]) or "sessions"
@@ -336,15 +365,21 @@ def sessions_table(paths: Iterable[str | os.PathLike], blendshapes: BlendshapeSe
     check_values(table, blendshapes.names, source)
     for col in STRING_COLUMNS:  # as read_table holds them
         table[col] = _categorical(table[col])
+    table.attrs["left_out"], table.attrs["label_origins"] = left_out, origins
     return table
 
 
 def session_table(folder: str | os.PathLike, blendshapes: BlendshapeSet = DEFAULT_SET,
-                  rater_policy: str = "mean", raters: str = "humans") -> pd.DataFrame:
+                  rater_policy: str = "mean", raters: str = "humans",
+                  origins: dict[str, int] | None = None) -> pd.DataFrame:
     """One session folder -> its per-second rows in the long format (plus ``exercise`` and measured HR).
+
+    ``origins``, when given, is added the seconds of the raters' complete tracks by key origin.
 
     Raises
     ------
+    MachineLabelsOnly
+        If its complete tracks hold only keys accepted from the machine (no human label).
     DatasetError
         See :func:`sessions_table`.
     """
@@ -358,7 +393,7 @@ def session_table(folder: str | os.PathLike, blendshapes: BlendshapeSet = DEFAUL
     t = np.arange(0.0, math.floor(end_s) + 1.0)
     w, p = _work(s, t)
     check_raters(raters)
-    weights = _weights(s, t, blendshapes, rater_policy, machine=raters == "humans+machine")
+    weights = _weights(s, t, blendshapes, rater_policy, machine=raters == "humans+machine", origins=origins)
     from_machine = np.zeros(weights.shape, bool)
     if raters == "humans+machine":
         weights, from_machine = _fill_from_machine(s, t, blendshapes, weights)
@@ -461,7 +496,7 @@ def _fill_from_machine(s: Session, t: np.ndarray, blendshapes: BlendshapeSet, we
 
 
 def _weights(s: Session, t: np.ndarray, blendshapes: BlendshapeSet, rater_policy: str,
-             machine: bool = False) -> np.ndarray:
+             machine: bool = False, origins: dict[str, int] | None = None) -> np.ndarray:
     """Per-second weights (len(t), B) under the rater policy; DatasetError if unannotated (with ``machine``,
     a session with a machine track may have no human annotation: its weights are then all NaN)."""
     files = sorted((s.path / ANNOTATIONS_DIR).glob("*.json"))
@@ -478,10 +513,20 @@ def _weights(s: Session, t: np.ndarray, blendshapes: BlendshapeSet, rater_policy
                            f"and video_frames.csv, found {len(files)} annotation files and "
                            f"{len(s.frame_times_s)} frames")
     frames = _nearest_frames(np.asarray(s.frame_times_s), t)
-    stack = np.stack([_rater_weights(f, frames, blendshapes, s.info.session_id, s.frame_times_s) for f in files])
+    found = {o: 0 for o in ORIGINS}
+    stack = np.stack([_rater_weights(f, frames, blendshapes, s.info.session_id, s.frame_times_s, found)
+                      for f in files])
+    for origin, n in found.items():
+        if origins is not None:
+            origins[origin] += n
     with np.errstate(all="ignore"):
         counts = np.isfinite(stack).sum(axis=0)
         mean = np.where(counts > 0, np.nansum(stack, axis=0) / np.maximum(counts, 1), np.nan)
+    if not np.isfinite(mean).any() and found["machine"] and not machine:
+        raise MachineLabelsOnly(f"{s.path / ANNOTATIONS_DIR}: expected keys a person typed or edited, found "
+                                f"only keys accepted from the machine ({found['machine']} s)",
+                                reason=f"left out: its complete tracks are keys accepted from the machine, "
+                                       f"not edited ({found['machine']} s)")
     if not np.isfinite(mean).any() and not (machine and (s.path / "machine").is_dir()):
         raise DatasetError(f"{s.path / ANNOTATIONS_DIR}: expected complete key-frame tracks "
                            f"({RULE_TEXT}), found none")
@@ -495,12 +540,22 @@ def _nearest_frames(frame_t: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 
 def _rater_weights(path: Path, frames: np.ndarray, blendshapes: BlendshapeSet, session_id: str,
-                   frame_times_s: Sequence[float]) -> np.ndarray:
-    """One rater's weights for our blendshape set (NaN for tracks the file lacks or that are incomplete)."""
+                   frame_times_s: Sequence[float], origins: dict[str, int]) -> np.ndarray:
+    """One rater's weights for our blendshape set (NaN for tracks the file lacks or that are incomplete,
+    and at the seconds whose label is a key accepted from the machine); ``origins`` is added the seconds
+    of each origin of the complete tracks."""
     ann = read_annotations(path, session_id=session_id, rater=path.stem)
     status = rater_status(ann, frame_times_s)
-    cols = [ann.tracks[n].evaluate(frames) if n in ann.tracks and status[n].complete
-            else np.full(len(frames), np.nan) for n in blendshapes.names]
+    cols = []
+    for n in blendshapes.names:
+        if n in ann.tracks and status[n].complete:
+            track = ann.tracks[n]
+            found = track.origins(frames)
+            for origin in ORIGINS:
+                origins[origin] += int(np.count_nonzero(found == origin))
+            cols.append(np.where(np.isin(found, HUMAN_ORIGINS), track.evaluate(frames), np.nan))
+        else:
+            cols.append(np.full(len(frames), np.nan))
     return np.column_stack(cols).astype(float)
 
 

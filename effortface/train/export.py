@@ -616,6 +616,20 @@ def _raters_line(prov: dict) -> str:
             "keyed; machine-labelled seconds: " + ", ".join(f"{b} {n}" for b, n in counts.items()) + ")")
 
 
+def _origins_lines(prov: dict) -> list[str]:
+    """Model-card lines: seconds of rater labels by key origin, and the sessions left out."""
+    origins = prov.get("label_origins")
+    if not isinstance(origins, dict) or not origins:
+        return []
+    n = origins.get("seconds", {})
+    lines = [f"- rater labels by origin (seconds over complete tracks): typed {n.get('typed', 0)}, machine keys "
+             f"edited by a rater {n.get('edited', 0)}; keys accepted from the machine and not edited "
+             f"{n.get('machine', 0)} (not human labels: left out"
+             + (", the machine track labels those seconds)" if prov.get("raters") == "humans+machine" else ")")]
+    lines += [f"- session left out: {s}" for s in origins.get("left_out", [])]
+    return lines
+
+
 def _label_comparison_card(comparison: object) -> list[str]:
     """Model-card lines: held-out scores on human labels, human labels only against human + machine."""
     if comparison is None:
@@ -661,6 +675,7 @@ def model_card(bundle: ModelBundle) -> str:
         f"- face fit: {_face_fit_line(prov)}",
         f"- rater policy: {prov.get('rater_policy', 'n/a')}",
         f"- raters: {_raters_line(prov)}",
+        *_origins_lines(prov),
         f"- annotation tracks used: {prov.get('annotation_rule', 'all (model trained before the completeness rule)')}", "",
         "## Model",
         f"- heart rate: t_root = {reg.t_root[0]:.3g} {reg.t_root[1]:+.3g} TL W/kg, "

@@ -219,6 +219,8 @@ class TrainingOutcome:
     label_comparison: pd.DataFrame | None = None
     #: why there is no comparison (e.g. the machine labelled no second)
     label_note: str = ""
+    #: sessions left out (only keys accepted from the machine) and seconds of rater labels by key origin
+    label_origins: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     @property
     def sessions(self) -> list[str]:
@@ -325,7 +327,7 @@ def train_models(table: pd.DataFrame, blendshapes: BlendshapeSet, settings: Trai
                         if settings.raters == "humans+machine" else (None, ""))
     step("protocols", "done")
     return TrainingOutcome(prepared, series, hr_eval, face, held, protos, proto_preds, blendshapes,
-                           list(sources), settings, comparison, note)
+                           list(sources), settings, comparison, note, label_origins(table))
 
 
 def _label_comparison(table: pd.DataFrame, blendshapes: BlendshapeSet, config: FaceFitConfig,
@@ -427,6 +429,8 @@ def export_outcome(outcome: TrainingOutcome, out: str | Path, *, force: bool = F
     metrics = training_metrics(o.hr_eval, o.face, o.held_out, o.protocols)
     provenance = training_provenance(o.prepared, o.face, o.sources, o.settings.rater_policy, config)
     provenance["raters"] = o.settings.raters
+    if o.label_origins:
+        provenance["label_origins"] = o.label_origins
     if o.settings.raters == "humans+machine":
         from effortface.train.rater_sources import machine_agreement, machine_label_counts
 
@@ -512,6 +516,14 @@ def _finite_or_none(value: Any) -> Any:
     if isinstance(value, float) and not math.isfinite(value):
         return None
     return value
+
+
+def label_origins(table: pd.DataFrame) -> dict[str, Any]:
+    """The sessions table's note of key origins (:func:`effortface.train.dataset.sessions_table`):
+    ``{"seconds": {origin: n}, "left_out": [...]}``, empty for a long table (no origins)."""
+    if "label_origins" not in table.attrs:
+        return {}
+    return {"seconds": dict(table.attrs["label_origins"]), "left_out": list(table.attrs.get("left_out", []))}
 
 
 def training_provenance(prepared: pd.DataFrame, face: Any, sources: Sequence[str], rater_policy: str,

@@ -137,14 +137,16 @@ def held_out_pairs(outcome: TrainingOutcome) -> dict[str, np.ndarray]:
 
 
 def bundle_settings(provenance: dict[str, Any], metrics: dict[str, Any]) -> dict[str, Any]:
-    """How a bundle was trained, as Compare shows it: CV scheme, raters, grid, chosen C/gamma/epsilon.
+    """How a bundle was trained, as Compare shows it: CV scheme, rater policy and source (humans, or
+    humans + machine), grid, chosen C/gamma/epsilon.
 
     Older bundles without a field show ``"not recorded"``.
     """
     cv = provenance.get("cv")
     out: dict[str, Any] = {
         "CV scheme": CV_LABELS.get(str(cv), "not recorded") if cv else "not recorded",
-        "raters": provenance.get("rater_policy", "not recorded"),
+        "rater policy": provenance.get("rater_policy", "not recorded"),
+        "rater source": provenance.get("raters", "not recorded"),
         "grid": _grid_name(provenance.get("grid")),
         "participants": provenance.get("n_participants", "not recorded"),
     }

@@ -583,7 +583,23 @@ class TrainSession:
             edge = (f"; warning: {_count(self.grid_edges, 'blendshape')} chose a value at the grid's edge (see the "
                     f"run log): a wider grid may fit better" + (" (Wider grid)" if self.wider_grid() else "")
                     if self.grid_edges else "")
-            self.status_changed.emit(f"trained on {len(self.outcome.series)} sessions{edge}", False)
+            notes = "".join(f"; note: {n}" for n in self.label_notes())
+            self.status_changed.emit(f"trained on {len(self.outcome.series)} sessions{notes}{edge}", False)
+
+    def label_notes(self) -> list[str]:
+        """What the label sources gave, when it is not what was asked: sessions left out (labelled only by
+        keys accepted from the machine), and humans + machine that added no machine-labelled second."""
+        o = self.outcome
+        if o is None:
+            return []
+        notes = []
+        if o.settings.raters == "humans+machine" and o.label_comparison is None and o.label_note:
+            notes.append(f"humans + machine added nothing: {o.label_note}, so the model learnt the humans' "
+                         "labels alone")
+        left_out = o.label_origins.get("left_out", []) if o.label_origins else []
+        if left_out:
+            notes.append(f"{_count(left_out, 'session')} left out ({'; '.join(left_out)})")
+        return notes
 
     def wider_grid(self) -> str:
         """The next wider grid of :data:`~effortface.train.face_fit.GRIDS` than the current one ('' if none)."""

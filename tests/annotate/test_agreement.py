@@ -240,3 +240,39 @@ def test_bland_altman_png(tmp_path: Path) -> None:
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 5000
     with pytest.raises(FileExistsError):
         ag.save_bland_altman_png(report, out)
+
+
+def test_keys_accepted_from_the_machine_stay_out_of_the_ratings_and_the_human_mean(tmp_path: Path) -> None:
+    import shutil
+
+    from effortface.annotate.annotate_session import AnnotateSession
+    from tests.annotate.machine_helpers import write_fake_machine
+
+    session = tmp_path / "P01_20260112-093000_cardio"
+    shutil.copytree(SAMPLES / session.name, session, ignore=shutil.ignore_patterns("serial"))
+    write_fake_machine(session, no_face=False)
+    poses = read_poses(SAMPLES / "reliability" / "poses.csv")
+    mine = [p for p in poses if p.session_id == session.name]
+    s = AnnotateSession(session, "R4")  # R4 accepts the machine on every blendshape, edits one key
+    try:
+        for name in s.blendshape_names:
+            s.set_blendshape(name)
+            s.accept_machine(0, s.n_frames - 1)
+        s.set_blendshape("eye_squint")
+        edited = min((k.frame for k in s.track.keys), key=lambda f: abs(f - mine[0].frame))  # near a pose
+        s.set_key(0.4, edited)
+    finally:
+        s.close()
+    ratings = ag.ratings_from_keyframes(session, poses)
+    r4 = [r for r in ratings if r.rater == "R4"]
+    ann = read_annotations(session / "annotations" / "R4.json")
+    # only poses whose nearest key is the edited one: eye_squint near that frame, nothing else
+    expected = [p.pose_id for p in mine if ann.tracks["eye_squint"].origins([p.frame])[0] == "edited"]
+    assert mine[0].pose_id in expected
+    assert sorted(r.pose_id for r in r4) == sorted(expected) and {r.blendshape for r in r4} == {"eye_squint"}
+    assert len([r for r in ratings if r.rater == "R1"]) == len(mine) * 4  # the typed raters untouched
+    _, source = ag.gather_ratings(session)
+    counts = ag.origin_seconds_by_rater([session])
+    assert counts["R1"]["machine"] == counts["R1"]["edited"] == 0 and counts["R1"]["typed"] > 4 * 600
+    assert counts["R4"]["typed"] == 0 and 0 < counts["R4"]["edited"] < 20 and counts["R4"]["machine"] > 4 * 600
+    assert f"R4 machine {counts['R4']['machine']} s, edited {counts['R4']['edited']} s (machine: left out)" in source

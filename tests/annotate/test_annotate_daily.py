@@ -269,14 +269,14 @@ def test_the_curve_editor_is_tall_with_small_keys_at_1280x800(qtbot, lab: Path, 
     assert timeline.curve_plot.vb.height() >= 150 > 110
     assert timeline.curve_plot.vb.height() > 2 * timeline.hr_plot.vb.height()
     n = len(editor.session.track.keys)
-    assert n > 120 and timeline.keys.opts["size"] == key_size(n) == 4  # R1 on P01 cardio: 266 keys
+    assert n > 120 and set(timeline.keys.data["size"]) == {key_size(n)} == {4}  # R1 on P01 cardio: 266 keys (typed)
     assert key_size(10) == 8 and key_size(266) == 4
     win.shutdown()
 
 
 def test_bland_altman_draws_one_pair_at_a_time(qtbot, stage: QtAnnotateStage) -> None:
     """Issue 25 item 6: the plot overlaid every rater pair under its legend; it now draws the pair
-    chosen (first by default, a row of the pairs table picks one), all pairs on request."""
+    chosen (the reading rater's pairs by default, a row of the pairs table picks one), all pairs on request."""
     from effortface.annotate.gui.reliability_panel import ALL_PAIRS
 
     stage.rater.setText("R1")
@@ -288,7 +288,12 @@ def test_bland_altman_draws_one_pair_at_a_time(qtbot, stage: QtAnnotateStage) ->
         return [i.name() for i in panel.ba_plot.getPlotItem().listDataItems() if i.name()]
 
     pairs = [panel.pairs.item(r, 0).text() for r in range(panel.pairs.rowCount())]
-    assert len(pairs) == 3 and [panel.ba_pair.itemText(i) for i in range(panel.ba_pair.count())] == [ALL_PAIRS, *pairs]
+    assert len(pairs) == 3 and [panel.ba_pair.itemText(i) for i in range(panel.ba_pair.count())] == [
+        ALL_PAIRS, *pairs, "R1's pairs"]
+    # by default the pairs of the rater reading the report (issue 36)
+    mine = [p for p in pairs if "R1" in p.split("-")]
+    assert panel.ba_pair.currentText() == "R1's pairs" and sorted(drawn()) == sorted(mine) and len(mine) == 2
+    panel.ba_pair.setCurrentText(pairs[0])
     assert drawn() == [pairs[0]] and pairs[0] in panel.ba_plot.getPlotItem().titleLabel.text
     panel.pairs.setCurrentCell(2, 0)
     assert panel.ba_pair.currentText() == pairs[2] and drawn() == [pairs[2]]

@@ -183,3 +183,25 @@ def test_rating_blind_the_pictures_get_the_report_s_room(qtbot, window: MainWind
     panel = stage.reliability
     assert panel.report is None and panel.image.width() > 1.3 * with_report
     assert abs(panel.image.height() - min(round(0.75 * panel.image.width()), 260)) <= 1
+
+
+def test_no_stage_shows_a_widget_before_it_has_a_parent(qtbot, window: MainWindow) -> None:
+    """Visit every stage and open a pre-annotated session: nothing opens as a window of its own (such a
+    window takes the keyboard from the main window: the machine row did, 797x23)."""
+    from tests.annotate.machine_helpers import write_fake_machine
+    from tests.annotate.test_machine_keys_gui import _WindowsShown
+
+    write_fake_machine(window.sessions_dir / SESSION)
+    spy = _WindowsShown()
+    QtWidgets.QApplication.instance().installEventFilter(spy)
+    try:
+        for key in STAGES:
+            _click_stage(window, key)
+        stage, editor = _open(window)
+    finally:
+        QtWidgets.QApplication.instance().removeEventFilter(spy)
+    assert editor.machine_row.isVisible() and spy.windows == []
+    assert QtWidgets.QApplication.focusWidget() is editor.video_view
+    frame = editor.session.frame
+    _key_to_focus(Key.Key_Right)
+    assert editor.session.frame == frame + 1

@@ -13,6 +13,7 @@ from effortface.annotate.keyframes import (
     AnnotationFormatError,
     Keyframe,
     KeyframeTrack,
+    origin_seconds,
     RaterAnnotations,
     read_annotations,
 )
@@ -107,7 +108,7 @@ def test_save_read_round_trip(tmp_path) -> None:
     assert w.shape == (3, 4) and np.isnan(w[:, 0]).all()
     np.testing.assert_allclose(w[:, 1], [0.0, 0.0, 0.55])
     doc = json.loads(path.read_text())
-    assert doc["schema_version"] == 1 and list(doc["tracks"]) == list(DEFAULT_SET.names)
+    assert doc["schema_version"] == 2 and list(doc["tracks"]) == list(DEFAULT_SET.names)
 
 
 def test_copy_is_independent() -> None:
@@ -151,7 +152,11 @@ def _doc(**changes) -> dict:
 @pytest.mark.parametrize("match, content", [
     (r"expected a JSON annotation file", "{not json"),
     (r"expected a JSON object, found list", json.dumps([1, 2])),
-    (r"schema_version: expected 1, found 2", json.dumps(_doc(schema_version=2))),
+    (r"schema_version: expected 1 or 2, found 3", json.dumps(_doc(schema_version=3))),
+    (r"tracks.mouth_open\[0\]: key-frame origin: expected one of typed, machine, edited, found 'robot'",
+     json.dumps(_doc(tracks={"mouth_open": [{"frame": 3, "weight": 0.1, "origin": "robot"}]}))),
+    (r"tracks.mouth_open\[0\]: key-frame accepted_by: expected the accepting rater's code",
+     json.dumps(_doc(tracks={"mouth_open": [{"frame": 3, "weight": 0.1, "origin": "machine"}]}))),
     (r"rater: expected a non-empty string, found ''", json.dumps(_doc(rater=""))),
     (r"blendshapes: expected unique, non-empty names", json.dumps(_doc(blendshapes=[]))),
     (r"tracks: expected an object", json.dumps(_doc(tracks=[]))),
@@ -174,3 +179,38 @@ def test_bad_files_raise_naming_the_file(tmp_path, match: str, content: str) -> 
 def test_missing_file_names_it(tmp_path) -> None:
     with pytest.raises(AnnotationFormatError, match="R7.json"):
         read_annotations(tmp_path / "R7.json")
+
+
+def test_a_version_1_file_loads_every_key_as_typed(tmp_path) -> None:
+    doc = _annotations().to_dict()
+    doc["schema_version"] = 1
+    for keys in doc["tracks"].values():
+        for key in keys:
+            key.pop("origin")
+            key["origin"] = "machine"  # a version 1 file knows no origins: ignored, typed
+    path = tmp_path / "R1.json"
+    path.write_text(json.dumps(doc))
+    back = read_annotations(path)
+    keys = [k for t in back.tracks.values() for k in t.keys]
+    assert keys and all(k.origin == "typed" and k.human for k in keys)
+    assert back == _annotations()
+
+
+def test_origins_round_trip_and_an_edit_makes_a_machine_key_the_raters(tmp_path) -> None:
+    track = KeyframeTrack([Keyframe(0, 0.1), Keyframe(30, 0.5, origin="machine", accepted_by="R2"),
+                           Keyframe(60, 0.2, origin="machine", accepted_by="R2")])
+    ann = RaterAnnotations("R2", "S1", DEFAULT_SET, {"mouth_open": track})
+    doc = json.loads(ann.save(tmp_path / "R2.json").read_text())
+    assert doc["tracks"]["mouth_open"][1] == {"frame": 30, "weight": 0.5, "interp": "linear",
+                                              "origin": "machine", "accepted_by": "R2"}
+    assert doc["tracks"]["mouth_open"][0]["origin"] == "typed"
+    back = read_annotations(tmp_path / "R2.json").tracks["mouth_open"]
+    assert [k.origin for k in back.keys] == ["typed", "machine", "machine"]
+    # the label at each frame is the nearest key's: the machine's from frame 16 on
+    assert back.origins([0, 15, 16, 45, 60]).tolist() == ["typed", "typed", "machine", "machine", "machine"]
+    assert np.isnan(back.evaluate_human([16, 60])).all() and back.evaluate_human([0])[0] == 0.1
+    moved = back.move(60, 62)
+    assert (moved.origin, moved.accepted_by) == ("edited", None) and moved.human
+    assert back.get(30).origin == "machine"  # the others stay the machine's
+    times = np.arange(63) * 1.0  # one frame per second
+    assert origin_seconds(back, times) == {"typed": 16, "machine": 31, "edited": 16}

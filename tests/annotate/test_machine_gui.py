@@ -54,6 +54,7 @@ def test_reliability_panel_shows_the_machine_apart_once_the_round_is_rated(qtbot
     assert panel.report is not None and panel.machine_box.isVisible()
     assert "machine rater" in panel.machine_box.title().lower()
     assert "MediaPipe face landmarker" in panel.machine_note.text()
+    assert panel.machine_note.text().startswith("<b>Machine against the human mean, all blendshapes:</b> n ")
     assert "machine" not in panel.report.raters
     ratings, _ = gather_ratings(lab)
     machine, no_face = machine_ratings(lab, gather_poses(lab))
@@ -187,3 +188,18 @@ def test_cancel_preannotate_writes_nothing(qtbot, tmp_path: Path) -> None:
         assert not (lab / SESSION / "machine").exists()
     finally:
         view.shutdown()
+
+
+def test_the_report_tables_grow_with_the_window(qtbot, stage: QtAnnotateStage) -> None:
+    stage.resize(1280, 800)
+    stage.rater.setText("R1")
+    stage.rater.editingFinished.emit()
+    stage.tabs.setCurrentIndex(1)
+    panel = stage.open_reliability()
+    qtbot.waitUntil(lambda: panel.report is not None and panel.per_pose.isVisible())
+    small = (panel.per_pose.height(), panel.machine_table.height(), panel.ba_plot.height())
+    stage.resize(1920, 1080)
+    qtbot.waitUntil(lambda: panel.per_pose.height() > small[0])
+    grown = (panel.per_pose.height() - small[0], panel.machine_table.height() - small[1],
+             panel.ba_plot.height() - small[2])
+    assert grown[0] >= grown[2] > 0 and grown[1] > 0  # the tables take at least as much as the plot

@@ -1,4 +1,5 @@
-"""The machine guide (Qt-free): RDP within the tolerance, no-face spans, "Accept machine" as one undo step."""
+"""The machine guide (Qt-free): RDP within the tolerance, no-face spans, "Accept machine" as sparse machine keys
+(one per 3 s at most, close to the 1 s median of the machine curve) in one undo step."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import numpy as np
 import pytest
 
 from effortface.annotate.annotate_session import AnnotateSession
-from effortface.annotate.machine_guide import load_guide, rdp_keep, runs
+from effortface.annotate.machine_guide import fit_keys, load_guide, rdp_keep, runs
 from effortface.core.errors import UserError
 from tests.annotate.machine_helpers import write_fake_machine
 
@@ -42,26 +43,48 @@ def test_a_straight_line_needs_two_keys_and_runs_are_inclusive() -> None:
     assert runs(np.array([0, 1, 1, 0, 0, 1], bool)) == [(1, 2), (5, 5)]
 
 
-def test_accept_machine_turns_the_curve_into_keys_one_undo_step(session_dir: Path) -> None:
+def one_second_median(curve: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+    """The reference: at each frame, the median of the machine's values within +-0.5 s (NaN where no face)."""
+    out = np.full(curve.shape, np.nan)
+    for i in np.flatnonzero(np.isfinite(curve)):
+        near = np.abs(t_s - t_s[i]) <= 0.5
+        out[i] = np.nanmedian(curve[near])
+    return out
+
+
+def test_accept_machine_sets_sparse_machine_keys_close_to_the_smoothed_curve(session_dir: Path) -> None:
     s = AnnotateSession(session_dir, "R1", autosave=False)
     guide = s.machine
     assert guide is not None and guide.no_face.any()
     s.set_blendshape("mouth_open")
     before = s.track.copy()
     outside = [k.frame for k in before.keys if k.frame < 100 or k.frame > 700]
-    n = s.accept_machine(100, 700)
+    fit = s.accept_machine(100, 700)
     keys = [k for k in s.track.keys if 100 <= k.frame <= 700]
-    assert len(keys) == n > 2
+    assert len(keys) == len(fit.keys) > 2
+    t = np.asarray(s.session.frame_times_s)
+    assert len(keys) <= (t[700] - t[100]) / 3.0  # at most one key per 3 s
+    assert all(k.origin == "machine" and k.accepted_by == "R1" for k in keys)
     assert not any(guide.no_face[k.frame] for k in keys)  # no key where no face
     assert [k.frame for k in s.track.keys if k.frame < 100 or k.frame > 700] == outside  # untouched
-    curve = guide.curve("mouth_open")
+    reference = one_second_median(np.clip(guide.curve("mouth_open"), 0, 1), t)
     frames = np.arange(100, 701)
-    for a, b in runs(np.isfinite(curve[frames])):  # within the tolerance on each stretch with a face
-        f = frames[a:b + 1]
-        assert np.max(np.abs(s.track.evaluate(f) - np.clip(curve[f], 0, 1))) <= 0.03 + 1e-4
-    assert "accept machine mouth_open" in s.undo_text
+    face = np.isfinite(reference[frames])
+    rms = float(np.sqrt(np.mean((s.track.evaluate(frames) - reference[frames])[face] ** 2)))
+    assert rms <= 0.08, rms
+    assert "accept machine mouth_open" in s.undo_text and f"RMS {fit.rms:.3f}" in s.undo_text
     s.undo()
     assert s.track == before
+
+
+def test_the_budget_puts_keys_where_the_curve_moves() -> None:
+    t = np.arange(0, 300, 0.5)  # 300 s at 2 frames/s: a flat first half, a ramp up and down after
+    curve = np.where(t < 150, 0.2, 0.2 + 0.6 * np.abs(np.sin((t - 150) / 20)))
+    fit = fit_keys(curve, t)
+    frames = np.array([f for f, _ in fit.keys])
+    assert len(frames) <= 300 / 3 and fit.budget == 99  # 299.5 s // 3 s
+    assert (t[frames] < 149).sum() <= 2 < (t[frames] >= 150).sum()
+    assert fit.max_error <= 0.03 + 1e-9  # within the tolerance before the budget ran out
 
 
 def test_accept_refuses_without_a_track_or_a_face(session_dir: Path, tmp_path: Path) -> None:

@@ -336,9 +336,11 @@ def test_missing_strap_is_shown_and_start_error_stays_in_window(qtbot, window, t
                         lambda parent, title, *a: (asked.append(title), QtWidgets.QMessageBox.StandardButton.Yes)[1])
     qtbot.mouseClick(stage.record_button, QtCore.Qt.MouseButton.LeftButton)
     qtbot.waitUntil(stage.settled, timeout=10_000)
-    assert asked == ["Strap not ready"]  # a strap not ready asks first; "No video" chosen never asks
+    assert asked == ["Devices not ready"]  # one question; "No video" chosen never asks
     assert not stage.session.recording
-    assert "Could not start" in stage.banner.text() and "ttyNONE" in stage.banner.text()
+    # in the app's words, not the command line's (--port)
+    assert stage.banner.text() == (f"Could not start: strap port {tmp_path / 'ttyNONE'}: no such device: the "
+                                   "receiver is unplugged, or another port is meant")
     assert stage.record_button.isEnabled() and not (tmp_path / "sessions").exists()
 
 

@@ -235,12 +235,13 @@ def test_a_plan_drives_phases_and_stop_logs_the_note_notes_and_warns_without_syn
     assert "water break" in stage.banner_text()
     info = read_session_info(path)
     assert info.extra["notes"] == "participant felt dizzy after squats"
-    # no sync test: said at Stop and beside the Record button
-    assert "No sync test was measured" in stage.banner_text()
-    assert "not done" in stage.sync_label.text()
+    # recorded without video: nothing to synchronise, said in the summary that stays until the next Record
+    assert "No sync test" not in stage.banner_text()
+    assert stage.summary.isVisible() and stage.summary_sync.text() == "Sync test: no video: no sync needed"
 
 
 def test_sync_result_is_described() -> None:
+    assert describe_sync(None, has_video=False) == ("Sync test: no video: no sync needed", True)
     assert describe_sync(None) == ("Sync test: not done (no flash, F8): the video-to-heart-rate offset is unknown",
                                    False)
     text, ok = describe_sync({"flashes_t_s": [3.0], "offsets_s": [], "video_offset_s": None, "note": "flash not seen"})

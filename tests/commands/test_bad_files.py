@@ -121,7 +121,7 @@ def test_a_deep_session_json_does_not_stop_the_annotate_stage(qtbot, session: Pa
 
 ANNOTATION_FILES = {
     r"R1.json: expected JSON nested at most 32 levels": lambda d: DEEP,
-    r"R1.json: schema_version: expected 1, found True": lambda d: json.dumps({**d, "schema_version": True}),
+    r"R1.json: schema_version: expected 1 or 2, found True": lambda d: json.dumps({**d, "schema_version": True}),
     r"R1.json: session_id: expected 'P03_20260113-094400_cardio' \(this file's session\), found 'P01_":
         lambda d: json.dumps({**d, "session_id": OTHER}),
     r"R1.json: rater: expected 'R1' \(this file's name\), found 'R2'": lambda d: json.dumps({**d, "rater": "R2"}),

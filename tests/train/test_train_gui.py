@@ -75,6 +75,11 @@ def test_train_export_and_refuse_overwrite(qtbot, stage: QtTrainStage, tmp_path:
     for name in ("model.json", "svr.npz", "face.onnx", "MODEL_CARD.md", "report/report.md"):
         assert (out / name).is_file(), name
     assert read_bundle(out).provenance["participants"] == [f"P0{i}" for i in range(1, 7)]
+    # the card in the app: the Card tab renders the exported MODEL_CARD.md
+    card = stage.card.toPlainText()
+    assert stage.tabs.tabText(stage.tabs.indexOf(stage.card)) == "Card"
+    assert card.startswith("Model card: effortface face-of-effort model") and "raters: humans" in card
+    assert stage.card.toolTip() == str(out / "MODEL_CARD.md")
     assert load_model(out).blendshapes.names == outcome.face.blendshapes
 
     stamp = (out / "model.json").stat().st_mtime_ns
@@ -376,7 +381,8 @@ def test_compare_shows_cv_schemes(qtbot, stage: QtTrainStage, two_bundles: tuple
     rows = {table.item(r, 0).text(): [table.item(r, c).text() for c in (1, 2, 3)]
             for r in range(table.rowCount())}
     assert rows["CV scheme"] == ["leave one participant out", "random-frame K-fold (inflated)", "differs"]
-    assert rows["raters"] == ["mean", "mean", "same"] and rows["grid"] == ["small", "small", "same"]
+    assert rows["rater policy"] == ["mean", "mean", "same"] and rows["grid"] == ["small", "small", "same"]
+    assert rows["rater source"] == ["humans", "humans", "same"]  # who labelled the face, a row of its own
     for name in stage.session.blendshapes.names:
         assert len(rows[f"{name} C / gamma / epsilon"][0].split(" / ")) == 3
     r_a, r_b, diff = rows["HR tl_regression r"]
@@ -497,3 +503,29 @@ def test_c_and_gamma_values_replace_the_grid(qtbot, stage: QtTrainStage) -> None
     assert stage.session.settings.gamma_values is None
     panel.values["C"].setText("")
     assert panel.commit_values("C") and stage.session.settings.c_values is None
+
+
+def test_export_starts_in_the_labs_models_folder(tmp_path: Path, qtbot) -> None:
+    lab = tmp_path / "lab"
+    lab.mkdir()
+    view = QtTrainStage(TrainSession(lab))
+    qtbot.addWidget(view)
+    try:
+        start = view.export_start()
+        assert start == lab.resolve() / "models" / "new_model" and start.is_absolute()
+        (lab / "models" / "new_model").mkdir(parents=True)
+        assert view.export_start().name == "new_model_2"  # never an existing model
+    finally:
+        view.shutdown()
+
+
+def test_humans_plus_machine_that_adds_nothing_says_so(qtbot, stage: QtTrainStage) -> None:
+    """The sample lab has no machine track: humans + machine cannot add a second, and the stage says it."""
+    _pick_cardio_small(stage)
+    box = stage.settings_panel.sources
+    box.setCurrentIndex(box.findData("humans+machine"))
+    _train(qtbot, stage)
+    assert stage.session.outcome is not None, stage.status.text()
+    text = stage.status.text()
+    assert "; note: humans + machine added nothing: the machine labelled no second" in text
+    assert "the model learnt the humans' labels alone" in text and "bold" in stage.status.styleSheet()

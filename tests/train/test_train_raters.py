@@ -141,3 +141,82 @@ def test_train_stage_raters_box_offers_humans_plus_machine(qtbot, lab: Path, tmp
     finally:
         view.shutdown()
         view.session.wait(30)
+
+
+ACCEPTED = "P02_20260119-121100_cardio"  # its only track: keys a rater accepted from the machine, not edited
+
+
+def _accept_everything(session_dir: Path, rater: str = "R4") -> None:
+    """The rater's whole pass: Accept machine on each blendshape over the whole video (no edit)."""
+    from effortface.annotate.annotate_session import AnnotateSession
+
+    s = AnnotateSession(session_dir, rater)
+    try:
+        for name in s.blendshape_names:
+            s.set_blendshape(name)
+            s.set_frame(0)
+            s.accept_machine(0, s.n_frames - 1)
+            s.set_frame(s.n_frames - 1)  # the pass is done
+    finally:
+        s.close()
+
+
+@pytest.fixture(scope="module")
+def accepted_lab(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Three human-keyed cardio sessions and one whose only track is the machine's, accepted by R4."""
+    out = tmp_path_factory.mktemp("accepted") / "lab"
+    for name in (SESSIONS[0], ACCEPTED, SESSIONS[2], SESSIONS[3]):
+        shutil.copytree(SAMPLES / name, out / name, ignore=shutil.ignore_patterns("serial"))
+    shutil.rmtree(out / ACCEPTED / "annotations")
+    write_fake_machine(out / ACCEPTED, no_face=False)
+    _accept_everything(out / ACCEPTED)
+    return out
+
+
+def test_humans_training_leaves_out_a_session_of_accepted_machine_keys(accepted_lab: Path, tmp_path: Path) -> None:
+    from effortface.annotate.completeness import rater_status
+    from effortface.annotate.keyframes import read_annotations
+
+    ann = read_annotations(accepted_lab / ACCEPTED / "annotations" / "R4.json")
+    from effortface.core.session.folder import read_session
+
+    frame_times = read_session(accepted_lab / ACCEPTED).frame_times_s
+    assert all(st.complete for st in rater_status(ann, frame_times).values())  # complete, but the machine's
+    assert {k.origin for t in ann.tracks.values() for k in t.keys} == {"machine"}
+    out = tmp_path / "model"
+    assert main(["train", str(accepted_lab), "--out", str(out)]) == 0
+    prov = json.loads((out / "model.json").read_text())["provenance"]
+    assert prov["n_sessions"] == 3 and prov["raters"] == "humans"
+    left_out = prov["label_origins"]["left_out"]
+    assert len(left_out) == 1 and left_out[0].startswith(f"{ACCEPTED}: left out: its complete tracks are keys "
+                                                         "accepted from the machine, not edited")
+    seconds = prov["label_origins"]["seconds"]
+    assert seconds["machine"] >= 4 * 600 and seconds["typed"] > 3 * 4 * 500 and seconds["edited"] == 0
+    card = (out / "MODEL_CARD.md").read_text()
+    assert f"- session left out: {ACCEPTED}: left out" in card
+    assert f"keys accepted from the machine and not edited {seconds['machine']} (not human labels" in card
+
+
+def test_an_edited_machine_key_is_the_raters_label(accepted_lab: Path, tmp_path: Path) -> None:
+    from effortface.annotate.annotate_session import AnnotateSession
+
+    lab = tmp_path / "lab"
+    shutil.copytree(accepted_lab / ACCEPTED, lab / ACCEPTED)
+    s = AnnotateSession(lab / ACCEPTED, "R4")
+    try:
+        s.set_blendshape("mouth_open")
+        key = s.track.keys[len(s.track) // 2]
+        s.set_frame(key.frame)
+        s.set_key(0.55)  # the rater edits one key
+    finally:
+        s.close()
+    table = session_table(lab / ACCEPTED)  # no longer left out: one human label
+    labelled = table["mouth_open"].notna()
+    others = ["mouth_stretch", "eye_squint", "brow_lower"]
+    assert 0 < labelled.sum() < 10 and table[others].isna().all().all()  # the others are still the machine's
+    frame_t = np.asarray(s.session.frame_times_s)
+    t_labelled = table.loc[labelled, "t_s"].to_numpy()
+    assert np.all(np.abs(t_labelled - frame_t[key.frame]) < 6.0)  # around the edited key only
+    nearest = [int(np.argmin(np.abs(frame_t - t))) for t in t_labelled]
+    np.testing.assert_allclose(table.loc[labelled, "mouth_open"], s.track.evaluate(nearest))
+    assert s.track.get(key.frame).origin == "edited" and s.track.get(key.frame).weight == 0.55

@@ -47,7 +47,7 @@ from effortface.core.gui.qt_compat import guard_none_refcount
 from effortface.annotate.gui.reliability_panel import QtReliabilityPanel
 from effortface.annotate.gui.timeline import QtTimeline
 from effortface.annotate.annotate_session import AnnotateSession, check_rater
-from effortface.annotate.machine_guide import ACCEPT_TOLERANCE
+from effortface.annotate.machine_guide import ACCEPT_TOLERANCE, KeyFit
 from effortface.annotate.preannotate_run import PreannotateRun, has_track
 from effortface.annotate.video_index import VideoIndex
 from effortface.core.errors import UserError
@@ -92,6 +92,7 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         self.loop: tuple[int, int] | None = None  # frames played over and over (L)
         self._build()
         self._add_shortcuts()
+        self._return_focus_from_boxes()
         session.frame_changed.connect(self._show_frame)
         session.keys_changed.connect(lambda *_: self._show_face())
         session.file_changed.connect(self._show_saved)
@@ -129,11 +130,12 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         self.splitter.setChildrenCollapsible(False)
         self.splitter.addWidget(top)
         self.splitter.addWidget(self._build_curves_pane())
-        self.splitter.setStretchFactor(0, 6)
-        self.splitter.setStretchFactor(1, 4)
+        self.splitter.setStretchFactor(0, 1)
+        self.splitter.setStretchFactor(1, 2)  # a taller window mostly grows the curve editor
         # the curves' size hints would take half the height: start at 55:45 (the protocol panel fits
         # unscrolled at 1280x800 with room to spare, the video gets the rest)
         self.splitter.setSizes([500, 500])  # a tall curve editor; the splitter moves either way
+        self._grown_from: int | None = None
         help_label = QtWidgets.QLabel(HELP_TEXT, wordWrap=True)
         help_label.setStyleSheet("color:#505050;")
         layout = QtWidgets.QVBoxLayout(self)
@@ -181,6 +183,7 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         column.addLayout(toggles)
         column.addWidget(machine_row)
         column.addLayout(row, 1)
+        machine_row.setVisible(self.session.machine is not None)  # it has a parent now: never a window
         self._show_history()
         return pane
 
@@ -204,8 +207,9 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         self.accept_tolerance = QtWidgets.QDoubleSpinBox(minimum=0.0, maximum=0.5, value=ACCEPT_TOLERANCE,
                                                          decimals=3, singleStep=0.005)
         self.accept_tolerance.setFocusPolicy(QtCore.Qt.FocusPolicy.ClickFocus)
-        self.accept_tolerance.setToolTip("Accept machine keeps the machine curve within this weight at every frame "
-                                         "(Ramer-Douglas-Peucker): larger, fewer keys")
+        self.accept_tolerance.setToolTip("Accept machine smooths the machine curve (1 s running median) and adds "
+                                         "keys where it moves most, at most one per 3 s, until within this weight: "
+                                         "larger, fewer keys. The keys stay the machine's (grey) until you edit them")
         row.addWidget(self.accept_tolerance)
         self.accept_button = QtWidgets.QPushButton("Accept machine (A)")
         self.accept_button.setFocusPolicy(QtCore.Qt.FocusPolicy.NoFocus)
@@ -216,7 +220,9 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         row.addWidget(self.accept_button)
         self.machine_row = QtWidgets.QWidget()
         self.machine_row.setLayout(row)
-        self.machine_row.setVisible(self.session.machine is not None)
+        # hidden until it has a parent: setVisible(True) on a parentless widget opens it as a window of its
+        # own, which takes the keyboard from the main window (_build_curves_pane shows it once laid out)
+        self.machine_row.hide()
         return self.machine_row
 
     def accept_range(self) -> tuple[int, int]:
@@ -228,8 +234,8 @@ class QtKeyframeEditor(QtWidgets.QWidget):
             return chosen[0], chosen[-1]
         return self.timeline.visible_frames()
 
-    def accept_machine(self) -> int:
-        """Turn the machine curve into key-frames over :meth:`accept_range` (one undo step)."""
+    def accept_machine(self) -> KeyFit:
+        """Turn the machine curve into sparse key-frames over :meth:`accept_range` (one undo step)."""
         first, last = self.accept_range()
         return self.session.accept_machine(first, last, self.accept_tolerance.value())
 
@@ -366,6 +372,17 @@ class QtKeyframeEditor(QtWidgets.QWidget):
             action.triggered.connect(lambda *_, s=slot: self._guarded(s))
             self.addAction(action)
 
+    def _return_focus_from_boxes(self) -> None:
+        """Enter (or Esc) in the weight or tolerance box hands the keyboard back to the video, as the frame
+        and time boxes do: Right and the digits key frames again at once."""
+        for box in (self.protocol.number, self.accept_tolerance):
+            box.editingFinished.connect(functools.partial(self._focus_video_from, box))
+            box.installEventFilter(self)
+
+    def _focus_video_from(self, box: QtWidgets.QWidget) -> None:
+        if box.hasFocus():
+            self.video_view.setFocus()
+
     def _select_frame_box(self) -> None:
         """Ctrl+G: type the frame to go to."""
         self.frame_box.setFocus()
@@ -386,16 +403,21 @@ class QtKeyframeEditor(QtWidgets.QWidget):
     def eventFilter(self, watched: QtCore.QObject, event: QtCore.QEvent) -> bool:  # noqa: N802 - Qt override
         """Esc in the frame or time box cancels the go-to and hands the keys back to the video."""
         if (isinstance(event, QtGui.QKeyEvent) and event.type() == QtCore.QEvent.Type.KeyPress
-                and event.key() == QtCore.Qt.Key.Key_Escape
-                and watched in (self.frame_box, self.time_box)):
-            self.cancel_go_to()
-            return True
+                and event.key() == QtCore.Qt.Key.Key_Escape):
+            if watched in (self.frame_box, self.time_box):
+                self.cancel_go_to()
+                return True
+            if watched in (self.protocol.number, self.accept_tolerance):
+                self.video_view.setFocus()
+                return True
         return super().eventFilter(watched, event)
 
     def _escape(self) -> None:
-        """Esc: cancel a go-to being typed, else clear the key selection."""
+        """Esc: cancel a go-to being typed, leave the weight or tolerance box, else clear the key selection."""
         if self.frame_box.hasFocus() or self.time_box.hasFocus():
             self.cancel_go_to()
+        elif self.protocol.number.hasFocus() or self.accept_tolerance.hasFocus():
+            self.video_view.setFocus()
         else:
             self.timeline.select_key(None)
 
@@ -533,6 +555,15 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         self.video.close()
 
 
+def time_left(elapsed_s: float, fraction: float) -> str:
+    """``"about 2 min 10 s left"`` at the pace so far (``"estimating..."`` before 2 % or 2 s)."""
+    if fraction < 0.02 or elapsed_s < 2.0:
+        return "estimating time left..."
+    left_s = elapsed_s * (1.0 - fraction) / fraction
+    minutes, seconds = divmod(int(round(left_s)), 60)
+    return f"about {minutes} min {seconds:02d} s left" if minutes else f"about {seconds} s left"
+
+
 def timecode(t_s: float) -> str:
     """``h:mm:ss.mmm`` of a session time."""
     ms = int(round(max(t_s, 0.0) * 1000))
@@ -567,8 +598,8 @@ class QtAnnotateStage(QtWidgets.QWidget):
         self.cache_frames = cache_frames
         self.editor: QtKeyframeEditor | None = None
         self.preannotate = PreannotateRun()
-        self.preannotate.progress_changed.connect(lambda f, text: self.show_message(
-            f"pre-annotate {100 * f:.0f} %: {text}"))
+        self.preannotate.progress_changed.connect(self._show_preannotate_progress)
+        self._pre_started = 0.0
         self.preannotate.finished.connect(self._preannotated)
         self._pre_timer = QtCore.QTimer(self, interval=100)
         self._pre_timer.timeout.connect(self.preannotate.poll)
@@ -645,6 +676,11 @@ class QtAnnotateStage(QtWidgets.QWidget):
         left.addWidget(self.rater)
         left.addLayout(buttons)
         left.addWidget(self.preannotate_button)
+        self.pre_progress = QtWidgets.QProgressBar(maximum=1000, textVisible=True)
+        self.pre_progress.setToolTip("Pre-annotate: the share of the chosen sessions' frames rated, and the time "
+                                     "left at the pace so far")
+        self.pre_progress.hide()
+        left.addWidget(self.pre_progress)
         left.addWidget(self._build_toolbar())
         left.addWidget(self.status)
         side = QtWidgets.QWidget()
@@ -652,7 +688,8 @@ class QtAnnotateStage(QtWidgets.QWidget):
         side.setMinimumWidth(SIDE_MIN_WIDTH)
         side.setMaximumWidth(SIDE_WIDTH)
         side.setSizePolicy(QtWidgets.QSizePolicy.Policy.Preferred, QtWidgets.QSizePolicy.Policy.Preferred)
-        self.sessions.setTextElideMode(QtCore.Qt.TextElideMode.ElideMiddle)
+        self.sessions.setTextElideMode(QtCore.Qt.TextElideMode.ElideRight)  # the id's date stays readable;
+        # the whole line (and each rater's tracks) is in the item's tooltip
         self.sessions.setHorizontalScrollBarPolicy(QtCore.Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
         return side
 
@@ -697,6 +734,10 @@ class QtAnnotateStage(QtWidgets.QWidget):
         existing = sum(has_track(s) for s in chosen)
         force = bool(existing) and self.confirm_replace(existing)
         self.preannotate.start(chosen, force=force)
+        self._pre_started = time.perf_counter()
+        self.pre_progress.setValue(0)
+        self.pre_progress.setFormat("starting...")
+        self.pre_progress.show()
         self.preannotate_button.setText("Cancel pre-annotate")
         self.show_message(f"pre-annotate: {len(chosen)} session{'s' * (len(chosen) != 1)} started")
         self._pre_timer.start()
@@ -706,7 +747,15 @@ class QtAnnotateStage(QtWidgets.QWidget):
             self, "Pre-annotate", f"{n} of the chosen sessions have a machine track already. Replace them?")
         return answer == QtWidgets.QMessageBox.StandardButton.Yes
 
+    def _show_preannotate_progress(self, fraction: float, text: str) -> None:
+        """The bar: share done and the time left at the pace so far; the status line: what is being rated."""
+        elapsed_s = time.perf_counter() - self._pre_started
+        self.pre_progress.setValue(int(round(1000 * min(max(fraction, 0.0), 1.0))))
+        self.pre_progress.setFormat(f"{100 * fraction:.0f} %, {time_left(elapsed_s, fraction)}")
+        self.show_message(f"pre-annotate: {text}")
+
     def _preannotated(self, text: str, is_error: bool, outcome: Any) -> None:
+        self.pre_progress.hide()
         self._pre_timer.stop()
         self.preannotate_button.setText("Pre-annotate")
         self.show_message(text, is_error)
@@ -883,6 +932,7 @@ class QtAnnotateStage(QtWidgets.QWidget):
         self.editor.video_view.setFocus()
         if self.settings is not None:
             self.settings.setValue("annotate/rater", rater)
+            self._resume(self.editor)
         keys = sum(len(t) for t in session.annotations.tracks.values())
         self.show_message(f"{session.session.info.session_id}: rater {rater}, {keys} keys "
                           f"({'file ' + session.path.name if session.path.exists() else 'new file on first key'})")
@@ -906,8 +956,25 @@ class QtAnnotateStage(QtWidgets.QWidget):
             if Path(self.sessions.item(row).data(QtCore.Qt.ItemDataRole.UserRole)) == folder:
                 self.sessions.setCurrentRow(row)
 
+    def _place_key(self, session: AnnotateSession) -> str:
+        return f"annotate/place/{session.session.info.session_id}/{session.rater}"
+
+    def _resume(self, editor: QtKeyframeEditor) -> None:
+        """Go back to the blendshape and frame where this rater left this session (remembered at close)."""
+        assert self.settings is not None
+        place = str(self.settings.value(self._place_key(editor.session), ""))
+        name, _, frame = place.rpartition("@")
+        if name in editor.session.blendshape_names and frame.isdigit():
+            editor.session.set_blendshape(name)
+            editor.session.set_frame(int(frame))
+            editor.timeline.follow_cursor(editor.session.t_s)
+
     def close_session(self) -> None:
-        """Close the open session (nothing to save: every edit is already on disk)."""
+        """Close the open session (nothing to save: every edit is already on disk; the place the rater
+        stopped at is remembered for the next opening)."""
+        if self.editor is not None and self.settings is not None:
+            m = self.editor.session
+            self.settings.setValue(self._place_key(m), f"{m.blendshape}@{m.frame}")
         if self.editor is not None:
             self.editor.shutdown()
             self.editor_host.removeWidget(self.editor)

@@ -27,7 +27,7 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6 import QtCore, QtGui, QtWidgets
 
-from effortface.annotate.agreement import (FLAG_PCT, MACHINE_LABEL, N_POSES, AgreementReport, MachineReport,
+from effortface.annotate.agreement import (FLAG_PCT, HUMAN_MEAN, MACHINE_LABEL, N_POSES, AgreementReport, MachineReport,
                                            agreement_report, format_ci, gather_poses, gather_ratings,
                                            machine_ratings, machine_report, propose_poses)
 from effortface.annotate.face import render_face
@@ -47,6 +47,48 @@ UNRATED = -0.01
 #: smallest pose frame and face picture (4:3): small enough for the report's tables at 1280x800
 _PICTURE_MIN = (130, 98)
 _ROW_PX = 22
+
+
+class _TablesFirstSplitter(QtWidgets.QSplitter):
+    """A vertical splitter whose extra height, when the window grows, goes to its growing tables (poses and
+    pairs, the machine's rows) once the Bland-Altman plot has :data:`_PLOT_ENOUGH_PX`; a smaller window
+    shrinks all."""
+
+    plot_index = 2
+    #: the blendshape table shows its five rows at its minimum: it never needs more
+    fixed_index = 0
+
+    def resizeEvent(self, event: QtGui.QResizeEvent) -> None:  # noqa: N802 - Qt override
+        before = self.sizes()
+        super().resizeEvent(event)
+        grown = event.size().height() - event.oldSize().height()
+        if event.oldSize().height() <= 0 or grown <= 0 or len(before) <= self.plot_index:
+            return
+        plot_gain = max(0, min(grown, _PLOT_ENOUGH_PX - before[self.plot_index]))
+        tables = [i for i, w in enumerate(before) if i not in (self.plot_index, self.fixed_index) and w > 0
+                  and (pane := self.widget(i)) is not None and pane.isVisible()]
+        if not tables:
+            return
+        sizes = list(before)
+        sizes[self.plot_index] += plot_gain
+        share, rest = divmod(grown - plot_gain, len(tables))
+        for n, i in enumerate(tables):
+            sizes[i] += share + (1 if n < rest else 0)
+        self.setSizes(sizes)
+
+
+#: the Bland-Altman plot grows up to this height before a taller window goes to the tables
+_PLOT_ENOUGH_PX = 240
+
+
+def machine_summary(rep: MachineReport) -> str:
+    """One line like the humans' overall row: the machine against the human mean, every blendshape pooled."""
+    pooled = next((st for st in rep.stats if st.reference == HUMAN_MEAN and st.name == "all"), None)
+    if pooled is None:
+        return "<b>Machine against the human mean:</b> no pose rated by both"
+    return (f"<b>Machine against the human mean, all blendshapes:</b> n {pooled.n_items}, ICC(A,1) "
+            f"{pooled.icc_a1:.2f} {format_ci(pooled.icc_a1_ci)}, alpha {pooled.alpha:.2f}, MAD "
+            f"{pooled.mad_pct:.1f} % of the range")
 
 
 def _table(headers: list[str], fit: bool = False) -> QtWidgets.QTableWidget:
@@ -205,7 +247,7 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         lower_widget = QtWidgets.QWidget()
         lower_widget.setLayout(lower)
         _fit_rows(self.pairs, 3)  # three raters' pairs unscrolled (the worst poses come first above them)
-        results = QtWidgets.QSplitter(QtCore.Qt.Orientation.Vertical)
+        results = _TablesFirstSplitter(QtCore.Qt.Orientation.Vertical)
         results.setChildrenCollapsible(False)
         results.addWidget(self.per_shape)
         results.addWidget(lower_widget)
@@ -463,8 +505,9 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         if rep is None:
             _fill(self.machine_table, [])
             return
-        self.machine_note.setText(f"{rep.label[0].upper()}{rep.label[1:]} at the pose frames: {rep.n_poses} poses; "
-                                  f"no face: {', '.join(rep.no_face) or 'none'}. Never in the human mean.")
+        self.machine_note.setText(f"{machine_summary(rep)}<br>{rep.label[0].upper()}{rep.label[1:]} at the pose "
+                                  f"frames: {rep.n_poses} poses; no face: {', '.join(rep.no_face) or 'none'}. "
+                                  "Never in the human mean.")
         _fill(self.machine_table, [[s.reference, s.name, str(s.n_items), f"{s.icc_a1:.3f}", format_ci(s.icc_a1_ci),
                                     f"{s.alpha:.3f}", format_ci(s.alpha_ci), f"{s.mad_pct:.1f}",
                                     f"[{s.mad_pct_ci[0]:.1f}, {s.mad_pct_ci[1]:.1f}]"] for s in rep.stats])
@@ -495,15 +538,21 @@ class QtReliabilityPanel(QtWidgets.QWidget):
     def _plot_bland_altman(self, rep: AgreementReport) -> None:
         """Offer the report's pairs (one at a time, or all) and draw the one chosen."""
         names = [f"{p.rater_a}-{p.rater_b}" for p in rep.pairs]
+        mine = self._my_pairs_label() if any(self.rater in (p.rater_a, p.rater_b) for p in rep.pairs) else ""
         keep = self.ba_pair.currentText()
         self._report = rep
         self.ba_pair.blockSignals(True)
         self.ba_pair.clear()
-        self.ba_pair.addItems([ALL_PAIRS, *names])
-        self.ba_pair.setCurrentText(keep if keep and keep in (*names, ALL_PAIRS) else
-                                    (names[0] if names else ALL_PAIRS))
+        self.ba_pair.addItems([ALL_PAIRS, *names] + ([mine] if mine else []))
+        # by default the pairs of the rater who reads the report (their own agreement first)
+        self.ba_pair.setCurrentText(keep if keep and keep in (*names, ALL_PAIRS, mine) else
+                                    mine or (names[0] if names else ALL_PAIRS))
         self.ba_pair.blockSignals(False)
         self._replot()
+
+    def _my_pairs_label(self) -> str:
+        """The Bland-Altman choice of every pair this panel's rater is in."""
+        return f"{self.rater}'s pairs"
 
     def _pick_pair_row(self, row: int, *_: int) -> None:
         """A row of the pairs table picks that pair's Bland-Altman plot."""
@@ -518,7 +567,9 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         plot = self.ba_plot
         plot.clear()
         chosen = self.ba_pair.currentText()
-        drawn = [(i, p) for i, p in enumerate(rep.pairs) if chosen in (ALL_PAIRS, f"{p.rater_a}-{p.rater_b}")]
+        mine = chosen == self._my_pairs_label()
+        drawn = [(i, p) for i, p in enumerate(rep.pairs) if chosen in (ALL_PAIRS, f"{p.rater_a}-{p.rater_b}")
+                 or (mine and self.rater in (p.rater_a, p.rater_b))]
         plot.setTitle(f"Bland-Altman: {chosen if chosen != ALL_PAIRS else 'rater a - rater b, every pair'}")
         for i, p in drawn:
             colour = _PAIR_COLOURS[i % len(_PAIR_COLOURS)]

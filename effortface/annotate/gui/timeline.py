@@ -14,8 +14,14 @@
 - the machine guide (``machine/face_landmarker.csv``): each blendshape's machine curve dashed under the
   rater's own curves (shown or hidden per blendshape with :meth:`QtTimeline.set_machine_shown`), and the
   frames where the machine found no face shaded grey and labelled "no face";
+- keys the rater accepted from the machine and has not edited are grey diamonds, and the curve is grey
+  where its nearest key is one of them (the machine's colour, :data:`MACHINE_KEY_COLOUR`); the rater's
+  own keys (typed or edited) and their stretches are in the curve's colour;
 - zoom: :meth:`QtTimeline.zoom` (the editor binds + and -) about the cursor, :meth:`frame_all` (F);
-- a cursor line at the current frame's time in both plots; dragging it scrubs the video.
+  the view never shows time before the session's start nor after its end;
+- a cursor line at the current frame's time in both plots; dragging it scrubs the video; the view
+  follows the cursor (:attr:`QtTimeline.follow`: ``"page"`` turns the page when the cursor leaves the
+  view, ``"centre"`` keeps it in the middle, ``"off"`` leaves the view alone).
 
 Everything is written back through the model's methods (the rule: a view writes back only through model methods and keeps widget state only); the widget keeps only the
 selection and the drag preview.
@@ -37,6 +43,13 @@ _KEY_BRUSH = pg.mkBrush("#1f5fbf")
 _SELECTED_BRUSH = pg.mkBrush("#e07000")
 _PHASE_BRUSHES = (pg.mkBrush(90, 140, 220, 40), pg.mkBrush(230, 150, 60, 40))
 _NO_FACE_BRUSH = pg.mkBrush(120, 120, 120, 60)
+_MACHINE_BRUSH = pg.mkBrush("#6e6e6e")
+#: keys accepted from the machine (not edited) are drawn in the machine's colour, as diamonds
+MACHINE_KEY_COLOUR = "#6e6e6e"
+#: width of both plots' left axes (their time axes line up; the HR title fits)
+LEFT_AXIS_PX = 48
+#: how the view follows the play head
+FOLLOW_MODES = ("page", "centre", "off")
 #: "no face" labels drawn at most (every stretch is shaded)
 _MAX_NO_FACE_LABELS = 30
 
@@ -137,6 +150,8 @@ class QtTimeline(pg.GraphicsLayoutWidget):
         self.machine_hidden: set[str] = set()  # blendshapes whose machine guide the rater switched off
         self.t_s = session.times.t_s
         self.phase_labels: list[tuple[pg.LinearRegionItem, pg.InfLineLabel, str]] = []
+        #: how the view follows the current frame (one of :data:`FOLLOW_MODES`)
+        self.follow = "page"
         self.hr_plot = self.addPlot(row=0, col=0)
         self._curve_box = _ClickViewBox()
         self.curve_plot = self.addPlot(row=1, col=0, viewBox=self._curve_box)
@@ -158,7 +173,8 @@ class QtTimeline(pg.GraphicsLayoutWidget):
     # -------------------------------------------------------------------------------- building
     def _build_hr(self) -> None:
         plot = self.hr_plot
-        plot.setLabel("left", "heart rate", units="bpm")
+        plot.setLabel("left", "HR", units="bpm")  # short: "heart rate (bpm)" was clipped at 1280x800
+        plot.getAxis("left").setWidth(LEFT_AXIS_PX)
         plot.showGrid(x=True, y=True, alpha=0.2)
         plot.setMouseEnabled(x=True, y=False)
         hr = self.session.session.heart_rate
@@ -169,6 +185,8 @@ class QtTimeline(pg.GraphicsLayoutWidget):
             plot.setYRange(np.nanmin(bpm) - 5, np.nanmax(bpm) + 12, padding=0)
         self._add_phases(plot)
         self._add_marks(plot)
+        start_s, end_s = min(float(self.t_s[0]), 0.0), float(self.t_s[-1])
+        plot.setLimits(xMin=start_s, xMax=end_s + 0.01 * max(end_s - start_s, 1.0))  # no negative time
         plot.setXRange(self.t_s[0], self.t_s[-1], padding=0.01)
 
     def _add_marks(self, plot: pg.PlotItem) -> None:
@@ -221,6 +239,7 @@ class QtTimeline(pg.GraphicsLayoutWidget):
     def _build_curves(self) -> None:
         plot = self.curve_plot
         plot.setLabel("left", "weight")
+        plot.getAxis("left").setWidth(LEFT_AXIS_PX)  # as wide as the HR plot's: the time axes line up
         plot.setLabel("bottom", "session time", units="s")
         plot.showGrid(x=True, y=True, alpha=0.2)
         plot.setMouseEnabled(x=True, y=False)
@@ -237,6 +256,8 @@ class QtTimeline(pg.GraphicsLayoutWidget):
             item.setZValue(-5)  # under the rater's own curves and keys
         self.others = {n: plot.plot(pen=pg.mkPen(self.colour(n), width=1.2)) for n in self.session.blendshape_names}
         self.current_curve = plot.plot(pen=pg.mkPen(self.colour(self.session.blendshape), width=2.5))
+        #: the stretches of the current curve whose nearest key is the machine's (accepted, not edited)
+        self.machine_keyed_curve = plot.plot(pen=pg.mkPen(MACHINE_KEY_COLOUR, width=2.5))
         self.keys = _KeyPoints()
         plot.addItem(self.keys)
         self.keys.on_select = self.select_key
@@ -298,8 +319,7 @@ class QtTimeline(pg.GraphicsLayoutWidget):
         lo, hi = self.curve_plot.viewRange()[0]
         t = float(self.t_s[self.session.frame])
         span = max((hi - lo) / factor, 0.5)
-        span = min(span, float(self.t_s[-1] - self.t_s[0]) * 1.02)
-        self.curve_plot.setXRange(t - span / 2, t + span / 2, padding=0)
+        self._show_span(t - span / 2, span)
 
     def frame_all(self) -> None:
         """Show the whole session (F)."""
@@ -350,18 +370,28 @@ class QtTimeline(pg.GraphicsLayoutWidget):
             colour.setAlpha(255 if current else 110)  # the other blendshapes' guides faint
             item.setPen(pg.mkPen(colour, width=2.0 if current else 1.0, style=QtCore.Qt.PenStyle.DashLine))
         self.current_curve.setPen(pg.mkPen(self.colour(self.session.blendshape), width=2.5))
-        self.current_curve.setData(self.t_s, self.session.track.evaluate(frames), connect="finite")
+        values = self.session.track.evaluate(frames)
+        human = self.session.track.human_mask(frames) | ~np.isfinite(values)
+        # a frame on each side of a change belongs to both curves, so that they join
+        edge = np.convolve(human.astype(int), [1, 1, 1], mode="same")
+        self.current_curve.setData(self.t_s, np.where(edge > 0, values, np.nan), connect="finite")
+        self.machine_keyed_curve.setData(self.t_s, np.where(edge < 3, values, np.nan), connect="finite")
         kf, kw, _ = self.session.track.arrays()
+        machine = np.array([not k.human for k in self.session.track.keys], dtype=bool)
         keyed = set(kf.tolist())
         if self.selected is not None and self.selected not in keyed:
             self.selected = None
         self.extra &= keyed
         chosen = set(self.selection)
-        brushes = [_SELECTED_BRUSH if f in chosen else pg.mkBrush(self.colour(self.session.blendshape)) for f in kf]
-        self.keys.setData(x=self.t_s[kf], y=kw, data=kf, brush=brushes, size=key_size(len(kf)))
+        own = pg.mkBrush(self.colour(self.session.blendshape))
+        brushes = [_SELECTED_BRUSH if f in chosen else _MACHINE_BRUSH if m else own for f, m in zip(kf, machine)]
+        size = key_size(len(kf))
+        self.keys.setData(x=self.t_s[kf], y=kw, data=kf, brush=brushes, symbol=["d" if m else "o" for m in machine],
+                          size=[size + 3 if m else size for m in machine])
         picked = f", {len(chosen)} selected" if len(chosen) > 1 else ""
+        accepted = f" ({int(machine.sum())} the machine's, grey)" if machine.any() else ""
         self.title.setColor(self.colour(self.session.blendshape))
-        self.title.setText(f"{self.session.blendshape} ({self.session.rater}): {len(kf)} keys{picked}")
+        self.title.setText(f"{self.session.blendshape} ({self.session.rater}): {len(kf)} keys{accepted}{picked}")
         self.title.setPos(self.t_s[0], 1.05)
 
     def _on_frame(self, frame: int) -> None:
@@ -373,6 +403,24 @@ class QtTimeline(pg.GraphicsLayoutWidget):
                 line.blockSignals(True)
                 line.setValue(t)
                 line.blockSignals(False)
+        self.follow_cursor(t)
+
+    def follow_cursor(self, t_s: float) -> None:
+        """Bring time ``t_s`` into view as :attr:`follow` says (page: a new page when it leaves the view)."""
+        lo, hi = self.curve_plot.viewRange()[0]
+        span = hi - lo
+        if self.follow == "centre":
+            self._show_span(t_s - span / 2, span)
+        elif self.follow == "page" and not lo <= t_s <= hi:
+            self._show_span(t_s - 0.05 * span if t_s > hi else t_s - 0.95 * span, span)
+
+    def _show_span(self, lo: float, span: float) -> None:
+        """Show ``span`` seconds from ``lo``, shifted to stay within the session (never negative time)."""
+        first_s, end_s = min(float(self.t_s[0]), 0.0), float(self.t_s[-1])
+        last_s = end_s + 0.01 * max(end_s - first_s, 1.0)
+        span = min(span, last_s - first_s)
+        lo = max(min(lo, last_s - span), first_s)
+        self.curve_plot.setXRange(lo, lo + span, padding=0)
 
     def _on_blendshape(self, _name: str) -> None:
         self.selected = None

@@ -185,7 +185,7 @@ def human_keys(session_dir: Path, frames: np.ndarray, names: Sequence[str]) -> t
         for j, name in enumerate(names):
             track = ann.tracks.get(name)
             for key in (track.keys if track is not None else ()):
-                if key.frame in position:
+                if key.frame in position and key.human:  # never calibrate on its own accepted keys
                     keyed.setdefault(key.frame, [float("nan")] * len(names))[j] = float(key.weight)
         for frame, weights in sorted(keyed.items()):
             rows_i.append(position[frame])

@@ -24,11 +24,11 @@ from effortface.capture_tool.capture_session import (BUSY_STATES, CaptureSession
                                                       LiveUpdate, format_elapsed)
 from effortface.capture_tool.corrections import CORRECTION_KIND
 from effortface.capture_tool.gui.live_view import QtLiveView, format_bytes
-from effortface.capture_tool.gui.participant_form import QtParticipantForm
+from effortface.capture_tool.gui.participant_form import TITLES, QtParticipantForm
 from effortface.capture_tool.gui.phases import PHASE_TITLES, QtPhasePanel, catalog_models
 from effortface.capture_tool.gui.preflight import QtPreflight
 from effortface.capture_tool.monitor import MonitorStats
-from effortface.core.session.folder import Event
+from effortface.core.session.folder import EVENTS_CSV, Event, read_events
 from effortface.capture_tool.strap_status import StrapView, plain_link_error
 
 __all__ = ["CaptureSession", "QtCaptureStage"]
@@ -59,19 +59,42 @@ _BANNER_STYLE = {"warn": "background:#fff3cd; color:#664d03; border:1px solid #e
 WATCH_ERROR = "Live heart rate: "
 
 
+#: command-line option names in a model's message, in the app's words
+_OPTION_WORDS = (("--camera ", "camera "), ("--camera:", "camera:"), ("--video ", "video file "),
+                 ("--plan ", "plan "), ("--participant / body options: ", "participant: "), ("--port ", "strap port "))
+
+
+def app_words(text: str) -> str:
+    """A message in the app's words: no command-line option names (``--port /dev/ttyUSB9: expected a
+    serial port, found no such device`` -> ``strap port /dev/ttyUSB9: no such device: the receiver is
+    unplugged, or another port is meant``)."""
+    head, sep, rest = text.partition(": ")
+    if text.startswith("--port "):
+        return "Strap port " + plain_link_error(text)
+    if rest.startswith("--port "):
+        return f"{head}: strap port {plain_link_error(rest)}"
+    for option, words in _OPTION_WORDS:
+        text = text.replace(option, words)
+    return text
+
+
 def tanaka_hr_max(age: float) -> float:
     """Age-predicted maximal HR, Tanaka 2001: ``208 - 0.7 age`` (SCIENCE.md section 3)."""
     return 208.0 - 0.7 * age
 
 
-def describe_sync(sync: dict[str, Any] | None) -> tuple[str, bool]:
-    """One line about a session's sync test and whether it passed.
+def describe_sync(sync: dict[str, Any] | None, has_video: bool = True) -> tuple[str, bool]:
+    """One line about a session's sync test and whether it passed (or was not needed).
 
     Parameters
     ----------
     sync : dict or None
         ``session.json``'s ``sync`` (:func:`~effortface.capture_tool.capture_session.measure_sync`).
+    has_video : bool
+        Whether the session recorded video; without video there is nothing to synchronise.
     """
+    if not has_video:
+        return "Sync test: no video: no sync needed", True
     if not sync or not sync.get("flashes_t_s"):
         return "Sync test: not done (no flash, F8): the video-to-heart-rate offset is unknown", False
     offset = sync.get("video_offset_s")
@@ -109,6 +132,7 @@ class QtCaptureStage(QtWidgets.QWidget):
         self._pending_note = ""  # a marker note logged at Stop, said in the summary
         self._contact_marked_s = -CONTACT_MARK_S
         self._last_row_s: float | None = None
+        self._last_status: Any = None  # the recording's last status (the summary's figures)
         self._build(settings)
         self._connect()
         self._timer = QtCore.QTimer(self, interval=POLL_MS)
@@ -177,18 +201,24 @@ class QtCaptureStage(QtWidgets.QWidget):
         self.flash.setAttribute(QtCore.Qt.WidgetAttribute.WA_StyledBackground, True)
         self.flash.hide()
         left = QtWidgets.QVBoxLayout()
-        for widget in (self.preflight, self.form, self.lsl_box, self.record_button, self.import_button,
-                       self.session_label,
-                       self.sync_label, self._events_box(), self.notes):
+        # the last recording's summary first: in sight after Stop, above the devices and the emptied form
+        for widget in (self._summary_panel(), self.preflight, self.form, self.session_label, self.sync_label,
+                       self._events_box(), self.notes):
             left.addWidget(widget)
         left.addStretch(1)
         left_box = QtWidgets.QWidget()
         left_box.setLayout(left)
-        scroll = QtWidgets.QScrollArea(widgetResizable=True)
+        self.left_scroll = scroll = QtWidgets.QScrollArea(widgetResizable=True)
         scroll.setWidget(left_box)
-        scroll.setFixedWidth(430)
         scroll.setHorizontalScrollBarPolicy(QtCore.Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
         scroll.setFrameShape(QtWidgets.QFrame.Shape.NoFrame)
+        column = QtWidgets.QVBoxLayout()
+        column.setContentsMargins(0, 0, 0, 0)
+        column.addWidget(scroll, 1)
+        column.addWidget(self._action_bar())  # fixed under the scrolled form: Record/Stop always in sight
+        left_column = QtWidgets.QWidget()
+        left_column.setLayout(column)
+        left_column.setFixedWidth(430)
         right = QtWidgets.QVBoxLayout()
         right.addWidget(self.banner)
         right.addWidget(self.recovery_bar)
@@ -196,8 +226,34 @@ class QtCaptureStage(QtWidgets.QWidget):
         right.addWidget(self.phases)
         layout = QtWidgets.QHBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
-        layout.addWidget(scroll)
+        layout.addWidget(left_column)
         layout.addLayout(right, 1)
+
+    def _action_bar(self) -> QtWidgets.QWidget:
+        """The LSL switch and Record/Stop, fixed at the foot of the left column (never scrolled away)."""
+        self.action_bar = QtWidgets.QFrame()
+        self.action_bar.setFrameShape(QtWidgets.QFrame.Shape.StyledPanel)
+        bar = QtWidgets.QVBoxLayout(self.action_bar)
+        bar.setContentsMargins(6, 4, 6, 6)
+        bar.addWidget(self.lsl_box)
+        bar.addWidget(self.record_button)
+        bar.addWidget(self.import_button)  # a watch's or app's file instead of a recording
+        return self.action_bar
+
+    def _summary_panel(self) -> QtWidgets.QGroupBox:
+        """What the last recording saved (path, length, samples, events, dropped frames, sync): shown at the
+        top of the left column from Stop until the next Record, its plot kept on the right (the strap
+        watched again meanwhile shows only in the live readout)."""
+        self.summary = QtWidgets.QGroupBox("Last recording")
+        self.summary_text = QtWidgets.QLabel(wordWrap=True)
+        self.summary_text.setTextInteractionFlags(QtCore.Qt.TextInteractionFlag.TextSelectableByMouse)
+        self.summary_sync = QtWidgets.QLabel(wordWrap=True)
+        box = QtWidgets.QVBoxLayout(self.summary)
+        box.setContentsMargins(6, 2, 6, 4)
+        box.addWidget(self.summary_text)
+        box.addWidget(self.summary_sync)
+        self.summary.hide()
+        return self.summary
 
     def _events_box(self) -> QtWidgets.QGroupBox:
         box = QtWidgets.QGroupBox("Recorded events")
@@ -293,7 +349,7 @@ class QtCaptureStage(QtWidgets.QWidget):
         if self.form.validate():
             conflicts = self.form.conflicts()
             if conflicts:  # the form shows the record and each difference; the banner says what to do
-                fields = ", ".join(f for f, _, _ in conflicts).replace("_", " ")
+                fields = ", ".join(TITLES[f].lower() for f, _, _ in conflicts)
                 self.show_banner(f"Record refused: participant {self.form.code.text().strip()} differs from the "
                                  f"lab's record ({fields}): choose 'Use the record' or 'Change the record' in "
                                  f"the form", "error")
@@ -358,21 +414,23 @@ class QtCaptureStage(QtWidgets.QWidget):
         self.refresh_participants()
 
     def _confirm_devices(self, choice: DeviceChoice) -> DeviceChoice | None:
-        """Ask before recording without a ready strap, or with a chosen camera that is not ready.
+        """Ask once before recording without a ready strap or with a chosen camera that is not ready.
 
-        "No video" chosen on purpose is the operator's choice, not a fault: nothing is asked.
+        One question names everything not ready; "No video" chosen on purpose is the operator's
+        choice, not a fault: nothing is asked.
         """
         missing = self.preflight.missing()
+        if not missing:
+            return choice
+        problems = []
         if "strap" in missing:
-            text = ("The heart-rate strap is not shown ready. Record anyway? "
-                    "If its port cannot be opened the recording will not start.")
-            if not _ask(self, "Strap not ready", text):
-                return None
+            problems.append("the heart-rate strap is not shown ready (if its port cannot be opened the "
+                            "recording will not start)")
         if "camera" in missing:
-            if not _ask(self, "Camera not ready", "The camera chosen is not ready. Record heart rate without video?"):
-                return None
-            choice = DeviceChoice(choice.port, choice.protocol, None)
-        return choice
+            problems.append("the camera chosen is not ready (heart rate is recorded without video)")
+        if not _ask(self, "Devices not ready", "Before Record: " + "; ".join(problems) + ". Record anyway?"):
+            return None
+        return DeviceChoice(choice.port, choice.protocol, None) if "camera" in missing else choice
 
     def stop_recording(self) -> bool:
         """Stop in the background; a marker note typed but not sent is logged first (and said).
@@ -484,6 +542,7 @@ class QtCaptureStage(QtWidgets.QWidget):
         if update.frame is not None:
             self.live.set_frame(update.frame, f"live camera: {update.status.frames} frames recorded")
         status = update.status
+        self._last_status = status
         live = status.link_state == "connected"  # never show a stale HR while the strap is gone
         self.live.set_current(status.hr_bpm if live and self._contact_ok else None,
                               status.rr_ms if live and self._contact_ok else None)
@@ -529,7 +588,8 @@ class QtCaptureStage(QtWidgets.QWidget):
             self.live.set_counters({"link": "not watched", "rate": "-", "last": "-", "contact": "-"})
             return
         self.live.set_current(view.hr_bpm, stats.rr_ms if view.hr_bpm is not None else None)
-        if stats.new:  # the stream drawn before Record, as LabRecorder and OpenSignals do
+        if stats.new and not self.summary.isVisibleTo(self):  # the stream drawn before Record, as LabRecorder
+            # and OpenSignals do; the last recording's plot stays with its summary until the next Record
             if not self._plot_is_monitor:  # the last recording's plot gives way to the live stream
                 self.live.clear()
                 self._plot_is_monitor = True
@@ -633,12 +693,15 @@ class QtCaptureStage(QtWidgets.QWidget):
             text += f". The marker note typed but not sent was logged at Stop: {note!r}"
             self._pending_note = ""
         warn = not is_error and "No sync test" in text
-        self.show_banner(text, "error" if is_error else ("warn" if warn else "info"))
+        self.show_banner(app_words(text) if is_error else text, "error" if is_error else ("warn" if warn else "info"))
 
     def _show_sync(self, sync: dict[str, Any] | None) -> None:
-        text, passed = describe_sync(sync)
-        self.sync_label.setText(text)
-        self.sync_label.setStyleSheet("color: #1b7f3b;" if passed else "color: #b00020; font-weight: bold;")
+        last = self.session.last_session
+        text, passed = describe_sync(sync, has_video=last is None or (Path(last) / "video.avi").exists())
+        style = "color: #1b7f3b;" if passed else "color: #b00020; font-weight: bold;"
+        for label in (self.sync_label, self.summary_sync):
+            label.setText(text)
+            label.setStyleSheet(style)
 
     def _show_recording(self, path: Path | None) -> None:
         """A recording started into ``path`` (clear the live view), or stopped (None)."""
@@ -655,6 +718,10 @@ class QtCaptureStage(QtWidgets.QWidget):
             self.sync_label.setStyleSheet("color: #806000;")
             self.form.show_session_name(path.name)
             self.session_label.setText(f"Recording into<br><b>{path}</b>")
+            self.session_label.show()
+            self.sync_label.show()
+            self.summary.hide()
+            self._last_status = None
             return
         self._banner_reason = ""
         # the next recording starts empty: the note was saved in this session, the marker note logged
@@ -664,9 +731,39 @@ class QtCaptureStage(QtWidgets.QWidget):
         self.live.set_counters({"link": "stopped"})
         self.live.preview_caption.setText("last frame recorded (stopped)")
         self.session_label.setText(f"Saved, complete:<br><b>{self.session.last_session}</b>")
+        self._show_summary()
+        self.session_label.hide()  # said in the summary panel, which stays until the next Record
+        self.sync_label.hide()
+        self.form.clear_after_recording()  # the next participant starts from an empty form
         self.refresh_participants()
         choice = self.preflight.choice()
         self._watch_strap(choice.port, choice.protocol)
+
+    def _show_summary(self) -> None:
+        """Fill and show the last recording's summary panel (the sync line follows when measured)."""
+        path = Path(self.session.last_session) if self.session.last_session else None
+        st = self._last_status
+        has_video = path is not None and (path / "video.avi").exists()
+        try:  # as saved (a marker note typed but not sent is logged at Stop)
+            events = [e for e in read_events(path / EVENTS_CSV) if e.kind in _LISTED
+                      and e.label not in ("session_start", "session_stop")] if path is not None else []
+        except (UserError, OSError):
+            events = []
+        phases = sum(e.kind == "phase_start" for e in events)
+        lines = [f"Saved, complete: <b>{path.name if path else '?'}</b> <span style='color:#505050;'>"
+                 f"({path.parent if path else ''})</span>"]
+        if st is not None:
+            video = (f"{st.frames:,} video frames, {st.dropped_frames} dropped" if has_video
+                     else "no video")
+            lines.append(f"{format_elapsed(st.elapsed_s)} recorded · {st.samples:,} heart-rate samples "
+                         f"· {video}")
+        lines.append(f"{len(events)} event{'s' * (len(events) != 1)} logged ({phases} phase"
+                     f"{'s' * (phases != 1)}): listed under Recorded events, drawn on the plot")
+        self.summary_text.setText("<br>".join(lines))
+        self.summary_text.setToolTip(str(path) if path else "")
+        if not has_video:
+            self._show_sync(None)
+        self.summary.show()
 
     # ----------------------------------------------------------------------------- recovery
     def check_incomplete(self) -> list[Path]:

@@ -116,9 +116,19 @@ class QtParticipantForm(QtWidgets.QGroupBox):
         form.addRow("Code", self.code)
         form.addRow("Lab record", self.record)
         form.addRow("", self.record_buttons)
+        #: beside each field, the lab's record of it when the two differ (side by side, said once)
+        self.record_hints: dict[str, QtWidgets.QLabel] = {}
         for field, widget in self.fields.items():
             self._row_labels[field] = QtWidgets.QLabel(TITLES[field])
-            form.addRow(self._row_labels[field], widget)
+            hint = QtWidgets.QLabel()
+            hint.setStyleSheet("color: #b00020;")
+            hint.hide()
+            self.record_hints[field] = hint
+            row = QtWidgets.QHBoxLayout()
+            row.setContentsMargins(0, 0, 0, 0)
+            row.addWidget(widget, 1)
+            row.addWidget(hint)
+            form.addRow(self._row_labels[field], row)
         form.addRow("Session label", self.label)
         form.addRow("Session", self.session_preview)
         form.addRow(self.confirmed)
@@ -205,7 +215,7 @@ class QtParticipantForm(QtWidgets.QGroupBox):
         if person is None:
             return False
         diff = differences(person, self.values())
-        change = ("from " + ", ".join(f"{f} {_text(r)} to {_text(g)}" for f, r, g in diff)) if diff else \
+        change = ("from " + ", ".join(f"{TITLES[f].lower()} {_text(r)} to {_text(g)}" for f, r, g in diff)) if diff else \
             "(edit the fields, which are unlocked)"
         answer = QtWidgets.QMessageBox.question(
             self, "Change the lab's record",
@@ -223,28 +233,41 @@ class QtParticipantForm(QtWidgets.QGroupBox):
         return True
 
     def _show_record(self) -> None:
-        """The lab's record beside the code, what differs from it in red, and the two choices."""
+        """The lab's record beside the code, each differing field's record beside its box, the two choices."""
         person = self.known.get(self.code.text().strip())
         self.record.setVisible(person is not None)
         self.record_buttons.setVisible(person is not None)
         if person is None:
             self.record.clear()
+            for hint in self.record_hints.values():
+                hint.hide()
             return
         shown = ", ".join(f"{TITLES[f].lower()} {_text(getattr(person, f))}" for f in TITLES
                           if getattr(person, f) is not None)
         diff = self.conflicts(person)
         text = shown
-        if diff:
-            text += ("<br><span style='color:#b00020; font-weight:bold;'>Differs: " + ", ".join(
-                f"{TITLES[f].lower()} {_text(g)} (record {_text(r)})" for f, r, g in diff) + "</span>")
-        elif self.update_record:
+        if self.update_record:
             text += "<br><span style='color:#806000;'>The record changes to the values below at Record.</span>"
         self.record.setText(text)
+        differing = {f: r for f, r, _ in diff}
         for field, label in self._row_labels.items():
-            if any(f == field for f, _, _ in diff):
+            hint = self.record_hints[field]
+            hint.setVisible(field in differing)
+            if field in differing:  # typed value in its box, the lab's record beside it
+                hint.setText(f"lab record: {_text(differing[field])}")
+                label.setText(TITLES[field])
                 label.setStyleSheet("color: #b00020; font-weight: bold;")
         self.use_record.setEnabled(bool(diff) or self.update_record)
         self.change_record.setEnabled(not self.update_record)
+
+    def clear_after_recording(self) -> None:
+        """After Stop: an empty form for the next participant (code, label, fields, record choice)."""
+        self.update_record = False
+        self.registry.setCurrentIndex(0)
+        self.code.clear()
+        self.label.clear()
+        self.clear_fields()
+        self._on_changed()
 
     def clear_fields(self) -> None:
         """Every body field back to '-' (not confirmed), editable."""
@@ -274,8 +297,15 @@ class QtParticipantForm(QtWidgets.QGroupBox):
         missing = self.missing()
         self.confirmed.setText(f"All required fields confirmed{source}." if not missing else
                                "To confirm before Record: " + ", ".join(TITLES[f].lower() for f in missing))
-        if self.conflicts():
-            self.confirmed.setText("The fields differ from the lab's record: use it, or change it.")
+        diff = self.conflicts()
+        if diff:
+            where = self.sources.get(self.code.text().strip(), "the lab")
+            self.confirmed.setText(f"{', '.join(TITLES[f] for f, _, _ in diff)} differ{'s' * (len(diff) == 1)} "
+                                   f"from the lab's record (beside each; from {where}): Use the record, or "
+                                   "Change the record.")
+            self.confirmed.setStyleSheet("color: #b00020;")
+        else:
+            self.confirmed.setStyleSheet("")
         self._show_record()
 
     def missing(self) -> list[str]:
@@ -314,7 +344,7 @@ class QtParticipantForm(QtWidgets.QGroupBox):
     def validate(self) -> str:
         """Check the form; return the problem as one line ('' when valid) and show it in the form."""
         problem = self._problem()
-        self.message.setText(problem)
+        self.message.setText("" if self.conflicts() else problem)  # a conflict is said once, above
         _mark(self.code, "code" in problem.split(":")[0])
         _mark(self.label, "label" in problem.split(":")[0])
         return problem

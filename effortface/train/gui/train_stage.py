@@ -821,6 +821,10 @@ class QtTrainStage(QtWidgets.QWidget):
         self.tabs.addTab(self.face_results, "Face (Fig. 3)")
         self.tabs.addTab(self.comparison, "Compare models")
         self.tabs.addTab(self.run_log, "Run log")
+        self.card = QtWidgets.QTextBrowser()
+        self.card.setOpenExternalLinks(False)
+        self.card.setPlaceholderText("The exported model's card (MODEL_CARD.md) shows here after Export model...")
+        self.tabs.addTab(self.card, "Card")
         self._build()
         self._connect_session()
         self.timer = QtCore.QTimer(self, interval=POLL_MS)
@@ -885,8 +889,9 @@ class QtTrainStage(QtWidgets.QWidget):
                                      "Tick sessions (or load a table) to train")
 
     def show_status(self, text: str, is_error: bool = False) -> None:
-        """Show a message under the buttons (errors in red)."""
-        self.status.setStyleSheet("color:#b00020;" if is_error else "color:#404040;")
+        """Show a message under the buttons (errors in red, a note about the labels in bold amber)."""
+        self.status.setStyleSheet("color:#b00020;" if is_error else
+                                  "color:#806000; font-weight:bold;" if "; note: " in text else "color:#404040;")
         self.status.setText(text)
 
     def train(self) -> None:
@@ -920,8 +925,23 @@ class QtTrainStage(QtWidgets.QWidget):
             self, "Replace model?", f"{path} exists. Replace the model folder?")
         return answer == QtWidgets.QMessageBox.StandardButton.Yes
 
+    def export_start(self) -> Path:
+        """Where Export model... starts: a new folder name in the lab's ``models/`` (an absolute path)."""
+        models = self.session.sessions_dir.resolve() / "models"
+        name, n = "new_model", 2
+        while (models / name).exists():
+            name, n = f"new_model_{n}", n + 1
+        return models / name
+
     def _ask_export(self) -> None:
-        path = QtWidgets.QFileDialog.getSaveFileName(self, "Export model folder", "models/new_model")[0]
+        start = self.export_start()
+        try:  # the dialog opens in models/ (made on first use; a read-only lab starts in the lab)
+            start.parent.mkdir(exist_ok=True)
+        except OSError:
+            start = start.parent.parent / start.name
+        path = QtWidgets.QFileDialog.getSaveFileName(
+            self, "Export model: name the new model folder", str(start), "",
+            options=QtWidgets.QFileDialog.Option.ShowDirsOnly)[0]
         if path:
             self.export(path)
 
@@ -937,6 +957,12 @@ class QtTrainStage(QtWidgets.QWidget):
         self.cancel_button.setEnabled(busy and self.session.cancellable)   # an export always finishes
 
     def _on_exported(self, path: Path) -> None:
+        card = Path(path) / "MODEL_CARD.md"
+        try:
+            self.card.setMarkdown(card.read_text(encoding="utf-8"))
+            self.card.setToolTip(str(card))
+        except OSError as exc:
+            self.card.setPlainText(f"{card}: could not be read ({exc})")
         for edit in self.comparison.paths:
             if not edit.text():
                 edit.setText(str(path))
