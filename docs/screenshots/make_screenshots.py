@@ -14,7 +14,9 @@ training level 8 on the sample lab, whose P01 is a woman of 23 with 2.5, Record 
 ``effortface train``; ``card``: the Card tab after exporting the stage's model), ``synth`` (``rule``, ``trained``), ``machine`` (``annotate_machine_guide``:
 R1's keys over the machine rater's dashed curves (the real rater, run on the copy), 330-470 s; ``annotate_machine_accept``:
 a new rater after "Accept machine" over the whole session), ``fileinfo`` (``synth_fileinfo``: the
-Synthesize stage's File info panel on bvh-toolbox's walk, ``tests/data/bvh``, with a mapping of its two feet).
+Synthesize stage's File info panel on bvh-toolbox's walk, ``tests/data/bvh``, with a mapping of its two feet),
+``import_hr`` (``capture_import_hr``: a new participant P07 typed in the Capture stage, a Garmin Fenix 5
+FIT and a Polar S810 R-R file from ``tests/data/hr`` imported with *Import heart rate...*).
 
 The sample lab (``sample_sessions/``) is copied to a temporary folder first and never written to;
 the states are fixed (session P01 cardio, frame at 400 s for rater R1, new rater R7 in the blind
@@ -47,7 +49,7 @@ from effortface.core.fileio import atomic_write  # noqa: E402
 OUT = Path(__file__).resolve().parent
 SAMPLES = ROOT / "sample_sessions"
 SIZES = ((1280, 800), (1920, 1080))
-GROUPS = ("app", "capture", "participant", "annotate", "train", "synth", "machine", "fileinfo")
+GROUPS = ("app", "capture", "participant", "annotate", "train", "synth", "machine", "fileinfo", "import_hr")
 #: the fixed states of the pictures
 SESSION = "P01_20260112-093000_cardio"
 KEYFRAME_T_S = 400.0            # P01's 3.4 m/s run
@@ -371,6 +373,27 @@ def shoot_fileinfo(lab: Path, tmp: Path, out: Path) -> None:
         grab(window, "synth_fileinfo", out)
 
 
+def shoot_import_hr(lab: Path, tmp: Path, out: Path) -> None:
+    """Two watch files imported for a new participant from the Capture stage's action bar."""
+    data = ROOT / "tests" / "data" / "hr"
+    with main_window(lab, tmp) as window:
+        stage = window.stages["capture"]
+        _settle(window)
+        form = stage.form
+        form.code.setText("P07")
+        form.sex.setCurrentText("male")
+        form.age.setValue(34)
+        form.height_m.setValue(1.81)
+        form.mass.setValue(77.5)
+        form.training_level.setValue(5.0)
+        if not stage.import_heart_rate([str(data / "garmin-fenix5-run.fit"), str(data / "polar-s810-rr.hrm")]):
+            raise RuntimeError(stage.banner.text())
+        if not _wait(60.0, lambda: stage.banner.text().startswith(("Imported", "Import refused"))):
+            raise RuntimeError("the import did not finish in 60 s")
+        _settle(window)
+        grab(window, "capture_import_hr", out)
+
+
 # ----------------------------------------------------------------------------------- main
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """``--only GROUP ...`` and ``--out DIR``."""
@@ -408,6 +431,8 @@ def main(argv: list[str] | None = None) -> int:
             shoot_machine(lab, tmp, args.out)
         if "fileinfo" in args.only:
             shoot_fileinfo(lab, tmp, args.out)
+        if "import_hr" in args.only:
+            shoot_import_hr(lab, tmp, args.out)
     finally:
         app.processEvents()
         shutil.rmtree(tmp, ignore_errors=True)
