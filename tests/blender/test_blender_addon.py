@@ -1,0 +1,151 @@
+"""The add-on in a real Blender (``bpy`` 4.5 LTS, headless): installed from the zip that
+``effortface blender-addon`` builds, baked on BVH clips imported with Blender's own importer, and
+compared frame by frame with ``effortface synth default`` on the same file.
+
+Blender runs in a fresh interpreter (tests/blender/run_in_blender.py), so the bake uses the runtime
+the zip bundles, not this checkout's (checked). The clips are cut to a few seconds to keep the tests
+short; the 10-minute case is benchmarks/bench_blender.py.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from effortface.cli import main as cli_main
+from effortface.core.blendshapes import DEFAULT_SET
+from effortface.synth.curves_io import read_curves
+from tests.conftest import ROOT
+
+pytest.importorskip("bpy", reason="bpy (Blender as a Python module) has wheels for CPython 3.11 on "
+                                  "Linux x86-64, macOS and Windows only")
+
+DRIVER = Path(__file__).with_name("run_in_blender.py")
+MOTION = ROOT / "tests" / "data" / "motion"
+#: the Must-show bound on |Blender's shape-key value - effortface synth's weight|
+MAX_DIFFERENCE = 0.03
+#: ARKit shape key -> blendshape (the project's own table, effortface.core.blendshapes)
+ARKIT = {arkit: shape.name for shape in DEFAULT_SET.shapes for arkit in shape.arkit}
+
+
+def trim_bvh(src: Path, dst: Path, n_frames: int) -> Path:
+    """The first ``n_frames`` frames of a BVH file (the header's Frames: line changed to match)."""
+    lines = src.read_text().splitlines()
+    at = next(i for i, line in enumerate(lines) if line.strip().startswith("Frame Time"))
+    lines[at - 1] = f"Frames: {n_frames}"
+    dst.write_text("\n".join(lines[:at + 1 + n_frames]) + "\n")
+    return dst
+
+
+@pytest.fixture(scope="module")
+def addon_zip(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("addon") / "effortface_blender.zip"
+    assert cli_main(["blender-addon", "--out", str(out)]) == 0
+    return out
+
+
+def in_blender(mode: str, spec: dict, tmp: Path) -> dict:
+    """Run the driver in a fresh interpreter with its own Blender user folder; its JSON result."""
+    (tmp / "spec.json").write_text(json.dumps(spec))
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    env["BLENDER_USER_RESOURCES"] = str(tmp / "blender_user")
+    proc = subprocess.run([sys.executable, str(DRIVER), mode, str(tmp / "spec.json"), str(tmp / "out.json")],
+                          cwd=tmp, env=env, capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0 and (tmp / "out.json").is_file(), proc.stderr[-3000:]
+    return json.loads((tmp / "out.json").read_text())
+
+
+def bake_and_compare(clip: Path, addon_zip: Path, tmp: Path) -> tuple[float, dict]:
+    """Bake ``clip`` in Blender and synthesize it with the command line; (max |difference|, result)."""
+    out = in_blender("bake", {"zip": str(addon_zip), "bvh": str(clip)}, tmp)
+    assert out["effortface_file"].startswith(str(tmp / "blender_user")), out["effortface_file"]
+    assert out["operators"] == [True, True]
+    assert cli_main(["synth", "default", str(clip), "--out", str(tmp / "synth.csv")]) == 0
+    synth = read_curves(tmp / "synth.csv")
+    n = out["last"] - out["first"] + 1
+    assert n == len(synth["t_s"]), (n, len(synth["t_s"]), out["scene_range"])
+    diffs = {key: float(np.max(np.abs(np.asarray(v) - synth[ARKIT[key]]))) for key, v in out["values"].items()}
+    assert set(diffs) == set(ARKIT)
+    assert np.max(np.abs(np.asarray(out["props"]["effortface_hr_bpm"]) - synth["hr_bpm"])) < 1.0
+    print(f"{clip.name}: {n} frames at {out['fps']:.3f} fps, bake {out['bake_s']:.2f} s, "
+          f"max |diff| per key {json.dumps({k: round(d, 5) for k, d in diffs.items()})}")
+    return max(diffs.values()), out
+
+
+def test_cmu_squats_baked_in_blender_match_effortface_synth(addon_zip: Path, tmp_path: Path) -> None:
+    clip = trim_bvh(MOTION / "cmu_13_29_squats_120fps.bvh", tmp_path / "cmu_squats_3s.bvh", 360)
+    worst, out = bake_and_compare(clip, addon_zip, tmp_path)
+    assert out["first"] == 1 and out["scene_range"] == [1, 361]  # the importer's scene ends one frame late
+    assert abs(out["fps"] - 120.0) < 0.01
+    assert max(max(v) for v in out["values"].values()) > 0.01  # a face that moved: a real comparison
+    assert worst <= MAX_DIFFERENCE
+
+
+def test_cmu_jumping_jacks_baked_in_blender_match_effortface_synth(addon_zip: Path, tmp_path: Path) -> None:
+    clip = MOTION / "cmu_13_29_jumping_jacks_120fps.bvh"  # 439 frames, 3.7 s
+    worst, out = bake_and_compare(clip, addon_zip, tmp_path)
+    assert max(max(v) for v in out["values"].values()) > 0.1
+    assert worst <= MAX_DIFFERENCE
+
+
+def test_pymo_walk_baked_in_blender_match_effortface_synth(addon_zip: Path, tmp_path: Path) -> None:
+    clip = trim_bvh(ROOT / "tests" / "data" / "bvh" / "pymo_walk.bvh", tmp_path / "pymo_walk_3s.bvh", 360)
+    worst, _ = bake_and_compare(clip, addon_zip, tmp_path)
+    assert worst <= MAX_DIFFERENCE
+
+
+def test_wrong_selections_give_one_line_and_key_nothing(addon_zip: Path, tmp_path: Path) -> None:
+    clip = trim_bvh(MOTION / "cmu_13_29_squats_120fps.bvh", tmp_path / "short.bvh", 60)
+    out = in_blender("errors", {"zip": str(addon_zip), "bvh": str(clip)}, tmp_path)
+    expected = {"no_armature": "expected an active armature, found Face (mesh)",
+                "nothing_active": "expected an active armature, found no active object",
+                "no_shape_keys": "expected selected meshes with shape keys named mouthStretchLeft",
+                "unmapped_skeleton": "skeleton joints: expected every segment mapped",
+                "missing_mapping": "expected a JSON mapping file, found no such file"}
+    for case, (message, keyed) in ((k, out[k]) for k in expected):
+        assert message.startswith("Error: Bake effort face: "), (case, message)
+        assert "\n" not in message and "Traceback" not in message, (case, message)
+        assert keyed == 0, (case, message)
+    for case, text in expected.items():
+        assert text.lower() in out[case][0].lower(), (case, out[case][0])
+
+
+def test_import_curves_keys_synth_csv_and_livelink(addon_zip: Path, tmp_path: Path) -> None:
+    clip = MOTION / "cmu_13_29_jumping_jacks_120fps.bvh"
+    csv, live = tmp_path / "face.csv", tmp_path / "face_livelink.csv"
+    assert cli_main(["synth", "default", str(clip), "--out", str(csv)]) == 0
+    assert cli_main(["synth", "default", str(clip), "--out", str(live), "--format", "livelink"]) == 0
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time,value\n0,1\n")
+    out = in_blender("import", {"zip": str(addon_zip), "fps": 120, "files": [str(csv), str(live), str(bad)]}, tmp_path)
+    per_frame, livelink = read_curves(csv), read_curves(live)
+    got = out[str(csv)]["keyed"]
+    assert set(got) == set(ARKIT)
+    for key, points in got.items():
+        co = np.asarray(points)
+        assert np.allclose(co[:, 0], 1 + per_frame["t_s"] * 120, atol=1e-3)
+        assert np.allclose(co[:, 1], per_frame[ARKIT[key]], atol=1e-6)
+    got = out[str(live)]["keyed"]
+    assert set(got) == set(ARKIT)
+    for key, points in got.items():
+        co = np.asarray(points)
+        assert np.allclose(co[:, 0], 1 + livelink["t_s"] * 120, atol=1e-3)
+        assert np.allclose(co[:, 1], livelink[key], atol=1e-6)
+    assert out[str(bad)]["keyed"] == {}
+    assert out[str(bad)]["result"].startswith("Error: Import curves: ")
+    assert "expected a header starting with t_s" in out[str(bad)]["result"]
+
+
+def test_demo_scene_example_runs_and_bakes(tmp_path: Path) -> None:
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "blender_user"), PYTHONPATH=str(ROOT))
+    proc = subprocess.run([sys.executable, str(ROOT / "examples" / "blender_demo_scene.py"), "--seconds", "2"],
+                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "add-on: registered from the effortface package" in proc.stdout
+    assert "bake: {'FINISHED'}" in proc.stdout
