@@ -21,8 +21,8 @@ import numpy as np
 
 from effortface.core.blendshapes import BlendshapeSet
 from effortface.core.errors import UserError
-from effortface.runtime import Character, FaceModel, Motion, motion_from_positions
-from effortface.synth.motion import detect_bvh_unit_m
+from effortface.synth.motion import Motion, detect_bvh_unit_m, motion_from_positions
+from effortface.synth.runtime import Character, FaceModel
 
 #: the curves stored as custom properties (with F-curves) on the armature, for other drivers
 PROPERTY_CURVES = ("w_per_kg", "p_per_kg", "hr_bpm", "epoc")
@@ -102,6 +102,20 @@ def joint_positions(skeleton: Skeleton, matrices_t: np.ndarray, lengths: np.ndar
     return np.einsum("tij,tkj->tki", world[:, :3, :3], local) + world[:, None, :3, 3]
 
 
+def joint_rotations(skeleton: Skeleton, matrices_t: np.ndarray, world: np.ndarray) -> np.ndarray:
+    """World rotations of the joints (T, J, 3, 3), columns the frame's axes: each bone's posed
+    frame, an ``_end`` joint its bone's (as the BVH reader gives an end site its parent's).
+
+    A bone's frame differs from the BVH joint's by a constant rest rotation, which leaves the
+    angular velocity the energies take from consecutive rotations (``log(R(k) R(k-1)^T)``)
+    unchanged; without rotations, spin about a segment's long axis would not be seen.
+    """
+    bones = np.swapaxes(matrices_t[:, :, :3, :3], -1, -2)  # back to row-major: M[:3, :3]
+    rot = np.einsum("tij,tbjk->tbik", world[:, :3, :3], bones)
+    rot /= np.linalg.norm(rot, axis=-2, keepdims=True)  # no object or bone scale
+    return np.concatenate([rot, rot[:, list(skeleton.leaves)]], axis=1)
+
+
 def rest_height(heads: np.ndarray, tails: np.ndarray, skeleton: Skeleton) -> float:
     """Height (along Z) of the rest pose: bone heads and the leaf bones' tails, armature units."""
     z = np.concatenate([np.asarray(heads, float)[:, 2], np.asarray(tails, float)[list(skeleton.leaves), 2]])
@@ -117,11 +131,13 @@ def unit_m(height_units: float, unit_m: float = 0.0) -> float:
     return detect_bvh_unit_m(height_units)[1]
 
 
-def motion_of(skeleton: Skeleton, positions_units: np.ndarray, metres_per_unit: float, fps: float,
-              source: str) -> Motion:
-    """The bake's :class:`Motion` (metres, Z up: Blender's axes are already effortface's)."""
-    return motion_from_positions(np.asarray(positions_units, float) * metres_per_unit,
-                                 skeleton.joint_names, skeleton.parents, fps, source=source)
+def motion_of(skeleton: Skeleton, positions_units: np.ndarray, rotations: np.ndarray | None,
+              metres_per_unit: float, fps: float, source: str) -> Motion:
+    """The bake's :class:`Motion` (metres, Z up: Blender's axes are already effortface's; a
+    turn about Z between Blender's BVH axes and effortface's changes no energy)."""
+    motion = motion_from_positions(np.asarray(positions_units, float) * metres_per_unit,
+                                   skeleton.joint_names, skeleton.parents, fps, source=source)
+    return motion if rotations is None else dataclasses.replace(motion, rotations=np.asarray(rotations, float))
 
 
 def bake_curves(model: FaceModel, motion: Motion, character: Character, mapping: Any = None

@@ -18,7 +18,7 @@ from . import bake
 from effortface.core.blendshapes import DEFAULT_SET
 from effortface.core.errors import UserError
 from effortface.core.participant import LIMITS
-from effortface.runtime import Character, load_model
+from effortface.synth.runtime import Character, load_model
 from effortface.synth.curves_io import read_curves
 
 _SEXES = [("male", "Male", "de Leva male table"), ("female", "Female", "de Leva female table")]
@@ -127,9 +127,10 @@ def key_curves(targets: list[tuple[Any, dict[str, str]]], curves: dict[str, np.n
     return n
 
 
-def sample_armature(context: Any, ob: Any, first: int, last: int) -> tuple[bake.Skeleton, np.ndarray, float]:
+def sample_armature(context: Any, ob: Any, first: int, last: int
+                    ) -> tuple[bake.Skeleton, np.ndarray, np.ndarray, float]:
     """Blender's own evaluation of the armature at every frame: (skeleton, positions in scene
-    units (T, J, 3), rest-pose height in scene units)."""
+    units (T, J, 3), world rotations (T, J, 3, 3), rest-pose height in scene units)."""
     scene = context.scene
     bones = ob.data.bones
     skeleton = bake.skeleton_from_bones([b.name for b in bones],
@@ -152,7 +153,8 @@ def sample_armature(context: Any, ob: Any, first: int, last: int) -> tuple[bake.
     heads = np.array([ob.matrix_world @ b.head_local for b in bones])
     tails = np.array([ob.matrix_world @ b.tail_local for b in bones])
     positions = bake.joint_positions(skeleton, mats.astype(float), lengths, world)
-    return skeleton, positions, bake.rest_height(heads, tails, skeleton)
+    rotations = bake.joint_rotations(skeleton, mats.astype(float), world)
+    return skeleton, positions, rotations, bake.rest_height(heads, tails, skeleton)
 
 
 def scene_fps(scene: Any) -> float:
@@ -199,9 +201,9 @@ def bake_face(context: Any) -> str:
                           expressiveness=(1.0,) * len(model.blendshapes))
     scene = context.scene
     first, last = bake.frame_range((scene.frame_start, scene.frame_end), tuple(action.frame_range))
-    skeleton, positions, height = sample_armature(context, ob, first, last)
+    skeleton, positions, rotations, height = sample_armature(context, ob, first, last)
     metres = bake.unit_m(height, s.unit_m)
-    motion = bake.motion_of(skeleton, positions, metres, scene_fps(scene), f"{ob.name} ({action.name})")
+    motion = bake.motion_of(skeleton, positions, rotations, metres, scene_fps(scene), f"{ob.name} ({action.name})")
     curves = bake.bake_curves(model, motion, character, bake.check_mapping_path(bpy.path.abspath(s.mapping_path)))
     frames = np.arange(first, last + 1, dtype=float)
     n = key_curves(targets, curves, frames)
