@@ -70,15 +70,14 @@ def _shape(name: str, co: np.ndarray, part: dict[str, slice]) -> np.ndarray:
     elif name.startswith("mouthStretch"):
         m = out[part["mouth"]]
         sel = m[:, 0] > 0 if side == "L" else m[:, 0] < 0
-        m[sel, 0] *= 1.45
-        m[sel, 2] -= 0.05 * np.abs(m[sel, 0])
+        m[sel, 0] *= 2.0
+        m[sel, 2] -= 0.15 * np.abs(m[sel, 0])
     elif name.startswith("eyeSquint"):
         e = out[part[f"eye_{side}"]]
-        e[:, 2] = 0.25 + (e[:, 2] - 0.25) * 0.25
+        e[:, 2] = 0.25 + (e[:, 2] - 0.25) * 0.1 - 0.03
     elif name.startswith("browDown"):
         b = out[part[f"brow_{side}"]]
-        b[:, 2] -= 0.16 - 0.1 * np.abs(b[:, 0]) * 0
-        b[:, 2] -= 0.12 * (0.7 - np.abs(b[:, 0]))
+        b[:, 2] -= 0.25 + 0.3 * (0.66 - np.abs(b[:, 0]))  # down, the inner end most
     return out
 
 
