@@ -66,7 +66,8 @@ def _shape(name: str, co: np.ndarray, part: dict[str, slice]) -> np.ndarray:
     side = "L" if name.endswith("Left") else "R"
     if name == "jawOpen":
         m = out[part["mouth"]]
-        m[:, 2] = -0.5 + (m[:, 2] + 0.5) * 4.0 - 0.08
+        lower = m[:, 2] < -0.5
+        m[lower, 2] -= 0.3 * (1 - np.abs(m[lower, 0]) / 0.34) ** 0.5  # the lower lip drops, most at the middle
     elif name.startswith("mouthStretch"):
         m = out[part["mouth"]]
         sel = m[:, 0] > 0 if side == "L" else m[:, 0] < 0
@@ -154,7 +155,7 @@ def render_face(face: bpy.types.Object, frame: int, path: Path, size: int = 320)
         scene.collection.objects.link(cam)
     cam.location = (face.location.x, face.location.y - 6.0, face.location.z)
     cam.rotation_euler = (np.pi / 2, 0.0, 0.0)
-    cam_data.lens = 45
+    cam_data.lens = 70
     scene.camera = cam
     for ob in scene.objects:
         ob.hide_render = ob not in (face, cam)
@@ -192,6 +193,10 @@ def main(argv: list[str] | None = None) -> int:
         result = bpy.ops.effortface.bake_face()
         render_face(face, peak, args.render / "blender_face_after.png")
         weights = ", ".join(f"{k} {face.data.shape_keys.key_blocks[k].value:.2f}" for k in ARKIT_KEYS)
+        face.data.shape_keys.animation_data_clear()
+        for key in ARKIT_KEYS:
+            face.data.shape_keys.key_blocks[key].value = 1.0
+        render_face(face, peak, args.render / "blender_face_keys_at_1.png")  # what the keys do
         print(f"rendered frame {peak} ({weights}) to {args.render}")
     return 0
 
