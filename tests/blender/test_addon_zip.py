@@ -114,3 +114,14 @@ def test_a_missing_mapping_file_is_one_line(tmp_path: Path) -> None:
     assert bake.check_mapping_path("  ") is None
     with pytest.raises(UserError, match="expected a JSON mapping file, found no such file"):
         bake.check_mapping_path(str(tmp_path / "none.json"))
+
+
+def test_the_guide_lists_every_panel_field() -> None:
+    """The panel cannot be rendered headless: the guide's table stands for it (docs/guide/blender.md)."""
+    import ast
+
+    tree = ast.parse((ROOT / "effortface" / "blender" / "ui.py").read_text())
+    settings = next(n for n in ast.walk(tree) if isinstance(n, ast.ClassDef) and n.name == "EFFORTFACE_PG_settings")
+    fields = [n.target.id for n in settings.body if isinstance(n, ast.AnnAssign) and isinstance(n.target, ast.Name)]
+    guide = (ROOT / "docs" / "guide" / "blender.md").read_text()
+    assert len(fields) == 10 and all(f"| `{f}` |" in guide for f in fields), fields
