@@ -19,6 +19,7 @@ from effortface.core.blendshapes import DEFAULT_SET
 from effortface.core.errors import UserError
 from effortface.core.participant import LIMITS
 from effortface.synth.runtime import Character, load_model
+from effortface.synth.segments import SegmentMappingError
 from effortface.synth.curves_io import read_curves
 
 _SEXES = [("male", "Male", "de Leva male table"), ("female", "Female", "de Leva female table")]
@@ -204,7 +205,10 @@ def bake_face(context: Any) -> str:
     skeleton, positions, rotations, height = sample_armature(context, ob, first, last)
     metres = bake.unit_m(height, s.unit_m)
     motion = bake.motion_of(skeleton, positions, rotations, metres, scene_fps(scene), f"{ob.name} ({action.name})")
-    curves = bake.bake_curves(model, motion, character, bake.check_mapping_path(bpy.path.abspath(s.mapping_path)))
+    try:
+        curves = bake.bake_curves(model, motion, character, bake.check_mapping_path(bpy.path.abspath(s.mapping_path)))
+    except SegmentMappingError as exc:
+        raise UserError(f"{exc} (here: the panel's Skeleton mapping field)") from None
     frames = np.arange(first, last + 1, dtype=float)
     n = key_curves(targets, curves, frames)
     for name in bake.PROPERTY_CURVES:

@@ -91,6 +91,15 @@ def errors(spec: dict) -> dict:
     out["no_shape_keys"] = [_try_bake(), _keyed(armature, face, plain)]
     bpy.context.view_layer.objects.active = None
     out["nothing_active"] = [_try_bake(), _keyed(armature, face)]
+    still = bpy.data.objects.new("Still", bpy.data.armatures.new("Still"))
+    bpy.context.scene.collection.objects.link(still)
+    demo.select(still, face)  # an armature with no action
+    out["no_action"] = [_try_bake(), _keyed(still, face)]
+    settings = bpy.context.scene.effortface
+    settings.model = str(Path(spec["bvh"]).parent / "no_such_bundle")
+    demo.select(armature, face)  # a model folder that is not there
+    out["missing_model"] = [_try_bake(), _keyed(armature, face)]
+    settings.model = "default"
     for i, bone in enumerate(armature.data.bones):
         bone.name = f"bone{i:03d}"
     demo.select(armature, face)  # a skeleton no convention maps

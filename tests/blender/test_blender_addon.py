@@ -127,6 +127,8 @@ def test_wrong_selections_give_one_line_and_key_nothing(addon_zip: Path, tmp_pat
     out = in_blender("errors", {"zip": str(addon_zip), "bvh": str(clip)}, tmp_path)
     expected = {"no_armature": "expected an active armature, found Face (mesh)",
                 "nothing_active": "expected an active armature, found no active object",
+                "no_action": "expected an armature with an action, found Still without one",
+                "missing_model": "no_such_bundle",
                 "no_shape_keys": "expected selected meshes with shape keys named mouthStretchLeft",
                 "unmapped_skeleton": "skeleton joints: expected every segment mapped",
                 "missing_mapping": "expected a JSON mapping file, found no such file"}
