@@ -143,19 +143,38 @@ def sample_armature(context: Any, ob: Any, first: int, last: int
     buf = np.empty(n * 16, np.float32)
     pose_bones = ob.pose.bones
     current = scene.frame_current
+    moves = _object_moves(ob)
     try:
         for k, frame in enumerate(range(first, last + 1)):
             scene.frame_set(frame)
             pose_bones.foreach_get("matrix", buf)
             mats[k] = buf.reshape(n, 4, 4)
-            world[k] = np.array(ob.matrix_world)
+            if moves or not k:
+                world[k] = np.array(ob.matrix_world)
+        if not moves:
+            world[1:] = world[0]
     finally:
         scene.frame_set(current)
     heads = np.array([ob.matrix_world @ b.head_local for b in bones])
     tails = np.array([ob.matrix_world @ b.tail_local for b in bones])
-    positions = bake.joint_positions(skeleton, mats.astype(float), lengths, world)
-    rotations = bake.joint_rotations(skeleton, mats.astype(float), world)
+    positions = bake.joint_positions(skeleton, mats, lengths, world)  # float32 in (as Blender poses), float64 out
+    rotations = bake.joint_rotations(skeleton, mats, world)
     return skeleton, positions, rotations, bake.rest_height(heads, tails, skeleton)
+
+
+#: an object's own transform channels (its bones' are read from the pose every frame)
+_TRANSFORMS = ("location", "rotation_euler", "rotation_quaternion", "rotation_axis_angle", "scale",
+               "delta_location", "delta_rotation_euler", "delta_rotation_quaternion", "delta_scale")
+
+
+def _object_moves(ob: Any) -> bool:
+    """Whether the armature object's own world matrix may change over frames (a parent, a
+    constraint, a driver or a keyed transform); if not it is read once."""
+    anim = ob.animation_data
+    keyed = anim is not None and ((anim.action is not None and any(
+        fc.data_path in _TRANSFORMS for fc in anim.action.fcurves)) or len(anim.drivers) > 0
+        or len(anim.nla_tracks) > 0)
+    return ob.parent is not None or len(ob.constraints) > 0 or keyed
 
 
 def scene_fps(scene: Any) -> float:
