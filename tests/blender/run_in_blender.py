@@ -47,6 +47,8 @@ def values(face, first: int, last: int) -> dict[str, list[float]]:
 def bake(spec: dict) -> dict:
     armature, face = demo.build_scene(Path(spec["bvh"]), spec.get("seconds"))
     scene = bpy.context.scene
+    armature.rotation_euler.z = spec.get("turn_rad", 0.0)  # the whole character turned about the vertical
+    armature.location.x += spec.get("shift_m", 0.0)
     t0 = time.perf_counter()
     result = bpy.ops.effortface.bake_face()
     bake_s = time.perf_counter() - t0
@@ -100,6 +102,9 @@ def errors(spec: dict) -> dict:
     demo.select(armature, face)  # a model folder that is not there
     out["missing_model"] = [_try_bake(), _keyed(armature, face)]
     settings.model = "default"
+    armature.rotation_euler.x = 1.5708  # the character laid down by its object: world space, so
+    out["lying_down"] = [_try_bake(), _keyed(armature, face)]  # no standing height to tell the unit
+    armature.rotation_euler.x = 0.0
     for i, bone in enumerate(armature.data.bones):
         bone.name = f"bone{i:03d}"
     demo.select(armature, face)  # a skeleton no convention maps

@@ -67,9 +67,10 @@ def in_blender(mode: str, spec: dict, tmp: Path) -> dict:
     return json.loads((tmp / "out.json").read_text())
 
 
-def bake_and_compare(clip: Path, addon_zip: Path, tmp: Path) -> tuple[float, dict]:
-    """Bake ``clip`` in Blender and synthesize it with the command line; (max |difference|, result)."""
-    out = in_blender("bake", {"zip": str(addon_zip), "bvh": str(clip)}, tmp)
+def bake_and_compare(clip: Path, addon_zip: Path, tmp: Path, **placed: float) -> tuple[float, dict]:
+    """Bake ``clip`` in Blender and synthesize it with the command line; (max |difference|, result).
+    ``placed``: ``turn_rad`` / ``shift_m`` of the armature object (world space)."""
+    out = in_blender("bake", {"zip": str(addon_zip), "bvh": str(clip), **placed}, tmp)
     assert out["effortface_file"].startswith(str(tmp / "blender_user")), out["effortface_file"]
     assert out["operators"] == [True, True]
     assert cli_main(["synth", "default", str(clip), "--out", str(tmp / "synth.csv")]) == 0
@@ -111,6 +112,15 @@ def test_pymo_walk_baked_in_blender_match_effortface_synth(addon_zip: Path, tmp_
     assert worst <= MAX_DIFFERENCE
 
 
+def test_a_turned_and_moved_armature_object_bakes_the_same_face(addon_zip: Path, tmp_path: Path) -> None:
+    """Positions are taken in world space: turning the armature object about the vertical and
+    moving it (a static placement) changes no energy, so the face is still the file's (laying it
+    down does change the world positions: the wrong-selection test's ``lying_down`` case)."""
+    clip = trim_bvh(MOTION / "cmu_13_29_squats_120fps.bvh", tmp_path / "cmu_squats_2s.bvh", 240)
+    worst, _ = bake_and_compare(clip, addon_zip, tmp_path, turn_rad=2.0, shift_m=5.0)
+    assert worst <= MAX_DIFFERENCE
+
+
 def test_mixamo_named_skeleton_baked_in_blender_match_effortface_synth(addon_zip: Path, tmp_path: Path) -> None:
     """Mixamo's own BVH files may not be redistributed (measured in docs/guide/blender.md: max
     |difference| 0.0002 on two of them); this fixture gives real CMU motion Mixamo's namespaced
@@ -129,6 +139,7 @@ def test_wrong_selections_give_one_line_and_key_nothing(addon_zip: Path, tmp_pat
                 "nothing_active": "expected an active armature, found no active object",
                 "no_action": "expected an armature with an action, found Still without one",
                 "missing_model": "no_such_bundle",
+                "lying_down": "unit_m: cannot tell the BVH length unit from a rest-pose height of 4.5",
                 "no_shape_keys": "expected selected meshes with shape keys named mouthStretchLeft",
                 "unmapped_skeleton": "skeleton joints: expected every segment mapped",
                 "missing_mapping": "expected a JSON mapping file, found no such file"}
