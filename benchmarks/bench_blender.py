@@ -8,13 +8,19 @@ action's duration (30 s for 10 minutes). Baseline: the runtime on the same BVH f
 (``load_model("default").synthesize(path, character)``, what ``effortface synth`` does), so the
 ratio is the cost of Blender's evaluation and keying.
 
-Run: ``python benchmarks/bench_blender.py [--minutes 10]`` (needs ``bpy``: the test extra).
+Run: ``python benchmarks/bench_blender.py [--minutes 10]`` from the project's environment. Blender
+runs in an interpreter of its own, found as the Blender tests find it (tests/blender/bpy_env.py):
+``EFFORTFACE_BPY_PYTHON`` if set, else the cached virtual environment with pyproject.toml's
+``blender`` extra (bpy 4.5 and its numpy 1.26), made on first use. The script starts itself again in
+that interpreter (``--in-blender``, this checkout on PYTHONPATH: the runtime needs numpy only), where
+the baseline and the bake are measured in one process.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import subprocess
 import sys
 import tempfile
 import time
@@ -45,17 +51,35 @@ def tiled_bvh(minutes: float, out: Path) -> tuple[Path, int]:
 
 
 def main() -> int:
-    """Measure and print; 0 when the bake is within the target."""
+    """Start the measurement in Blender's interpreter (or, with ``--in-blender``, measure); its exit status."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=10.0)
+    parser.add_argument("--in-blender", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.in_blender:
+        return measure(args.minutes)
+    from tests.blender.bpy_env import NoBlender, bpy_python, clean_env
+
+    try:
+        blender = bpy_python()
+    except NoBlender as exc:
+        print(f"bench_blender: {exc}", file=sys.stderr)
+        return 2
+    print(f"Blender's interpreter: {blender.how}", flush=True)
+    env = dict(clean_env(), PYTHONPATH=str(ROOT))
+    return subprocess.run([str(blender.python), __file__, "--minutes", str(args.minutes), "--in-blender"],
+                          env=env).returncode
+
+
+def measure(minutes: float) -> int:
+    """Measure and print, in an interpreter with bpy; 0 when the bake is within the target."""
     import bpy
 
     import blender_demo_scene as demo
     from effortface.synth.runtime import Character, load_model
 
     with tempfile.TemporaryDirectory() as tmp:
-        path, n = tiled_bvh(args.minutes, Path(tmp) / "tiled.bvh")
+        path, n = tiled_bvh(minutes, Path(tmp) / "tiled.bvh")
         duration_s = n / 120
         t0 = time.perf_counter()
         load_model("default").synthesize(path, Character())
@@ -79,4 +103,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

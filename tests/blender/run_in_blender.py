@@ -1,4 +1,4 @@
-"""Run in a fresh Python with ``bpy`` by tests/blender/test_blender_addon.py (not collected by pytest).
+"""Run in Blender's own Python (the ``bpy_python`` fixture) by tests/blender/test_blender_addon.py (not collected).
 
 ``python run_in_blender.py MODE SPEC.json OUT.json``: installs the add-on zip as a Blender extension
 (``bpy.ops.extensions.package_install_files`` into ``BLENDER_USER_RESOURCES``), then
@@ -30,7 +30,8 @@ def install(zip_path: str) -> dict:
     t0 = time.perf_counter()
     bpy.ops.extensions.package_install_files(filepath=zip_path, repo="user_default", enable_on_install=True)
     return {"install_s": time.perf_counter() - t0, "effortface_file": sys.modules["effortface"].__file__,
-            "operators": [hasattr(bpy.ops.effortface, n) for n in ("bake_face", "import_curves")]}
+            "operators": [hasattr(bpy.ops.effortface, n) for n in ("bake_face", "import_curves")],
+            "modules": {m: sys.modules[m].__file__ for m in ("bpy", "numpy")}, "prefix": sys.prefix}
 
 
 def values(face, first: int, last: int) -> dict[str, list[float]]:

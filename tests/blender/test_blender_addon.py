@@ -2,18 +2,18 @@
 ``effortface blender-addon`` builds, baked on BVH clips imported with Blender's own importer, and
 compared frame by frame with ``effortface synth default`` on the same file.
 
-Blender runs in a fresh interpreter (tests/blender/run_in_blender.py), so the bake uses the runtime
-the zip bundles, not this checkout's (checked). The clips are cut to a few seconds to keep the tests
-short; the 10-minute case is benchmarks/bench_blender.py.
+Blender runs in a fresh interpreter of its own (tests/blender/run_in_blender.py under the
+``bpy_python`` fixture: a virtual environment with pyproject.toml's ``blender`` extra and Blender's
+numpy 1.26, never the project's environment, checked), so the bake uses the runtime the zip bundles,
+not this checkout's (checked). ``effortface synth`` runs here, in the project's environment. The clips
+are cut to a few seconds to keep the tests short; the 10-minute case is benchmarks/bench_blender.py.
 """
 
 from __future__ import annotations
 
 import json
-import os
 import re
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -22,10 +22,8 @@ import pytest
 from effortface.cli import main as cli_main
 from effortface.core.blendshapes import DEFAULT_SET
 from effortface.synth.curves_io import read_curves
+from tests.blender.bpy_env import BpyPython, clean_env
 from tests.conftest import ROOT
-
-pytest.importorskip("bpy", reason="bpy (Blender as a Python module) has wheels for CPython 3.11 on "
-                                  "Linux x86-64, macOS and Windows only")
 
 DRIVER = Path(__file__).with_name("run_in_blender.py")
 MOTION = ROOT / "tests" / "data" / "motion"
@@ -56,21 +54,27 @@ def addon_zip(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out
 
 
-def in_blender(mode: str, spec: dict, tmp: Path) -> dict:
-    """Run the driver in a fresh interpreter with its own Blender user folder; its JSON result."""
+def in_blender(blender: BpyPython, mode: str, spec: dict, tmp: Path) -> dict:
+    """Run the driver in ``blender``'s interpreter (no PYTHONPATH, no user site: nothing of the
+    project's environment) with its own Blender user folder; its JSON result."""
     (tmp / "spec.json").write_text(json.dumps(spec))
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    env = clean_env()
     env["BLENDER_USER_RESOURCES"] = str(tmp / "blender_user")
-    proc = subprocess.run([sys.executable, str(DRIVER), mode, str(tmp / "spec.json"), str(tmp / "out.json")],
+    proc = subprocess.run([str(blender.python), str(DRIVER), mode, str(tmp / "spec.json"), str(tmp / "out.json")],
                           cwd=tmp, env=env, capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0 and (tmp / "out.json").is_file(), proc.stderr[-3000:]
-    return json.loads((tmp / "out.json").read_text())
+    out = json.loads((tmp / "out.json").read_text())
+    # Blender's own interpreter, not the project's: bpy and numpy from under its prefix
+    for module in ("bpy", "numpy"):
+        assert Path(out["modules"][module]).resolve().is_relative_to(blender.prefix.resolve()), out["modules"]
+    return out
 
 
-def bake_and_compare(clip: Path, addon_zip: Path, tmp: Path, **placed: float) -> tuple[float, dict]:
+def bake_and_compare(blender: BpyPython, clip: Path, addon_zip: Path, tmp: Path,
+                     **placed: float) -> tuple[float, dict]:
     """Bake ``clip`` in Blender and synthesize it with the command line; (max |difference|, result).
     ``placed``: ``turn_rad`` / ``shift_m`` of the armature object (world space)."""
-    out = in_blender("bake", {"zip": str(addon_zip), "bvh": str(clip), **placed}, tmp)
+    out = in_blender(blender, "bake", {"zip": str(addon_zip), "bvh": str(clip), **placed}, tmp)
     assert out["effortface_file"].startswith(str(tmp / "blender_user")), out["effortface_file"]
     assert out["operators"] == [True, True]
     assert cli_main(["synth", "default", str(clip), "--out", str(tmp / "synth.csv")]) == 0
@@ -90,51 +94,57 @@ def bake_and_compare(clip: Path, addon_zip: Path, tmp: Path, **placed: float) ->
     return max(diffs.values()), out
 
 
-def test_cmu_squats_baked_in_blender_match_effortface_synth(addon_zip: Path, tmp_path: Path) -> None:
+def test_cmu_squats_baked_in_blender_match_effortface_synth(bpy_python: BpyPython, addon_zip: Path,
+                                                            tmp_path: Path) -> None:
     clip = trim_bvh(MOTION / "cmu_13_29_squats_120fps.bvh", tmp_path / "cmu_squats_3s.bvh", 360)
-    worst, out = bake_and_compare(clip, addon_zip, tmp_path)
+    worst, out = bake_and_compare(bpy_python, clip, addon_zip, tmp_path)
     assert out["first"] == 1 and out["scene_range"] == [1, 361]  # the importer's scene ends one frame late
     assert abs(out["fps"] - 120.0) < 0.01
     assert max(max(v) for v in out["values"].values()) > 0.01  # a face that moved: a real comparison
     assert worst <= MAX_DIFFERENCE
 
 
-def test_cmu_jumping_jacks_baked_in_blender_match_effortface_synth(addon_zip: Path, tmp_path: Path) -> None:
+def test_cmu_jumping_jacks_baked_in_blender_match_effortface_synth(bpy_python: BpyPython, addon_zip: Path,
+                                                                   tmp_path: Path) -> None:
     clip = MOTION / "cmu_13_29_jumping_jacks_120fps.bvh"  # 439 frames, 3.7 s
-    worst, out = bake_and_compare(clip, addon_zip, tmp_path)
+    worst, out = bake_and_compare(bpy_python, clip, addon_zip, tmp_path)
     assert max(max(v) for v in out["values"].values()) > 0.1
     assert worst <= MAX_DIFFERENCE
 
 
-def test_pymo_walk_baked_in_blender_match_effortface_synth(addon_zip: Path, tmp_path: Path) -> None:
+def test_pymo_walk_baked_in_blender_match_effortface_synth(bpy_python: BpyPython, addon_zip: Path,
+                                                           tmp_path: Path) -> None:
     clip = trim_bvh(ROOT / "tests" / "data" / "bvh" / "pymo_walk.bvh", tmp_path / "pymo_walk_3s.bvh", 360)
-    worst, _ = bake_and_compare(clip, addon_zip, tmp_path)
+    worst, _ = bake_and_compare(bpy_python, clip, addon_zip, tmp_path)
     assert worst <= MAX_DIFFERENCE
 
 
-def test_a_turned_and_moved_armature_object_bakes_the_same_face(addon_zip: Path, tmp_path: Path) -> None:
+def test_a_turned_and_moved_armature_object_bakes_the_same_face(bpy_python: BpyPython, addon_zip: Path,
+                                                                tmp_path: Path) -> None:
     """Positions are taken in world space: turning the armature object about the vertical and
     moving it (a static placement) changes no energy, so the face is still the file's (laying it
     down does change the world positions: the wrong-selection test's ``lying_down`` case)."""
     clip = trim_bvh(MOTION / "cmu_13_29_squats_120fps.bvh", tmp_path / "cmu_squats_2s.bvh", 240)
-    worst, _ = bake_and_compare(clip, addon_zip, tmp_path, turn_rad=2.0, shift_m=5.0)
+    worst, _ = bake_and_compare(bpy_python, clip, addon_zip, tmp_path, turn_rad=2.0, shift_m=5.0)
     assert worst <= MAX_DIFFERENCE
 
 
-def test_mixamo_named_skeleton_baked_in_blender_match_effortface_synth(addon_zip: Path, tmp_path: Path) -> None:
+def test_mixamo_named_skeleton_baked_in_blender_match_effortface_synth(bpy_python: BpyPython, addon_zip: Path,
+                                                                       tmp_path: Path) -> None:
     """Mixamo's own BVH files may not be redistributed (measured in docs/guide/blender.md: max
     |difference| 0.0002 on two of them); this fixture gives real CMU motion Mixamo's namespaced
     joint names (``mixamorig:Hips``...), which Blender's bones keep and the conventions strip."""
     text = (MOTION / "cmu_13_29_jumping_jacks_120fps.bvh").read_text()
     renamed = re.sub(r"(?m)^(\s*(?:ROOT|JOINT)\s+)(\S+)", r"\1mixamorig:\2", text)
     clip = trim_bvh_text(renamed, tmp_path / "mixamorig_jumping_jacks.bvh", 240)
-    worst, out = bake_and_compare(clip, addon_zip, tmp_path)
+    worst, out = bake_and_compare(bpy_python, clip, addon_zip, tmp_path)
     assert worst <= MAX_DIFFERENCE
 
 
-def test_wrong_selections_give_one_line_and_key_nothing(addon_zip: Path, tmp_path: Path) -> None:
+def test_wrong_selections_give_one_line_and_key_nothing(bpy_python: BpyPython, addon_zip: Path,
+                                                        tmp_path: Path) -> None:
     clip = trim_bvh(MOTION / "cmu_13_29_squats_120fps.bvh", tmp_path / "short.bvh", 60)
-    out = in_blender("errors", {"zip": str(addon_zip), "bvh": str(clip)}, tmp_path)
+    out = in_blender(bpy_python, "errors", {"zip": str(addon_zip), "bvh": str(clip)}, tmp_path)
     expected = {"no_armature": "expected an active armature, found Face (mesh)",
                 "nothing_active": "expected an active armature, found no active object",
                 "no_action": "expected an armature with an action, found Still without one",
@@ -151,14 +161,16 @@ def test_wrong_selections_give_one_line_and_key_nothing(addon_zip: Path, tmp_pat
         assert text.lower() in out[case][0].lower(), (case, out[case][0])
 
 
-def test_import_curves_keys_synth_csv_and_livelink(addon_zip: Path, tmp_path: Path) -> None:
+def test_import_curves_keys_synth_csv_and_livelink(bpy_python: BpyPython, addon_zip: Path,
+                                                   tmp_path: Path) -> None:
     clip = MOTION / "cmu_13_29_jumping_jacks_120fps.bvh"
     csv, live = tmp_path / "face.csv", tmp_path / "face_livelink.csv"
     assert cli_main(["synth", "default", str(clip), "--out", str(csv)]) == 0
     assert cli_main(["synth", "default", str(clip), "--out", str(live), "--format", "livelink"]) == 0
     bad = tmp_path / "bad.csv"
     bad.write_text("time,value\n0,1\n")
-    out = in_blender("import", {"zip": str(addon_zip), "fps": 120, "files": [str(csv), str(live), str(bad)]}, tmp_path)
+    spec = {"zip": str(addon_zip), "fps": 120, "files": [str(csv), str(live), str(bad)]}
+    out = in_blender(bpy_python, "import", spec, tmp_path)
     per_frame, livelink = read_curves(csv), read_curves(live)
     got = out[str(csv)]["keyed"]
     assert set(got) == set(ARKIT)
@@ -177,10 +189,12 @@ def test_import_curves_keys_synth_csv_and_livelink(addon_zip: Path, tmp_path: Pa
     assert "expected a header starting with t_s" in out[str(bad)]["result"]
 
 
-def test_demo_scene_example_runs_and_bakes(tmp_path: Path) -> None:
-    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "blender_user"), PYTHONPATH=str(ROOT))
-    proc = subprocess.run([sys.executable, str(ROOT / "examples" / "blender_demo_scene.py"), "--seconds", "2"],
-                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+def test_demo_scene_example_runs_and_bakes(bpy_python: BpyPython, tmp_path: Path) -> None:
+    """The example in Blender's interpreter, the add-on registered from this checkout's package
+    (PYTHONPATH): effortface.blender and the runtime it loads need numpy only, Blender's 1.26 here."""
+    env = dict(clean_env(), BLENDER_USER_RESOURCES=str(tmp_path / "blender_user"), PYTHONPATH=str(ROOT))
+    proc = subprocess.run([str(bpy_python.python), str(ROOT / "examples" / "blender_demo_scene.py"),
+                           "--seconds", "2"], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "add-on: registered from the effortface package" in proc.stdout
     assert "bake: {'FINISHED'}" in proc.stdout
