@@ -26,11 +26,15 @@ import shutil
 import subprocess
 import sys
 import time
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
 from packaging.requirements import Requirement
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10, for which bpy 4.5 has no wheel anyway
+    tomllib = None  # type: ignore[assignment]
 
 ROOT = Path(__file__).resolve().parents[2]
 #: a Python with bpy to use instead of the cached virtual environment
@@ -232,6 +236,8 @@ def bpy_python() -> BpyPython:
         if found is None:
             raise RuntimeError(f"{PYTHON_VAR}={given}: expected a Python that imports bpy, found none")
         return BpyPython(**{**found.__dict__, "how": f"bpy {found.bpy_version} from {PYTHON_VAR}={given}"})
+    if tomllib is None:
+        raise NoBlender(f"no bpy wheel for Python {platform.python_version()}: bpy 4.5 is for CPython 3.11 only")
     spec = blender_requirement()
     reason = no_wheel_reason(spec)
     if reason:

@@ -4,11 +4,12 @@ pyproject.toml, kept out of the project's environment, and a skip that says whic
 from __future__ import annotations
 
 import sys
-import tomllib
 import venv
 from pathlib import Path
 
 import pytest
+
+tomllib = pytest.importorskip("tomllib", reason="tomllib is Python 3.11+ (bpy 4.5 is for CPython 3.11 only)")
 
 from tests.blender import bpy_env
 from tests.conftest import ROOT
