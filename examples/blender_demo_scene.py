@@ -1,8 +1,11 @@
 """A demo scene for the effortface Blender add-on, built from nothing (no .blend file).
 
-Run it with Blender as a Python module (``pip install 'bpy>=4.5,<4.6'``) or inside Blender::
+Run it inside Blender, or with Blender as a Python module in a Python of its own (bpy 4.5 pins
+numpy<2, so not beside effortface's environment: ``tests/blender/bpy_env.py`` prints the Blender tests'
+interpreter, making it first if need be), this checkout on PYTHONPATH::
 
-    python examples/blender_demo_scene.py [--bvh CLIP.bvh] [--seconds S] [--render DIR]
+    PYTHONPATH=. "$(python tests/blender/bpy_env.py)" examples/blender_demo_scene.py [--bvh CLIP.bvh] \
+        [--seconds S] [--render DIR]
     blender --background --python examples/blender_demo_scene.py -- --render DIR
 
 It imports the sample squats clip (``effortface/samplelab/data/cmu_13_29_squats_120fps.bvh``) with

@@ -258,5 +258,7 @@ def bpy_python() -> BpyPython:
     return BpyPython(**{**found.__dict__, "how": how})
 
 
-if __name__ == "__main__":
-    print(bpy_python().how)
+if __name__ == "__main__":  # the interpreter's path on stdout (made first if need be), how on stderr
+    found = bpy_python()
+    print(found.how, file=sys.stderr)
+    print(found.python)
