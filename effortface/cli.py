@@ -39,6 +39,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "import": ("effortface.interop.commands.import_data", "import xdf FILE | hr FILE...: a LabRecorder recording, or watch/app heart-rate files -> sessions"),
     "export": ("effortface.interop.commands.export_data", "export bids SESSIONS: sessions -> a BIDS dataset"),
     "serve": ("effortface.interop.commands.serve", "live face from an LSL or OSC stream to LSL, OSC or Live Link"),
+    "blender-addon": ("effortface.blender.commands.blender_addon", "build the Blender add-on's installable zip"),
     "demo": ("effortface.commands.demo", "the whole pipeline on the sample lab"),
 }
 

@@ -29,8 +29,8 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "effortface"
 #: the guide's own pages, in reading order (other docs/guide/*.md pages follow, by name)
 GUIDE_ORDER = ["getting-started.md", "layout.md", "app.md", "capture.md", "heart-rate-devices.md", "annotate.md",
-               "train.md", "motion-and-work.md", "skeleton-mapping.md", "synthesize.md", "interop.md", "formats.md",
-               "sample-data.md",
+               "train.md", "motion-and-work.md", "skeleton-mapping.md", "synthesize.md", "blender.md", "interop.md",
+               "formats.md", "sample-data.md",
                "troubleshooting.md", "extend-strap-protocol.md", "extend-motion-format.md",
                "extend-output-format.md", "extend-live-protocol.md"]
 BACKGROUND = [("Design card", "DESIGN.md"), ("The science", "SCIENCE.md"), ("Science notes", "SCIENCE_NOTES.md"),

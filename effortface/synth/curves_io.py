@@ -23,7 +23,7 @@ import numpy as np
 
 from effortface.core.blendshapes import BlendshapeSet
 from effortface.core.errors import UserError
-from effortface.core.fileio import atomic_write, atomic_write_text
+from effortface.core.fileio import atomic_write, atomic_write_text, check_regular_file
 from effortface.synth.runtime import FaceModel
 
 #: the file formats of :func:`write_curves` out of the box (:func:`curve_formats` adds registered ones)
@@ -398,6 +398,75 @@ def _chunk_texts(chunks: Iterable[Mapping[str, np.ndarray]], model: FaceModel, f
         pieces = list(chunks)
         whole = {c: np.concatenate([np.asarray(p[c]) for p in pieces]) for c in model.columns}
         yield curves_text(whole, model, fmt, digits, every_frame)
+
+
+# --------------------------------------------------------------------------- reading back
+
+def read_curves(path: str | Path) -> dict[str, np.ndarray]:
+    """Read a curves file written by :func:`write_curves`: the per-frame CSV or a Live Link Face CSV.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    dict of ndarray, each (T,)
+        ``t_s`` (from the first row; a Live Link file's timecodes at :data:`LIVELINK_TIMECODE_FPS`)
+        and every other column; a Live Link file's blendshape columns under their ARKit names
+        (``JawOpen`` -> ``jawOpen``), its rotations left out.
+
+    Raises
+    ------
+    UserError
+        One line naming the file, the expected header or value and what was found.
+    """
+    path = check_regular_file(path, "a curves CSV (effortface synth)")
+    with path.open(encoding="utf-8", errors="replace", newline="") as f:
+        rows = list(csv.reader(f))
+    header = rows[0] if rows else []
+    livelink = bool(header) and header[0] == "Timecode"
+    if not livelink and (not header or header[0] != "t_s"):
+        raise UserError(f"{path}: expected a header starting with t_s (per-frame CSV) or Timecode "
+                        f"(Live Link Face CSV), found {','.join(header)[:60]!r}")
+    if len(rows) < 2:
+        raise UserError(f"{path}: expected at least one row of values, found none")
+    if livelink:
+        keep = [i for i, c in enumerate(header) if c in LIVELINK_BLENDSHAPES]
+        times = [_timecode_s(path, n + 2, r[0] if r else "") for n, r in enumerate(rows[1:])]
+        names = [header[i][:1].lower() + header[i][1:] for i in keep]
+        values = _values(path, [[r[i] if i < len(r) else "" for i in keep] for r in rows[1:]], names)
+        t = np.asarray(times)
+        return {"t_s": t - t[0], **{n: values[:, k] for k, n in enumerate(names)}}
+    values = _values(path, rows[1:], header)
+    return {c: values[:, k] for k, c in enumerate(header)}
+
+
+def _values(path: Path, rows: list[list[str]], names: Sequence[str]) -> np.ndarray:
+    """The rows as a (T, C) float table; the first bad cell named."""
+    for n, row in enumerate(rows):
+        if len(row) != len(names):
+            raise UserError(f"{path}: line {n + 2}: expected {len(names)} values, found {len(row)}")
+    try:
+        return np.array(rows, dtype=float).reshape(len(rows), len(names))
+    except ValueError:
+        for n, row in enumerate(rows):
+            for name, cell in zip(names, row):
+                try:
+                    float(cell)
+                except ValueError:
+                    raise UserError(f"{path}: line {n + 2}, column {name}: expected a number, "
+                                    f"found {cell!r}") from None
+        raise
+
+
+def _timecode_s(path: Path, line: int, text: str) -> float:
+    """Seconds of a Live Link ``HH:MM:SS:FF.fff`` timecode (:func:`livelink_timecode`)."""
+    try:
+        hh, mm, ss, ff = text.split(":")
+        return (int(hh) * 60 + int(mm)) * 60 + int(ss) + float(ff) / LIVELINK_TIMECODE_FPS
+    except ValueError:
+        raise UserError(f"{path}: line {line}: expected a timecode HH:MM:SS:FF.fff, found {text!r}") from None
 
 
 register_curve_format("csv", lambda curves, model, digits: curves_csv(curves, model.columns, digits))

@@ -1,0 +1,1 @@
+"""The Blender room's command: ``effortface blender-addon``."""
