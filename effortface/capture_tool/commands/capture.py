@@ -75,14 +75,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "Lab Streaming Layer, for LabRecorder")
 
 
-def _participant(args: argparse.Namespace) -> tuple[Participant, bool]:
-    """The participant from the options and the lab's registry, and whether it is new there."""
+def participant_options(args: argparse.Namespace) -> tuple[str, dict[str, object]]:
+    """``--participant``'s checked code and the body options (``--sex``, ``--age``, ``--height``,
+    ``--mass``, ``--training-level``) as the lab registry takes them (``capture``, ``import hr``)."""
     try:
         code = Participant(code=args.participant).code
     except UserError as exc:
         raise UserError(f"--participant: {exc}") from None
-    options = {"sex": args.sex, "age": args.age, "height_m": args.height, "mass_kg": args.mass,
-               "training_level": args.training_level}
+    return code, {"sex": args.sex, "age": args.age, "height_m": args.height, "mass_kg": args.mass,
+                  "training_level": args.training_level}
+
+
+def _participant(args: argparse.Namespace) -> tuple[Participant, bool]:
+    """The participant from the options and the lab's registry, and whether it is new there."""
+    code, options = participant_options(args)
     return resolve_participant(code, options, Path(args.out) / REGISTRY_TSV,
                                update=bool(getattr(args, "update_participant", False)))
 

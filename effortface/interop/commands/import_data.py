@@ -91,6 +91,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_hr(args: argparse.Namespace) -> int:
     """``import hr``: read and check every file, resolve the participant, then write one session each."""
+    from effortface.capture_tool.commands.capture import participant_options
     from effortface.capture_tool.importers.session import import_hr_files
 
     for option in ("hr_stream", "work_stream", "mocap_stream", "video_stream", "hr_json_key", "rr_json_key"):
@@ -100,12 +101,7 @@ def _run_hr(args: argparse.Namespace) -> int:
         raise UserError("--keep-ecg: only for 'import xdf', found with 'import hr'")
     if args.marker_stream:
         raise UserError("--marker-stream: only for 'import xdf', found with 'import hr'")
-    try:
-        code = Participant(code=args.participant).code
-    except UserError as exc:
-        raise UserError(f"--participant: {exc}") from None
-    options = {"sex": args.sex, "age": args.age, "height_m": args.height, "mass_kg": args.mass,
-               "training_level": args.training_level}
+    code, options = participant_options(args)
     folders = import_hr_files(args.file, args.out, code, options, update=args.update_participant, label=args.label,
                               video=Path(args.video) if args.video is not None else None,
                               video_offset_s=args.video_offset, video_flash_at_s=args.video_flash_at,
