@@ -16,6 +16,7 @@ writes a new participant, or a changed record whose previous values are kept, da
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import datetime as dt
 import math
@@ -390,3 +391,14 @@ def _locked(registry_path: Path) -> Iterator[None]:
 def _line(p: Participant) -> str:
     """One registry line."""
     return "\t".join(_cell(getattr(p, _attr(c))) for c in COLUMNS)
+
+
+def participant_options(args: argparse.Namespace) -> tuple[str, dict[str, object]]:
+    """``--participant``'s checked code and the body options (``--sex``, ``--age``, ``--height``,
+    ``--mass``, ``--training-level``) as the lab registry takes them (``capture``, ``import hr``)."""
+    try:
+        code = Participant(code=args.participant).code
+    except UserError as exc:
+        raise UserError(f"--participant: {exc}") from None
+    return code, {"sex": args.sex, "age": args.age, "height_m": args.height, "mass_kg": args.mass,
+                  "training_level": args.training_level}

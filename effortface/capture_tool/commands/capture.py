@@ -27,7 +27,7 @@ from pathlib import Path
 
 from effortface.core.docs import DESIGN
 from effortface.core.errors import UserError
-from effortface.capture_tool.participants import HISTORY_TSV, REGISTRY_TSV, resolve_participant, save_participant
+from effortface.capture_tool.participants import HISTORY_TSV, REGISTRY_TSV, participant_options, resolve_participant, save_participant
 from effortface.capture_tool.plan import PlanRunner, read_plan
 from effortface.capture_tool.protocols import PROTOCOLS, check_protocol
 from effortface.capture_tool.recorder import Recorder
@@ -73,17 +73,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--lsl", action="store_true",
                         help="also publish the strap (LSL type HeartRate) and the events (Markers) on the "
                              "Lab Streaming Layer, for LabRecorder")
-
-
-def participant_options(args: argparse.Namespace) -> tuple[str, dict[str, object]]:
-    """``--participant``'s checked code and the body options (``--sex``, ``--age``, ``--height``,
-    ``--mass``, ``--training-level``) as the lab registry takes them (``capture``, ``import hr``)."""
-    try:
-        code = Participant(code=args.participant).code
-    except UserError as exc:
-        raise UserError(f"--participant: {exc}") from None
-    return code, {"sex": args.sex, "age": args.age, "height_m": args.height, "mass_kg": args.mass,
-                  "training_level": args.training_level}
 
 
 def _participant(args: argparse.Namespace) -> tuple[Participant, bool]:

@@ -91,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_hr(args: argparse.Namespace) -> int:
     """``import hr``: read and check every file, resolve the participant, then write one session each."""
-    from effortface.capture_tool.commands.capture import participant_options
+    from effortface.capture_tool.participants import participant_options
     from effortface.capture_tool.importers.session import import_hr_files
 
     for option in ("hr_stream", "work_stream", "mocap_stream", "video_stream", "hr_json_key", "rr_json_key"):
