@@ -24,7 +24,7 @@ from effortface.capture_tool.capture_session import (BUSY_STATES, CaptureSession
                                                       LiveUpdate, format_elapsed)
 from effortface.capture_tool.corrections import CORRECTION_KIND
 from effortface.capture_tool.gui.live_view import QtLiveView, format_bytes
-from effortface.capture_tool.gui.participant_form import TITLES, QtParticipantForm
+from effortface.capture_tool.gui.participant_form import QtParticipantForm
 from effortface.capture_tool.gui.phases import PHASE_TITLES, QtPhasePanel, catalog_models
 from effortface.capture_tool.gui.preflight import QtPreflight
 from effortface.capture_tool.monitor import MonitorStats
@@ -347,12 +347,8 @@ class QtCaptureStage(QtWidgets.QWidget):
             True if a start was requested.
         """
         if self.form.validate():
-            conflicts = self.form.conflicts()
-            if conflicts:  # the form shows the record and each difference; the banner says what to do
-                fields = ", ".join(TITLES[f].lower() for f, _, _ in conflicts)
-                self.show_banner(f"Record refused: participant {self.form.code.text().strip()} differs from the "
-                                 f"lab's record ({fields}): choose 'Use the record' or 'Change the record' in "
-                                 f"the form", "error")
+            if self.form.conflicts():  # the form states the conflict (once, record beside typed value)
+                self.show_banner("Record refused: see the participant form", "error")
             else:
                 self.show_banner("Record refused: " + self.form.message.text(), "error")
             return False
