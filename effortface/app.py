@@ -116,25 +116,24 @@ class QtKeyboardMap(QtWidgets.QDialog):
         self.label.setTextInteractionFlags(QtCore.Qt.TextInteractionFlag.TextSelectableByMouse)
         self.label.setMargin(6)
         self.label.setWordWrap(True)  # a narrow screen wraps the descriptions, never scrolls sideways
-        self.scroll = QtWidgets.QScrollArea(widgetResizable=True)
-        self.scroll.setHorizontalScrollBarPolicy(QtCore.Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
-        self.scroll.setWidget(self.label)
-        self.scroll.setFrameShape(QtWidgets.QFrame.Shape.NoFrame)
+        self.scroll_area = QtWidgets.QScrollArea()
+        self.scroll_area.setWidgetResizable(True)
+        self.scroll_area.setHorizontalScrollBarPolicy(QtCore.Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+        self.scroll_area.setWidget(self.label)
+        self.scroll_area.setFrameShape(QtWidgets.QFrame.Shape.NoFrame)
         buttons = QtWidgets.QDialogButtonBox(QtWidgets.QDialogButtonBox.StandardButton.Close)
         buttons.rejected.connect(self.close)
         layout = QtWidgets.QVBoxLayout(self)
-        layout.addWidget(self.scroll, 1)
+        layout.addWidget(self.scroll_area, 1)
         layout.addWidget(buttons)
-        self._fit_screen()
+        self._fit_screen(parent.screen() if parent is not None else QtGui.QGuiApplication.primaryScreen())
 
     def text(self) -> str:
         """The map's rich text."""
         return self.label.text()
 
-    def _fit_screen(self) -> None:
+    def _fit_screen(self, screen: QtGui.QScreen | None) -> None:
         """As big as the map, at most the available screen (less the title bar's room)."""
-        screen = (self.parent().screen() if isinstance(self.parent(), QtWidgets.QWidget) else None) \
-            or QtGui.QGuiApplication.primaryScreen()
         room = screen.availableGeometry().size() if screen is not None else QtCore.QSize(1280, 800)
         max_h, max_w = room.height() - 40, room.width() - 40
         self.setMaximumSize(max_w, max_h)

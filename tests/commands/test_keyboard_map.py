@@ -71,8 +71,8 @@ for _ in range(20):
     app.processEvents()
 box.grab().save(sys.argv[1] + "/keyboard_map.png")
 print(json.dumps({"height": box.height(), "width": box.width(), "hint": box.sizeHint().height(),
-                  "label": box.label.height(), "viewport": box.scroll.viewport().height(),
-                  "label_w": box.label.width(), "viewport_w": box.scroll.viewport().width(),
+                  "label": box.label.height(), "viewport": box.scroll_area.viewport().height(),
+                  "label_w": box.label.width(), "viewport_w": box.scroll_area.viewport().width(),
                   "text": re.sub("<[^>]+>", "|", box.text()).replace("&amp;", "&")}))
 box.close()
 win.shutdown()
