@@ -395,8 +395,8 @@ class MainWindow(QtWidgets.QMainWindow):
         # two columns (the window's, Capture's and Synthesize's keys | Annotate's): half the height of one list
         columns = ((("Everywhere", WINDOW_KEYS), ("Capture", capture), ("Synthesize", PLAYER_KEYS)),
                    (("Annotate", ANNOTATE_KEYS),))
-        cells = "".join(f"<td valign=top style='padding-right:18px'><table cellspacing=3>{_key_rows(column)}</table></td>"
-                        for column in columns)
+        cells = "".join(f"<td valign=top style='padding-right:18px'><table cellspacing=3>{_key_rows(column)}"
+                        "</table></td>" for column in columns)
         return f"<table><tr>{cells}</tr></table>"
 
     def show_keyboard_map(self) -> QtKeyboardMap:

@@ -110,4 +110,5 @@ def test_the_map_fits_the_screen_and_lists_every_key(tmp_path: Path, screen: tup
     for key, _ in (*WINDOW_KEYS, *ANNOTATE_KEYS, *PLAYER_KEYS, *((k, "") for k in PHASE_KEYS.values())):
         assert f"|{key}|" in got["text"], key
     if out := os.environ.get("EFFORTFACE_KEYMAP_PNG_DIR"):
-        (Path(out) / f"keyboard_map_{screen[0]}x{screen[1]}.png").write_bytes((tmp_path / "keyboard_map.png").read_bytes())
+        shot = (tmp_path / "keyboard_map.png").read_bytes()
+        (Path(out) / f"keyboard_map_{screen[0]}x{screen[1]}.png").write_bytes(shot)

@@ -129,9 +129,10 @@ class QtLiveView(QtWidgets.QWidget):
                                     "recording until the next Record")
         self.monitor_plot = pg.PlotWidget(background="w")
         self.monitor_plot.setLabel("left", "bpm")
+        self.monitor_plot.setLabel("bottom", "strap time (s)")
         self.monitor_plot.setMouseEnabled(x=False, y=False)
         self.monitor_plot.hideButtons()
-        self.monitor_plot.setFixedHeight(84)
+        self.monitor_plot.setFixedHeight(100)
         self.monitor_plot.setYRange(50, 200)
         self.monitor_curve = self.monitor_plot.plot(pen=pg.mkPen("#1f5fa8", width=2))
         box = QtWidgets.QVBoxLayout(self.monitor_box)
@@ -149,8 +150,9 @@ class QtLiveView(QtWidgets.QWidget):
         keep = t >= t[-1] - MONITOR_S if t.size else np.zeros(0, bool)
         self._monitor = (t[keep], hr[keep])
         self.monitor_curve.setData(*self._monitor, connect="finite")
-        if t.size:
-            self.monitor_plot.setXRange(t[-1] - MONITOR_S, t[-1], padding=0.0)
+        if t.size:  # the first minute fills from the left, then the last minute scrolls (no time before it)
+            lo = max(float(self._monitor[0][0]), float(t[-1]) - MONITOR_S)
+            self.monitor_plot.setXRange(lo, lo + MONITOR_S, padding=0.0)
         self.monitor_box.show()
 
     def clear_monitor(self) -> None:
