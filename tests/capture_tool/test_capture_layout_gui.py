@@ -62,6 +62,7 @@ def test_record_stays_in_sight_and_the_summary_stays_after_stop(qtbot, stage, si
     assert _in_sight(stage.record_button) and stage.record_button.text().endswith("Stop")
     qtbot.waitUntil(lambda: stage.live.n_samples() >= 8, timeout=15_000)
     stage.phases.marker_text.setText("water")
+    stage.phases.pick("treadmill_run", speed_m_s=3.6, grade_pct=1.0)  # its parameters make the log taller
     path = _stop(qtbot, stage)
     recorded = stage.live.n_samples()
     qtbot.wait(50)

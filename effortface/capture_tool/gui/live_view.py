@@ -74,7 +74,7 @@ class QtLiveView(QtWidgets.QWidget):
     def _build(self) -> None:
         self.preview = QtWidgets.QLabel("no camera")
         self.preview.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
-        self.preview.setMinimumSize(240, 150)
+        self.preview.setMinimumSize(240, 130)  # with the live strap's plot under it at 1280x800
         self.preview.setSizePolicy(QtWidgets.QSizePolicy.Policy.Ignored,
                                    QtWidgets.QSizePolicy.Policy.Ignored)
         self.preview.setStyleSheet("background: #202020; color: #c0c0c0;")
@@ -132,7 +132,7 @@ class QtLiveView(QtWidgets.QWidget):
         self.monitor_plot.setLabel("bottom", "strap time (s)")
         self.monitor_plot.setMouseEnabled(x=False, y=False)
         self.monitor_plot.hideButtons()
-        self.monitor_plot.setFixedHeight(100)
+        self.monitor_plot.setFixedHeight(88)
         self.monitor_plot.setYRange(50, 200)
         self.monitor_curve = self.monitor_plot.plot(pen=pg.mkPen("#1f5fa8", width=2))
         box = QtWidgets.QVBoxLayout(self.monitor_box)
