@@ -20,7 +20,7 @@ import os
 import sys
 import threading
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -86,6 +86,63 @@ ANNOTATE_KEYS = (
     ("Ctrl+B", "hide / show the session list"),
     ("A", "accept the machine rater's curve as keys over the loop, the selection or the time shown"),
 )
+
+
+def _key_rows(sections: Iterable[tuple[str, Iterable[tuple[str, str]]]]) -> str:
+    """HTML rows of the keyboard map: each section's title, then one row per key."""
+    return "".join(f"<tr><td colspan=2><b>{title}</b></td></tr>"
+                   + "".join(f"<tr><td>{html.escape(k)}</td><td>{html.escape(v)}</td></tr>" for k, v in keys)
+                   for title, keys in sections)
+
+
+class QtKeyboardMap(QtWidgets.QDialog):
+    """Help > Keyboard map: the keys in a scroll area no taller than the screen's available height (the
+    whole map in sight at 1280x800; a smaller screen scrolls it).
+
+    Parameters
+    ----------
+    text : str
+        The map as rich text (:meth:`MainWindow.keyboard_map_html`).
+    parent : QWidget, optional
+        The main window.
+    """
+
+    def __init__(self, text: str, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.setWindowTitle("effortface: keyboard map")
+        self.setAttribute(QtCore.Qt.WidgetAttribute.WA_DeleteOnClose)
+        self.label = QtWidgets.QLabel(text)
+        self.label.setTextFormat(QtCore.Qt.TextFormat.RichText)
+        self.label.setTextInteractionFlags(QtCore.Qt.TextInteractionFlag.TextSelectableByMouse)
+        self.label.setMargin(6)
+        self.label.setWordWrap(True)  # a narrow screen wraps the descriptions, never scrolls sideways
+        self.scroll_area = QtWidgets.QScrollArea()
+        self.scroll_area.setWidgetResizable(True)
+        self.scroll_area.setHorizontalScrollBarPolicy(QtCore.Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+        self.scroll_area.setWidget(self.label)
+        self.scroll_area.setFrameShape(QtWidgets.QFrame.Shape.NoFrame)
+        buttons = QtWidgets.QDialogButtonBox(QtWidgets.QDialogButtonBox.StandardButton.Close)
+        buttons.rejected.connect(self.close)
+        layout = QtWidgets.QVBoxLayout(self)
+        layout.addWidget(self.scroll_area, 1)
+        layout.addWidget(buttons)
+        self._fit_screen(parent.screen() if parent is not None else QtGui.QGuiApplication.primaryScreen())
+
+    def text(self) -> str:
+        """The map's rich text."""
+        return self.label.text()
+
+    def _fit_screen(self, screen: QtGui.QScreen | None) -> None:
+        """As big as the map, at most the available screen (less the title bar's room)."""
+        room = screen.availableGeometry().size() if screen is not None else QtCore.QSize(1280, 800)
+        max_h, max_w = room.height() - 40, room.width() - 40
+        self.setMaximumSize(max_w, max_h)
+        doc = QtGui.QTextDocument()
+        doc.setDefaultFont(self.label.font())
+        doc.setHtml(self.label.text())
+        width = min(int(doc.idealWidth()) + 60, max_w)  # unwrapped, with the margins and a scroll bar
+        want_h = self.label.heightForWidth(width - 40) + 70  # the Close button's row
+        self.resize(width, min(want_h, max_h))
 
 
 def guard_refcounts() -> bool:
@@ -335,16 +392,18 @@ class MainWindow(QtWidgets.QMainWindow):
                     (SYNC_KEY, "sync test (a white flash)")]
         from effortface.synth.gui.synth_stage import PLAYER_KEYS
 
-        sections = (("Everywhere", WINDOW_KEYS), ("Capture", capture), ("Annotate", ANNOTATE_KEYS),
-                    ("Synthesize", PLAYER_KEYS))
-        rows = "".join(f"<tr><td colspan=2><b>{title}</b></td></tr>"
-                       + "".join(f"<tr><td>{html.escape(k)}</td><td>{html.escape(v)}</td></tr>" for k, v in keys)
-                       for title, keys in sections)
-        return f"<table cellspacing=4>{rows}</table>"
+        # two columns (the window's, Capture's and Synthesize's keys | Annotate's): half the height of one list
+        columns = ((("Everywhere", WINDOW_KEYS), ("Capture", capture), ("Synthesize", PLAYER_KEYS)),
+                   (("Annotate", ANNOTATE_KEYS),))
+        cells = "".join(f"<td valign=top style='padding-right:18px'><table cellspacing=3>{_key_rows(column)}"
+                        "</table></td>" for column in columns)
+        return f"<table><tr>{cells}</tr></table>"
 
-    def show_keyboard_map(self) -> QtWidgets.QMessageBox:
-        """Help > Keyboard map (a non-modal box, returned)."""
-        return self._info_box("effortface: keyboard map", self.keyboard_map_html())
+    def show_keyboard_map(self) -> QtKeyboardMap:
+        """Help > Keyboard map (a non-modal box, returned): two columns, never taller than the screen."""
+        box = QtKeyboardMap(self.keyboard_map_html(), self)
+        box.open()
+        return box
 
     def about_html(self) -> str:
         """Help > About: the version, what the program is, where its documents are."""

@@ -5,7 +5,8 @@
 Writes ``<name>_<w>x<h>.png`` at 1280x800 and 1920x1080 into this folder (or ``--out``), replacing
 the previous ones (that is what the script is for; each path is printed). Groups (``--only``, default
 all): ``app`` (the main window as it opens), ``capture`` (``before``, ``during``, ``strap_lost``,
-``after`` (Stop: the last recording's summary and plot): P01's
+``after`` (Stop: the last recording's summary and plot, the strap plugged back in on its own small
+live plot): P01's
 ANT+ serial log replayed on a pseudo-terminal, the session video played as the camera, recorded into
 an empty lab), ``participant`` (``capture_participant_refused``: P01 typed as a man of 45 with
 training level 8 on the sample lab, whose P01 is a woman of 23 with 2.5, Record refused;
@@ -159,7 +160,7 @@ def shoot_capture(tmp: Path, out: Path) -> None:
     register(lab / "participants.tsv", read_session_info(session).participant)
     replay = PtyReplay(load_timed_chunks(session / "serial" / "ant.serlog"), speed=STRAP_SPEED,
                        unplug_after_s=200.0)  # after the "during" picture, even on a busy machine
-    thread = start_replay_thread(replay)
+    replays = [(replay, start_replay_thread(replay))]
     try:
         with main_window(lab, tmp) as window:
             stage = window.stages["capture"]
@@ -179,12 +180,19 @@ def shoot_capture(tmp: Path, out: Path) -> None:
             stage.stop_recording()  # as the operator does: in the background, the summary stays after it
             if not _wait(60, lambda: not stage.session.recording and stage.settled()):
                 raise RuntimeError("the recording did not stop")
-            _wait(3.5)  # the strap watched again meanwhile: the summary and the plot stay
+            # the receiver plugged back in (a new port): its live strap gets a small plot of its own, the
+            # summary and the recording's plot stay
+            replug = PtyReplay(load_timed_chunks(session / "serial" / "ant.serlog"), speed=STRAP_SPEED)
+            replays.append((replug, start_replay_thread(replug)))
+            stage.preflight.set_choice(port=replug.path)  # checked again (the same path may come back)
+            if not _wait(30, lambda: stage.live.n_monitor_samples() >= 40):
+                raise RuntimeError(f"the strap plugged back in is not drawn: {stage.preflight.strap_status.text()}")
             grab(window, "capture_after", out)
     finally:
-        replay.stop()
-        thread.join(5)
-        replay.close()
+        for each, each_thread in replays:
+            each.stop()
+            each_thread.join(5)
+            each.close()
 
 
 def shoot_participant(lab: Path, tmp: Path, out: Path) -> None:

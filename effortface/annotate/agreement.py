@@ -978,11 +978,25 @@ def _align(values: np.ndarray, order: list[str], poses: list[str]) -> np.ndarray
     return out
 
 
+def machine_summary_line(report: MachineReport) -> str:
+    """One line like the humans' overall row: the machine against the human mean, every blendshape pooled
+    (items, ICC(A,1) with its 95 % CI, alpha, mean absolute difference in % of the weight range); the app's
+    report and ``effortface agreement`` both show it."""
+    pooled = next((st for st in report.stats if st.reference == HUMAN_MEAN and st.name == "all"), None)
+    if pooled is None:
+        return "Machine against the human mean: no pose rated by both"
+    return (f"Machine against the human mean, all blendshapes: n {pooled.n_items}, ICC(A,1) "
+            f"{pooled.icc_a1:.2f} {format_ci(pooled.icc_a1_ci)}, alpha {pooled.alpha:.2f}, MAD "
+            f"{pooled.mad_pct:.1f} % of the range")
+
+
 def format_machine_report(report: MachineReport) -> str:
-    """The machine rater's section as plain text (printed after the humans' report)."""
+    """The machine rater's section as plain text (printed after the humans' report): its one-line summary
+    (:func:`machine_summary_line`) first, then the table against each human and the human mean."""
     mean_note = ("also counted as a rater above (--machine-in-mean)" if report.in_mean
                  else "not in the human mean")
     lines = ["", f"{report.label[0].upper()}{report.label[1:]}: apart from the humans ({mean_note})",
+             machine_summary_line(report),
              f"machine/face_landmarker.csv at the pose frames (nearest frame): {report.n_poses} poses; "
              f"poses without a face: {', '.join(report.no_face) or 'none'}",
              "", f"  {'against':<12} {'blendshape':<14} {'items':>5} {'ICC(A,1)':>9} {'95 % CI':>14} "

@@ -138,3 +138,39 @@ def test_bad_plot_paths_are_one_line(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert re.search(message, err), err
     assert (tmp_path / "afile").read_text() == "keep" and not list((tmp_path / "dir.png").iterdir())
     assert not (tmp_path / "p.txt").exists()
+
+
+def test_a_lab_with_a_machine_track_gets_the_one_line_machine_summary(tmp_path: Path,
+                                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """The machine against the human mean, pooled over blendshapes, in one line (as the app's report shows it)."""
+    import shutil
+
+    from effortface.annotate.agreement import HUMAN_MEAN, gather_poses, machine_ratings, machine_report
+    from tests.annotate.machine_helpers import write_fake_machine
+
+    lab = tmp_path / "lab"
+    shutil.copytree(SAMPLES, lab, ignore=shutil.ignore_patterns("*.avi", "_ground_truth", "serial"))
+    for session in sorted(lab.glob("P0*")):
+        write_fake_machine(session)
+    assert main(["agreement", str(lab)]) == 0
+    out = capsys.readouterr().out
+    lines = [line for line in out.splitlines() if line.startswith("Machine against the human mean")]
+    assert len(lines) == 1, out
+    ratings, _ = gather_ratings(lab)
+    pooled = next(s for s in machine_report(ratings, machine_ratings(lab, gather_poses(lab))[0]).stats
+                  if s.reference == HUMAN_MEAN and s.name == "all")
+    match = re.fullmatch(r"Machine against the human mean, all blendshapes: n (\d+), ICC\(A,1\) ([-\d.]+) "
+                         r"\[([-\d.]+), ([-\d.]+)\], alpha ([-\d.]+), MAD ([\d.]+) % of the range", lines[0])
+    assert match, lines[0]
+    n, icc, lo, hi, alpha, mad = match.groups()
+    assert int(n) == pooled.n_items > 0
+    assert float(icc) == pytest.approx(pooled.icc_a1, abs=0.005) and float(lo) <= float(icc) <= float(hi)
+    assert float(alpha) == pytest.approx(pooled.alpha, abs=0.005)
+    assert float(mad) == pytest.approx(pooled.mad_pct, abs=0.05) and float(icc) > 0.8  # the raters' mean + noise
+    # the summary sits in the machine's section, after the humans' report (which stays unchanged)
+    assert out.index("apart from the humans") < out.index(lines[0])
+
+
+def test_no_machine_track_no_machine_summary(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["agreement", str(SAMPLES)]) == 0
+    assert "Machine against the human mean" not in capsys.readouterr().out

@@ -124,3 +124,48 @@ def test_the_session_list_elides_at_the_end_with_the_whole_line_in_the_tooltip(s
     assert stage.sessions.textElideMode() == QtCore.Qt.TextElideMode.ElideRight
     item = stage.sessions.item(0)
     assert SESSION in item.toolTip() and "R1:" in item.toolTip()
+
+
+@pytest.mark.parametrize("mode", ["page", "centre"])
+def test_the_follow_control_keeps_the_cursor_on_screen_and_is_remembered(qtbot, tmp_path: Path, lab: Path,
+                                                                         mode: str) -> None:
+    """The Follow combo over the timeline (page | centre | off): both following modes keep the cursor on
+    screen through Ctrl+G and stepping; centre keeps it in the middle; the choice is kept in QSettings."""
+    from effortface.annotate.gui.annotate_stage import FOLLOW_KEY, QtAnnotateStage
+
+    settings = QtCore.QSettings(str(tmp_path / "settings.ini"), QtCore.QSettings.Format.IniFormat)
+    view = QtAnnotateStage(lab, settings=settings, cache_frames=64)
+    qtbot.addWidget(view)
+    view.resize(*STAGE_SIZE)
+    view.show()
+    qtbot.waitExposed(view)
+    try:
+        editor = view.open_session(lab / SESSION, "R1")
+        assert editor is not None and editor.follow_box.currentText() == "page"  # the default
+        assert editor.follow_box.isVisible() and editor.follow_box.focusPolicy() == QtCore.Qt.FocusPolicy.NoFocus
+        editor.follow_box.setCurrentText("off")
+        assert settings.value(FOLLOW_KEY) == "off"
+        editor.follow_box.setCurrentText(mode)  # as the user picks it (a combo of its own)
+        assert editor.timeline.follow == mode and settings.value(FOLLOW_KEY) == mode
+        view.activateWindow()
+        editor.video_view.setFocus()
+        qtbot.waitUntil(lambda: QtWidgets.QApplication.focusWidget() is editor.video_view)
+        for _ in range(3):
+            QTest.keyClick(_focus(), Key.Key_Plus)
+        QTest.keyClick(_focus(), Key.Key_G, Ctrl)
+        QTest.keyClicks(_focus(), "400")
+        QTest.keyClick(_focus(), Key.Key_Return)
+        assert editor.session.frame == 400 and _in_view(editor, 400)
+        for _ in range(120):
+            QTest.keyClick(_focus(), Key.Key_Right)
+            assert _in_view(editor, editor.session.frame)
+        lo, hi = editor.timeline.curve_plot.viewRange()[0]
+        t = editor.session.times.t_at(editor.session.frame)
+        if mode == "centre":
+            assert abs(t - (lo + hi) / 2) < 0.02 * (hi - lo)
+        assert lo >= 0.0
+        view.close_session()
+        again = view.open_session(lab / SESSION, "R1")  # reopened: the mode is remembered
+        assert again.follow_box.currentText() == mode and again.timeline.follow == mode
+    finally:
+        view.shutdown()

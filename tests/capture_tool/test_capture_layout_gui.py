@@ -62,6 +62,7 @@ def test_record_stays_in_sight_and_the_summary_stays_after_stop(qtbot, stage, si
     assert _in_sight(stage.record_button) and stage.record_button.text().endswith("Stop")
     qtbot.waitUntil(lambda: stage.live.n_samples() >= 8, timeout=15_000)
     stage.phases.marker_text.setText("water")
+    stage.phases.pick("treadmill_run", speed_m_s=3.6, grade_pct=1.0)  # its parameters make the log taller
     path = _stop(qtbot, stage)
     recorded = stage.live.n_samples()
     qtbot.wait(50)
@@ -74,8 +75,16 @@ def test_record_stays_in_sight_and_the_summary_stays_after_stop(qtbot, stage, si
     assert "No sync test" not in stage.banner_text()
     # the strap is watched again: its readout goes on, the recording's plot and summary stay
     qtbot.waitUntil(lambda: stage.session.watching(replay.path), timeout=10_000)
-    qtbot.wait(3000)
+    assert not stage.live.monitor_box.isVisible()  # until the strap is watched again
+    qtbot.waitUntil(lambda: stage.live.n_monitor_samples() >= 2, timeout=10_000)
+    qtbot.wait(1000)
     assert stage.summary.isVisible() and stage.live.n_samples() == recorded
+    # the live strap in a place of its own, labelled, beside the readout: in sight with the recording's plot
+    monitor = stage.live.monitor_box
+    assert monitor.title() == "Live strap (not recording)" and _in_sight(monitor) and _in_sight(stage.live.plot.viewport())
+    assert not monitor.geometry().intersects(stage.live.plot.geometry())
+    assert _in_sight(stage.live.hr_label) and _in_sight(stage.live.counters)
+    assert stage.window().size() == QtCore.QSize(*size)
     assert f"Saved, complete: <b>{path.name}</b>" in stage.summary_text.text()
     # the form is empty for the next participant
     assert stage.form.code.text() == "" and stage.form.registry.currentIndex() == 0
@@ -83,7 +92,7 @@ def test_record_stays_in_sight_and_the_summary_stays_after_stop(qtbot, stage, si
     # the next Record takes the summary away
     stage.form.registry.setCurrentText("P02")
     _record(qtbot, stage)
-    assert not stage.summary.isVisible()
+    assert not stage.summary.isVisible() and not stage.live.monitor_box.isVisible()
     _stop(qtbot, stage)
     _end(replay, thread)
 

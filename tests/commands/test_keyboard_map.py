@@ -51,3 +51,64 @@ def test_the_map_lists_every_annotate_and_synthesize_key(qtbot, tmp_path: Path) 
     assert "Alt+Left / Alt+Right" in text and "Ctrl+A / Esc" in text
     win.shutdown()
     stage.shutdown()
+
+
+
+#: opens Help > Keyboard map on a screen of the given size, prints its figures as JSON (a screen of
+#: its own needs a process of its own: the offscreen platform's screen is set when Qt starts)
+_OPEN_MAP = """
+import json, re, sys
+from pathlib import Path
+from PySide6 import QtCore, QtWidgets
+from effortface.app import MainWindow
+app = QtWidgets.QApplication([])
+settings = QtCore.QSettings(sys.argv[1] + "/s.ini", QtCore.QSettings.Format.IniFormat)
+win = MainWindow(Path(sys.argv[2]), settings)
+win.resize(*app.primaryScreen().availableGeometry().size().toTuple())
+win.show()
+box = win.show_keyboard_map()
+for _ in range(20):
+    app.processEvents()
+box.grab().save(sys.argv[1] + "/keyboard_map.png")
+print(json.dumps({"height": box.height(), "width": box.width(), "hint": box.sizeHint().height(),
+                  "label": box.label.height(), "viewport": box.scroll_area.viewport().height(),
+                  "label_w": box.label.width(), "viewport_w": box.scroll_area.viewport().width(),
+                  "text": re.sub("<[^>]+>", "|", box.text()).replace("&amp;", "&")}))
+box.close()
+win.shutdown()
+"""
+
+
+@pytest.mark.parametrize("screen", [(1280, 800), (800, 600)], ids=["1280x800", "800x600"])
+def test_the_map_fits_the_screen_and_lists_every_key(tmp_path: Path, screen: tuple[int, int]) -> None:
+    """Help > Keyboard map in two columns in a scroll area (it was one list 1302 px tall): whole and
+    unscrolled on a 1280x800 screen; on a smaller one never taller than the screen (it scrolls); every key
+    of the window, Capture, Annotate and Synthesize still listed."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    from effortface.app import WINDOW_KEYS
+    from effortface.capture_tool.gui.phases import PHASE_KEYS
+    from effortface.synth.gui.synth_stage import PLAYER_KEYS
+
+    config = tmp_path / "screen.json"
+    config.write_text(json.dumps({"screens": [{"name": "s", "x": 0, "y": 0, "width": screen[0],
+                                               "height": screen[1], "logicalDpi": 96, "logicalBaseDpi": 96,
+                                               "dpr": 1}]}))
+    env = {**os.environ, "QT_QPA_PLATFORM": f"offscreen:configfile={config}",
+           "EFFORTFACE_SETTINGS": str(tmp_path / "s.ini")}
+    done = subprocess.run([sys.executable, "-c", _OPEN_MAP, str(tmp_path), str(ROOT / "sample_sessions")],
+                          capture_output=True, text=True, env=env, cwd=ROOT, timeout=120)
+    assert done.returncode == 0, done.stderr
+    got = json.loads(done.stdout.splitlines()[-1])
+    assert got["height"] <= screen[1] and got["hint"] <= 800 and got["width"] <= screen[0]
+    assert got["label_w"] <= got["viewport_w"]  # never scrolled sideways
+    if screen == (1280, 800):
+        assert got["label"] <= got["viewport"], got  # the whole map in sight
+    for key, _ in (*WINDOW_KEYS, *ANNOTATE_KEYS, *PLAYER_KEYS, *((k, "") for k in PHASE_KEYS.values())):
+        assert f"|{key}|" in got["text"], key
+    if out := os.environ.get("EFFORTFACE_KEYMAP_PNG_DIR"):
+        shot = (tmp_path / "keyboard_map.png").read_bytes()
+        (Path(out) / f"keyboard_map_{screen[0]}x{screen[1]}.png").write_bytes(shot)

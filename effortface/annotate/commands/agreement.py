@@ -9,7 +9,8 @@ flagged poses. ``--plot PNG`` also draws the Bland-Altman plot.
 
 When the sessions hold a machine track (``SESSION/machine/face_landmarker.csv``, written by
 ``effortface preannotate``), a section labelled "machine rater" follows the humans' report, unchanged:
-the machine's ICC(A,1), Krippendorff's alpha and mean absolute difference against each human and
+first its one-line summary (the machine against the human mean, all blendshapes pooled: n, ICC(A,1)
+with its CI, alpha, MAD %; the line the app's report shows), then the machine's ICC(A,1), Krippendorff's alpha and mean absolute difference against each human and
 against the human mean, per blendshape and pooled, with 95 % bootstrap intervals over poses. The
 machine is never counted among the humans unless ``--machine-in-mean`` is given.
 """

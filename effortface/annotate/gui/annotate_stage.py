@@ -45,7 +45,7 @@ from effortface.annotate.gui.image_view import QtImageView
 from effortface.annotate.gui.protocol_panel import HELP_TEXT, QtProtocolPanel
 from effortface.core.gui.qt_compat import guard_none_refcount
 from effortface.annotate.gui.reliability_panel import QtReliabilityPanel
-from effortface.annotate.gui.timeline import QtTimeline
+from effortface.annotate.gui.timeline import FOLLOW_MODES, QtTimeline
 from effortface.annotate.annotate_session import AnnotateSession, check_rater
 from effortface.annotate.machine_guide import ACCEPT_TOLERANCE, KeyFit
 from effortface.annotate.preannotate_run import PreannotateRun, has_track
@@ -62,6 +62,8 @@ WEIGHT_NUDGE = 0.05
 #: a selection of keys is scaled by this factor (]) or its inverse ([) about its mean weight
 SCALE_STEP = 1.25
 ZOOM_STEP = 1.5
+#: the QSettings key of the timeline's follow mode (page, centre, off)
+FOLLOW_KEY = "annotate/follow"
 _ERROR_STYLE = "color:#842029;"
 _INFO_STYLE = "color:#305030;"
 
@@ -160,6 +162,16 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         toggles.addStretch(1)
         self.loop_label = QtWidgets.QLabel("")
         toggles.addWidget(self.loop_label)
+        toggles.addWidget(QtWidgets.QLabel("Follow:"))
+        self.follow_box = QtWidgets.QComboBox()
+        self.follow_box.addItems(list(FOLLOW_MODES))
+        self.follow_box.setCurrentText(self.timeline.follow)
+        self.follow_box.setFocusPolicy(QtCore.Qt.FocusPolicy.NoFocus)  # the keys stay the video's
+        self.follow_box.setToolTip("How the timeline follows the play head: page (a new page when the cursor "
+                                   "leaves the view), centre (the cursor stays in the middle), off (the view "
+                                   "stays where you put it)")
+        self.follow_box.currentTextChanged.connect(self.set_follow)
+        toggles.addWidget(self.follow_box)
         machine_row = self._build_machine_row()
         self.history_view = QtWidgets.QListWidget()
         self.history_view.setFocusPolicy(QtCore.Qt.FocusPolicy.NoFocus)
@@ -186,6 +198,16 @@ class QtKeyframeEditor(QtWidgets.QWidget):
         machine_row.setVisible(self.session.machine is not None)  # it has a parent now: never a window
         self._show_history()
         return pane
+
+    def set_follow(self, mode: str) -> None:
+        """How the timeline follows the play head (one of :data:`~effortface.annotate.gui.timeline.FOLLOW_MODES`;
+        an unknown mode, e.g. from an older settings file, is ignored)."""
+        if mode not in FOLLOW_MODES:
+            return
+        self.timeline.follow = mode
+        if self.follow_box.currentText() != mode:
+            self.follow_box.setCurrentText(mode)
+        self.timeline.follow_cursor(self.session.t_s)
 
     def _build_machine_row(self) -> QtWidgets.QWidget:
         """Machine guide toggles per blendshape, the accept tolerance and "Accept machine" (hidden without a track)."""
@@ -932,6 +954,9 @@ class QtAnnotateStage(QtWidgets.QWidget):
         self.editor.video_view.setFocus()
         if self.settings is not None:
             self.settings.setValue("annotate/rater", rater)
+            self.editor.set_follow(str(self.settings.value(FOLLOW_KEY, self.editor.timeline.follow)))
+            settings = self.settings
+            self.editor.follow_box.currentTextChanged.connect(lambda mode: settings.setValue(FOLLOW_KEY, mode))
             self._resume(self.editor)
         keys = sum(len(t) for t in session.annotations.tracks.values())
         self.show_message(f"{session.session.info.session_id}: rater {rater}, {keys} keys "

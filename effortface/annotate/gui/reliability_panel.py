@@ -20,6 +20,7 @@ pose after the last one, Ctrl+Enter saves at once.
 
 from __future__ import annotations
 
+import html
 from collections.abc import Collection
 from pathlib import Path
 
@@ -27,9 +28,10 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6 import QtCore, QtGui, QtWidgets
 
-from effortface.annotate.agreement import (FLAG_PCT, HUMAN_MEAN, MACHINE_LABEL, N_POSES, AgreementReport, MachineReport,
+from effortface.annotate.agreement import (FLAG_PCT, MACHINE_LABEL, N_POSES, AgreementReport, MachineReport,
                                            agreement_report, format_ci, gather_poses, gather_ratings,
-                                           machine_ratings, machine_report, propose_poses)
+                                           machine_ratings, machine_report, machine_summary_line,
+                                           propose_poses)
 from effortface.annotate.face import render_face
 from effortface.annotate.gui.image_view import QtImageView
 from effortface.annotate.reliability import Pose, write_poses
@@ -82,13 +84,9 @@ _PLOT_ENOUGH_PX = 240
 
 
 def machine_summary(rep: MachineReport) -> str:
-    """One line like the humans' overall row: the machine against the human mean, every blendshape pooled."""
-    pooled = next((st for st in rep.stats if st.reference == HUMAN_MEAN and st.name == "all"), None)
-    if pooled is None:
-        return "<b>Machine against the human mean:</b> no pose rated by both"
-    return (f"<b>Machine against the human mean, all blendshapes:</b> n {pooled.n_items}, ICC(A,1) "
-            f"{pooled.icc_a1:.2f} {format_ci(pooled.icc_a1_ci)}, alpha {pooled.alpha:.2f}, MAD "
-            f"{pooled.mad_pct:.1f} % of the range")
+    """:func:`~effortface.annotate.agreement.machine_summary_line` with its head in bold (rich text)."""
+    head, sep, rest = machine_summary_line(rep).partition(": ")
+    return f"<b>{html.escape(head)}{sep.strip()}</b> {html.escape(rest)}"
 
 
 def _table(headers: list[str], fit: bool = False) -> QtWidgets.QTableWidget:

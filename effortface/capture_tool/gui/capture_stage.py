@@ -24,7 +24,7 @@ from effortface.capture_tool.capture_session import (BUSY_STATES, CaptureSession
                                                       LiveUpdate, format_elapsed)
 from effortface.capture_tool.corrections import CORRECTION_KIND
 from effortface.capture_tool.gui.live_view import QtLiveView, format_bytes
-from effortface.capture_tool.gui.participant_form import TITLES, QtParticipantForm
+from effortface.capture_tool.gui.participant_form import QtParticipantForm
 from effortface.capture_tool.gui.phases import PHASE_TITLES, QtPhasePanel, catalog_models
 from effortface.capture_tool.gui.preflight import QtPreflight
 from effortface.capture_tool.monitor import MonitorStats
@@ -243,7 +243,7 @@ class QtCaptureStage(QtWidgets.QWidget):
     def _summary_panel(self) -> QtWidgets.QGroupBox:
         """What the last recording saved (path, length, samples, events, dropped frames, sync): shown at the
         top of the left column from Stop until the next Record, its plot kept on the right (the strap
-        watched again meanwhile shows only in the live readout)."""
+        watched again meanwhile has its own small plot, "Live strap (not recording)", beside the readout)."""
         self.summary = QtWidgets.QGroupBox("Last recording")
         self.summary_text = QtWidgets.QLabel(wordWrap=True)
         self.summary_text.setTextInteractionFlags(QtCore.Qt.TextInteractionFlag.TextSelectableByMouse)
@@ -347,12 +347,8 @@ class QtCaptureStage(QtWidgets.QWidget):
             True if a start was requested.
         """
         if self.form.validate():
-            conflicts = self.form.conflicts()
-            if conflicts:  # the form shows the record and each difference; the banner says what to do
-                fields = ", ".join(TITLES[f].lower() for f, _, _ in conflicts)
-                self.show_banner(f"Record refused: participant {self.form.code.text().strip()} differs from the "
-                                 f"lab's record ({fields}): choose 'Use the record' or 'Change the record' in "
-                                 f"the form", "error")
+            if self.form.conflicts():  # the form states the conflict (once, record beside typed value)
+                self.show_banner("Record refused: see the participant form", "error")
             else:
                 self.show_banner("Record refused: " + self.form.message.text(), "error")
             return False
@@ -584,17 +580,21 @@ class QtCaptureStage(QtWidgets.QWidget):
             if self._plot_is_monitor:  # the next strap watched starts its own plot
                 self.live.clear()
                 self._plot_is_monitor = False
+            self.live.clear_monitor()
             self.live.set_current(None, None)
             self.live.set_counters({"link": "not watched", "rate": "-", "last": "-", "contact": "-"})
             return
         self.live.set_current(view.hr_bpm, stats.rr_ms if view.hr_bpm is not None else None)
-        if stats.new and not self.summary.isVisibleTo(self):  # the stream drawn before Record, as LabRecorder
-            # and OpenSignals do; the last recording's plot stays with its summary until the next Record
-            if not self._plot_is_monitor:  # the last recording's plot gives way to the live stream
-                self.live.clear()
-                self._plot_is_monitor = True
-            self.live.add_samples(np.array([t for t, _ in stats.new]),
-                                  np.array([np.nan if hr is None else hr for _, hr in stats.new]))
+        if stats.new:  # the stream drawn before Record, as LabRecorder and OpenSignals do
+            t_s = np.array([t for t, _ in stats.new])
+            hr_bpm = np.array([np.nan if hr is None else hr for _, hr in stats.new])
+            if self.summary.isVisibleTo(self):  # after Stop: the last recording keeps the big plot with its
+                self.live.add_monitor_samples(t_s, hr_bpm)  # summary; the strap goes to a place of its own
+            else:
+                if not self._plot_is_monitor:  # nothing recorded yet in this stage: the big plot is free
+                    self.live.clear()
+                    self._plot_is_monitor = True
+                self.live.add_samples(t_s, hr_bpm)
         self.live.set_counters({
             "link": f"{stats.link_state} (not recording)",
             "rate": "-" if stats.rate_hz is None else f"{stats.rate_hz:.2f} Hz",
@@ -712,6 +712,7 @@ class QtCaptureStage(QtWidgets.QWidget):
             self._last_row_s = None
             self._plot_is_monitor = False
             self.live.clear()
+            self.live.clear_monitor()  # the recording takes the big plot: no separate strap area
             self.event_list.clear()
             self.clear_banner()
             self.sync_label.setText("Sync test: not done yet (F8, with the camera seeing the screen)")

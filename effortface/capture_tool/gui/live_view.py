@@ -20,6 +20,8 @@ _CHAR_PX = 7.5
 _ROW_PX = 17.0
 #: seconds of HR shown on the plot
 WINDOW_S = 300.0
+#: seconds of the strap watched after Stop drawn in the live strap area
+MONITOR_S = 60.0
 #: (name, low, high) as fractions of the heart-rate reserve (Karvonen), with their colours
 ZONES = (("Z1", 0.5, 0.6, "#9ecae1"), ("Z2", 0.6, 0.7, "#a1d99b"), ("Z3", 0.7, 0.8, "#fdd49e"),
          ("Z4", 0.8, 0.9, "#fc9272"), ("Z5", 0.9, 1.0, "#de2d26"))
@@ -72,7 +74,7 @@ class QtLiveView(QtWidgets.QWidget):
     def _build(self) -> None:
         self.preview = QtWidgets.QLabel("no camera")
         self.preview.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
-        self.preview.setMinimumSize(240, 150)
+        self.preview.setMinimumSize(240, 130)  # with the live strap's plot under it at 1280x800
         self.preview.setSizePolicy(QtWidgets.QSizePolicy.Policy.Ignored,
                                    QtWidgets.QSizePolicy.Policy.Ignored)
         self.preview.setStyleSheet("background: #202020; color: #c0c0c0;")
@@ -89,6 +91,7 @@ class QtLiveView(QtWidgets.QWidget):
         camera.setSpacing(2)
         camera.addWidget(self.preview, 1)
         camera.addWidget(self.preview_caption)
+        camera.addWidget(self._make_monitor())  # after Stop, under the camera (whose picture gives it room)
         top = QtWidgets.QHBoxLayout()
         top.addLayout(camera, 3)
         figures = QtWidgets.QVBoxLayout()
@@ -118,6 +121,49 @@ class QtLiveView(QtWidgets.QWidget):
         self.curve.setDownsampling(auto=True, method="peak")
         self.curve.setClipToView(True)
         return plot
+
+    def _make_monitor(self) -> QtWidgets.QGroupBox:
+        """The strap watched after Stop, in a small plot of its own (the big plot keeps the last recording)."""
+        self.monitor_box = QtWidgets.QGroupBox("Live strap (not recording)")
+        self.monitor_box.setToolTip("The strap watched since Stop, not recorded: the plot below keeps the last "
+                                    "recording until the next Record")
+        self.monitor_plot = pg.PlotWidget(background="w")
+        self.monitor_plot.setLabel("left", "bpm")
+        self.monitor_plot.setLabel("bottom", "strap time (s)")
+        self.monitor_plot.setMouseEnabled(x=False, y=False)
+        self.monitor_plot.hideButtons()
+        self.monitor_plot.setFixedHeight(88)
+        self.monitor_plot.setYRange(50, 200)
+        self.monitor_curve = self.monitor_plot.plot(pen=pg.mkPen("#1f5fa8", width=2))
+        box = QtWidgets.QVBoxLayout(self.monitor_box)
+        box.setContentsMargins(4, 2, 4, 2)
+        box.addWidget(self.monitor_plot)
+        self._monitor: tuple[np.ndarray, np.ndarray] = (np.empty(0), np.empty(0))
+        self.monitor_box.hide()
+        return self.monitor_box
+
+    def add_monitor_samples(self, t_s: np.ndarray, hr_bpm: np.ndarray) -> None:
+        """Draw the strap watched (not recorded) in the live strap area, its last :data:`MONITOR_S` seconds
+        (NaN: no contact, drawn as a gap), and show the area."""
+        t = np.concatenate([self._monitor[0], np.asarray(t_s, dtype=float)])
+        hr = np.concatenate([self._monitor[1], np.asarray(hr_bpm, dtype=float)])
+        keep = t >= t[-1] - MONITOR_S if t.size else np.zeros(0, bool)
+        self._monitor = (t[keep], hr[keep])
+        self.monitor_curve.setData(*self._monitor, connect="finite")
+        if t.size:  # the first minute fills from the left, then the last minute scrolls (no time before it)
+            lo = max(float(self._monitor[0][0]), float(t[-1]) - MONITOR_S)
+            self.monitor_plot.setXRange(lo, lo + MONITOR_S, padding=0.0)
+        self.monitor_box.show()
+
+    def clear_monitor(self) -> None:
+        """Hide and empty the live strap area (a Record, or no strap watched)."""
+        self._monitor = (np.empty(0), np.empty(0))
+        self.monitor_curve.setData([], [])
+        self.monitor_box.hide()
+
+    def n_monitor_samples(self) -> int:
+        """Valid samples in the live strap area (tests)."""
+        return int(np.isfinite(self._monitor[1]).sum())
 
     def set_zones(self, hr_rest_bpm: float, hr_max_bpm: float) -> None:
         """Shade the HR zones for this participant's resting and maximal HR."""
