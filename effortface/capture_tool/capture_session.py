@@ -86,8 +86,15 @@ class LiveUpdate:
     camera_ended: bool = False
 
 
+#: bytes a :class:`CsvTail` reads at most per call (about 5,000 heart-rate rows): the GUI polls on its
+#: own thread, so a burst (a flooding port, a poll that came late) is drawn over a few polls instead of
+#: stalling one; a real strap writes about 100 bytes a second
+TAIL_READ_BYTES = 128 * 1024
+
+
 class CsvTail:
-    """Read the complete lines appended to a CSV file since the last call (header skipped).
+    """Read the complete lines appended to a CSV file since the last call (header skipped), at most
+    :data:`TAIL_READ_BYTES` a call (the rest at the next).
 
     Parameters
     ----------
@@ -106,7 +113,7 @@ class CsvTail:
         try:
             with open(self.path, "rb") as fh:
                 fh.seek(self._offset)
-                blob = fh.read()
+                blob = fh.read(TAIL_READ_BYTES)
         except FileNotFoundError:
             return []
         self._offset += len(blob)

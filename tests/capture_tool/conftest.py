@@ -1,8 +1,11 @@
-"""Fixtures the capture stage's GUI tests share (test_capture_gui.py, test_capture_stage_daily.py)."""
+"""Fixtures the capture stage's GUI tests share (test_capture_gui.py, test_capture_stage_daily.py, and the
+lab-stage fixtures of the layout, participant and heart-rate import tests through :func:`capture_stage_on`)."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -28,6 +31,28 @@ def window(qtbot, tmp_path: Path, settings):
     qtbot.waitUntil(stage.settled, timeout=10_000)
     yield win
     # stopped here, never asked: a test that failed mid-recording must not leave a question open
+    if stage.session.recording:
+        stage.stop_now()
+    win.shutdown()
+    win.hide()
+    win.deleteLater()
+
+
+def capture_stage_on(qtbot: Any, lab: Path, settings_file: Path,
+                     size: tuple[int, int] = (1280, 800)) -> Iterator[Any]:
+    """The Capture stage of a main window on ``lab`` at ``size`` once it has settled (a fixture's body:
+    ``yield from``); a recording a failed test left running is stopped, never asked about."""
+    from PySide6 import QtCore
+
+    from effortface.app import MainWindow
+
+    win = MainWindow(lab, QtCore.QSettings(str(settings_file), QtCore.QSettings.Format.IniFormat))
+    win.resize(*size)
+    win.show()
+    qtbot.waitExposed(win)
+    stage = win.show_stage("capture")
+    qtbot.waitUntil(stage.settled, timeout=10_000)
+    yield stage
     if stage.session.recording:
         stage.stop_now()
     win.shutdown()

@@ -461,3 +461,20 @@ def test_publish_to_lsl_toggle_streams_the_strap(qtbot, window, settings) -> Non
     replay.close()
     assert got == [70.0 + i for i in range(10)]
     assert "clock_offset_s" in json.loads((path / "session.json").read_text())["lsl"]
+
+
+def test_csv_tail_reads_a_backlog_over_several_calls_losing_no_row(tmp_path) -> None:
+    """A burst (a flooding port, a late poll) is read at most TAIL_READ_BYTES a call, so one GUI poll
+    never parses all of it; every row arrives once, none torn."""
+    from effortface.capture_tool.capture_session import TAIL_READ_BYTES
+
+    path = tmp_path / "hr.csv"
+    rows = [[f"{i / 50:.3f}", str(60 + i % 90)] for i in range(40_000)]
+    path.write_text("t_s,hr_bpm\n" + "".join(f"{a},{b}\n" for a, b in rows))
+    assert path.stat().st_size > 3 * TAIL_READ_BYTES
+    tail = CsvTail(path)
+    batches = [tail.read_rows()]
+    while batches[-1]:
+        batches.append(tail.read_rows())
+    assert len(batches) > 3 and max(len(b) for b in batches) < len(rows)
+    assert [r for b in batches for r in b] == rows

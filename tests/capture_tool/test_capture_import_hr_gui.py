@@ -8,13 +8,12 @@ import os
 from pathlib import Path
 
 import pytest
-from PySide6 import QtCore
 
-from effortface.app import MainWindow
 from effortface.capture_tool.participants import REGISTRY_TSV, read_registry
 from effortface.core.session.folder import read_session, validate_session
 
 from .test_capture_gui import _fill_form
+from .conftest import capture_stage_on
 from .test_participant_truth import copy_sample_lab
 
 pytestmark = pytest.mark.qt_log_ignore("This plugin does not support propagateSizeHints")
@@ -23,18 +22,7 @@ DATA = Path(__file__).resolve().parents[1] / "data" / "hr"
 
 @pytest.fixture
 def stage(qtbot, tmp_path: Path):
-    lab = copy_sample_lab(tmp_path / "lab")
-    settings = QtCore.QSettings(str(tmp_path / "settings.ini"), QtCore.QSettings.Format.IniFormat)
-    win = MainWindow(lab, settings)
-    win.resize(1280, 800)
-    win.show()
-    qtbot.waitExposed(win)
-    stage = win.show_stage("capture")
-    qtbot.waitUntil(stage.settled, timeout=10_000)
-    yield stage
-    win.shutdown()
-    win.hide()
-    win.deleteLater()
+    yield from capture_stage_on(qtbot, copy_sample_lab(tmp_path / "lab"), tmp_path / "settings.ini")
 
 
 def test_ble_straps_beside_serial_ones(qtbot, stage):

@@ -10,10 +10,10 @@ from pathlib import Path
 import pytest
 from PySide6 import QtCore, QtWidgets
 
-from effortface.app import MainWindow
 from effortface.capture_tool.replay import start_replay_thread
 
 from .test_capture_stage_daily import _choose, _end, _record, _stop, _strap
+from .conftest import capture_stage_on
 from .test_participant_truth import copy_sample_lab
 
 pytestmark = pytest.mark.qt_log_ignore("This plugin does not support propagateSizeHints")
@@ -26,19 +26,7 @@ def size(request) -> tuple[int, int]:
 
 @pytest.fixture
 def stage(qtbot, tmp_path: Path, size: tuple[int, int]):
-    settings = QtCore.QSettings(str(tmp_path / "settings.ini"), QtCore.QSettings.Format.IniFormat)
-    win = MainWindow(copy_sample_lab(tmp_path / "lab"), settings)
-    win.resize(*size)
-    win.show()
-    qtbot.waitExposed(win)
-    stage = win.show_stage("capture")
-    qtbot.waitUntil(stage.settled, timeout=10_000)
-    yield stage
-    if stage.session.recording:
-        stage.stop_now()
-    win.shutdown()
-    win.hide()
-    win.deleteLater()
+    yield from capture_stage_on(qtbot, copy_sample_lab(tmp_path / "lab"), tmp_path / "settings.ini", size)
 
 
 def _in_sight(widget: QtWidgets.QWidget) -> bool:

@@ -11,11 +11,11 @@ from pathlib import Path
 import pytest
 from PySide6 import QtCore, QtWidgets
 
-from effortface.app import MainWindow
 from effortface.capture_tool.participants import REGISTRY_TSV, read_history, read_registry
 from effortface.core.session.folder import Participant
 
 from .test_capture_stage_daily import _choose, _end, _record, _stop, _strap
+from .conftest import capture_stage_on
 from .test_participant_truth import LAB_P01, copy_sample_lab
 from effortface.capture_tool.replay import start_replay_thread
 
@@ -29,19 +29,7 @@ def lab(tmp_path: Path) -> Path:
 
 @pytest.fixture
 def stage(qtbot, tmp_path: Path, lab: Path):
-    settings = QtCore.QSettings(str(tmp_path / "settings.ini"), QtCore.QSettings.Format.IniFormat)
-    win = MainWindow(lab, settings)
-    win.resize(1280, 800)
-    win.show()
-    qtbot.waitExposed(win)
-    stage = win.show_stage("capture")
-    qtbot.waitUntil(stage.settled, timeout=10_000)
-    yield stage
-    if stage.session.recording:
-        stage.stop_now()
-    win.shutdown()
-    win.hide()
-    win.deleteLater()
+    yield from capture_stage_on(qtbot, lab, tmp_path / "settings.ini")
 
 
 def type_wrong_p01(stage) -> None:
