@@ -163,10 +163,8 @@ def _only_user_errors(read: Callable[[], object]) -> None:
 
 
 @pytest.fixture(scope="module")
-def workdir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def workdir(tmp_path_factory: pytest.TempPathFactory, make_bundle) -> Path:
     """A session copy and a model folder that each example rewrites one file of."""
-    from tests.synth.test_bundle import make_bundle
-
     root = tmp_path_factory.mktemp("fuzz")
     shutil.copytree(SESSION, root / "s", ignore=shutil.ignore_patterns("video.avi", "serial"))
     (root / "s" / "serial").mkdir()

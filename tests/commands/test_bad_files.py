@@ -31,7 +31,6 @@ from effortface.synth.work import write_work
 from effortface.synth.work import WorkError, read_motion_index
 from effortface.synth.physiology import PhysiologyParams
 from effortface.synth.runtime import Character
-from tests.synth.test_bundle import make_bundle
 
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLES = ROOT / "sample_sessions"
@@ -185,7 +184,7 @@ def test_check_session_accepts_every_sample_session() -> None:
         assert check_session(folder).frame_times_s
 
 
-def test_train_cli_refuses_a_corrupt_session_in_one_line(session: Path, tmp_path: Path, capsys) -> None:
+def test_train_cli_refuses_a_corrupt_session_in_one_line(session: Path, tmp_path: Path, capsys, make_bundle) -> None:
     _swap_frame_times(session)
     assert main(["train", str(session), "--out", str(tmp_path / "m"), "--max-rows", "20"]) == 2
     _one_line(capsys, "train", r"video_frames.csv: t_s decreases 1 times")
@@ -292,7 +291,7 @@ MODELS = {
 
 
 @pytest.mark.parametrize(("message", "corrupt"), MODELS.items(), ids=list(MODELS))
-def test_bad_models_are_one_line(tmp_path: Path, message: str, corrupt) -> None:
+def test_bad_models_are_one_line(tmp_path: Path, message: str, corrupt, make_bundle) -> None:
     folder = write_bundle(make_bundle(), tmp_path / "m")
     corrupt(folder)
     with pytest.raises(BundleFormatError, match=message) as info:
@@ -300,7 +299,7 @@ def test_bad_models_are_one_line(tmp_path: Path, message: str, corrupt) -> None:
     assert "\n" not in str(info.value)
 
 
-def test_npz_content_over_the_limit(tmp_path: Path, monkeypatch) -> None:
+def test_npz_content_over_the_limit(tmp_path: Path, monkeypatch, make_bundle) -> None:
     folder = write_bundle(make_bundle(), tmp_path / "m")
     monkeypatch.setattr(npzio, "MAX_NPZ_BYTES", 1000)
     with pytest.raises(BundleFormatError, match=r"svr.npz: expected at most 1000 bytes of arrays"):
@@ -330,7 +329,7 @@ def test_absurd_character_options_are_refused_before_nan(shared_data: Path, tmp_
     assert not out.exists()
 
 
-def test_synth_force_never_overwrites_its_inputs(shared_data: Path, tmp_path: Path, capsys) -> None:
+def test_synth_force_never_overwrites_its_inputs(shared_data: Path, tmp_path: Path, capsys, make_bundle) -> None:
     clip = tmp_path / "clip.bvh"
     shutil.copy(shared_data / JJ, clip)
     before = clip.read_bytes()
@@ -349,10 +348,8 @@ def test_synth_force_never_overwrites_its_inputs(shared_data: Path, tmp_path: Pa
     assert (model / "model.json").read_bytes() == model_json
 
 
-def test_train_force_never_deletes_blendshapes_or_linked_sessions(tmp_path: Path, capsys) -> None:
+def test_train_force_never_deletes_blendshapes_or_linked_sessions(tmp_path: Path, capsys, make_bundle, make_session) -> None:
     from effortface.train.dataset import synthetic_table
-    from tests.train.test_dataset import make_session
-
     table = synthetic_table(n_participants=3, seconds=120, seed=5)
     model = write_bundle(make_bundle(), tmp_path / "model")  # an existing model: --force may replace it
     shapes = model / "shapes.json"

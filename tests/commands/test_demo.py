@@ -22,9 +22,7 @@ def lab() -> Path:
 
 
 @pytest.mark.slow
-def test_demo_runs_the_whole_pipeline(lab, tmp_path, capsys, monkeypatch):
-    from tests.train.test_one_training_run import spy_on_jobs
-
+def test_demo_runs_the_whole_pipeline(lab, tmp_path, capsys, monkeypatch, spy_on_jobs):
     calls = spy_on_jobs(monkeypatch)  # the demo trains, exports, evaluates and writes as the CLI and GUI do
     out = tmp_path / "demo"
     assert main(["demo", "--out", str(out), "--capture-seconds", "4", "--max-rows", "60"]) == 0

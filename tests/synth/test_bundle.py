@@ -7,35 +7,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from sklearn.preprocessing import StandardScaler
-from sklearn.svm import SVR
 
 from effortface.core.blendshapes import DEFAULT_SET
 from effortface.core.errors import UserError
-from effortface.synth.bundle import BundleFormatError, ModelBundle, read_bundle, write_bundle
-from effortface.synth.face import DEFAULT_FILTER_TAU_S, SvrModel
+from effortface.synth.bundle import BundleFormatError, read_bundle, write_bundle
+from effortface.synth.face import DEFAULT_FILTER_TAU_S
 from effortface.synth.physiology import NhrParams, NhrRegression
 
 
-def make_bundle(seed: int = 0, n: int = 200) -> ModelBundle:
-    """A bundle from real scikit-learn fits on random data (also used by the runtime tests)."""
-    rng = np.random.default_rng(seed)
-    x = np.column_stack([rng.uniform(0, 25, n), rng.uniform(0, 40, n), rng.uniform(0, 1, n),
-                         rng.uniform(0, 1, n)])
-    scaler = StandardScaler().fit(x)
-    z = scaler.transform(x)
-    svrs = [SVR(C=10.0, gamma=0.5, epsilon=0.05).fit(z, np.clip(z @ rng.normal(size=4) / 4 + 0.5,
-                                                                0, 1)) for _ in DEFAULT_SET.names]
-    model = SvrModel.from_estimators(svrs, scaler.mean_, scaler.scale_)
-    return ModelBundle(
-        blendshapes=DEFAULT_SET, scaler_mean=scaler.mean_, scaler_scale=scaler.scale_,
-        nhr_coefficients=NhrParams(8.0, 0.004, 0.001), nhr_regression=NhrRegression(),
-        svr_hyperparameters=[{"C": 10.0, "gamma": 0.5, "epsilon": 0.05} for _ in svrs],
-        support_vectors=model.support_vectors, dual_coef=model.dual_coef,
-        intercept=model.intercept, metrics={"r_mean": 0.8}, provenance={"data": "random"})
 
 
-def test_round_trip(tmp_path: Path) -> None:
+def test_round_trip(tmp_path: Path, make_bundle) -> None:
     bundle = make_bundle()
     write_bundle(bundle, tmp_path / "m")
     back = read_bundle(tmp_path / "m")
@@ -52,7 +34,7 @@ def test_round_trip(tmp_path: Path) -> None:
     assert doc["svr"][0]["gamma"] == 0.5
 
 
-def test_refuses_to_overwrite_but_tolerates_extra_files(tmp_path: Path) -> None:
+def test_refuses_to_overwrite_but_tolerates_extra_files(tmp_path: Path, make_bundle) -> None:
     folder = write_bundle(make_bundle(), tmp_path / "m")
     (folder / "face.onnx").write_bytes(b"onnx")
     (folder / "MODEL_CARD.md").write_text("# card\n")
@@ -163,7 +145,7 @@ BAD = {
 }
 
 
-def test_output_filter_round_trip_and_old_bundles_get_the_default(tmp_path: Path) -> None:
+def test_output_filter_round_trip_and_old_bundles_get_the_default(tmp_path: Path, make_bundle) -> None:
     bundle = make_bundle()
     bundle.filter_tau_s = (0.1, 0.2, 0.0, 0.3)
     folder = write_bundle(bundle, tmp_path / "m")
@@ -175,7 +157,7 @@ def test_output_filter_round_trip_and_old_bundles_get_the_default(tmp_path: Path
 
 
 @pytest.mark.parametrize(("message", "corrupt"), BAD.items(), ids=list(BAD))
-def test_bad_bundles_name_file_and_field(tmp_path: Path, message: str, corrupt) -> None:
+def test_bad_bundles_name_file_and_field(tmp_path: Path, message: str, corrupt, make_bundle) -> None:
     folder = write_bundle(make_bundle(), tmp_path / "m")
     corrupt(folder)
     with pytest.raises(BundleFormatError, match=message) as info:

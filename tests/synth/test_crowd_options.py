@@ -17,7 +17,6 @@ from effortface.synth.face import (SINGLE_PRECISION_ERROR_PER_ALPHA, SURROGATE_M
 from effortface.synth.motion import Motion, read_motion
 from effortface.synth.physiology import NhrParams, NhrRegression
 from effortface.synth.runtime import Character, FaceModel, load_model
-from tests.synth.test_bundle import make_bundle
 from tests.synth.test_face import _fit_random
 
 JJ = "motion/cmu_13_29_jumping_jacks_120fps.bvh"
@@ -107,7 +106,7 @@ def test_surrogate_gives_the_exact_model_outside_its_range(big_svr: SvrModel) ->
     assert abs(got[2] - big_svr.predict(x[2:])[0]).max() <= SURROGATE_MAX_ERROR  # inside: close
 
 
-def test_small_models_keep_their_exact_face(tmp_path: Path, shared_data: Path) -> None:
+def test_small_models_keep_their_exact_face(tmp_path: Path, shared_data: Path, make_bundle) -> None:
     """200 support vectors per blendshape: no surrogate would be much cheaper, so none is made and
     the surrogate option changes nothing."""
     model = load_model(write_bundle(make_bundle(), tmp_path / "m"))

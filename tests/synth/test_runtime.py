@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 from effortface.core.errors import UserError
-from tests.synth.test_bundle import make_bundle
 from effortface.synth.bundle import write_bundle
 from effortface.synth.motion import motion_from_positions, read_motion
 from effortface.synth.face import DEFAULT_FILTER_TAU_S, WeightFilter, filter_weights, jitter
@@ -101,7 +100,7 @@ def _stream_curves(model, character, motion, causal_rotations: bool) -> dict[str
 
 
 @pytest.mark.parametrize("model_name", ["default", "bundle"])
-def test_streaming_equals_whole_clip(jumping_jacks, tmp_path: Path, model_name: str) -> None:
+def test_streaming_equals_whole_clip(jumping_jacks, tmp_path: Path, model_name: str, make_bundle) -> None:
     path = "default" if model_name == "default" else write_bundle(make_bundle(), tmp_path / "m")
     model = load_model(path)
     hero = Character(training_level=2, expressiveness=(1, 0.8, 1.2, 1))
@@ -112,7 +111,7 @@ def test_streaming_equals_whole_clip(jumping_jacks, tmp_path: Path, model_name: 
         np.testing.assert_allclose(streamed[key], whole[key], rtol=1e-9, atol=1e-9, err_msg=key)
 
 
-def test_crowd_equals_single_streams(jumping_jacks, tmp_path: Path) -> None:
+def test_crowd_equals_single_streams(jumping_jacks, tmp_path: Path, make_bundle) -> None:
     model = load_model(write_bundle(make_bundle(), tmp_path / "m"))
     crowd_chars = [Character(training_level=tl, mass_kg=m, expressiveness=(1, 1, e, 1))
                    for tl, m, e in [(0, 60, 1), (5, 80, 0.5), (10, 100, 1.5)]]
@@ -131,7 +130,7 @@ def test_crowd_equals_single_streams(jumping_jacks, tmp_path: Path) -> None:
         crowd.step(frames[:2], 1 / 120)
 
 
-def test_bundle_model_uses_its_svr(jumping_jacks, tmp_path: Path) -> None:
+def test_bundle_model_uses_its_svr(jumping_jacks, tmp_path: Path, make_bundle) -> None:
     bundle = make_bundle(3)
     model = load_model(write_bundle(bundle, tmp_path / "m"))
     curves = model.synthesize(jumping_jacks, Character(), filter_tau_s=0)
@@ -146,7 +145,7 @@ def test_bundle_model_uses_its_svr(jumping_jacks, tmp_path: Path) -> None:
                                atol=1e-10)
 
 
-def test_output_filter_removes_the_jump_rhythm(jumping_jacks, tmp_path: Path) -> None:
+def test_output_filter_removes_the_jump_rhythm(jumping_jacks, tmp_path: Path, make_bundle) -> None:
     """Jumping jacks through an SVR bundle: the filter cuts the jitter (median largest frame-to-frame
     step of any weight) at least 3x and keeps the mean face within 0.03 once effort has built up."""
     model = load_model(write_bundle(make_bundle(), tmp_path / "m"))

@@ -21,7 +21,6 @@ from effortface.synth.face import WeightFilter, filter_weights
 from effortface.synth.motion import read_bvh, read_motion, read_motion_blocks
 from effortface.synth.physiology import PhysiologyParams, PhysiologyState, simulate
 from effortface.synth.runtime import Character, load_model
-from tests.synth.test_bundle import make_bundle
 
 JJ = "motion/cmu_13_29_jumping_jacks_120fps.bvh"
 CSV_POSITIONS = "positions.csv"
@@ -70,7 +69,7 @@ def test_pieces_give_the_whole_clip_curves(long_clip: Path, monkeypatch: pytest.
     assert np.max(whole["w_per_kg"]) > 5  # a real workout, not zeros
 
 
-def test_pieces_with_an_svr_bundle_and_positions_only(shared_data: Path, tmp_path: Path) -> None:
+def test_pieces_with_an_svr_bundle_and_positions_only(shared_data: Path, tmp_path: Path, make_bundle) -> None:
     """A bundle's SVR face, its output filter, and a clip of joint positions without rotations."""
     model = load_model(write_bundle(make_bundle(), tmp_path / "model"))
     motion = read_motion(shared_data / JJ)

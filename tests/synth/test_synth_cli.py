@@ -13,7 +13,6 @@ import numpy as np
 import pytest
 
 from effortface.cli import main
-from tests.synth.test_bundle import make_bundle
 from effortface.synth.bundle import write_bundle
 from effortface.synth.curves_io import LIVELINK_BLENDSHAPES, livelink_timecode
 from effortface.synth.face import jitter
@@ -54,7 +53,7 @@ def test_synth_default_model_end_to_end(shared_data: Path, tmp_path: Path) -> No
     assert max(float(r["eye_squint"]) for r in rows) > 0.3
 
 
-def test_synth_character_options_and_bundle(shared_data: Path, tmp_path: Path) -> None:
+def test_synth_character_options_and_bundle(shared_data: Path, tmp_path: Path, make_bundle) -> None:
     model_dir = write_bundle(make_bundle(), tmp_path / "model")
     plain, loaded = tmp_path / "plain.csv", tmp_path / "loaded.csv"
     common = ["synth", str(model_dir), str(shared_data / JJ), "--age", "45", "--sex", "female",
@@ -335,7 +334,7 @@ def test_audit_bad_inputs_are_one_line_exit_2(shared_data: Path, tmp_path: Path,
 
 
 @pytest.mark.parametrize("arkit", [None, 3, ["jawOpen"]], ids=["null", "number", "list"])
-def test_livelink_bad_arkit_entry_is_one_line(shared_data: Path, tmp_path: Path, capsys, arkit) -> None:
+def test_livelink_bad_arkit_entry_is_one_line(shared_data: Path, tmp_path: Path, capsys, arkit, make_bundle) -> None:
     """An arkit entry that is not a string loaded fine, then crashed --format livelink."""
     import json
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import datetime as dt
 import gc
 import json
 import tracemalloc
@@ -13,54 +12,11 @@ import pandas as pd
 import pytest
 
 from effortface.core.blendshapes import DEFAULT_SET
-from effortface.annotate.keyframes import KeyframeTrack, RaterAnnotations
+from effortface.annotate.keyframes import KeyframeTrack
 from effortface.core.errors import UserError
-from effortface.capture_tool.protocols import HrSample
-from effortface.core.session.folder import (FrameTimeWriter, HrWriter, Participant, SessionInfo, create_session,
-                                  make_session_id)
 from effortface.train.dataset import (TABLE_COLUMNS, DatasetError, hr_series, prepare, read_table,
                            session_table, sessions_table, synthetic_table, write_table)
 from effortface.synth.physiology import hr_max_bpm, hr_rest_bpm
-
-FPS = 10.0
-
-
-def make_session(root: Path, rows: pd.DataFrame, *, raters: dict[str, float] | None = None,
-                 participant: dict | None = None, hr: bool = True) -> Path:
-    """Write one session folder from one session's synthetic rows (work.csv, strap, video times,
-    one annotation file per rater with key-frames every 5 s; a rater's value offsets the weights)."""
-    first = rows.iloc[0]
-    part = participant or {k: first[k] for k in ("sex", "age", "height_m", "mass_kg", "training_level")}
-    code = str(first["participant"])
-    stamp = dt.datetime(2026, 1, 1, 10, 0, 0) + dt.timedelta(minutes=len(list(root.glob("*"))))
-    info = SessionInfo(make_session_id(code, stamp, str(first["exercise"])),
-                       Participant(code, **{k: (float(v) if k != "sex" else v) for k, v in part.items()}),
-                       complete=True)
-    folder = create_session(root, info)
-    t = rows["t_s"].to_numpy(float)
-    pd.DataFrame({"t_s": t, "w_per_kg": rows["w_per_kg"], "p_per_kg": rows["p_per_kg"]}).to_csv(
-        folder / "work.csv", index=False)
-    writer = HrWriter(folder / "heart_rate.csv")
-    for ti, h in zip(t, rows["hr_bpm"]):
-        if hr:
-            writer.write(HrSample(t_s=float(ti) + 0.3, hr_bpm=float(round(h, 1)), device="sim"))
-    writer.close()
-    frames = FrameTimeWriter(folder / "video_frames.csv")
-    frame_t = np.arange(0, t[-1] + 1, 1 / FPS)
-    for i, ft in enumerate(frame_t):
-        frames.write(i, float(ft))
-    frames.close()
-    for rater, offset in (raters or {"R1": 0.0}).items():
-        tracks = {}
-        for name in DEFAULT_SET.names:
-            track = KeyframeTrack()
-            for ti in t[::5]:
-                w = float(np.clip(rows.loc[rows["t_s"] == ti, name].iloc[0] + offset, 0, 1))
-                track.add(int(round(ti * FPS)), w, "linear")
-            tracks[name] = track
-        RaterAnnotations(rater, info.session_id, DEFAULT_SET, tracks).save(
-            folder / "annotations" / f"{rater}.json")
-    return folder
 
 
 @pytest.fixture(scope="module")
@@ -69,7 +25,7 @@ def table() -> pd.DataFrame:
 
 
 @pytest.fixture
-def lab(tmp_path: Path, table: pd.DataFrame) -> Path:
+def lab(tmp_path: Path, table: pd.DataFrame, make_session) -> Path:
     for _, rows in table.groupby("session"):
         make_session(tmp_path, rows.reset_index(drop=True), raters={"R1": 0.0, "R2": 0.1})
     return tmp_path

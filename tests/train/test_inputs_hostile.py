@@ -53,10 +53,8 @@ def test_absurd_session_numbers_are_refused_naming_the_field(tmp_path, capsys, e
     assert message in capsys.readouterr().err
 
 
-def test_an_svr_npz_linked_to_a_text_file_is_not_called_pickled(tmp_path) -> None:
+def test_an_svr_npz_linked_to_a_text_file_is_not_called_pickled(tmp_path, make_bundle) -> None:
     from effortface.synth.bundle import read_bundle, write_bundle
-    from tests.synth.test_bundle import make_bundle
-
     model = write_bundle(make_bundle(), tmp_path / "model")
     (tmp_path / "notes.txt").write_text("not arrays\n")
     (model / "svr.npz").unlink()

@@ -13,13 +13,9 @@ tests/commands/test_demo.py (:func:`spy_on_jobs`).
 
 from __future__ import annotations
 
-import importlib
 import json
-import sys
-from collections.abc import Callable
 from pathlib import Path
 from types import SimpleNamespace
-from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -28,40 +24,11 @@ import pytest
 from effortface.cli import main
 from effortface.train.dataset import synthetic_table, write_table
 
-#: module -> the one function of a job
-JOBS = {"train_models": "effortface.train.pipeline", "export_outcome": "effortface.train.pipeline",
-        "evaluate_bundle": "effortface.train.evaluation", "write_curve_chunks": "effortface.synth.curves_io"}
-#: the callers: the command modules and the GUI models (imported before the spies go in)
-CALLERS = ("effortface.train.commands.train", "effortface.train.commands.evaluate",
-           "effortface.synth.commands.synth", "effortface.commands.demo",
-           "effortface.train.train_session", "effortface.synth.synth_session")
 CLIP = "motion/cmu_13_29_jumping_jacks_120fps.bvh"
 
 
-def _spy(original: Callable[..., Any], name: str, calls: dict[str, int]) -> Callable[..., Any]:
-    def spy(*args: Any, **kwargs: Any) -> Any:
-        calls[name] += 1
-        return original(*args, **kwargs)
-    return spy
 
 
-def spy_on_jobs(monkeypatch: pytest.MonkeyPatch) -> dict[str, int]:
-    """Count the calls of each job's function (the real function still runs); returns the counts.
-
-    The spy replaces the function in its own module and in every loaded ``effortface`` module that
-    imported it by name, so a caller is counted whichever import form it uses.
-    """
-    for name in CALLERS:
-        importlib.import_module(name)
-    calls = dict.fromkeys(JOBS, 0)
-    for name, owner in JOBS.items():
-        original = getattr(importlib.import_module(owner), name)
-        spy = _spy(original, name, calls)
-        for module in [m for k, m in sys.modules.items() if k.startswith("effortface") and m is not None]:
-            for attr, value in list(vars(module).items()):
-                if value is original:
-                    monkeypatch.setattr(module, attr, spy)
-    return calls
 
 
 @pytest.fixture(scope="module")
@@ -71,7 +38,7 @@ def table_csv(tmp_path_factory) -> Path:
 
 
 def test_cli_and_train_stage_run_the_same_training_and_export(table_csv: Path, tmp_path: Path,
-                                                             monkeypatch: pytest.MonkeyPatch) -> None:
+                                                             monkeypatch: pytest.MonkeyPatch, spy_on_jobs) -> None:
     from effortface.train.train_session import TrainSession
 
     calls = spy_on_jobs(monkeypatch)
@@ -101,7 +68,7 @@ def test_cli_and_train_stage_run_the_same_training_and_export(table_csv: Path, t
 
 
 def test_synth_cli_and_synthesize_stage_write_with_the_same_writer(shared_data: Path, tmp_path: Path,
-                                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+                                                                  monkeypatch: pytest.MonkeyPatch, spy_on_jobs) -> None:
     from effortface.synth.synth_session import SynthSession
 
     calls = spy_on_jobs(monkeypatch)

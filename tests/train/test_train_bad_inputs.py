@@ -11,7 +11,6 @@ import pandas as pd
 import pytest
 
 from effortface.cli import main
-from tests.train.test_dataset import make_session
 from effortface.train.dataset import synthetic_table, write_table
 
 
@@ -35,7 +34,7 @@ def _train(args: list[str]) -> int:
 # --------------------------------------------------------------------------- item 1: --out --force
 
 
-def test_force_refuses_the_input_sessions_folder(table, tmp_path, capsys):
+def test_force_refuses_the_input_sessions_folder(table, tmp_path, capsys, make_session):
     lab = tmp_path / "lab"
     for _, rows in table.groupby("session"):
         make_session(lab, rows.reset_index(drop=True))
@@ -71,7 +70,7 @@ def test_force_refuses_the_current_directory(table, tmp_path, capsys, monkeypatc
     assert (work / "keep.txt").read_text() == "x"
 
 
-def test_force_refuses_other_files_and_folders(table, tmp_path, capsys):
+def test_force_refuses_other_files_and_folders(table, tmp_path, capsys, make_session):
     csv = write_table(table, tmp_path / "t.csv")
     other = tmp_path / "other.txt"
     other.write_text("keep")
@@ -168,7 +167,7 @@ def test_bad_table_exit_2_with_one_line_before_any_progress(case, table, tmp_pat
     assert not (tmp_path / "model").exists()
 
 
-def test_session_without_mass_names_the_session(table, tmp_path, capsys):
+def test_session_without_mass_names_the_session(table, tmp_path, capsys, make_session):
     for i, (_, rows) in enumerate(table.groupby("session")):
         part = None
         if i == 1:

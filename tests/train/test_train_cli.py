@@ -6,13 +6,13 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import pandas as pd
 import pytest
 
 from effortface.cli import main
-from tests.train.test_dataset import make_session
 from effortface.train.dataset import synthetic_table, write_table
 
 
@@ -87,7 +87,7 @@ def test_report_and_card_lead_with_the_score_as_a_game_uses_it(trained):
     assert card.index("as a game uses it") < card.index("| blendshape | model |")
 
 
-def test_train_from_sessions(table, tmp_path, capsys):
+def test_train_from_sessions(table, tmp_path, capsys, make_session):
     for _, rows in table.groupby("session"):
         make_session(tmp_path / "lab", rows.reset_index(drop=True), raters={"R1": 0.0, "R2": 0.05})
     out = tmp_path / "model"
@@ -97,7 +97,7 @@ def test_train_from_sessions(table, tmp_path, capsys):
     assert json.loads((out / "model.json").read_text())["provenance"]["rater_policy"] == "R2"
 
 
-def _sessions(table: pd.DataFrame, root: Path, spoil: str) -> list[str]:
+def _sessions(make_session: Callable[..., Path], table: pd.DataFrame, root: Path, spoil: str) -> list[str]:
     for i, (_, rows) in enumerate(table.groupby("session")):
         kw = {}
         if spoil == "no_hr" and i == 0:
@@ -124,27 +124,27 @@ def _csv(t: pd.DataFrame, path: Path) -> str:
 
 BAD = {
     "table missing a column": (
-        lambda t, d: ["--table", _csv(t.drop(columns=["p_per_kg"]), d / "bad.csv")],
+        lambda t, d, make: ["--table", _csv(t.drop(columns=["p_per_kg"]), d / "bad.csv")],
         r"bad.csv: expected columns p_per_kg"),
     "session without heart rate": (
-        lambda t, d: _sessions(t, d / "lab", "no_hr"), r"heart_rate.csv: expected valid heart-rate samples, found 0"),
+        lambda t, d, make: _sessions(make, t, d / "lab", "no_hr"), r"heart_rate.csv: expected valid heart-rate samples, found 0"),
     "unannotated session": (
-        lambda t, d: _sessions(t, d / "lab", "unannotated"), r"P01_\S+: expected key-framed annotations"),
+        lambda t, d, make: _sessions(make, t, d / "lab", "unannotated"), r"P01_\S+: expected key-framed annotations"),
     "contradictory participant": (
-        lambda t, d: _sessions(t, d / "lab", "contradictory"), r"participant P01: expected one sex"),
+        lambda t, d, make: _sessions(make, t, d / "lab", "contradictory"), r"participant P01: expected one sex"),
     "existing --out without --force": (
-        lambda t, d: ["--table", str(write_table(t, d / "ok.csv")), "--out", str(_existing(d / "old"))],
+        lambda t, d, make: ["--table", str(write_table(t, d / "ok.csv")), "--out", str(_existing(d / "old"))],
         r"--out \S+: expected a new model folder, found an existing one \(pass --force"),
-    "neither sessions nor table": (lambda t, d: [], r"expected session folders or --table CSV .*found neither"),
+    "neither sessions nor table": (lambda t, d, make: [], r"expected session folders or --table CSV .*found neither"),
     "unknown rater": (
-        lambda t, d: _sessions(t, d / "lab", "") + ["--rater-policy", "R7"], r"expected rater 'R7'"),
+        lambda t, d, make: _sessions(make, t, d / "lab", "") + ["--rater-policy", "R7"], r"expected rater 'R7'"),
 }
 
 
 @pytest.mark.parametrize("case", list(BAD))
-def test_bad_inputs_exit_2_with_one_line(case, table, tmp_path, capsys):
+def test_bad_inputs_exit_2_with_one_line(case, table, tmp_path, capsys, make_session):
     build, message = BAD[case]
-    args = build(table.copy(), tmp_path)
+    args = build(table.copy(), tmp_path, make_session)
     if "--out" not in args:
         args += ["--out", str(tmp_path / "model")]
     assert main(["train", *args, "--max-rows", "40"]) == 2
