@@ -184,6 +184,25 @@ def test_phone_app_clocks(tmp_path):
     assert sum(not r.valid for r in rows) == 73 and all(r.hr_bpm is None for r in rows if not r.valid)
 
 
+def test_hrv_logger_dates(tmp_path):
+    """HRV Logger's iOS R-R export (``date, rr, since start``, dates to the second with ``+0000``, several
+    beats in one second, old Mac line ends): made here in that layout from the real R-R of
+    wearablehrv-rhythm_RR.csv, since the HRV Logger files found in public repositories carry no licence."""
+    src = [line.split(",") for line in (DATA / "wearablehrv-rhythm_RR.csv").read_text().splitlines()[2:]]
+    t0 = dt.datetime(2016, 9, 22, 20, 42, 20, tzinfo=dt.timezone.utc)
+    lines = ["date, rr, since_start, window, lap"]
+    for ts, rr, _ in src:
+        when = t0 + dt.timedelta(milliseconds=int(ts) - int(src[0][0]))
+        lines.append(f"{when:%Y-%m-%d %H:%M:%S +0000}, {int(rr)}.000000, {int(ts) - int(src[0][0])}.000000, 1, 0")
+    (tmp_path / "rr.csv").write_text("\r".join(lines) + "\r")
+    (folder,) = _import(tmp_path, tmp_path / "rr.csv")
+    rows = read_session(folder).heart_rate
+    assert len(rows) == len(src) and [r.rr_ms for r in rows] == [(float(rr),) for _, rr, _ in src]
+    assert rows[-1].t_s == (int(src[-1][0]) - int(src[0][0])) // 1000    # whole seconds, as the dates say
+    info = json.loads((folder / "session.json").read_text())["import"]
+    assert (info["start_time"], info["start_time_zone"]) == ("2016-09-22T20:42:20.000Z", "UTC")
+
+
 def _refused(capsys, tmp_path: Path, *argv: str) -> str:
     out = tmp_path / "lab"
     code = main(["import", "hr", *argv, "--out", str(out), "--participant", "P01", *BODY])
