@@ -1,9 +1,11 @@
 """``effortface import hr`` (issue 35, Must show): every real heart-rate file in tests/data/hr/ (FIT
 from Garmin Fenix 2/5, Suunto Spartan, Wahoo ELEMNT; TCX from a Garmin Edge 705 and Forerunner 405;
 GPX from a Garmin Oregon 450; Polar HRM from an S610, an S725 and an S810 in R-R mode; PWX from a
-Timex Global Trainer; Polar Sensor Logger HR and R-R tables) imports through the CLI to a session
-whose median bpm equals an independent parse of the file (another library or another traversal)
-within 1 bpm and whose time span is the file's. Bad input is one line, exit 2, nothing written."""
+Timex Global Trainer; phone-app tables: Polar Sensor Logger's HR export from a Verity Sense, an HRV
+Logger R-R export, and Polar Sensor Logger HR and R-R layouts filled with real R-R) imports through
+the CLI to a session whose median bpm equals an independent parse of the file (another library or
+another traversal) within 1 bpm and whose time span is the file's. Bad input is one line, exit 2,
+nothing written."""
 
 from __future__ import annotations
 
@@ -91,12 +93,21 @@ def lines_hrm(path: Path) -> tuple[list[float], list[float], int]:
 
 
 def dictreader_table(path: Path) -> tuple[list[float], list[float], int]:
+    """Polar Sensor Logger: ``Phone timestamp;HR [bpm]...`` (0 bpm: no skin contact) or ``...;RR-interval [ms]``."""
     with open(path, newline="", encoding="utf-8") as fh:
         rows = list(csv.DictReader(fh, delimiter=";"))
-    times = [_iso(r["Phone timestamp"]) for r in rows]
     if "HR [bpm]" in rows[0]:
-        return times, [float(r["HR [bpm]"]) for r in rows], 0
+        kept = [(_iso(r["Phone timestamp"]), float(r["HR [bpm]"])) for r in rows if float(r["HR [bpm]"]) > 0]
+        return [t for t, _ in kept], [h for _, h in kept], 0
+    times = [_iso(r["Phone timestamp"]) for r in rows]
     return times, [60000 / float(r["RR-interval [ms]"]) for r in rows], len(rows)
+
+
+def hrv_logger_table(path: Path) -> tuple[list[float], list[float], int]:
+    """HRV Logger's R-R export: ``timestamp, rr, since_start`` (Unix ms, ms, ms), one beat a row."""
+    with open(path, newline="", encoding="utf-8") as fh:
+        rows = [r for r in csv.DictReader(fh, skipinitialspace=True) if r["timestamp"]]
+    return [int(r["timestamp"]) / 1000 for r in rows], [60000 / int(r["rr"]) for r in rows], len(rows)
 
 
 #: file -> (independent parse, kind, device named in session.json, producer it contains, R-R kept)
@@ -114,6 +125,9 @@ SAMPLES = {
     "timex-global-trainer.pwx": (dom_pwx, "pwx", "Timex Global Trainer", "winDeviceAgent", False),
     "polar-h10-sensor-logger_HR.txt": (dictreader_table, "csv", "polar-h10-sensor-logger_HR", "", False),
     "polar-h10-sensor-logger_RR.txt": (dictreader_table, "csv", "polar-h10-sensor-logger_RR", "", True),
+    "polar-verity-sense-sensor-logger_HR.txt": (dictreader_table, "csv", "polar-verity-sense-sensor-logger_HR", "",
+                                                False),
+    "wearablehrv-rhythm_RR.csv": (hrv_logger_table, "csv", "wearablehrv-rhythm_RR", "", True),
 }
 
 
@@ -155,6 +169,38 @@ def test_start_time_and_registry(tmp_path):
                  "--participant", "P01"]) == 0
     hrm = json.loads((tmp_path / "lab" / "P01_20030413-091656" / "session.json").read_text())
     assert hrm["import"]["start_time_zone"].startswith("unknown") and hrm["participant"]["mass_kg"] == 60
+
+
+def test_phone_app_clocks(tmp_path):
+    """A phone app's time without a zone (Polar Sensor Logger) is the phone's local time, kept without a
+    zone; HRV Logger's Unix milliseconds are UTC. Both name the session folder by the file's start."""
+    psl, hrvl = _import(tmp_path, DATA / "polar-verity-sense-sensor-logger_HR.txt", DATA / "wearablehrv-rhythm_RR.csv")
+    assert psl.name == "P01_20220425-113902" and hrvl.name == "P01_20230630-115817"
+    info = json.loads((psl / "session.json").read_text())["import"]
+    assert (info["start_time"], info["start_time_zone"]) == ("2022-04-25T11:39:02.323", "unknown (device local time)")
+    info = json.loads((hrvl / "session.json").read_text())["import"]
+    assert (info["start_time"], info["start_time_zone"]) == ("2023-06-30T11:58:17.704Z", "UTC")
+    rows = read_session(psl).heart_rate                   # the strap's 0 bpm (no contact): kept, not valid
+    assert sum(not r.valid for r in rows) == 73 and all(r.hr_bpm is None for r in rows if not r.valid)
+
+
+def test_hrv_logger_dates(tmp_path):
+    """HRV Logger's iOS R-R export (``date, rr, since start``, dates to the second with ``+0000``, several
+    beats in one second, old Mac line ends): made here in that layout from the real R-R of
+    wearablehrv-rhythm_RR.csv, since the HRV Logger files found in public repositories carry no licence."""
+    src = [line.split(",") for line in (DATA / "wearablehrv-rhythm_RR.csv").read_text().splitlines()[2:]]
+    t0 = dt.datetime(2016, 9, 22, 20, 42, 20, tzinfo=dt.timezone.utc)
+    lines = ["date, rr, since_start, window, lap"]
+    for ts, rr, _ in src:
+        when = t0 + dt.timedelta(milliseconds=int(ts) - int(src[0][0]))
+        lines.append(f"{when:%Y-%m-%d %H:%M:%S +0000}, {int(rr)}.000000, {int(ts) - int(src[0][0])}.000000, 1, 0")
+    (tmp_path / "rr.csv").write_text("\r".join(lines) + "\r")
+    (folder,) = _import(tmp_path, tmp_path / "rr.csv")
+    rows = read_session(folder).heart_rate
+    assert len(rows) == len(src) and [r.rr_ms for r in rows] == [(float(rr),) for _, rr, _ in src]
+    assert rows[-1].t_s == (int(src[-1][0]) - int(src[0][0])) // 1000    # whole seconds, as the dates say
+    info = json.loads((folder / "session.json").read_text())["import"]
+    assert (info["start_time"], info["start_time_zone"]) == ("2016-09-22T20:42:20.000Z", "UTC")
 
 
 def _refused(capsys, tmp_path: Path, *argv: str) -> str:
@@ -202,6 +248,15 @@ def test_bpm_in_wrong_unit(capsys, tmp_path):
     (tmp_path / "hz.txt").write_text("\n".join(hz) + "\n")
     line = _refused(capsys, tmp_path, str(tmp_path / "hz.txt"))
     assert "hz.txt" in line and "not a bpm series" in line
+
+
+def test_time_in_another_unit(capsys, tmp_path):
+    """Milliseconds from the start in a column read as seconds would make a 23-day session: refused."""
+    rr = [int(line.split(",")[1]) for line in (DATA / "wearablehrv-rhythm_RR.csv").read_text().splitlines()[2:]]
+    elapsed = [sum(rr[:k + 1]) for k in range(len(rr))]
+    (tmp_path / "ms.csv").write_text("time,RR\n" + "".join(f"{t},{r}\n" for t, r in zip(elapsed, rr)))
+    line = _refused(capsys, tmp_path, str(tmp_path / "ms.csv"))
+    assert "ms.csv" in line and "expected a recording of at most 1e+06 s, found 2.55" in line
 
 
 def test_one_bad_file_writes_nothing(capsys, tmp_path):

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from effortface.core.bounds import BOUNDS
 from effortface.core.errors import UserError
 from effortface.core.hr_sample import HrSample
 from effortface.core.physio_limits import IMPORT_HR_BPM, rr_plausible
@@ -77,7 +78,8 @@ class HrRecording:
 def check_series(rec: HrRecording) -> None:
     """HrImportError (one line naming the file) unless ``rec`` is a usable heart-rate series.
 
-    Refused: no samples (laps only, or nothing), a time that is not finite or goes backwards, and
+    Refused: no samples (laps only, or nothing), a time that is not finite or goes backwards, a
+    recording longer than a session may be (``BOUNDS["t_s"]``: a time column in another unit), and
     rates that are mostly outside :data:`IMPORT_HR_BPM` (a column in another unit).
     """
     name = f"{rec.path}: {rec.kind.upper()}"
@@ -95,6 +97,10 @@ def check_series(rec: HrRecording) -> None:
         i = int(back[0]) + 1
         raise HrImportError(f"{name}: expected times that never go backwards, found sample {i} at "
                             f"{t[i] - t[0]:.3f} s after one at {t[i - 1] - t[0]:.3f} s")
+    longest = BOUNDS["t_s"].high
+    if t[-1] - t[0] > longest:
+        raise HrImportError(f"{name}: expected a recording of at most {longest:g} s, found {t[-1] - t[0]:.6g} s "
+                            "from the first sample to the last (a time column in another unit?)")
     rates = np.asarray([h for h in rec.hr_bpm if h is not None and math.isfinite(h) and h > 0], float)
     if rates.size == 0 and not rec.has_rr:
         raise HrImportError(f"{name}: expected heart rates in bpm, found no rate above 0 in {len(t)} samples")

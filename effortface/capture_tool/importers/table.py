@@ -7,6 +7,11 @@ letters and digits only, lower case: the time (``time``, ``timestamp``, ``Phone 
 header says ``[s]`` or the values are all below 3). ``--time-col``, ``--hr-col`` and ``--rr-col``
 name a column when the header is ambiguous. A table of R-R intervals without a time column gets its
 beats' times from the sum of the intervals.
+
+A number in the time column is seconds from the start, unless it is a Unix time: 1e9 to 1e11 is
+epoch seconds, 1e11 to 1e14 epoch milliseconds (HRV Logger's ``timestamp``); the start is then
+absolute, UTC. An ISO 8601 time with a zone (``Z``, ``+02:00``) is absolute; one without (Polar Sensor
+Logger's ``Phone timestamp``) is the phone's local time, its zone unknown.
 """
 
 from __future__ import annotations
@@ -28,6 +33,12 @@ RR_KEYS = frozenset({"rr", "rrms", "rrs", "rrinterval", "rrintervalms", "rrinter
 #: ... and the time
 TIME_KEYS = frozenset({"time", "times", "timestamp", "phonetimestamp", "ts", "t", "datetime", "date",
                        "elapsedtime", "elapsed", "seconds", "secs", "sec"})
+#: a number in the time column from EPOCH_S[0] to EPOCH_S[1] is Unix seconds, from EPOCH_MS[0] to
+#: EPOCH_MS[1] Unix milliseconds (2001-5138); below, seconds from the start (at most 11.6 days)
+EPOCH_S = (1e9, 1e11)
+EPOCH_MS = (1e11, 1e14)
+#: an ISO 8601 time that names its zone
+ZONED = re.compile(r"\d:\d\d(?::\d\d(?:[.,]\d+)?)?\s*(?:[Zz]|[+-]\d\d(?::?\d\d)?)$")
 
 
 def key(text: str) -> str:
@@ -85,7 +96,7 @@ def read_table(path: Path, *, time_col: str | None = None, hr_col: str | None = 
     rec = HrRecording(path, "csv", device=path.stem, producer="")
     rr_to_ms = _rr_factor(header[rr_i], [r[rr_i] for r in rows if rr_i < len(r)]) if rr_i is not None else 1.0
     elapsed = 0.0
-    absolute = None
+    clock = None
     for n, row in enumerate(rows, start=2):
         hr = _number(path, row, hr_i, n, header)
         rr = _number(path, row, rr_i, n, header)
@@ -96,11 +107,12 @@ def read_table(path: Path, *, time_col: str | None = None, hr_col: str | None = 
             elapsed += (rr_ms[0] / 1000.0) if rr_ms else 0.0
             t = elapsed
         else:
-            t, is_abs = _time(path, row, t_i, n, header)
-            absolute = is_abs if absolute is None else absolute
+            t, kind = _time(path, row, t_i, n, header)
+            clock = kind if clock is None else clock
         rec.add(t, hr, rr_ms)
-    if absolute and rec.t_s:
-        rec.start_utc = dt.datetime.fromtimestamp(rec.t_s[0], dt.timezone.utc)
+    if clock in ("utc", "local") and rec.t_s:
+        start = dt.datetime.fromtimestamp(rec.t_s[0], dt.timezone.utc)
+        rec.start_utc = start if clock == "utc" else start.replace(tzinfo=None)
     return rec
 
 
@@ -130,15 +142,21 @@ def _number(path: Path, row: list[str], col: int | None, n: int, header: list[st
     return value if math.isfinite(value) else None
 
 
-def _time(path: Path, row: list[str], col: int, n: int, header: list[str]) -> tuple[float, bool]:
-    """(seconds, absolute?) of a time cell: a number of seconds, or an ISO 8601 date-time."""
+def _time(path: Path, row: list[str], col: int, n: int, header: list[str]) -> tuple[float, str]:
+    """(seconds, clock) of a time cell; clock ``relative`` (seconds from the start), ``utc`` (a Unix time,
+    or an ISO 8601 time with a zone) or ``local`` (an ISO 8601 time without a zone: the phone's own
+    time, taken at face value)."""
     cell = row[col].strip() if col < len(row) else ""
     try:
-        return float(cell), False
+        value = float(cell)
     except ValueError:
         pass
+    else:
+        if EPOCH_MS[0] <= value < EPOCH_MS[1]:
+            return value / 1000.0, "utc"
+        return value, "utc" if EPOCH_S[0] <= value < EPOCH_S[1] else "relative"
     try:
-        return parse_time(cell).timestamp(), True
+        return parse_time(cell).timestamp(), "utc" if ZONED.search(cell) else "local"
     except ValueError:
         raise HrImportError(f"{path}: line {n}: column {header[col]!r}: expected seconds or an ISO 8601 time, "
                             f"found {cell[:40]!r}") from None
