@@ -42,6 +42,11 @@ class WorkError(UserError):
     """A session whose work cannot be derived; the message names the session or file."""
 
 
+class NoWorkSource(WorkError):
+    """A session with nothing to derive work from (no motion/, no exercise phase): not an error in
+    its files, so ``export bids`` states the omission instead of refusing."""
+
+
 @dataclasses.dataclass(frozen=True)
 class WorkTable:
     """w and p per second of one session.
@@ -180,7 +185,8 @@ def derive_work(session: Session | str | os.PathLike, t_s: np.ndarray | None = N
     Raises
     ------
     WorkError
-        If the session has neither a motion/ folder nor a phase in its exercise log, or a phase's
+        If the session has neither a motion/ folder nor a phase in its exercise log (the subclass
+        :class:`NoWorkSource`), or a phase's
         exercise or parameters cannot be estimated (names events.csv, its line and the catalog).
     """
     s = session if isinstance(session, Session) else read_session(session)
@@ -188,7 +194,7 @@ def derive_work(session: Session | str | os.PathLike, t_s: np.ndarray | None = N
     log = exercise_log(s.events, str(s.path / "events.csv"))
     has_motion = (s.path / MOTION_DIR / MOTION_JSON).is_file()
     if not has_motion and not log.phases:
-        raise WorkError(f"{s.path}: expected a motion/ folder (motion.json) or exercise phases "
+        raise NoWorkSource(f"{s.path}: expected a motion/ folder (motion.json) or exercise phases "
                         f"(phase_start rows in events.csv) to derive work, found neither")
     w, p = np.full(len(t), np.nan), np.full(len(t), np.nan)
     source = [""] * len(t)
