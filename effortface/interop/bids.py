@@ -479,7 +479,7 @@ def export_bids(sessions_dir: str | os.PathLike, out_dir: str | os.PathLike, *, 
 #: participants.tsv and sessions.tsv columns -> Participant attributes
 BODY_COLUMNS = {"sex": "sex", "age": "age", "height": "height_m", "weight": "mass_kg",
                 "training_level": "training_level"}
-BODY_SIDECAR = {"sex": {"Description": "sex", "Levels": {"female": "female", "male": "male"}},
+BODY_SIDECAR: dict[str, dict] = {"sex": {"Description": "sex", "Levels": {"female": "female", "male": "male"}},
                 "age": {"Units": "year"}, "height": {"Units": "m"}, "weight": {"Units": "kg"},
                 "training_level": {"Description": "training level, 0 (sedentary) to 10"}}
 
