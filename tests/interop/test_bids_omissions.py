@@ -102,12 +102,14 @@ def test_an_underivable_session_is_refused_unless_skip_invalid(tmp_path):
     events = lab / STRENGTH / "events.csv"
     text = events.read_text()
     exercise = next(r["label"] for r in csv.DictReader(text.splitlines()) if r["kind"] == "phase_start")
-    events.write_text(text.replace(f",phase_start,{exercise},", ",phase_start,underwater_basket_weaving,", 1))
+    for kind in ("phase_start", "phase_end"):
+        text = text.replace(f",{kind},{exercise},", f",{kind},underwater_basket_weaving,", 1)
+    events.write_text(text)
     out = tmp_path / "ds"
     done = _effortface("export", "bids", lab, "--out", out)
     assert done.returncode == 2 and "Traceback" not in done.stderr
     (line,) = done.stderr.strip().splitlines()
-    assert line.startswith(f"effortface export: error: {events}: line ") and "underwater_basket_weaving" in line
+    assert line.startswith(f"effortface export: error: {events}: line 3: ") and "underwater_basket_weaving" in line
     assert line.endswith("(its mechanical work cannot be exported: fix it, or --skip-invalid to export without "
                          "it, stated in the dataset's README)")
     assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) == ["lab"]
