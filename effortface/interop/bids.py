@@ -428,7 +428,8 @@ def export_bids(sessions_dir: str | os.PathLike, out_dir: str | os.PathLike, *, 
     Nothing is left out without a word: a session's work that cannot be derived or read, or a motion
     clip that cannot be read, is refused (one line naming the file and ``--skip-invalid``) unless
     ``notes.skip_invalid``; what is left out (that, and a session with nothing to derive work from or
-    without heart rate) is listed in ``notes.omitted`` and in the dataset's README. Each participant's
+    without heart rate) is listed in ``notes.omitted`` and in the dataset's README (its files named
+    from ``sessions_dir``). Each participant's
     record per session is kept in ``sub-<label>/sub-<label>_sessions.tsv`` (``participants.tsv``
     has the latest).
 
@@ -466,7 +467,8 @@ def export_bids(sessions_dir: str | os.PathLike, out_dir: str | os.PathLike, *, 
     try:
         for folder in folders:
             export_session(folder, staging, bids_label(records[folder].code), lab, ses=labels[folder], notes=notes)
-        _write_top(staging, records, labels, name, lab, notes.omitted)
+        prefix = f"{Path(sessions_dir)}{os.sep}"  # the README names the lab's files from the lab folder
+        _write_top(staging, records, labels, name, lab, [line.replace(prefix, "") for line in notes.omitted])
         if out.is_dir():
             out.rmdir()  # the empty folder given (checked above)
         os.rename(staging, out)

@@ -88,8 +88,9 @@ def test_a_session_with_nothing_to_derive_work_from_is_a_stated_omission(tmp_pat
     assert note == (f"sub-P01/ses-{ses} ({imported.name}): mechanical work left out: {imported}: expected a "
                     f"motion/ folder (motion.json) or exercise phases (phase_start rows in events.csv) to derive "
                     f"work, found neither")
-    readme = (out / "README").read_text()
-    assert readme.endswith(f"\nLeft out of this export (effortface export bids):\n\n- {note}\n")
+    readme = (out / "README").read_text()                       # the lab's files named from the lab folder
+    assert readme.endswith(f"\nLeft out of this export (effortface export bids):\n\n"
+                           f"- {note.replace(f'{lab}/', '')}\n") and str(tmp_path) not in readme
     assert not list((out / "sub-P01" / f"ses-{ses}").rglob("*recording-work*"))
     assert len(list(out.rglob("*recording-work_physio.tsv.gz"))) == 1            # the cardio session's
     assert _errors(out) == []
@@ -117,7 +118,7 @@ def test_an_underivable_session_is_refused_unless_skip_invalid(tmp_path):
     assert done.returncode == 0, done.stderr
     (note,) = _notes(done.stderr)
     assert note.startswith(f"sub-P01/ses-20260119140000 ({STRENGTH}): mechanical work left out: {events}: line ")
-    assert f"- {note}\n" in (out / "README").read_text()
+    assert f"- {note.replace(f'{lab}/', '')}\n" in (out / "README").read_text()
     assert [p.name for p in out.rglob("*recording-work_physio.tsv.gz")] == [
         "sub-P01_ses-20260112093000_task-cardio_recording-work_physio.tsv.gz"]
     assert len(list(out.rglob("*recording-heartrate_physio.tsv.gz"))) == 2     # the rest of the session stays
@@ -245,3 +246,22 @@ def test_two_sessions_starting_in_the_same_second_get_distinct_labels(tmp_path):
     assert (f"{lab / 'P01_20260112-093000_ab'}: expected one BIDS session per session folder, found the same "
             f"sub-P01/ses-20260112093000ab as {lab / 'P01_20260112-093000_a-b'}") in done.stderr
     assert not (tmp_path / "ds2").exists() and not list(tmp_path.glob(".ds2*"))
+
+
+def test_a_session_without_valid_heart_rate_is_a_stated_omission(tmp_path):
+    """Before: an empty heart-rate physio file (no rows), exit 0, no word."""
+    lab = _lab(tmp_path, CARDIO)
+    path = lab / CARDIO / "heart_rate.csv"
+    rows = list(csv.DictReader(path.read_text().splitlines()))
+    with open(path, "w", newline="") as fh:                     # contact lost all along: valid=0, no bpm
+        writer = csv.DictWriter(fh, fieldnames=list(rows[0]), lineterminator="\n")
+        writer.writeheader()
+        writer.writerows({**r, "hr_bpm": "", "valid": "0"} for r in rows)
+    out = tmp_path / "ds"
+    done = _effortface("export", "bids", lab, "--out", out)
+    assert done.returncode == 0, done.stderr
+    assert _notes(done.stderr) == [f"sub-P01/ses-20260112093000 ({CARDIO}): heart rate left out: {path}: expected "
+                                   f"at least 2 valid samples, found fewer"]
+    assert f"heart rate left out: {CARDIO}/heart_rate.csv: expected" in (out / "README").read_text()
+    assert not list(out.rglob("*recording-heartrate*")) and len(list(out.rglob("*recording-work*"))) == 2
+    assert _errors(out) == []
