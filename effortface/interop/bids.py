@@ -31,6 +31,7 @@ sidecar
 
 from __future__ import annotations
 
+import collections
 import csv
 import dataclasses
 import datetime
@@ -252,8 +253,9 @@ def session_labels(folders: Sequence[Path]) -> dict[Path, str]:
         keys[folder] = (bids_label(code), start.strftime("%Y%m%d%H%M%S"))
     out: dict[Path, str] = {}
     seen: dict[tuple[str, str], Path] = {}
+    count = collections.Counter(keys.values())
     for folder, (sub, ses) in keys.items():
-        if list(keys.values()).count((sub, ses)) > 1:
+        if count[sub, ses] > 1:
             ses += bids_label(parse_session_id(folder.name)[2] or "effort")
         if (sub, ses) in seen:
             raise UserError(f"{folder}: expected one BIDS session per session folder, found the same "
@@ -316,6 +318,14 @@ def _export_work(folder: Path, stem: Path, physio_keys: dict, where: str, notes:
         notes.leave_out(where, "mechanical work", exc, refuse=True)
         return
     rate = 1.0 / float(np.median(np.diff(work[:, 0]))) if len(work) > 1 else 1.0
+    rows = (work[-1, 0] - work[0, 0]) * rate + 1
+    if rows > MAX_GRID_FACTOR * len(work):
+        source = folder / WORK_CSV if (folder / WORK_CSV).is_file() else folder
+        notes.leave_out(where, "mechanical work", UserError(
+            f"{source}: t_s: expected times a grid at their median step ({1 / rate:g} s) can hold in at most "
+            f"{MAX_GRID_FACTOR} times their {len(work)} rows, found {work[-1, 0] - work[0, 0]:g} s of them"),
+            refuse=True)
+        return
     description = "mechanical work over the last 1 s (w) and 0.25 s (p), per kg"
     grid, table, how = regular_grid(work[:, 0], work[:, 1:3], rate)
     if how:
@@ -327,6 +337,9 @@ def _export_work(folder: Path, stem: Path, physio_keys: dict, where: str, notes:
 
 #: a time series is regular when every time lies within this fraction of a period of its grid place
 REGULAR_TOLERANCE = 0.01
+#: irregular work is placed on a grid of at most this many times its rows (drop-outs up to 9 times the
+#: recorded time); more is no drop-out but times with no usable rate (a few far apart, most close)
+MAX_GRID_FACTOR = 10
 
 
 def regular_grid(t_s: np.ndarray, values: np.ndarray, rate_hz: float) -> tuple[np.ndarray, np.ndarray, str]:

@@ -265,3 +265,17 @@ def test_a_session_without_valid_heart_rate_is_a_stated_omission(tmp_path):
     assert f"heart rate left out: {CARDIO}/heart_rate.csv: expected" in (out / "README").read_text()
     assert not list(out.rglob("*recording-heartrate*")) and len(list(out.rglob("*recording-work*"))) == 2
     assert _errors(out) == []
+
+
+def test_work_times_no_grid_can_hold_are_refused_not_a_huge_file(tmp_path):
+    """Three samples a millisecond apart and one a day later: a 1 kHz grid would be 86 million rows."""
+    lab = _lab(tmp_path, CARDIO)
+    work = lab / CARDIO / "work.csv"
+    work.write_text("t_s,w_per_kg,p_per_kg\n0,1,1\n0.001,1,1\n0.002,1,1\n86400,1,1\n")
+    done = _effortface("export", "bids", lab, "--out", tmp_path / "ds")
+    assert done.returncode == 2 and len(done.stderr.strip().splitlines()) == 1, done.stderr
+    assert (f"{work}: t_s: expected times a grid at their median step (0.001 s) can hold in at most 10 times "
+            f"their 4 rows, found 86400 s of them") in done.stderr and "--skip-invalid" in done.stderr
+    done = _effortface("export", "bids", lab, "--out", tmp_path / "ds", "--skip-invalid")
+    assert done.returncode == 0 and "mechanical work left out" in done.stderr
+    assert not list((tmp_path / "ds").rglob("*recording-work*"))
