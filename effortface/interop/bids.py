@@ -3,6 +3,7 @@
 Layout (BIDS 1.9, behavioural data with physiological recordings, attached mocap as motion)::
 
     dataset_description.json  participants.tsv  participants.json  README
+    sub-<code>/sub-<code>_sessions.tsv (+ .json)   (each session's acq_time and body record)
     sub-<code>/ses-<YYYYmmddHHMMSS>/beh/
         sub-<code>_ses-<...>_task-<label>_recording-heartrate_physio.tsv.gz (+ .json)
         sub-<code>_ses-<...>_task-<label>_recording-work_physio.tsv.gz (+ .json, with work.csv)
@@ -14,7 +15,11 @@ Labels are sanitised to letters and digits (BIDS labels are alphanumeric): ``LAB
 ``LAB207`` (two codes that collide are an error), the task is the session label (``cardio``) or
 ``effort``. BIDS physiological files need a constant rate: heart rate is linearly interpolated
 from the valid strap samples at :data:`HR_RATE_HZ` (``n/a`` across gaps longer than
-``effortface.train.dataset.MAX_HR_GAP_S``), work and power are written at their own 1 Hz. Each
+``effortface.train.dataset.MAX_HR_GAP_S``), work and power at their own rate (irregular times, an
+XDF stream with a drop-out, on a grid at their median rate, ``n/a`` where no sample is within half a
+period: :func:`regular_grid`, stated). Two sessions of one participant starting in the same second get
+``ses-<YYYYmmddHHMMSS><label>`` (:func:`session_labels`). Nothing is left out without a word: what an
+export leaves out is listed in :class:`ExportNotes` and at the end of the README (:func:`export_bids`). Each
 physio sidecar has ``SamplingFrequency``, ``StartTime`` (seconds from the session's time 0, which is
 also the events' onset origin) and ``Columns``, with units per column, ``PhysioType`` and
 ``TaskName``.
@@ -232,8 +237,8 @@ class ExportNotes:
         that cannot be read or derived) and without :attr:`skip_invalid`, raise it instead, naming
         the way on."""
         if refuse and not self.skip_invalid:
-            raise type(exc)(f"{exc} (its {what} cannot be exported: fix it, or --skip-invalid to export "
-                            f"without it, stated in the dataset's README)")
+            raise UserError(f"{exc} (its {what} cannot be exported: fix it, or --skip-invalid to export "
+                            f"without it, stated in the dataset's README)") from None
         self.omitted.append(f"{where}: {what} left out: {exc}")
 
 
