@@ -278,4 +278,4 @@ def test_work_times_no_grid_can_hold_are_refused_not_a_huge_file(tmp_path):
             f"their 4 rows, found 86400 s of them") in done.stderr and "--skip-invalid" in done.stderr
     done = _effortface("export", "bids", lab, "--out", tmp_path / "ds", "--skip-invalid")
     assert done.returncode == 0 and "mechanical work left out" in done.stderr
-    assert not list((tmp_path / "ds").rglob("*recording-work*"))
+    assert not list((tmp_path / "ds").rglob("*recording-work*")) and _errors(tmp_path / "ds") == []
