@@ -315,7 +315,7 @@ def synth_step(model_dir: Path, lab: Path, out: Path) -> Path:
     from effortface.core.session.folder import list_sessions, read_session
     from effortface.synth.curves_io import write_curves
     from effortface.synth.runtime import Character, load_model
-    from effortface.synth.work import WORK_CSV, derive_work
+    from effortface.synth.work import WORK_CSV, derive_work, read_work_csv
 
     model = load_model(model_dir)
     sessions = list_sessions(lab)
@@ -332,8 +332,8 @@ def synth_step(model_dir: Path, lab: Path, out: Path) -> Path:
         curves = model.synthesize(clips[0], character)
     else:
         if (sessions[0] / WORK_CSV).is_file():
-            work = pd.read_csv(sessions[0] / WORK_CSV)
-            t_s, w, p_ = (work[c].to_numpy(float) for c in ("t_s", "w_per_kg", "p_per_kg"))
+            saved = read_work_csv(sessions[0] / WORK_CSV)
+            t_s, w, p_ = saved.t_s, saved.w_per_kg, saved.p_per_kg
         else:
             table = derive_work(sessions[0])
             t_s, w, p_ = table.t_s, table.w_per_kg, table.p_per_kg

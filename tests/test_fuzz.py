@@ -34,7 +34,7 @@ from effortface.capture_tool.serlog import DATA, read_serlog
 from effortface.core.session.folder import read_events, read_session_info, read_video_frames
 from effortface.core.errors import UserError
 from effortface.synth.bundle import read_bundle, write_bundle
-from effortface.synth.work import read_motion_index
+from effortface.synth.work import read_motion_index, read_work_csv, write_work
 from effortface.synth.motion import read_motion
 
 pytestmark = pytest.mark.fuzz
@@ -167,6 +167,7 @@ def workdir(tmp_path_factory: pytest.TempPathFactory, make_bundle) -> Path:
     """A session copy and a model folder that each example rewrites one file of."""
     root = tmp_path_factory.mktemp("fuzz")
     shutil.copytree(SESSION, root / "s", ignore=shutil.ignore_patterns("video.avi", "serial"))
+    write_work(root / "s")  # the session's work.csv as `effortface work` writes it (issue 37)
     (root / "s" / "serial").mkdir()
     shutil.copy(SESSION / "serial" / "hrmi.serlog", root / "s" / "serial")
     write_bundle(make_bundle(), root / "m")
@@ -182,6 +183,7 @@ READERS: dict[str, Callable[[Path], object]] = {
     "s/events.csv": read_events,
     "s/heart_rate.csv": read_hr_csv,
     "s/video_frames.csv": read_video_frames,
+    "s/work.csv": read_work_csv,
     "s/annotations/R1.json": lambda p: read_annotations(p, session_id=SESSION.name, rater="R1"),
     "s/serial/hrmi.serlog": read_serlog,
     "m/model.json": lambda p: read_bundle(p.parent),

@@ -185,7 +185,8 @@ def attach_clip(session: str | os.PathLike, clip: str | os.PathLike, *, offset_s
                 sync: bool = False, sync_near_s: float | None = None,
                 mapping: str | os.PathLike | None = None, unit_m: float | None = None, up: str | None = None,
                 trust_skeleton: bool = False) -> Alignment:
-    """Copy ``clip`` into ``session/motion/`` and record its alignment in ``motion.json``.
+    """Copy ``clip`` (with a joint-positions CSV's ``<stem>.skeleton.json``, its tree) into
+    ``session/motion/`` and record its alignment in ``motion.json``.
 
     Parameters
     ----------
@@ -215,7 +216,8 @@ def attach_clip(session: str | os.PathLike, clip: str | os.PathLike, *, offset_s
     Raises
     ------
     AttachError
-        Unknown format, a clip of that name already in motion/ (never overwritten), a non-finite
+        Unknown format, a clip (or a joint-positions CSV's skeleton file, which is copied with it) of
+        that name already in motion/ (never overwritten), a non-finite
         offset, or a sync jump that cannot be found or is ambiguous; nothing is written then.
     UserError
         A clip that cannot be read, whose joints cannot be mapped to the 14 segments (the clip and
@@ -236,6 +238,7 @@ def attach_clip(session: str | os.PathLike, clip: str | os.PathLike, *, offset_s
     target = folder / clip.name
     if target.exists():
         raise AttachError(f"{target}: expected a new clip name in motion/, found one (not overwritten)")
+    companions = _companions(clip, folder)
     if sync:
         events = np.array([e.t_s for e in s.events if e.kind == "sync" and e.label == SYNC_LABEL])
         alignment = align_by_sync(find_jumps(motion), events, str(clip), str(s.path / "events.csv"), sync_near_s)
@@ -248,9 +251,32 @@ def attach_clip(session: str | os.PathLike, clip: str | os.PathLike, *, offset_s
     read_as = {"unit_m": unit_m, "up": up, "mapping": segments, "trust_skeleton": trust_skeleton or None}
     entries[-1].update({k: v for k, v in read_as.items() if v is not None})
     folder.mkdir(exist_ok=True)
-    shutil.copyfile(clip, target)
-    write_json_atomic(folder / MOTION_JSON, {"version": MOTION_JSON_VERSION, "files": entries})
+    copied: list[Path] = []
+    try:
+        for source, copy in [*companions, (clip, target)]:
+            shutil.copyfile(source, copy)
+            copied.append(copy)
+        write_json_atomic(folder / MOTION_JSON, {"version": MOTION_JSON_VERSION, "files": entries})
+    except BaseException:
+        for copy in copied:
+            copy.unlink(missing_ok=True)
+        raise
     return alignment
+
+
+def _companions(clip: Path, folder: Path) -> list[tuple[Path, Path]]:
+    """The files the clip is read with that travel with it into ``folder``: a joint-positions CSV's
+    skeleton file (``<stem>.skeleton.json``, its tree); AttachError if one of that name is there."""
+    from effortface.synth.motion_csv import skeleton_beside
+
+    skeleton = skeleton_beside(clip)
+    if clip.suffix.lower() != ".csv" or not skeleton.is_file():
+        return []
+    target = folder / skeleton.name
+    if target.exists():
+        raise AttachError(f"{target}: expected a new skeleton file name in motion/ for {clip.name}, found one "
+                          f"(not overwritten)")
+    return [(skeleton, target)]
 
 
 def _read_mapping(mapping: str | os.PathLike | None) -> dict | None:

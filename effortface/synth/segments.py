@@ -598,11 +598,26 @@ def _ancestors(j: int, parents: np.ndarray) -> list[int]:
 
 
 def lowest_common_ancestor(joints: Sequence[int], parents: np.ndarray) -> int:
-    """The deepest joint that is an ancestor of (or equal to) every joint in ``joints``."""
+    """The deepest joint that is an ancestor of (or equal to) every joint in ``joints``; -1 when they
+    lie in separate trees (a joint-positions CSV read without its tree: every joint a root)."""
     common = set(_ancestors(joints[0], parents))
     for j in joints[1:]:
         common &= set(_ancestors(j, parents))
-    return next(a for a in _ancestors(joints[0], parents) if a in common)
+    return next((a for a in _ancestors(joints[0], parents) if a in common), -1)
+
+
+def _frame_joints(names: Sequence[str], resolved: dict[str, tuple[tuple[int, ...], tuple[int, ...]]],
+                  parents: np.ndarray, joint_names: Sequence[str], source: str | Path) -> np.ndarray:
+    """Each segment's frame joint (:func:`lowest_common_ancestor` of its end joints), or a UserError
+    naming the clip and the segment whose end joints lie in separate trees."""
+    out = np.array([lowest_common_ancestor(resolved[s][0] + resolved[s][1], parents) for s in names])
+    for s, joint in zip(names, out):
+        if joint < 0:
+            ends = ", ".join(joint_names[j] for j in resolved[s][0] + resolved[s][1])
+            raise UserError(f"{source or 'skeleton'}: segment {s}: expected its end joints ({ends}) in one tree, "
+                            f"found them in separate trees (a joint-positions CSV gives its tree in "
+                            f"<clip>.skeleton.json beside it or a '# parents:' comment)")
+    return out
 
 
 def _segment_lengths(prox_w: np.ndarray, dist_w: np.ndarray, reference_positions_m: np.ndarray) -> np.ndarray:
@@ -680,8 +695,7 @@ def build_body(
         radii=np.array([(p.r_sag, p.r_trans, p.r_long) for p in params]),
         proximal_weights=prox_w,
         distal_weights=dist_w,
-        frame_joint=np.array([lowest_common_ancestor(resolved[s][0] + resolved[s][1], parents)
-                              for s in names]),
+        frame_joint=_frame_joints(names, resolved, parents, joint_names, source),
         hip_joints=(resolved["left_thigh"][0][0], resolved["right_thigh"][0][0]),
         load_kg=load_kg,
         back_load_kg=float(loads.back_kg),

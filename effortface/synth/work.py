@@ -42,6 +42,11 @@ class WorkError(UserError):
     """A session whose work cannot be derived; the message names the session or file."""
 
 
+class NoWorkSource(WorkError):
+    """A session with nothing to derive work from (no motion/, no exercise phase): not an error in
+    its files, so ``export bids`` states the omission instead of refusing."""
+
+
 @dataclasses.dataclass(frozen=True)
 class WorkTable:
     """w and p per second of one session.
@@ -73,34 +78,78 @@ def _num(x: float) -> str:
     return "" if math.isnan(x) else f"{x:.4f}"
 
 
+#: the columns every work.csv has (``source`` is optional)
+WORK_COLUMNS = ("t_s", "w_per_kg", "p_per_kg")
+#: cells read as "no value" (NaN) in the w and p columns besides an empty cell
+_MISSING = ("", "nan", "n/a")
+
+
 def read_work_csv(path: str | os.PathLike) -> WorkTable:
-    """Read a ``work.csv`` (as :meth:`WorkTable.to_csv` writes it, or hand-made with the first three
-    columns): empty w/p cells become NaN, a missing ``source`` column becomes empty strings.
+    """Read a ``work.csv`` (as :meth:`WorkTable.to_csv` writes it, as ``import xdf`` writes it, or
+    hand-made with the first three columns): the one checked reader of the file, used by every
+    command that reads it (``export bids``, ``train``, ``demo``).
+
+    Empty (or ``nan``, ``n/a``) w/p cells become NaN, a missing ``source`` column becomes empty
+    strings; a UTF-8 byte-order mark is accepted. Times need not be regular (an imported stream
+    may have drop-outs) but must increase.
 
     Raises
     ------
     WorkError
-        Missing columns or a cell that is not a number, in one line naming the file and row.
+        One line naming the file (and its line and field): not a regular file, not UTF-8 CSV text,
+        missing columns, no rows, a short row, a cell that is not a number, a number outside the
+        bounds table (``t_s``, ``w_per_kg``, ``p_per_kg`` of :mod:`effortface.core.bounds`), a time
+        not after the one before.
     """
     import csv
 
-    path = Path(path)
-    with open(path, newline="", encoding="utf-8") as fh:
-        rows = list(csv.DictReader(fh))
-    need = ("t_s", "w_per_kg", "p_per_kg")
-    if not rows or any(c not in rows[0] for c in need):
-        raise WorkError(f"{path}: expected rows with columns {','.join(need)}, "
-                        f"found {','.join(rows[0]) if rows else 'no rows'}")
-    cols: dict[str, list[float]] = {c: [] for c in need}
-    for i, row in enumerate(rows, start=2):
-        for c in need:
-            cell = (row[c] or "").strip()
-            try:
-                cols[c].append(float(cell) if cell else math.nan)
-            except ValueError:
-                raise WorkError(f"{path}: line {i}: {c}: expected a number, found {cell!r}") from None
-    t_s, w, p = (np.array(cols[c]) for c in need)
-    return WorkTable(t_s, w, p, [(r.get("source") or "") for r in rows])
+    from effortface.core.errors import not_text_error
+    from effortface.core.fileio import check_regular_file
+
+    path = check_regular_file(path, "a work CSV file (t_s,w_per_kg,p_per_kg)", WorkError)
+    cols: dict[str, list[float]] = {c: [] for c in WORK_COLUMNS}
+    source: list[str] = []
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as fh:
+            reader = csv.DictReader(fh)
+            header = [(f or "").strip() for f in reader.fieldnames or []]
+            if any(c not in header for c in WORK_COLUMNS):
+                raise WorkError(f"{path}: expected a header with columns {','.join(WORK_COLUMNS)}, "
+                                f"found {','.join(header) if header else 'an empty file'!r}")
+            reader.fieldnames = header
+            for row in reader:
+                _work_row(path, reader.line_num, row, cols, source)
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise WorkError(str(not_text_error(path, exc))) from None
+    if not source:
+        raise WorkError(f"{path}: expected rows of {','.join(WORK_COLUMNS)}, found none")
+    t_s, w, p = (np.array(cols[c]) for c in WORK_COLUMNS)
+    return WorkTable(t_s, w, p, source)
+
+
+def _work_row(path: Path, line: int, row: dict, cols: dict[str, list[float]], source: list[str]) -> None:
+    """Check one work.csv row (``line``) and append it to ``cols`` and ``source``."""
+    if any(row.get(c) is None for c in WORK_COLUMNS):
+        raise WorkError(f"{path}: line {line}: expected the fields {','.join(WORK_COLUMNS)}, "
+                        f"found a row of {sum(v is not None for k, v in row.items() if k is not None)} fields")
+    for c in WORK_COLUMNS:
+        cell = row[c].strip()
+        if c != "t_s" and cell.lower() in _MISSING:
+            cols[c].append(math.nan)
+            continue
+        try:
+            value = float(cell)
+        except ValueError:
+            raise WorkError(f"{path}: line {line}: {c}: expected a number, found {cell!r:.40}") from None
+        try:
+            cols[c].append(bounds.check(c, value, f"{path}: line {line}: {c}"))
+        except UserError as exc:
+            raise WorkError(str(exc)) from None
+    t = cols["t_s"]
+    if len(t) > 1 and not t[-1] > t[-2]:
+        raise WorkError(f"{path}: line {line}: t_s: expected times increasing (rows sorted by time), "
+                        f"found {t[-1]:g} after {t[-2]:g}")
+    source.append((row.get("source") or "").strip())
 
 
 def session_seconds(s: Session) -> np.ndarray:
@@ -136,7 +185,8 @@ def derive_work(session: Session | str | os.PathLike, t_s: np.ndarray | None = N
     Raises
     ------
     WorkError
-        If the session has neither a motion/ folder nor a phase in its exercise log, or a phase's
+        If the session has neither a motion/ folder nor a phase in its exercise log (the subclass
+        :class:`NoWorkSource`), or a phase's
         exercise or parameters cannot be estimated (names events.csv, its line and the catalog).
     """
     s = session if isinstance(session, Session) else read_session(session)
@@ -144,7 +194,7 @@ def derive_work(session: Session | str | os.PathLike, t_s: np.ndarray | None = N
     log = exercise_log(s.events, str(s.path / "events.csv"))
     has_motion = (s.path / MOTION_DIR / MOTION_JSON).is_file()
     if not has_motion and not log.phases:
-        raise WorkError(f"{s.path}: expected a motion/ folder (motion.json) or exercise phases "
+        raise NoWorkSource(f"{s.path}: expected a motion/ folder (motion.json) or exercise phases "
                         f"(phase_start rows in events.csv) to derive work, found neither")
     w, p = np.full(len(t), np.nan), np.full(len(t), np.nan)
     source = [""] * len(t)

@@ -50,13 +50,12 @@ from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
 from effortface.annotate.completeness import RULE_TEXT, rater_status
 from effortface.annotate.keyframes import HUMAN_ORIGINS, ORIGINS, read_annotations
 from effortface.core.errors import UserError
-from effortface.core import bounds
 from effortface.core.fileio import check_regular_file, read_json, refuse_overwrite
 from effortface.core.participant import LIMITS, SEX_ALIASES, SEXES  # the one limits table
 from effortface.core.session.folder import (Session, check_not_recording, check_session, list_sessions,
                                              parse_session_id, read_session)
 from effortface.train.hr_fit import HrSeries
-from effortface.synth.work import WORK_CSV, derive_work
+from effortface.synth.work import WORK_CSV, derive_work, read_work_csv
 from effortface.synth.physiology import (EpocParams, hr_max_bpm, hr_rest_bpm, epoc_step,
                               vo2max_ml_per_kg_min, VO2_REST_ML_PER_KG_MIN)
 
@@ -439,32 +438,16 @@ def _work(s: Session, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     path = s.path / WORK_CSV
     if path.is_file():
         try:
-            work = pd.read_csv(path)
-            wt, ww, wp = (work[c].to_numpy(float) for c in ("t_s", "w_per_kg", "p_per_kg"))
-        except (KeyError, ValueError, pd.errors.ParserError) as exc:
-            raise DatasetError(f"{path}: expected columns t_s,w_per_kg,p_per_kg, found {exc}") from None
-        _check_work_times(path, wt)
-        idx = np.clip(np.searchsorted(wt, t + 1e-9, side="right") - 1, 0, len(wt) - 1)
-        return ww[idx], wp[idx]
+            work = read_work_csv(path)
+        except UserError as exc:
+            raise DatasetError(str(exc)) from None
+        idx = np.clip(np.searchsorted(work.t_s, t + 1e-9, side="right") - 1, 0, len(work.t_s) - 1)
+        return work.w_per_kg[idx], work.p_per_kg[idx]
     try:
         table = derive_work(s, t)
     except UserError as exc:
         raise DatasetError(str(exc)) from None
     return table.w_per_kg, table.p_per_kg
-
-
-def _check_work_times(path: Path, t_s: np.ndarray) -> None:
-    """DatasetError unless work.csv's times are finite, within the bounds and strictly increasing."""
-    if len(t_s) == 0:
-        raise DatasetError(f"{path}: expected rows of t_s,w_per_kg,p_per_kg, found none")
-    bad = np.flatnonzero(~np.isfinite(t_s) | (t_s < bounds.BOUNDS["t_s"].low) | (t_s > bounds.BOUNDS["t_s"].high))
-    if bad.size:
-        raise DatasetError(f"{path}: row {bad[0] + 1}: t_s: expected {bounds.BOUNDS['t_s'].describe()}, "
-                           f"found {t_s[bad[0]]!r}")
-    back = np.flatnonzero(np.diff(t_s) <= 0)
-    if back.size:
-        raise DatasetError(f"{path}: row {back[0] + 2}: expected t_s increasing (rows sorted by time), "
-                           f"found {t_s[back[0] + 1]:g} after {t_s[back[0]]:g}")
 
 
 #: the numbers of a motion.json entry, with their bounds-table names and defaults

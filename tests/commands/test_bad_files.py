@@ -166,7 +166,7 @@ CORRUPT_SESSIONS = {
     r"annotations/R1.json: session_id: expected 'P03_20260113-094400_cardio'": _foreign_annotation,
     r"annotations/R2.json: rater: expected 'R2' \(this file's name\), found 'R1'":
         lambda s: shutil.copy(s / "annotations" / "R1.json", s / "annotations" / "R2.json"),
-    r"work.csv: row 2: expected t_s increasing \(rows sorted by time\)": _unsorted_work,
+    r"work.csv: line 3: t_s: expected times increasing \(rows sorted by time\), found 628 after 629": _unsorted_work,
     r"heart_rate.csv: line 2: .*found nan": lambda s: _replace_line(s / "heart_rate.csv", 1, "nan,80,,,sim,1"),
 }
 

@@ -51,9 +51,11 @@ def test_top_level_files(dataset):
 
 
 def test_every_file_follows_the_naming_rules(dataset):
-    files = [p for p in dataset.rglob("*") if p.is_file() and p.parent != dataset]
+    files = [p for p in dataset.rglob("*") if p.is_file() and len(p.relative_to(dataset).parts) > 2]
     motion = [f for f in files if f.parent.name == "motion"]
     assert len(files) - len(motion) == 12 * 6 and len(motion) == 3      # P02's attached squats clip
+    per_subject = sorted(p.name for p in dataset.glob("sub-*/*") if p.is_file())   # issue 37: each session's record
+    assert per_subject == sorted(f"sub-P0{i}_sessions.{ext}" for i in range(1, 7) for ext in ("json", "tsv"))
     for f in files:
         m = NAME_RE.match(f.name)
         assert m, f.name
