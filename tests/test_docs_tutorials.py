@@ -73,6 +73,7 @@ def test_every_tutorial_block_is_run() -> None:
         assert first.startswith("mkdir ") and "&& cd " in first, f"{name}: expected to start in a new folder, found {first}"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", tutorials())
 def test_the_tutorial_runs_from_an_empty_folder(name: str, tmp_path: Path) -> None:
     work = tmp_path / "work"
