@@ -43,6 +43,7 @@ FIGURES = [
     ("guide/tutorial-record.md", r"The lab holds (?P<sessions>\d+) sessions of (?P<participants>\d+) participants"),
     ("guide/tutorial-train.md", r"`\./sample_sessions`: (?P<sessions>\d+) sessions of (?P<participants>\d+) participants"),
     ("guide/tutorial-key.md", r"the lab's `reliability/poses\.csv`: (?P<poses>\d+)\s+frames"),
+    ("guide/reliability.md", r"\| 160 x 120, (?P<video_fps>[\d.]+) fps \(the sample lab\)"),
 ]
 
 
@@ -113,3 +114,42 @@ def test_the_figures_are_the_products() -> None:
     f = lab_figures()
     row = re.search(r"^  all\s+72\s+(\S+)\s+\[[^\]]+\]\s+(\S+)\s+(\[[^\]]+\])", done.stdout, re.M)
     assert row and row.groups() == (f["diff_all"], f["icc_all"], f["icc_all_ci"]), done.stdout[:3000]
+
+
+#: a sentence about the sample lab with such a figure is one this test checks or one stated as measured
+FIGURE = re.compile(r"\d\.\d|\d %|\d s\b|\d MB")
+LAB_WORDS = re.compile(r"sample lab|sample_sessions", re.I)
+MEASURED = re.compile(r"measured|earlier|of the time|before|bench", re.I)
+
+
+def _flat(text: str) -> str:
+    """A page as one line: code blocks left out, paragraphs and headings apart (`` ¶ ``), spaces single."""
+    text = re.sub(r"^```.*?^```", "", text, flags=re.M | re.S)
+    return " ".join(re.sub(r"\n\s*\n|\n(?=#)", " \u00b6 ", text).split())
+
+
+def _sentences(flat: str) -> list[tuple[int, int, str]]:
+    """(start, end, sentence) of a flattened page."""
+    out, start = [], 0
+    for m in re.finditer(r"(?<=[.;:])\s+(?=[A-Z(`*|-])|\s(?=\| )|\s\u00b6\s", flat):
+        out.append((start, m.start(), flat[start:m.start()]))
+        start = m.end()
+    out.append((start, len(flat), flat[start:]))
+    return out
+
+
+def test_every_figure_of_the_sample_lab_is_checked_or_dated() -> None:
+    """No figure about the shipped lab escapes: in every guide page, a sentence that names the sample
+    lab and states a figure is either one of :data:`FIGURES` (checked above) or says it was measured
+    (when, or on which earlier lab)."""
+    loose = []
+    for page in sorted((DOCS / "guide").glob("*.md")):
+        flat = _flat(page.read_text(encoding="utf-8"))
+        rel = page.relative_to(DOCS).as_posix()
+        checked = [m.span() for p, pattern in FIGURES if p == rel for m in re.finditer(pattern, flat, re.S)]
+        for start, end, sentence in _sentences(flat):
+            if not (LAB_WORDS.search(sentence) and FIGURE.search(sentence)) or MEASURED.search(sentence):
+                continue
+            if not any(a < end and start < b for a, b in checked):
+                loose.append(f"docs/{rel}: {sentence[:160]}")
+    assert not loose, "figures of the sample lab neither checked nor dated:\n" + "\n".join(loose)
