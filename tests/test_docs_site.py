@@ -3,6 +3,7 @@ command-line, error and API reference pages; the README stays a one-minute read.
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -53,6 +54,45 @@ def test_every_guide_page_is_in_the_navigation() -> None:
     on_disk = sorted(f"guide/{p.name}" for p in (ROOT / "docs" / "guide").glob("*.md") if not p.name.startswith("_"))
     assert sorted(listed) == on_disk
     assert listed[0] == "guide/getting-started.md"
+
+
+def test_the_guide_is_in_four_parts() -> None:
+    """Tutorials, how-to guides, reference and explanation (issue 40); the tutorials are one per user,
+    and every page of docs/guide/ is in one of them."""
+    sys.path.insert(0, str(ROOT / "tools"))
+    import docs_hooks
+
+    nav = docs_hooks.navigation()
+    assert [next(iter(e)) for e in nav] == ["Home", "Tutorials", "How-to guides", "Reference", "Explanation"]
+
+    def pages(entries: list) -> list[str]:
+        out = []
+        for e in entries:
+            (value,) = e.values()
+            out += pages(value) if isinstance(value, list) else [value]
+        return out
+
+    parts = {name: pages(entries) for e in nav[1:] for name, entries in e.items()}
+    assert parts["Tutorials"][1:] == ["guide/tutorial-record.md", "guide/tutorial-key.md", "guide/tutorial-train.md",
+                                      "guide/tutorial-character.md"], parts["Tutorials"]
+    assert {"reference/cli.md", "reference/errors.md", "guide/formats.md"} <= set(parts["Reference"])
+    assert {"SCIENCE.md", "guide/layout.md", "guide/reliability.md"} <= set(parts["Explanation"])
+    listed = [p for part in parts.values() for p in part]
+    assert sorted(p for p in listed if p.startswith("guide/")) == sorted(docs_hooks.guide_pages())
+    assert len(listed) == len(set(listed)), "a page in two parts"
+
+
+def test_no_page_is_named_after_a_round() -> None:
+    """Pages say what they hold, not the round of work that made them (what changed: CHANGELOG.md)."""
+    sys.path.insert(0, str(ROOT / "tools"))
+    import docs_hooks
+
+    word = re.compile(r"\bround\b", re.I)
+    for page in sorted((ROOT / "docs").rglob("*.md")):
+        assert not word.search(page.stem.replace("-", " ").replace("_", " ")), page
+        assert not word.search(docs_hooks._title(page.relative_to(ROOT / "docs").as_posix())), page
+    for title in re.findall(r"'([^']+)'", str(docs_hooks.navigation())):
+        assert not word.search(title), title
 
 
 def test_the_readme_is_a_one_minute_read() -> None:

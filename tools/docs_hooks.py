@@ -1,8 +1,8 @@
 """MkDocs hooks (``mkdocs.yml``: ``hooks``): the pages made from the code at build time.
 
-- the navigation: the guide's pages in :data:`GUIDE_ORDER`, then every other ``docs/guide/*.md``
-  by name (a page another change adds appears without editing anything), the science, the design
-  card and the engine guide, then the references;
+- the navigation: the guide in four parts, :data:`PARTS` (tutorials, how-to guides, reference,
+  explanation); every other ``docs/guide/*.md`` joins the how-to guides by name (a page another
+  change adds appears without editing anything);
 - ``reference/cli.md``: every command's options, from the real argparse parsers
   (:func:`effortface.cli.command_parser`);
 - ``reference/errors.md``: the one-line errors the sources raise (``UserError`` and its subclasses),
@@ -27,14 +27,30 @@ from mkdocs.structure.files import File, Files
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "effortface"
-#: the guide's own pages, in reading order (other docs/guide/*.md pages follow, by name)
-GUIDE_ORDER = ["getting-started.md", "layout.md", "app.md", "capture.md", "heart-rate-devices.md", "annotate.md",
-               "train.md", "motion-and-work.md", "skeleton-mapping.md", "synthesize.md", "blender.md", "interop.md",
-               "formats.md", "sample-data.md",
-               "troubleshooting.md", "extend-strap-protocol.md", "extend-motion-format.md",
-               "extend-output-format.md", "extend-live-protocol.md"]
-BACKGROUND = [("Design card", "DESIGN.md"), ("The science", "SCIENCE.md"), ("Science notes", "SCIENCE_NOTES.md"),
-              ("Engine guide", "ENGINE.md")]
+#: the guide in four parts (tutorials, how-to guides, reference, explanation): part -> pages, in reading
+#: order; a ``(title, [pages])`` entry is a sub-section. A docs/guide/*.md page not listed here goes
+#: to the how-to guides (by name), so a page another change adds appears without editing anything.
+PARTS: dict[str, list[Any]] = {
+    "Tutorials": ["guide/getting-started.md", "guide/tutorial-record.md", "guide/tutorial-key.md",
+                  "guide/tutorial-train.md", "guide/tutorial-character.md"],
+    "How-to guides": ["guide/import-heart-rate.md", "guide/read-c3d-from-qualisys.md", "guide/skeleton-mapping.md",
+                      "guide/recover-a-crashed-session.md", "guide/train-on-a-cluster.md", "guide/export-bids.md",
+                      "guide/serve-live-to-unreal.md", "guide/blender.md", "guide/troubleshooting.md",
+                      ("Extend effortface", ["guide/extend-strap-protocol.md", "guide/extend-motion-format.md",
+                                             "guide/extend-output-format.md", "guide/extend-live-protocol.md"])],
+    "Reference": [("The application's stages", ["guide/app.md", "guide/capture.md", "guide/annotate.md",
+                                                 "guide/machine-rater.md", "guide/machine-rater-annotate.md",
+                                                 "guide/train.md", "guide/synthesize.md", "guide/motion-and-work.md",
+                                                 "guide/interop.md"]),
+                  ("Command line", "reference/cli.md"), "guide/formats.md", ("Design card", "DESIGN.md"),
+                  "guide/sample-data.md", ("Errors", "reference/errors.md")],
+    "Explanation": ["guide/science-in-brief.md", ("The science", "SCIENCE.md"), ("Science notes", "SCIENCE_NOTES.md"), "guide/layout.md",
+                    ("Engine guide", "ENGINE.md"), "guide/reliability.md", "guide/app-lab-records.md",
+                    "guide/training-at-scale.md", "guide/scores-and-live-streams.md",
+                    "guide/files-from-other-labs.md"],
+}
+#: the pages a part lists that are generated at build time (not on disk)
+GENERATED = {"reference/cli.md", "reference/errors.md"}
 #: exception classes whose messages are the one-line errors a user reads
 ERROR_CLASSES = {"UserError", "SessionFormatError", "MotionFormatError", "CatalogError", "LockedError",
                  "DeviceError", "BundleError", "ModelFormatError"}
@@ -60,25 +76,57 @@ def _title(path: str) -> str:
     return Path(path).stem.replace("-", " ").capitalize()
 
 
+def _listed(entries: list[Any]) -> list[str]:
+    """The page paths of a part's entries, sub-sections included."""
+    out: list[str] = []
+    for e in entries:
+        if isinstance(e, str):
+            out.append(e)
+        elif isinstance(e[1], list):
+            out += _listed(e[1])
+        else:
+            out.append(e[1])
+    return out
+
+
 def guide_pages() -> list[str]:
-    """``guide/*.md`` paths in navigation order (``_drafts`` left out)."""
-    found = sorted(p.name for p in (ROOT / "docs" / "guide").glob("*.md") if not p.name.startswith("_"))
-    return [f"guide/{n}" for n in [*[n for n in GUIDE_ORDER if n in found], *[n for n in found if n not in GUIDE_ORDER]]]
+    """``guide/*.md`` paths in navigation order (``_drafts`` left out): the parts' pages, then the others by name."""
+    found = sorted(f"guide/{p.name}" for p in (ROOT / "docs" / "guide").glob("*.md") if not p.name.startswith("_"))
+    listed = [p for part in PARTS.values() for p in _listed(part) if p in found]
+    return [*listed, *[p for p in found if p not in listed]]
 
 
-def on_config(config: Any) -> Any:
-    """The navigation, made from the pages that exist."""
+def _nav(entries: list[Any]) -> list[Any]:
+    """MkDocs navigation entries of a part (pages that do not exist left out)."""
+    out: list[Any] = []
+    for e in entries:
+        if isinstance(e, str):
+            if (ROOT / "docs" / e).is_file():
+                out.append({_title(e): e})
+        elif isinstance(e[1], list):
+            out.append({e[0]: _nav(e[1])})
+        elif e[1] in GENERATED or (ROOT / "docs" / e[1]).is_file():
+            out.append({e[0]: e[1]})
+    return out
+
+
+def navigation() -> list[Any]:
+    """Home, the four parts (unlisted guide pages join the how-to guides) and the API reference."""
     api: dict[str, list[Any]] = {}
     for module in public_modules():
         room = ".".join(module.split(".")[:2])
         api.setdefault(room, []).append({module: f"reference/api/{module}.md"})
-    config["nav"] = [
-        {"Home": "index.md"},
-        {"Guide": [{_title(p): p} for p in guide_pages()]},
-        {"Background": [{t: p} for t, p in BACKGROUND if (ROOT / "docs" / p).is_file()]},
-        {"Reference": [{"Command line": "reference/cli.md"}, {"Errors": "reference/errors.md"},
-                       {"API": [{room: pages} for room, pages in api.items()]}]},
-    ]
+    listed = {p for part in PARTS.values() for p in _listed(part)}
+    others = [p for p in guide_pages() if p not in listed]
+    parts = {name: _nav(entries) for name, entries in PARTS.items()}
+    parts["How-to guides"] += _nav(others)
+    parts["Reference"].append({"API": [{room: pages} for room, pages in api.items()]})
+    return [{"Home": "index.md"}, *({name: entries} for name, entries in parts.items())]
+
+
+def on_config(config: Any) -> Any:
+    """The navigation, made from the pages that exist."""
+    config["nav"] = navigation()
     return config
 
 

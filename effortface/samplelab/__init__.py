@@ -10,7 +10,7 @@ Where the lab is read from (:func:`sample_lab`, used by ``effortface demo``):
 - otherwise (``pip install .``) a copy built on first use into the user cache,
   ``<cache>/<version>/sample_sessions`` where ``<cache>`` is ``$EFFORTFACE_CACHE_DIR``, else
   ``$XDG_CACHE_HOME/effortface``, else ``~/.cache/effortface`` (:func:`cache_root`). The build takes
-  about a minute and says so on stderr in one line.
+  about :data:`BUILD_ESTIMATE_S` seconds and says so on stderr in one line.
 
 Where the app writes (:func:`app_default_dir`, ``effortface app`` with no DIR): a ``sample_sessions``
 folder in the current directory if there is one (the user's choice, e.g. the repository's root);
@@ -35,7 +35,7 @@ from effortface.core.version import __version__
 
 #: the folder name of the lab, in the repository, the cache and the user data folder
 LAB_NAME = "sample_sessions"
-#: what a build takes on a shared 2-core machine (measured: 27 s), for the first-use message
+#: what a build takes on a 2-core machine, in seconds, for the first-use message (and the guide)
 BUILD_ESTIMATE_S = 75  # measured 71 s of CPU with the real faces (issue 23)
 CACHE_ENV, DATA_ENV = "EFFORTFACE_CACHE_DIR", "EFFORTFACE_DATA_DIR"
 #: the lab's parts a user copy takes (the generator's truth, ``_ground_truth/``, is not a session)
@@ -96,7 +96,7 @@ def sample_lab(stderr: TextIO | None = None) -> Path:
 
 
 def ensure_cached_lab(stderr: TextIO | None = None) -> Path:
-    """The cached lab of this version, built first if it is not there (about a minute, said on stderr)."""
+    """The cached lab of this version, built first if it is not there (about BUILD_ESTIMATE_S, said on stderr)."""
     target = cached_lab_path()
     if _has_sessions(target):
         return target
