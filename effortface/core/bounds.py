@@ -82,8 +82,10 @@ BOUNDS: dict[str, Bound] = {
     "frame": Bound(0.0, 1e9, ""),
     # model.json: the output filter's time constants (0: off; an hour smooths away any effort)
     "filter_tau_s": Bound(0.0, 3600.0, "s"),
-    # model.json: the SVR's normalised output at rest (rest_anchor.at_rest; written clipped to [0, 0.99])
-    "rest_at_rest": Bound(0.0, 0.99, ""),
+    # model.json: the SVR's normalised output at rest (rest_anchor.at_rest; train writes it clipped to
+    # [0, 0.99]); far below 0 it maps every output to 1 (-1e300: weight 1.0 on every frame)
+    "rest_at_rest": Bound(-1.0, 0.99, ""),
+    "rest_level": Bound(0.0, 0.99, ""),
     # session.json: counts of frames, samples, bytes, pixels
     "count": Bound(0.0, 1e15, ""),
 }
