@@ -113,7 +113,7 @@ def _check_key(frame: object, weight: object, interp: object) -> None:
     """Raise UserError naming the field when a key is malformed."""
     if isinstance(frame, bool) or not isinstance(frame, (int, np.integer)) or frame < 0:
         raise UserError(f"key-frame frame: expected an integer >= 0, found {frame!r:.40}")
-    if not FRAME_BOUND.contains(frame):
+    if frame > FRAME_BOUND.high:  # compared as is: float() of a huge JSON integer overflows
         raise UserError(f"key-frame frame: expected an integer from 0 to {FRAME_BOUND.high:g}, found {frame!r:.40}")
     if isinstance(weight, bool) or not isinstance(weight, (int, float, np.floating, np.integer)):
         raise UserError(f"key-frame weight: expected a number in [0, 1], found {weight!r:.40}")

@@ -135,8 +135,8 @@ class RestAnchor:
         writes it from 0: a value far below 0 would map every output to 1), ``level``
         from 0 to 0.99, ``raters_rest_level`` a number or null.
         """
-        lists = {key: doc.get(key, [None] * n if key == "raters_rest_level" else None) for key in
-                 ("at_rest", "level", "raters_rest_level")} if isinstance(doc, dict) else {}
+        lists: dict[str, Any] = {key: doc.get(key, [None] * n if key == "raters_rest_level" else None) for key in
+                                 ("at_rest", "level", "raters_rest_level")} if isinstance(doc, dict) else {}
         if not lists or not all(isinstance(v, list) and len(v) == n for v in lists.values()):
             raise UserError(f"{where}.rest_anchor: expected {n} values each in the at_rest, level and "
                             f"raters_rest_level lists, found {doc!r:.80}")
@@ -174,15 +174,22 @@ def check_filter_tau(tau_s: Any, n: int, name: str = "filter_tau_s") -> np.ndarr
         Naming ``name`` unless the values are numbers from 0 (0 turns the filter off) to the
         ``filter_tau_s`` bound of :data:`effortface.core.bounds.BOUNDS` (an integer of 400 digits too).
     """
-    items = list(tau_s) if isinstance(tau_s, (list, tuple, np.ndarray)) else [tau_s]
+    items = list(np.ravel(tau_s)) if isinstance(tau_s, np.ndarray) else \
+        list(tau_s) if isinstance(tau_s, (list, tuple)) else [tau_s]
     if len(items) not in (1, n):
         raise UserError(f"{name}: expected a time constant in seconds (>= 0) or {n} of them, "
                         f"found {tau_s!r:.80}")
-    if not all(isinstance(v, numbers.Real) and not isinstance(v, bool) and v >= 0 for v in items):
-        raise UserError(f"{name}: expected time constants of 0 s or more, found {tau_s!r:.80}")
-    values = [bounds.check("filter_tau_s", v, f"{name}[{i}]" if len(items) > 1 else name)
-              for i, v in enumerate(items)]
+    values = [_tau_value(v, tau_s, f"{name}[{i}]" if len(items) > 1 else name) for i, v in enumerate(items)]
     return np.broadcast_to(np.asarray(values, dtype=float), (n,)).copy()
+
+
+def _tau_value(value: Any, given: Any, label: str) -> float:
+    """One time constant (s) within ``BOUNDS["filter_tau_s"]`` (an integer of 400 digits too); UserError
+    naming ``label``, as ``check_filter_tau`` has always said for a negative or non-numeric one."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
+            or not value >= 0:
+        raise UserError(f"{label.split('[')[0]}: expected time constants of 0 s or more, found {given!r:.80}")
+    return bounds.check("filter_tau_s", value, label)
 
 
 class WeightFilter:
