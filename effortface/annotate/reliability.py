@@ -175,6 +175,9 @@ def read_poses(path: str | os.PathLike,
 
 def _check_pose_frame(path: Path, line: int, pose: Pose, frame_times_s: Sequence[float]) -> None:
     """SessionFormatError unless ``pose`` names a frame of its session at that frame's time."""
+    if not frame_times_s:
+        raise SessionFormatError(f"{path}:{line}: session_id: expected a session with video frames, found "
+                                 f"{pose.session_id} without video_frames.csv")
     if pose.frame >= len(frame_times_s):
         raise SessionFormatError(f"{path}:{line}: frame: expected a frame of session {pose.session_id} (0 to "
                                  f"{len(frame_times_s) - 1}), found {pose.frame}")

@@ -151,3 +151,9 @@ def test_an_unknown_blendshape_in_ratings_names_the_file_and_line(lab: Path,
     _refused(capsys, ["agreement", str(lab)], f"reliability/ratings.csv:{n}: blendshape: expected one of "
              "mouth_stretch, mouth_open, eye_squint, brow_lower, found 'smile_big'")
     _refused(capsys, ["agreement", "--ratings", str(ratings)], f"ratings.csv:{n}: blendshape")
+
+
+def test_a_pose_of_a_session_without_video_is_refused(lab: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (lab / CARDIO / "video_frames.csv").unlink()
+    _refused(capsys, ["agreement", str(lab)], "poses.csv:2: session_id: expected a session with video frames, "
+             f"found {CARDIO} without video_frames.csv")
