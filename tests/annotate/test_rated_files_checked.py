@@ -1,4 +1,4 @@
-"""Reliability round 4 (issue 37): the files ``agreement`` reads get the checks their siblings get.
+"""Issue 37: the files ``agreement`` reads get the checks their siblings get.
 
 Each case writes a hostile file into a copy of two sample sessions (with the blind round and a machine
 track per session) and runs the real command: one line naming the file (and line, field), exit 2.
