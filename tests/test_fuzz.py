@@ -26,7 +26,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from effortface.annotate.agreement import frames_by_session
 from effortface.annotate.keyframes import read_annotations
+from effortface.annotate.machine.track import read_machine_track
+from effortface.annotate.reliability import read_poses, read_ratings
+from effortface.core.blendshapes import DEFAULT_SET
 from effortface.core.session.hr_csv import read_hr_csv
 from effortface.capture_tool.protocols import PROTOCOLS, get_decoder
 from effortface.capture_tool.protocols.encode import encode_line
@@ -34,8 +38,10 @@ from effortface.capture_tool.serlog import DATA, read_serlog
 from effortface.core.session.folder import read_events, read_session_info, read_video_frames
 from effortface.core.errors import UserError
 from effortface.synth.bundle import read_bundle, write_bundle
-from effortface.synth.work import read_motion_index, read_work_csv, write_work
+from effortface.synth.work import _segment_mapping, read_motion_index, read_work_csv, write_work
 from effortface.synth.motion import read_motion
+from effortface.annotate.machine.landmarker import DEFAULT_MODEL, FaceLandmarker
+from effortface.annotate.machine.landmarker import read_bundle as read_landmarker_bundle
 
 pytestmark = pytest.mark.fuzz
 
@@ -165,16 +171,49 @@ def _only_user_errors(read: Callable[[], object]) -> None:
 @pytest.fixture(scope="module")
 def workdir(tmp_path_factory: pytest.TempPathFactory, make_bundle) -> Path:
     """A session copy and a model folder that each example rewrites one file of."""
+    from tests.annotate.machine_helpers import write_fake_machine
+
     root = tmp_path_factory.mktemp("fuzz")
     shutil.copytree(SESSION, root / "s", ignore=shutil.ignore_patterns("video.avi", "serial"))
     write_work(root / "s")  # the session's work.csv as `effortface work` writes it (issue 37)
     (root / "s" / "serial").mkdir()
     shutil.copy(SESSION / "serial" / "hrmi.serlog", root / "s" / "serial")
     write_bundle(make_bundle(), root / "m")
+    model = json.loads((root / "m" / "model.json").read_text())  # with the rest anchor train writes
+    model["rest_anchor"] = {"features": [0, 0, 0, 0], "at_rest": [0.1, 0.05, 0.2, 0.0], "level": [0.0] * 4,
+                            "raters_rest_level": [0.02, None, 0.1, 0.0]}
+    (root / "m" / "model.json").write_text(json.dumps(model))
     (root / "motion").mkdir()
-    shutil.copy(MOTION_JSON, root / "motion" / "motion.json")
+    index = json.loads(MOTION_JSON.read_text())  # a version 2 entry with a mapping, as motion attach writes
+    index["version"] = 2
+    index["files"][0].update(unit_m=0.0254, up="y", mapping={"version": 2, "head": ["Neck1", "Head_end"],
+                                                            "left_thigh": ["LeftUpLeg", "LeftLeg"]})
+    (root / "motion" / "motion.json").write_text(json.dumps(index))
     shutil.copy(ROOT / "tests" / "data" / "motion" / "amp_humanoid_run.npz", root / "motion" / "clip.npz")
+    write_fake_machine(root / "s")
+    shutil.copytree(ROOT / "sample_sessions" / "reliability", root / "rel")
+    poses = (root / "rel" / "poses.csv").read_text().replace("P01_20260112-093000_cardio", SESSION.name)
+    (root / "rel" / "poses.csv").write_text(poses)  # poses of the fuzzed session, checked against its frames
+    shutil.copy(DEFAULT_MODEL, root / "face_landmarker.task")
     return root
+
+
+def _poses(path: Path) -> object:
+    return read_poses(path, frames_by_session([path.parent.parent / "s"]))
+
+
+def _motion_index(path: Path) -> object:
+    """motion.json's entries and each entry's mapping as ``work`` reads them."""
+    return [_segment_mapping(entry.get("mapping"), path) for entry in read_motion_index(path)]
+
+
+def _task_bundle(path: Path) -> object:
+    """A Face Landmarker bundle read and, where its runtime is installed, its three models loaded."""
+    import importlib.util
+
+    if importlib.util.find_spec("ai_edge_litert") is None:
+        return read_landmarker_bundle(path)
+    return FaceLandmarker(path)
 
 
 #: file (relative to the work folder) -> the reader that must cope with it
@@ -188,8 +227,14 @@ READERS: dict[str, Callable[[Path], object]] = {
     "s/serial/hrmi.serlog": read_serlog,
     "m/model.json": lambda p: read_bundle(p.parent),
     "m/svr.npz": lambda p: read_bundle(p.parent),
-    "motion/motion.json": read_motion_index,
+    "motion/motion.json": _motion_index,
     "motion/clip.npz": read_motion,
+    # issue 37: the machine track and its sidecar, the blind round's CSVs, the .task bundle
+    "s/machine/face_landmarker.csv": lambda p: read_machine_track(p.parent.parent),
+    "s/machine/face_landmarker.json": lambda p: read_machine_track(p.parent.parent),
+    "rel/poses.csv": _poses,
+    "rel/ratings.csv": lambda p: read_ratings(p, DEFAULT_SET),
+    "face_landmarker.task": _task_bundle,
 }
 ORIGINALS: dict[str, bytes] = {}
 
@@ -254,6 +299,27 @@ def test_json_readers_raise_only_user_errors_on_any_field_value(workdir: Path, n
     original = _original(workdir, name)
     doc = json.loads(original)
     where = data.draw(st.sampled_from(_paths(doc)), label="field")
+    changed = _replace(doc, where, data.draw(JSON_VALUES, label="value"))
+    path = workdir / name
+    try:
+        path.write_text(json.dumps(changed))
+        _only_user_errors(lambda: READERS[name](path))
+    finally:
+        path.write_bytes(original)
+
+
+#: issue 37: JSON sections fuzzed on their own (a random field of the whole file rarely lands in them)
+SECTIONS = {"m/model.json": ("output_filter", "rest_anchor"), "motion/motion.json": ("files",)}
+
+
+@pytest.mark.parametrize("name", list(SECTIONS))
+@FUZZ
+@given(data=st.data())
+def test_json_sections_raise_only_user_errors_on_any_value(workdir: Path, name: str, data: st.DataObject) -> None:
+    original = _original(workdir, name)
+    doc = json.loads(original)
+    inside = [p for p in _paths(doc) if p and p[0] in SECTIONS[name]]
+    where = data.draw(st.sampled_from(inside), label="field")
     changed = _replace(doc, where, data.draw(JSON_VALUES, label="value"))
     path = workdir / name
     try:

@@ -51,7 +51,8 @@ from effortface.annotate.video_index import FrameTimes
 from effortface.core.errors import UserError
 from effortface.core.fileio import refuse_overwrite
 from effortface.core.figures import agg_figure
-from effortface.core.session.folder import Session, list_sessions, read_session, read_session_info
+from effortface.core.session.folder import (VIDEO_FRAMES_CSV, Session, list_sessions, read_session, read_session_info,
+                                            read_video_frames)
 
 #: poses whose mean absolute disagreement is above this (% of the weight range) are flagged
 FLAG_PCT = 15.0
@@ -677,7 +678,7 @@ def read_round(folder: str | os.PathLike) -> list[Rating]:
     out: list[Rating] = []
     seen: set[tuple[str, str, str]] = set()
     for path in files:
-        for r in read_ratings(path):
+        for r in read_ratings(path, DEFAULT_SET):
             key = (r.pose_id, r.rater, r.blendshape)
             if key in seen:
                 raise UserError(f"{path}: expected each pose, rater and blendshape once, found {key} again")
@@ -722,8 +723,8 @@ def _poses_for(target: Path, sessions: list[Path], n_poses: int) -> list[Pose]:
     """Poses from a nearby ``reliability/poses.csv``, else proposed across the sessions."""
     for rel in (target / RELIABILITY_DIR, target.parent / RELIABILITY_DIR):
         if (rel / "poses.csv").is_file():
-            ids = {read_session(s).info.session_id for s in sessions}
-            poses = [p for p in read_poses(rel / "poses.csv") if p.session_id in ids]
+            frames = frames_by_session(sessions)
+            poses = [p for p in read_poses(rel / "poses.csv", frames) if p.session_id in frames]
             if poses:
                 return poses
     per_session = max(1, math.ceil(n_poses / len(sessions)))
@@ -739,9 +740,20 @@ def gather_poses(target: str | os.PathLike, *, n_poses: int = N_POSES) -> list[P
     target = Path(target)
     rel = target / RELIABILITY_DIR
     if (rel / "ratings.csv").is_file() or list(rel.glob("ratings_*.csv")):
-        return read_poses(rel / "poses.csv") if (rel / "poses.csv").is_file() else []
+        frames = frames_by_session(list_sessions(target)) if target.is_dir() else {}
+        return read_poses(rel / "poses.csv", frames) if (rel / "poses.csv").is_file() else []
     sessions = [target] if (target / "session.json").is_file() else list_sessions(target)
     return _poses_for(target, sessions, n_poses) if sessions else []
+
+
+def frames_by_session(sessions: Iterable[str | os.PathLike]) -> dict[str, list[float]]:
+    """``session_id -> frame times (s)`` of the sessions' ``video_frames.csv`` (empty without video), the
+    frames a ``poses.csv`` must agree with (:func:`effortface.annotate.reliability.read_poses`)."""
+    out: dict[str, list[float]] = {}
+    for folder in map(Path, sessions):
+        frames = folder / VIDEO_FRAMES_CSV
+        out[read_session_info(folder).session_id] = read_video_frames(frames) if frames.is_file() else []
+    return out
 
 
 # ---------------------------------------------------------------------------- the machine rater

@@ -588,6 +588,8 @@ class BlindRound:
     """
 
     def __init__(self, lab_dir: str | os.PathLike, rater: str, blendshapes: BlendshapeSet = DEFAULT_SET) -> None:
+        from effortface.annotate.agreement import frames_by_session
+        from effortface.core.session.folder import list_sessions
         from effortface.annotate.reliability import read_poses, read_ratings
 
         self.lab_dir = Path(lab_dir)
@@ -597,12 +599,12 @@ class BlindRound:
         if not (rel / "poses.csv").is_file():
             raise UserError(f"{rel / 'poses.csv'}: expected the reliability pose set, found nothing "
                             "(propose one from HR and phase extremes first)")
-        self.poses = read_poses(rel / "poses.csv")
+        self.poses = read_poses(rel / "poses.csv", frames_by_session(list_sessions(self.lab_dir)))
         self.path = rel / f"ratings_{rater}.csv"
         lab_file = rel / "ratings.csv"
         self.locked = {(r.pose_id, r.blendshape): r.weight for r in
-                       (read_ratings(lab_file) if lab_file.is_file() else []) if r.rater == rater}
-        mine = read_ratings(self.path) if self.path.is_file() else []
+                       (read_ratings(lab_file, blendshapes) if lab_file.is_file() else []) if r.rater == rater}
+        mine = read_ratings(self.path, blendshapes) if self.path.is_file() else []
         self.ratings = dict(self.locked) | {(r.pose_id, r.blendshape): r.weight for r in mine}
 
     def rating(self, pose_id: str, name: str) -> float | None:

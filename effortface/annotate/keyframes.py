@@ -48,6 +48,7 @@ from typing import Any
 import numpy as np
 
 from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
+from effortface.core.bounds import BOUNDS
 from effortface.core.errors import SessionFormatError, UserError
 from effortface.core.fileio import atomic_write_text, read_json, refuse_overwrite
 
@@ -59,6 +60,10 @@ INTERPOLATIONS = ("hold", "linear", "smooth")
 ORIGINS = ("typed", "machine", "edited")
 #: origins that count as a person's label (human-only training, the human mean)
 HUMAN_ORIGINS = ("typed", "edited")
+
+
+#: the frame numbers a key may carry (a frame beyond it overflowed numpy in agreement and train)
+FRAME_BOUND = BOUNDS["frame"]
 
 
 class AnnotationFormatError(SessionFormatError):
@@ -107,7 +112,9 @@ class Keyframe:
 def _check_key(frame: object, weight: object, interp: object) -> None:
     """Raise UserError naming the field when a key is malformed."""
     if isinstance(frame, bool) or not isinstance(frame, (int, np.integer)) or frame < 0:
-        raise UserError(f"key-frame frame: expected an integer >= 0, found {frame!r}")
+        raise UserError(f"key-frame frame: expected an integer >= 0, found {frame!r:.40}")
+    if frame > FRAME_BOUND.high:  # compared as is: float() of a huge JSON integer overflows
+        raise UserError(f"key-frame frame: expected an integer from 0 to {FRAME_BOUND.high:g}, found {frame!r:.40}")
     if isinstance(weight, bool) or not isinstance(weight, (int, float, np.floating, np.integer)):
         raise UserError(f"key-frame weight: expected a number in [0, 1], found {weight!r:.40}")
     if not 0.0 <= weight <= 1.0:  # compared as is: float() of a huge JSON integer overflows

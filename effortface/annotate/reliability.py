@@ -16,15 +16,19 @@ import dataclasses
 import itertools
 import math
 import os
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
-from effortface.core.errors import SessionFormatError
+from effortface.core import bounds
+from effortface.core.blendshapes import BlendshapeSet
+from effortface.core.errors import SessionFormatError, UserError, not_text_error
 from effortface.core.fileio import refuse_overwrite
 
 POSES_HEADER = ("pose_id", "session_id", "frame", "t_s")
 RATINGS_HEADER = ("pose_id", "rater", "blendshape", "weight")
 CORRECTIONS_HEADER = ("time_utc", "pose_id", "blendshape", "old", "new", "reason")
+#: largest difference (s) between a pose's t_s and its frame's time in the session's video_frames.csv
+POSE_TIME_TOLERANCE_S = 1e-3
 
 
 @dataclasses.dataclass(frozen=True)
@@ -103,6 +107,7 @@ def _write_csv(path: Path, header: tuple[str, ...], rows: Iterable[tuple], overw
 
 def _read_csv(path: Path, header: tuple[str, ...]) -> list[dict[str, str]]:
     """Rows of a CSV whose header must hold ``header``; SessionFormatError otherwise."""
+    reader = None
     try:
         with open(path, encoding="utf-8", newline="") as fh:
             reader = csv.DictReader(fh)
@@ -112,7 +117,9 @@ def _read_csv(path: Path, header: tuple[str, ...]) -> list[dict[str, str]]:
                     f"{path}: expected columns {','.join(header)}, found {','.join(found) or 'none'}"
                 )
             return list(reader)
-    except (OSError, UnicodeDecodeError) as exc:
+    except (UnicodeDecodeError, csv.Error) as exc:  # csv.Error: a field over the csv module's limit
+        raise not_text_error(path, exc, reader.line_num if reader is not None else None) from None
+    except OSError as exc:
         raise SessionFormatError(f"{path}: expected a readable CSV file, found {exc}") from None
 
 
@@ -122,14 +129,25 @@ def write_poses(path: str | os.PathLike, poses: Iterable[Pose], *, overwrite: bo
     return _write_csv(Path(path), POSES_HEADER, rows, overwrite)
 
 
-def read_poses(path: str | os.PathLike) -> list[Pose]:
+def read_poses(path: str | os.PathLike,
+               frames_by_session: Mapping[str, Sequence[float]] | None = None) -> list[Pose]:
     """Read ``poses.csv``.
+
+    Parameters
+    ----------
+    path : path-like
+        The file.
+    frames_by_session : mapping, optional
+        ``session_id -> frame times (s)`` of the sessions at hand (their ``video_frames.csv``): a pose
+        of one of them must name one of its frames, at that frame's time (within
+        :data:`POSE_TIME_TOLERANCE_S`). Poses of other sessions are not checked against frames.
 
     Raises
     ------
     SessionFormatError
-        On missing columns, a non-integer frame, a non-numeric time or a duplicated pose id; the
-        message names the file and the line.
+        On missing columns, a non-integer frame (or one beyond :data:`effortface.core.bounds.BOUNDS`),
+        a non-numeric time, a duplicated pose id, or a pose that contradicts its session's frames;
+        the message names the file and the line.
     """
     path = Path(path)
     poses: list[Pose] = []
@@ -144,8 +162,29 @@ def read_poses(path: str | os.PathLike) -> list[Pose]:
             raise SessionFormatError(
                 f"{path}:{line}: expected a unique pose_id and frame >= 0, found {pose}"
             )
+        try:
+            bounds.check("frame", pose.frame, f"{path}:{line}: frame")
+            bounds.check("t_s", pose.t_s, f"{path}:{line}: t_s")
+        except UserError as exc:
+            raise SessionFormatError(str(exc)) from None
+        if frames_by_session is not None and pose.session_id in frames_by_session:
+            _check_pose_frame(path, line, pose, frames_by_session[pose.session_id])
         poses.append(pose)
     return poses
+
+
+def _check_pose_frame(path: Path, line: int, pose: Pose, frame_times_s: Sequence[float]) -> None:
+    """SessionFormatError unless ``pose`` names a frame of its session at that frame's time."""
+    if not frame_times_s:
+        raise SessionFormatError(f"{path}:{line}: session_id: expected a session with video frames, found "
+                                 f"{pose.session_id} without video_frames.csv")
+    if pose.frame >= len(frame_times_s):
+        raise SessionFormatError(f"{path}:{line}: frame: expected a frame of session {pose.session_id} (0 to "
+                                 f"{len(frame_times_s) - 1}), found {pose.frame}")
+    t_s = frame_times_s[pose.frame]
+    if abs(t_s - pose.t_s) > POSE_TIME_TOLERANCE_S:
+        raise SessionFormatError(f"{path}:{line}: t_s: expected {t_s:.6f} s, the time of frame {pose.frame} in "
+                                 f"session {pose.session_id}'s video_frames.csv, found {pose.t_s:.6f} s")
 
 
 def write_ratings(path: str | os.PathLike, ratings: Iterable[Rating], *,
@@ -155,14 +194,22 @@ def write_ratings(path: str | os.PathLike, ratings: Iterable[Rating], *,
     return _write_csv(Path(path), RATINGS_HEADER, rows, overwrite)
 
 
-def read_ratings(path: str | os.PathLike) -> list[Rating]:
+def read_ratings(path: str | os.PathLike, blendshapes: BlendshapeSet | None = None) -> list[Rating]:
     """Read long-format ratings ``pose_id,rater,blendshape,weight``.
+
+    Parameters
+    ----------
+    path : path-like
+        The file.
+    blendshapes : BlendshapeSet or None
+        The set every ``blendshape`` must belong to (the agreement command passes the paper's,
+        :data:`effortface.core.blendshapes.DEFAULT_SET`); None (default) accepts any name.
 
     Raises
     ------
     SessionFormatError
-        On missing columns, a weight that is not a number in [0, 1], or the same
-        (pose, rater, blendshape) twice; the message names the file and the line.
+        On missing columns, a weight that is not a number in [0, 1], a blendshape outside the set, or
+        the same (pose, rater, blendshape) twice; the message names the file and the line.
     """
     path = Path(path)
     out: list[Rating] = []
@@ -179,6 +226,9 @@ def read_ratings(path: str | os.PathLike) -> list[Rating]:
             raise SessionFormatError(
                 f"{path}:{line}: expected one non-empty pose_id,rater,blendshape, found {key} again"
             )
+        if blendshapes is not None and key[2] not in blendshapes.names:
+            raise SessionFormatError(f"{path}:{line}: blendshape: expected one of {', '.join(blendshapes.names)}, "
+                                     f"found {key[2]!r:.60}")
         seen.add(key)
         out.append(Rating(*key, weight))
     return out

@@ -66,11 +66,8 @@ def read_registry(path: str | os.PathLike) -> dict[str, Participant]:
     path = Path(path)
     if not path.exists():
         return {}
-    try:
-        lines = path.read_text(encoding="utf-8").splitlines()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise RegistryError(f"{path}: expected a tab-separated participants.tsv, found {exc}") from None
-    header = lines[0].split("\t") if lines else []
+    lines = _registry_lines(path)
+    header = [cell.strip() for cell in lines[0].split("\t")] if lines else []  # "mass_kg " as Excel may save it
     if tuple(header) != COLUMNS:
         raise RegistryError(f"{path}: line 1: expected the header {' '.join(COLUMNS)} (tab-separated), "
                             f"found {' '.join(header) or 'nothing'}")
@@ -88,6 +85,26 @@ def read_registry(path: str | os.PathLike) -> dict[str, Participant]:
         out.setdefault(person.code, person)
         first_line.setdefault(person.code, n)
     return out
+
+
+#: how UTF-16 text begins (Excel's "Unicode Text"), named rather than shown as an undecodable byte
+UTF16_BOMS = (b"\xff\xfe", b"\xfe\xff")
+
+
+def _registry_lines(path: Path) -> list[str]:
+    """The lines of a participants.tsv saved as UTF-8, with or without a byte-order mark (Excel's "CSV
+    UTF-8" writes one); RegistryError naming a UTF-16 file's byte-order mark or another encoding."""
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise RegistryError(f"{path}: expected a tab-separated participants.tsv, found {exc}") from None
+    if raw.startswith(UTF16_BOMS):
+        raise RegistryError(f"{path}: expected UTF-8 text, found UTF-16 (a byte-order mark {raw[:2].hex(' ').upper()}, "
+                            "as Excel's \"Unicode Text\" saves it): save it as UTF-8 (\"CSV UTF-8\" or tab-separated)")
+    try:
+        return raw.decode("utf-8-sig").splitlines()
+    except UnicodeDecodeError as exc:
+        raise RegistryError(f"{path}: expected a tab-separated participants.tsv, found {exc}") from None
 
 
 def _attr(column: str) -> str:
@@ -359,7 +376,7 @@ def read_history(lab_dir: str | os.PathLike) -> list[tuple[Participant, str]]:
     if not path.exists():
         return []
     out = []
-    for n, text in enumerate(path.read_text(encoding="utf-8").splitlines()[1:], start=2):
+    for n, text in enumerate(_registry_lines(path)[1:], start=2):
         if text.strip():
             cells = text.split("\t")
             out.append((_row(path, n, cells[:-1]), cells[-1].strip()))

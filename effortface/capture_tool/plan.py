@@ -22,7 +22,7 @@ import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from effortface.core.errors import UserError
+from effortface.core.errors import UserError, not_text_error
 from effortface.core.exercises import check_exercise_id
 
 #: plan column -> (events.csv kind, label: None = the exercise id)
@@ -102,10 +102,13 @@ def read_plan(path: str | os.PathLike) -> list[PlannedPhase]:
         raise PlanError(f"--plan {path}: expected a readable plan CSV, found {exc}") from None
     if not lines:
         raise PlanError(f"--plan {path}: expected a header {','.join(REQUIRED_COLUMNS)},... and phases, found none")
-    header = [c.strip() for c in next(csv.reader([lines[0][1]]))]
+    try:
+        cells = [(n, next(csv.reader([text]))) for n, text in lines]
+    except csv.Error as exc:  # a field over the csv module's limit
+        raise PlanError(f"--plan {not_text_error(path, exc)}") from None
+    header = [c.strip() for c in cells[0][1]]
     _check_header(path, lines[0][0], header)
-    phases = [_phase(path, line, dict(zip(header, (c.strip() for c in cells))))
-              for line, cells in ((n, next(csv.reader([text]))) for n, text in lines[1:])]
+    phases = [_phase(path, line, dict(zip(header, (c.strip() for c in row)))) for line, row in cells[1:]]
     if not phases:
         raise PlanError(f"--plan {path}: expected at least one phase after the header, found none")
     _check_overlaps(path, phases, [n for n, _ in lines[1:]])

@@ -76,6 +76,16 @@ BOUNDS: dict[str, Bound] = {
     "fps": Bound(0.0, 1000.0, "Hz", low_open=True),
     "report_s": Bound(0.0, 3600.0, "s", low_open=True),
     "port": Bound(0.0, 65535.0, ""),
+    # blendshape weights and scores (key-frames, ratings, the machine rater's track)
+    "blendshape_weight": Bound(0.0, 1.0, ""),
+    # video frame numbers (annotation keys, poses): 1e9 frames is 385 days at 30 fps
+    "frame": Bound(0.0, 1e9, ""),
+    # model.json: the output filter's time constants (0: off; an hour smooths away any effort)
+    "filter_tau_s": Bound(0.0, 3600.0, "s"),
+    # model.json: the SVR's normalised output at rest (rest_anchor.at_rest; train writes it clipped to
+    # [0, 0.99]); far below 0 it maps every output to 1 (-1e300: weight 1.0 on every frame)
+    "rest_at_rest": Bound(-1.0, 0.99, ""),
+    "rest_level": Bound(0.0, 0.99, ""),
     # session.json: counts of frames, samples, bytes, pixels
     "count": Bound(0.0, 1e15, ""),
 }

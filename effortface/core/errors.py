@@ -18,7 +18,7 @@ class SessionFormatError(UserError):
     """A session folder or one of its files does not follow the session format."""
 
 
-def not_text_error(path: object, exc: UnicodeDecodeError | csv.Error) -> SessionFormatError:
+def not_text_error(path: object, exc: UnicodeDecodeError | csv.Error, line: int | None = None) -> SessionFormatError:
     """The SessionFormatError for a file that should be UTF-8 CSV text but is not.
 
     Parameters
@@ -26,16 +26,22 @@ def not_text_error(path: object, exc: UnicodeDecodeError | csv.Error) -> Session
     path : path-like
         The file, named in the message.
     exc : UnicodeDecodeError or csv.Error
-        What reading it raised.
+        What reading it raised (a csv.Error also for a field over the csv module's size limit).
+    line : int, optional
+        The line being read (the csv reader's ``line_num``), named when given.
 
     Returns
     -------
     SessionFormatError
     """
+    where = f"{path}: line {line}" if line else f"{path}"
     if isinstance(exc, UnicodeDecodeError):
-        return SessionFormatError(f"{path}: expected UTF-8 text, found byte {exc.object[exc.start]:#04x} "
+        return SessionFormatError(f"{where}: expected UTF-8 text, found byte {exc.object[exc.start]:#04x} "
                                   "that is not UTF-8 (a binary file?)")
-    return SessionFormatError(f"{path}: expected CSV text, found unreadable CSV ({exc})")
+    if "field larger than field limit" in str(exc):
+        return SessionFormatError(f"{where}: expected CSV fields of at most {csv.field_size_limit()} characters, "
+                                  "found a longer one (a binary file, or a quote never closed?)")
+    return SessionFormatError(f"{where}: expected CSV text, found unreadable CSV ({exc})")
 
 
 def json_type(value: object) -> str:

@@ -19,6 +19,7 @@ import secrets
 import stat
 import tempfile
 import time
+import zipfile
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import IO, Any
@@ -385,3 +386,41 @@ def _input_forms(src: Path) -> set[Path]:
         except OSError:
             pass  # an unreadable folder: the reader will say so
     return forms
+
+
+def check_zip_sizes(path: Path, error: type[UserError], max_bytes: int, what: str) -> list[zipfile.ZipInfo]:
+    """Refuse a zip bomb before anything is inflated: the members' uncompressed sizes (as the archive
+    declares them, which :mod:`zipfile` holds each member to) summed over ``max_bytes``.
+
+    Parameters
+    ----------
+    path : Path
+        The archive (``.npz``, a Face Landmarker ``.task``...).
+    error : type
+        The UserError subclass to raise.
+    max_bytes : int
+        The most the content may take once uncompressed.
+    what : str
+        What the content is, for the message (``"arrays"``, ``"models"``).
+
+    Returns
+    -------
+    list of zipfile.ZipInfo
+        The members.
+
+    Raises
+    ------
+    UserError
+        Of type ``error``, naming the file, the limit and the size found.
+    zipfile.BadZipFile, OSError
+        When the file is not a zip (the caller names it).
+    """
+    with zipfile.ZipFile(path) as zf:
+        infos = zf.infolist()
+    total = 0
+    for info in infos:
+        total += info.file_size
+        if total > max_bytes:
+            raise error(f"{path}: expected at most {max_bytes} bytes of {what}, found {total} or more once "
+                        "uncompressed")
+    return infos

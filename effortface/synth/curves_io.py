@@ -22,7 +22,7 @@ from typing import IO, Any
 import numpy as np
 
 from effortface.core.blendshapes import BlendshapeSet
-from effortface.core.errors import UserError
+from effortface.core.errors import UserError, not_text_error
 from effortface.core.fileio import atomic_write, atomic_write_text, check_regular_file
 from effortface.synth.runtime import FaceModel
 
@@ -423,7 +423,11 @@ def read_curves(path: str | Path) -> dict[str, np.ndarray]:
     """
     path = check_regular_file(path, "a curves CSV (effortface synth)")
     with path.open(encoding="utf-8", errors="replace", newline="") as f:
-        rows = list(csv.reader(f))
+        reader = csv.reader(f)
+        try:
+            rows = list(reader)
+        except csv.Error as exc:  # a field over the csv module's limit
+            raise UserError(str(not_text_error(path, exc, reader.line_num))) from None
     header = rows[0] if rows else []
     livelink = bool(header) and header[0] == "Timecode"
     if not livelink and (not header or header[0] != "t_s"):

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from effortface.core import bounds
 from effortface.core.blendshapes import DEFAULT_SET, BlendshapeSet
 from effortface.core.errors import UserError
 from effortface.synth import iir
@@ -128,18 +129,24 @@ class RestAnchor:
 
     @classmethod
     def from_dict(cls, doc: dict[str, Any], n: int, where: str) -> RestAnchor:
-        """Read the JSON form; raise UserError naming ``where`` for a malformed one."""
-        try:
-            at_rest = tuple(float(v) for v in doc["at_rest"])
-            level = tuple(float(v) for v in doc["level"])
-            raters = tuple(float("nan") if v is None else float(v) for v in doc.get("raters_rest_level", [None] * n))
-        except (KeyError, TypeError, ValueError):
-            raise UserError(f"{where}.rest_anchor: expected at_rest and level lists of numbers, "
-                            f"found {doc!r}") from None
-        if not (len(at_rest) == len(level) == len(raters) == n) or not all(v < 1.0 for v in at_rest) \
-                or not all(0.0 <= v < 1.0 for v in level):
-            raise UserError(f"{where}.rest_anchor: expected {n} values each, at_rest below 1 and level "
-                            f"in [0, 1), found {doc!r}")
+        """Read the JSON form; raise UserError naming ``where`` and the field for a malformed one.
+
+        Every value is bounded (:data:`effortface.core.bounds.BOUNDS`): ``at_rest`` from -1 to 0.99 (:func:`rest_anchor`
+        writes it from 0: a value far below 0 would map every output to 1), ``level``
+        from 0 to 0.99, ``raters_rest_level`` a number or null.
+        """
+        lists: dict[str, Any] = {key: doc.get(key, [None] * n if key == "raters_rest_level" else None) for key in
+                                 ("at_rest", "level", "raters_rest_level")} if isinstance(doc, dict) else {}
+        if not lists or not all(isinstance(v, list) and len(v) == n for v in lists.values()):
+            raise UserError(f"{where}.rest_anchor: expected {n} values each in the at_rest, level and "
+                            f"raters_rest_level lists, found {doc!r:.80}")
+        at_rest = tuple(bounds.check("rest_at_rest", v, f"{where}.rest_anchor.at_rest[{i}]")
+                        for i, v in enumerate(lists["at_rest"]))
+        level = tuple(bounds.check("rest_level", v, f"{where}.rest_anchor.level[{i}]")
+                      for i, v in enumerate(lists["level"]))
+        raters = tuple(float("nan") if v is None else bounds.check("svr_value", v, f"{where}.rest_anchor."
+                                                                                  f"raters_rest_level[{i}]")
+                       for i, v in enumerate(lists["raters_rest_level"]))
         return cls(at_rest, level, raters)
 
 
@@ -164,16 +171,25 @@ def check_filter_tau(tau_s: Any, n: int, name: str = "filter_tau_s") -> np.ndarr
     Raises
     ------
     UserError
-        Naming ``name`` unless the values are finite numbers >= 0 (0 turns the filter off).
+        Naming ``name`` unless the values are numbers from 0 (0 turns the filter off) to the
+        ``filter_tau_s`` bound of :data:`effortface.core.bounds.BOUNDS` (an integer of 400 digits too).
     """
-    try:
-        values = np.broadcast_to(np.asarray(tau_s, dtype=float), (n,)).copy()
-    except (TypeError, ValueError):
+    items = list(np.ravel(tau_s)) if isinstance(tau_s, np.ndarray) else \
+        list(tau_s) if isinstance(tau_s, (list, tuple)) else [tau_s]
+    if len(items) not in (1, n):
         raise UserError(f"{name}: expected a time constant in seconds (>= 0) or {n} of them, "
-                        f"found {tau_s!r}") from None
-    if not np.all(np.isfinite(values) & (values >= 0)):
-        raise UserError(f"{name}: expected time constants of 0 s or more, found {tau_s!r}")
-    return values
+                        f"found {tau_s!r:.80}")
+    values = [_tau_value(v, tau_s, f"{name}[{i}]" if len(items) > 1 else name) for i, v in enumerate(items)]
+    return np.broadcast_to(np.asarray(values, dtype=float), (n,)).copy()
+
+
+def _tau_value(value: Any, given: Any, label: str) -> float:
+    """One time constant (s) within ``BOUNDS["filter_tau_s"]`` (an integer of 400 digits too); UserError
+    naming ``label``, as ``check_filter_tau`` has always said for a negative or non-numeric one."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
+            or not value >= 0:
+        raise UserError(f"{label.split('[')[0]}: expected time constants of 0 s or more, found {given!r:.80}")
+    return bounds.check("filter_tau_s", value, label)
 
 
 class WeightFilter:

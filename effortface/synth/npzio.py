@@ -17,6 +17,7 @@ from typing import IO
 import numpy as np
 
 from effortface.core.errors import UserError
+from effortface.core.fileio import check_zip_sizes
 
 #: what a damaged zip makes zipfile and numpy raise (a name that is not UTF-8, an unknown compression
 #: method, an "encrypted" flag, corrupt deflate data, a lone .npy...), found by benchmarks/fuzz_long.py
@@ -79,16 +80,12 @@ def _check_magic(path: Path, error: type[UserError], what: str) -> None:
 
 
 def check_npz_sizes(path: Path, error: type[UserError], max_bytes: int) -> None:
-    """Refuse a zip bomb: member sizes summed over ``max_bytes``, or an array header declaring more
-    data than its member holds (checked before numpy allocates the array)."""
+    """Refuse a zip bomb: member sizes summed over ``max_bytes`` (:func:`~effortface.core.fileio.check_zip_sizes`),
+    or an array header declaring more data than its member holds (checked before numpy allocates the array)."""
     try:
+        infos = check_zip_sizes(path, error, max_bytes, "arrays")
         with zipfile.ZipFile(path) as zf:
-            total = 0
-            for info in zf.infolist():
-                total += info.file_size
-                if total > max_bytes:
-                    raise error(f"{path}: expected at most {max_bytes} bytes of arrays, "
-                                f"found {total} or more once uncompressed")
+            for info in infos:
                 with zf.open(info) as fh:
                     _check_npy_header(path, info, fh, error)
     except UserError:

@@ -138,7 +138,7 @@ def read_resting_hr_chart(path: str | Path = CHART_PATH) -> dict[tuple[str, str]
         chart = {(r["sex"], r["category"]): tuple(_cell_bpm(v) for k, v in r.items()
                                                   if k.startswith("age_"))
                  for r in rows}
-    except (OSError, KeyError, ValueError, AttributeError) as exc:
+    except (OSError, KeyError, ValueError, AttributeError, csv.Error) as exc:
         raise UserError(f"{path}: expected a resting-HR chart (sex,category,age_...), "
                         f"found {exc!r}") from None
     return chart

@@ -21,6 +21,7 @@ from effortface.core import bounds
 from effortface.core.errors import UserError
 from effortface.core.fileio import read_json
 from effortface.synth.motion import check_parents
+from effortface.synth.motion_csv import SKELETON_SUFFIX
 
 TABLES_CSV = Path(__file__).with_name("data") / "segment_inertia_tables.csv"
 
@@ -599,25 +600,31 @@ def _ancestors(j: int, parents: np.ndarray) -> list[int]:
 
 def lowest_common_ancestor(joints: Sequence[int], parents: np.ndarray) -> int:
     """The deepest joint that is an ancestor of (or equal to) every joint in ``joints``; -1 when they
-    lie in separate trees (a joint-positions CSV read without its tree: every joint a root)."""
+    are in different trees (a skeleton of several roots)."""
     common = set(_ancestors(joints[0], parents))
     for j in joints[1:]:
         common &= set(_ancestors(j, parents))
     return next((a for a in _ancestors(joints[0], parents) if a in common), -1)
 
 
-def _frame_joints(names: Sequence[str], resolved: dict[str, tuple[tuple[int, ...], tuple[int, ...]]],
+def _frame_joints(names: Sequence[str], resolved: Mapping[str, tuple[tuple[int, ...], tuple[int, ...]]],
                   parents: np.ndarray, joint_names: Sequence[str], source: str | Path) -> np.ndarray:
-    """Each segment's frame joint (:func:`lowest_common_ancestor` of its end joints), or a UserError
-    naming the clip and the segment whose end joints lie in separate trees."""
-    out = np.array([lowest_common_ancestor(resolved[s][0] + resolved[s][1], parents) for s in names])
-    for s, joint in zip(names, out):
+    """Each segment's frame joint (the lowest common ancestor of its end joints); UserError naming the
+    clip and the segment when its ends are in different trees (a joint-positions CSV read without its
+    skeleton file has every joint a root)."""
+    out = []
+    for seg in names:
+        ends = resolved[seg][0] + resolved[seg][1]
+        joint = lowest_common_ancestor(ends, parents)
         if joint < 0:
-            ends = ", ".join(joint_names[j] for j in resolved[s][0] + resolved[s][1])
-            raise UserError(f"{source or 'skeleton'}: segment {s}: expected its end joints ({ends}) in one tree, "
-                            f"found them in separate trees (a joint-positions CSV gives its tree in "
-                            f"<clip>.skeleton.json beside it or a '# parents:' comment)")
-    return out
+            csv_hint = (f"a joint-positions CSV needs its skeleton file {Path(source).stem}{SKELETON_SUFFIX} "
+                        f"beside it (or a '# parents:' comment)" if str(source).lower().endswith(".csv")
+                        else "the skeleton needs one tree")
+            raise SegmentMappingError(f"{source or 'skeleton'}: {seg}: expected its joints "
+                                      f"({', '.join(joint_names[j] for j in ends)}) in one skeleton tree, found them "
+                                      f"in separate trees: {csv_hint}")
+        out.append(joint)
+    return np.array(out)
 
 
 def _segment_lengths(prox_w: np.ndarray, dist_w: np.ndarray, reference_positions_m: np.ndarray) -> np.ndarray:

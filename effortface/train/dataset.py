@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -211,22 +211,50 @@ def check_rows(table: pd.DataFrame, source: str) -> None:
                            f"t_s {row['t_s']:g} again on line {_line(table, dup)}")
 
 
-def check_values(table: pd.DataFrame, blendshapes: Sequence[str], source: str) -> None:
+def check_values(table: pd.DataFrame, blendshapes: Sequence[str], source: str,
+                 sources: Mapping[str, str] | None = None) -> None:
     """DatasetError for a per-second value outside its range (:data:`VALUE_RANGES`, weights in
     :data:`WEIGHT_RANGE`); empty cells are allowed.
+
+    Parameters
+    ----------
+    table : DataFrame
+        The long table (one session's rows when ``sources`` is given).
+    blendshapes : sequence of str
+        The weight columns.
+    source : str
+        The file the table was read from, for the message (with the line).
+    sources : mapping, optional
+        Column -> the user's file its values come from (a session's ``heart_rate.csv``, ``work.csv``,
+        ``annotations/``): the message names that file and the row's ``t_s`` instead of a line of
+        a table the user never saw.
 
     Raises
     ------
     DatasetError
-        Naming the source, the column, the range, the value and its line.
+        Naming the source, the column, the range, the value and its line (or its file and time).
     """
     ranges = {**VALUE_RANGES, **{n: WEIGHT_RANGE for n in blendshapes}}
     for col, (lo, hi) in ranges.items():
         values = table[col]
         bad = values.notna() & ~values.between(lo, hi)
         if bad.any():
-            raise DatasetError(f"{source}: column {col}: expected values from {lo:g} to {hi:g} (or "
-                               f"empty), found {values[bad].iloc[0]:g} on line {_line(table, bad)}")
+            where = (f"{sources.get(col, source)}: column {col}" if sources is not None
+                     else f"{source}: column {col}")
+            at = (f"at t_s {table['t_s'][bad].iloc[0]:g} s" if sources is not None
+                  else f"on line {_line(table, bad)}")
+            raise DatasetError(f"{where}: expected values from {lo:g} to {hi:g} (or empty), found "
+                               f"{values[bad].iloc[0]:g} {at}")
+
+
+def _value_sources(s: Session, blendshapes: Sequence[str]) -> dict[str, str]:
+    """Per-second column -> the session file (or derivation) its values come from, for messages."""
+    work = s.path / WORK_CSV
+    derived = f"{s.path}: the work derived from motion/ and the exercise log"
+    return {"hr_bpm": str(s.path / "heart_rate.csv"),
+            "w_per_kg": str(work) if work.is_file() else derived,
+            "p_per_kg": str(work) if work.is_file() else derived,
+            **{n: str(s.path / "annotations") for n in blendshapes}}
 
 
 def check_participants(table: pd.DataFrame, source: str) -> None:
@@ -408,6 +436,7 @@ def session_table(folder: str | os.PathLike, blendshapes: BlendshapeSet = DEFAUL
             df[MACHINE_PREFIX + name] = from_machine[:, j]
     df["exercise"] = _session_label(s.info.session_id)
     df["hr_rest_bpm"], df["hr_max_bpm"] = part.hr_rest_bpm, part.hr_max_bpm
+    check_values(df, blendshapes.names, str(s.path), _value_sources(s, blendshapes.names))
     return df
 
 

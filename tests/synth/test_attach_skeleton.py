@@ -85,9 +85,9 @@ def test_a_positions_csv_without_its_tree_is_one_line_not_a_traceback(tmp_path, 
     capsys.readouterr()
     assert main(["work", str(folder)]) == 2
     (line,) = capsys.readouterr().err.strip().splitlines()
-    assert line.startswith(f"effortface work: error: {folder / 'motion' / 'squats.csv'}: segment ")
-    assert line.endswith("in one tree, found them in separate trees (a joint-positions CSV gives its tree in "
-                         "<clip>.skeleton.json beside it or a '# parents:' comment)")
+    assert line.startswith(f"effortface work: error: {folder / 'motion' / 'squats.csv'}: ")
+    assert line.endswith("in one skeleton tree, found them in separate trees: a joint-positions CSV needs its "
+                         "skeleton file squats.skeleton.json beside it (or a '# parents:' comment)")
     assert not (folder / "work.csv").exists()
 
 

@@ -24,6 +24,7 @@ from effortface.core.docs import SCIENCE
 from effortface.annotate.agreement import (FLAG_PCT, agreement_report, format_machine_report, format_report, gather_poses,
                                            gather_ratings, machine_ratings, machine_report, save_bland_altman_png)
 from effortface.annotate.reliability import read_ratings
+from effortface.core.blendshapes import DEFAULT_SET
 from effortface.core.errors import UserError
 from effortface.core.fileio import check_new_png
 
@@ -57,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
         path = Path(args.ratings)
         if not path.is_file():
             raise UserError(f"--ratings {path}: expected a CSV file, found {'a folder' if path.exists() else 'nothing'}")
-        ratings, source = read_ratings(path), str(path)
+        ratings, source = read_ratings(path, DEFAULT_SET), str(path)
     else:
         ratings, source = gather_ratings(args.target)
     machine, no_face = (machine_ratings(args.target, gather_poses(args.target)) if args.target is not None

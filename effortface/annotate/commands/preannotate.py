@@ -39,7 +39,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _check_args(args: argparse.Namespace) -> tuple[list[Path], Path | None]:
     """The sessions (each checked, before any work) and the model path."""
-    from effortface.annotate.machine.landmarker import litert_interpreter, read_bundle
+    from effortface.annotate.machine.landmarker import FaceLandmarker, litert_interpreter
     from effortface.annotate.machine.preannotate import check_rateable
 
     if args.workers < 1:
@@ -47,7 +47,7 @@ def _check_args(args: argparse.Namespace) -> tuple[list[Path], Path | None]:
     litert_interpreter()  # one line where ai-edge-litert has no wheel
     model = Path(args.model) if args.model is not None else None
     if model is not None:
-        read_bundle(model)
+        FaceLandmarker(model)  # the bundle read and its three models loaded: one line before any work
     sessions = [Path(s) for s in args.sessions]
     seen: set[Path] = set()
     for s in sessions:

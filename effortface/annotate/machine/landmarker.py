@@ -34,6 +34,7 @@ import os
 import sys
 import threading
 import zipfile
+import zlib
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -41,6 +42,7 @@ from typing import Any
 import numpy as np
 
 from effortface.core.errors import UserError
+from effortface.core.fileio import check_zip_sizes
 
 #: the bundle shipped as package data (Apache-2.0, see data/README.md)
 DEFAULT_MODEL = Path(__file__).resolve().parent / "data" / "face_landmarker.task"
@@ -186,27 +188,65 @@ def file_sha256(path: Path) -> str:
     return digest.hexdigest()
 
 
+#: the most a ``.task`` bundle may hold once uncompressed (the shipped one: 3.8 MB)
+MAX_TASK_BYTES = 64 * 1024 * 1024
+#: what a damaged zip makes zipfile raise while a member is read (bad CRC or deflate data, a torn
+#: file, an encrypted or unknown compression method)
+ZIP_ERRORS = (zipfile.BadZipFile, zlib.error, OSError, EOFError, NotImplementedError, RuntimeError, ValueError)
+
+
 def read_bundle(path: Path) -> dict[str, bytes]:
     """The three ``.tflite`` models of a Face Landmarker ``.task`` bundle (a zip).
+
+    The members' sizes are checked before anything is inflated (at most :data:`MAX_TASK_BYTES`, as
+    :func:`effortface.core.fileio.check_zip_sizes` does for every archive the product reads).
 
     Raises
     ------
     UserError
-        Naming the file, when it is missing, not a zip, or lacks one of the three models.
+        Naming the file, when it is missing, not a zip, too large once uncompressed, damaged, or
+        lacks one of the three models.
     """
     if not path.is_file():
         raise UserError(f"--model {path}: expected a face_landmarker.task file, found "
                         f"{'a folder' if path.exists() else 'nothing'}")
     try:
+        names = {info.filename for info in check_zip_sizes(path, UserError, MAX_TASK_BYTES, "models")}
+        missing = [n for n in (DETECTOR_TFLITE, LANDMARKS_TFLITE, BLENDSHAPES_TFLITE) if n not in names]
+        if missing:
+            raise UserError(f"--model {path}: expected a Face Landmarker bundle with {', '.join(missing)}, "
+                            f"found {', '.join(sorted(names))[:200] or 'an empty zip'}")
         with zipfile.ZipFile(path) as bundle:
-            names = set(bundle.namelist())
-            missing = [n for n in (DETECTOR_TFLITE, LANDMARKS_TFLITE, BLENDSHAPES_TFLITE) if n not in names]
-            if missing:
-                raise UserError(f"--model {path}: expected a Face Landmarker bundle with {', '.join(missing)}, "
-                                f"found {', '.join(sorted(names)) or 'an empty zip'}")
             return {n: bundle.read(n) for n in (DETECTOR_TFLITE, LANDMARKS_TFLITE, BLENDSHAPES_TFLITE)}
-    except zipfile.BadZipFile as exc:
-        raise UserError(f"--model {path}: expected a Face Landmarker bundle (a zip), found {exc}") from exc
+    except UserError as exc:
+        raise UserError(str(exc) if str(exc).startswith("--model") else f"--model {exc}") from None
+    except ZIP_ERRORS as exc:
+        raise UserError(f"--model {path}: expected a Face Landmarker bundle (a zip), found "
+                        f"{str(exc) or type(exc).__name__}") from None
+
+
+def _interpreter(path: Path, models: dict[str, bytes], name: str, num_threads: int) -> Any:
+    """One model of the bundle loaded and allocated; UserError naming the bundle and the member when the
+    runtime cannot (a damaged or truncated ``.tflite``)."""
+    try:
+        it = litert_interpreter()(model_content=models[name], num_threads=num_threads)
+        it.allocate_tensors()
+    except (ValueError, RuntimeError) as exc:
+        raise UserError(f"--model {path}: {name}: expected a TFLite model, found one the runtime cannot load "
+                        f"({str(exc).splitlines()[0][:120] if str(exc) else type(exc).__name__})") from None
+    return it
+
+
+def _outputs(path: Path, name: str, it: Any, key: str, wanted: tuple[Any, ...]) -> dict[Any, int]:
+    """``{output name or shape: tensor index}`` of a loaded model; UserError naming the member when an
+    output MediaPipe's graph reads is missing (a bundle whose models were swapped or replaced)."""
+    found = {(d[key] if key == "name" else tuple(int(v) for v in d[key])): d["index"] for d in it.get_output_details()}
+    missing = [w for w in wanted if w not in found]
+    if missing or len(it.get_input_details()) != 1:
+        raise UserError(f"--model {path}: {name}: expected the Face Landmarker model with outputs "
+                        f"{', '.join(map(str, wanted))}, found {', '.join(map(str, found))[:160] or 'none'} "
+                        f"(a swapped or foreign model?)")
+    return found
 
 
 def ssd_anchors() -> np.ndarray:
@@ -366,22 +406,19 @@ class FaceLandmarker:
     def __init__(self, model_path: Path | None = None, *, num_threads: int = 1) -> None:
         self.model_path = Path(model_path) if model_path is not None else DEFAULT_MODEL
         models = read_bundle(self.model_path)
-        interpreter = litert_interpreter()
+        path = self.model_path
         with _quiet_stderr():  # the runtime's "INFO: Created TensorFlow Lite XNNPACK delegate for CPU."
-            self._det = interpreter(model_content=models[DETECTOR_TFLITE], num_threads=num_threads)
-            self._lmk = interpreter(model_content=models[LANDMARKS_TFLITE], num_threads=num_threads)
-            self._bs = interpreter(model_content=models[BLENDSHAPES_TFLITE], num_threads=num_threads)
-            for it in (self._det, self._lmk, self._bs):
-                it.allocate_tensors()
+            self._det, self._lmk, self._bs = (_interpreter(path, models, n, num_threads)
+                                              for n in (DETECTOR_TFLITE, LANDMARKS_TFLITE, BLENDSHAPES_TFLITE))
         self._det_in = self._det.get_input_details()[0]["index"]
-        det_out = {d["name"]: d["index"] for d in self._det.get_output_details()}
+        det_out = _outputs(path, DETECTOR_TFLITE, self._det, "name", ("regressors", "classificators"))
         self._det_boxes, self._det_scores = det_out["regressors"], det_out["classificators"]
         self._lmk_in = self._lmk.get_input_details()[0]["index"]
-        lmk_out = {tuple(d["shape"]): d["index"] for d in self._lmk.get_output_details()}
+        lmk_out = _outputs(path, LANDMARKS_TFLITE, self._lmk, "shape", ((1, 1, 1, 1434), (1, 1, 1, 1)))
         self._lmk_points = lmk_out[(1, 1, 1, 1434)]  # 478 x (x, y, z) in input pixels
         self._lmk_presence = lmk_out[(1, 1, 1, 1)]  # face presence logit
         self._bs_in = self._bs.get_input_details()[0]["index"]
-        self._bs_out = self._bs.get_output_details()[0]["index"]
+        self._bs_out = next(iter(_outputs(path, BLENDSHAPES_TFLITE, self._bs, "shape", ((52,),)).values()))
         self._anchors = ssd_anchors()
         self._next: Rect | None = None
         self._smoother = OneEuroSmoother()

@@ -25,8 +25,10 @@ from typing import Any
 import numpy as np
 
 from effortface.annotate.machine.landmarker import ARKIT_NAMES
+from effortface.core import bounds
 from effortface.core.errors import SessionFormatError, UserError, not_text_error
 from effortface.core.fileio import atomic_write_text, check_regular_file, read_json, write_json_atomic
+from effortface.core.session.folder import VIDEO_FRAMES_CSV, read_video_frames
 
 MACHINE_DIR = "machine"
 CSV_NAME = "face_landmarker.csv"
@@ -34,6 +36,9 @@ SIDECAR_NAME = "face_landmarker.json"
 #: our four blendshapes, in the CSV's column order
 FOUR = ("mouth_stretch", "mouth_open", "eye_squint", "brow_lower")
 HEADER = ("frame", "t_s", "face", *FOUR, *ARKIT_NAMES)
+#: largest difference (s) between a track's frame time and the session's video_frames.csv (the CSV
+#: holds 4 decimals)
+FRAME_TIME_TOLERANCE_S = 1e-3
 
 __all__ = ["ARKIT_NAMES", "CSV_NAME", "FOUR", "MACHINE_DIR", "SIDECAR_NAME", "MachineTrack",
            "read_machine_track", "write_machine_track", "machine_paths"]
@@ -119,25 +124,28 @@ def write_machine_track(session_dir: Path, track: MachineTrack, *, force: bool =
     return csv_path
 
 
-def _float(text: str, path: Path, line: int, column: str) -> float:
+def _float(text: str, path: Path, line: int, column: str, bound: str) -> float:
+    """A cell as a number within ``bounds.BOUNDS[bound]``; SessionFormatError naming the line and column."""
     try:
         value = float(text)
     except ValueError:
         raise SessionFormatError(f"{path}: line {line}: column {column}: expected a number, found {text!r}") from None
-    if not math.isfinite(value):
-        raise SessionFormatError(f"{path}: line {line}: column {column}: expected a finite number, found {text!r}")
-    return value
+    try:
+        return bounds.check(bound, value, f"{path}: line {line}: column {column}")
+    except UserError as exc:
+        raise SessionFormatError(str(exc)) from None
 
 
-def _parse_row(row: list[str], path: Path, line: int) -> tuple[int, float, bool, list[float]]:
-    """One data row -> (frame, t_s, face, 56 values with NaN for empty cells)."""
+def _parse_row(row: list[str], path: Path, line: int, index: int) -> tuple[int, float, bool, list[float]]:
+    """Data row ``index`` (0-based) -> (frame, t_s, face, 56 values with NaN for empty cells); its frame
+    must be ``index`` (video_frames.csv's numbering), its weights and scores in [0, 1]."""
     if len(row) != len(HEADER):
         raise SessionFormatError(f"{path}: line {line}: expected {len(HEADER)} columns, found {len(row)}")
-    try:
-        frame = int(row[0])
-    except ValueError:
-        raise SessionFormatError(f"{path}: line {line}: column frame: expected an integer, found {row[0]!r}") from None
-    t_s = _float(row[1], path, line, "t_s")
+    if row[0].strip() != str(index):
+        raise SessionFormatError(f"{path}: line {line}: column frame: expected frame {index} (frames 0, 1, 2... "
+                                 f"as in {VIDEO_FRAMES_CSV}), found {row[0][:40]!r}")
+    frame = index
+    t_s = _float(row[1], path, line, "t_s", "t_s")
     if row[2] not in ("0", "1"):
         raise SessionFormatError(f"{path}: line {line}: column face: expected 1 or 0, found {row[2]!r}")
     face = row[2] == "1"
@@ -145,17 +153,23 @@ def _parse_row(row: list[str], path: Path, line: int) -> tuple[int, float, bool,
     if not face and any(cells):
         raise SessionFormatError(f"{path}: line {line}: expected empty weights and scores where face is 0, "
                                  f"found values")
-    values = [_float(c, path, line, HEADER[3 + j]) if face else math.nan for j, c in enumerate(cells)]
+    values = [_float(c, path, line, HEADER[3 + j], "blendshape_weight") if face else math.nan
+              for j, c in enumerate(cells)]
     return frame, t_s, face, values
 
 
 def read_machine_track(session_dir: Path) -> MachineTrack | None:
     """Read a session's machine rating; None when it has none.
 
+    The track must be this session's: one row per frame of ``video_frames.csv`` with its times
+    (within :data:`FRAME_TIME_TOLERANCE_S`), weights and scores in [0, 1] and, when the sidecar
+    counts them, as many frames as it says.
+
     Raises
     ------
     SessionFormatError
-        Naming the file, when the CSV or its sidecar is damaged.
+        Naming the file (and line and column), when the CSV or its sidecar is damaged or the track
+        does not fit the session's frames (a track copied from another session).
     """
     csv_path, sidecar_path = machine_paths(session_dir)
     if not csv_path.exists():
@@ -169,16 +183,39 @@ def read_machine_track(session_dir: Path) -> MachineTrack | None:
                 raise SessionFormatError(f"{csv_path}: expected header {','.join(HEADER[:8])},...,"
                                          f"{HEADER[-1]} ({len(HEADER)} columns), found "
                                          f"{','.join((header or [])[:8])!r}")
-            rows = [_parse_row(row, csv_path, reader.line_num) for row in reader if row]
+            rows = [_parse_row(row, csv_path, reader.line_num, i) for i, row in enumerate(r for r in reader if r)]
     except (UnicodeDecodeError, csv.Error) as exc:
         raise not_text_error(csv_path, exc) from None
     sidecar = read_json(sidecar_path, "the machine rating's JSON sidecar", SessionFormatError) \
         if sidecar_path.exists() else {}
     if not isinstance(sidecar, dict):
         raise SessionFormatError(f"{sidecar_path}: expected a JSON object, found {type(sidecar).__name__}")
+    _check_fits_session(Path(session_dir), csv_path, [r[1] for r in rows], sidecar)
     values = np.array([r[3] for r in rows], dtype=float).reshape(len(rows), len(FOUR) + len(ARKIT_NAMES))
     return MachineTrack(frame=np.array([r[0] for r in rows], dtype=int),
                         t_s=np.array([r[1] for r in rows], dtype=float),
                         face=np.array([r[2] for r in rows], dtype=bool),
                         weights=values[:, :len(FOUR)].copy(), scores=values[:, len(FOUR):].copy(),
                         sidecar=sidecar)
+
+
+def _check_fits_session(session_dir: Path, csv_path: Path, t_s: list[float], sidecar: dict[str, Any]) -> None:
+    """SessionFormatError unless the track's frames are the session's (``video_frames.csv``, when the
+    session has one) and as many as its sidecar's ``frames`` count."""
+    counted = sidecar.get("frames")
+    if isinstance(counted, int) and not isinstance(counted, bool) and counted != len(t_s):
+        raise SessionFormatError(f"{csv_path}: expected the {counted} frames its sidecar "
+                                 f"{SIDECAR_NAME} counts, found {len(t_s)}")
+    frames_csv = session_dir / VIDEO_FRAMES_CSV
+    if not frames_csv.is_file():
+        return
+    video = read_video_frames(frames_csv)
+    if len(video) != len(t_s):
+        raise SessionFormatError(f"{csv_path}: expected the {len(video)} frames of this session's "
+                                 f"{VIDEO_FRAMES_CSV}, found {len(t_s)} (a track of another session's video?)")
+    off = np.flatnonzero(np.abs(np.asarray(t_s) - np.asarray(video)) > FRAME_TIME_TOLERANCE_S)
+    if off.size:
+        k = int(off[0])
+        raise SessionFormatError(f"{csv_path}: line {k + 2}: column t_s: expected frame {k} at {video[k]:.4f} s as "
+                                 f"in this session's {VIDEO_FRAMES_CSV}, found {t_s[k]:.4f} s (a track of another "
+                                 f"session's video?)")

@@ -24,6 +24,7 @@ from pathlib import Path
 
 from effortface.capture_tool.importers.recording import HrImportError, HrRecording
 from effortface.capture_tool.importers.xml_tracks import parse_time
+from effortface.core.errors import not_text_error
 
 #: header keys (letters and digits only, lower case) that say heart rate ...
 HR_KEYS = frozenset({"hr", "hrbpm", "heartrate", "heartratebpm", "bpm", "pulse", "pulserate", "hrbeatsmin"})
@@ -71,7 +72,10 @@ def _rows(path: Path) -> tuple[list[str], list[list[str]]]:
     if not lines:
         raise HrImportError(f"{path}: expected a table with a header line, found an empty file")
     sep = max(("\t", ";", ","), key=lines[0].count)
-    table = list(csv.reader(lines, delimiter=sep))
+    try:
+        table = list(csv.reader(lines, delimiter=sep))
+    except csv.Error as exc:  # a field over the csv module's limit
+        raise HrImportError(str(not_text_error(path, exc))) from None
     header = [h.strip() for h in table[0]]
     return header, table[1:]
 
