@@ -34,8 +34,11 @@ SIDECAR_NAME = "face_landmarker.json"
 #: our four blendshapes, in the CSV's column order
 FOUR = ("mouth_stretch", "mouth_open", "eye_squint", "brow_lower")
 HEADER = ("frame", "t_s", "face", *FOUR, *ARKIT_NAMES)
+#: the sidecar's ``format_version``: 2 since the effort mapping (a sidecar without one is version 1:
+#: the four weights are the mean of the definition's ARKit scores); the CSV is the same in both
+SIDECAR_VERSION = 2
 
-__all__ = ["ARKIT_NAMES", "CSV_NAME", "FOUR", "MACHINE_DIR", "SIDECAR_NAME", "MachineTrack",
+__all__ = ["ARKIT_NAMES", "CSV_NAME", "FOUR", "MACHINE_DIR", "SIDECAR_NAME", "SIDECAR_VERSION", "MachineTrack",
            "read_machine_track", "write_machine_track", "machine_paths"]
 
 
