@@ -29,6 +29,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "effortface"
 #: the guide's own pages, in reading order (other docs/guide/*.md pages follow, by name)
 GUIDE_ORDER = ["getting-started.md", "layout.md", "app.md", "capture.md", "heart-rate-devices.md", "annotate.md",
+               "machine-rater.md", "machine-rater-effort-mapping.md", "machine-rater-annotate.md",
                "train.md", "motion-and-work.md", "skeleton-mapping.md", "synthesize.md", "blender.md", "interop.md",
                "formats.md", "sample-data.md",
                "troubleshooting.md", "extend-strap-protocol.md", "extend-motion-format.md",

@@ -2,10 +2,13 @@
 
 The effort mapping (:mod:`effortface.annotate.machine.effort`) is a definition: it does not know how
 *this* lab's raters key. Where several participants have machine-rated sessions with human
-key-frames, a regressor can learn it: per blendshape, scikit-learn's
-:class:`~sklearn.ensemble.HistGradientBoostingRegressor` (:func:`make_regressor`) from
-:func:`features` (the 52 scores at the frame, and their mean over the :data:`HISTORY_S` before it) to
-the human key weights, one row per (rater, keyed frame), fitted across participants.
+key-frames, a regressor can learn it: per blendshape, scikit-learn's ridge regression on
+standardised features, its penalty chosen by leave-one-out cross-validation (``RidgeCV``,
+:func:`make_regressor`), from :func:`features` (the 52 scores at the frame, and their mean over the
+:data:`HISTORY_S` before it) to the human key weights, one row per (rater, keyed frame), fitted across
+participants. (Gradient-boosted trees, ``HistGradientBoostingRegressor``, scored a little higher held
+out on the sample lab but took about 100 s of fitting per session rated against ridge's 12 s: see
+docs/guide/machine-rater-effort-mapping.md.)
 
 It is scored **leave-one-participant-out** against the definition: for each participant with keys,
 the regressor fitted on the others predicts that participant's keyed frames, and the Pearson r of
@@ -36,7 +39,7 @@ MIN_PARTICIPANTS = 3
 MIN_KEYS_SCORED = 10
 #: the ridge penalties tried
 RIDGE_ALPHAS = (0.1, 1.0, 10.0, 100.0, 1000.0)
-LEARNED_MAPPING = "learned (HistGradientBoostingRegressor, leave-one-participant-out)"
+LEARNED_MAPPING = "learned (RidgeCV, leave-one-participant-out)"
 
 
 def features(scores: np.ndarray, t_s: np.ndarray) -> np.ndarray:
@@ -156,8 +159,8 @@ class Choice:
 
     def to_dict(self) -> dict[str, Any]:
         """The sidecar's ``learned`` object."""
-        return {"method": f"{LEARNED_MAPPING}: sklearn HistGradientBoostingRegressor per blendshape from the 52 "
-                          f"scores and their mean over the {HISTORY_S:g} s before the frame to the human keys; "
+        return {"method": f"{LEARNED_MAPPING}: sklearn StandardScaler + RidgeCV (alphas {list(RIDGE_ALPHAS)}) per "
+                          f"blendshape from the 52 scores and their mean over the {HISTORY_S:g} s before the frame to the human keys; "
                           "held-out Pearson r per participant, the regressor fitted on the other participants",
                 "participant": self.participant,
                 "calibration": "the per-participant isotonic calibration is fitted after this mapping, on the same "
@@ -192,7 +195,7 @@ def choose(sessions: Sequence[KeyedSession], participant: str) -> Choice:
                         "per_participant": {p: {k: (round(v, 4) if isinstance(v, float) else v)
                                                 for k, v in s.items()} for p, s in scores.items()}}
         if not wins:
-            report[name]["why_not"] = (f"keys of {len(participants)} participant(s), fewer than {MIN_PARTICIPANTS}"
+            report[name]["why_not"] = (f"held-out scores for {scored} participant(s), fewer than {MIN_PARTICIPANTS}"
                                        if scored < MIN_PARTICIPANTS else "the definition scores at least as well held out")
             use[name] = False
             continue
