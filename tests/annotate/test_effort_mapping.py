@@ -101,7 +101,8 @@ def test_mouth_stretch_and_baselines(rated: dict[str, Path]) -> None:
         track = read_machine_track(session)
         assert track is not None
         neutral = track.sidecar["mapping"]["neutral"]
-        assert neutral["reference"].startswith("first rest phase") and neutral["frames"] == 16, neutral  # 0 to 0.6 s at 25 frames/s
+        # 0 to 0.6 s at 25 frames/s: 16 frames
+        assert neutral["reference"].startswith("first rest phase") and neutral["frames"] == 16, neutral
         rest = track.t_s <= REST_S
         definition = map_scores(track.scores, default_mapping(), FOUR)
         # the neutral face reads 0 (at least the half of its frames at or below its median), and a raised

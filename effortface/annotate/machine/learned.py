@@ -131,9 +131,10 @@ def heldout(sessions: Sequence[KeyedSession], j: int) -> dict[str, dict[str, flo
 
 
 def _mean_r(scores: dict[str, dict[str, float | None]], key: str) -> float | None:
-    values = [v[key] for v in scores.values() if v[key] is not None and v["learned_r"] is not None
-              and v["definition_r"] is not None]
-    return None if not values else float(np.mean([float(v) for v in values]))
+    """The mean of ``key`` over the participants with both held-out r's (None when there are none)."""
+    values = [float(value) for v in scores.values()
+              if (value := v[key]) is not None and v["learned_r"] is not None and v["definition_r"] is not None]
+    return None if not values else float(np.mean(values))
 
 
 @dataclasses.dataclass
@@ -160,8 +161,9 @@ class Choice:
     def to_dict(self) -> dict[str, Any]:
         """The sidecar's ``learned`` object."""
         return {"method": f"{LEARNED_MAPPING}: sklearn StandardScaler + RidgeCV (alphas {list(RIDGE_ALPHAS)}) per "
-                          f"blendshape from the 52 scores and their mean over the {HISTORY_S:g} s before the frame to the human keys; "
-                          "held-out Pearson r per participant, the regressor fitted on the other participants",
+                          f"blendshape from the 52 scores and their mean over the {HISTORY_S:g} s before the frame "
+                          "to the human keys; held-out Pearson r per participant, the regressor fitted on the other "
+                          "participants",
                 "participant": self.participant,
                 "calibration": "the per-participant isotonic calibration is fitted after this mapping, on the same "
                                "humans' keys (this participant's): its fit_mae is not a held-out figure",
@@ -195,8 +197,9 @@ def choose(sessions: Sequence[KeyedSession], participant: str) -> Choice:
                         "per_participant": {p: {k: (round(v, 4) if isinstance(v, float) else v)
                                                 for k, v in s.items()} for p, s in scores.items()}}
         if not wins:
-            report[name]["why_not"] = (f"held-out scores for {scored} participant(s), fewer than {MIN_PARTICIPANTS}"
-                                       if scored < MIN_PARTICIPANTS else "the definition scores at least as well held out")
+            report[name]["why_not"] = (
+                f"held-out scores for {scored} participant(s), fewer than {MIN_PARTICIPANTS}"
+                if scored < MIN_PARTICIPANTS else "the definition scores at least as well held out")
             use[name] = False
             continue
         x_fit, y_fit, _ = _rows(sessions, j, lambda q: q != participant)
