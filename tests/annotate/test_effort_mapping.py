@@ -187,3 +187,26 @@ def test_features_hold_the_short_history() -> None:
     assert x[0, 52] == 0.0  # nothing before: its own
     np.testing.assert_allclose(x[4, 52], np.mean([0, 1, 2, 3]))
     np.testing.assert_allclose(x[7, 52], np.mean([3, 4, 6]))  # frame 5 had no face
+
+
+def test_without_a_rest_phase_no_baseline_is_removed(rated: dict[str, Path], tmp_path: Path) -> None:
+    track = read_machine_track(rated["lbax4n"])
+    assert track is not None
+    (tmp_path / "events.csv").write_text("t_s,kind,label,value\n0.0000,phase_start,talk,\n")
+    weights, mapping = effort.session_weights(tmp_path, track.scores, track.t_s)
+    assert mapping["neutral"] == {"reference": "none: no rest phase in events.csv", "frames": 0, "baseline": None,
+                                  "smile": None}
+    definition = map_scores(track.scores, default_mapping(), FOUR)
+    np.testing.assert_allclose(weights[:, [1, 3]], definition[:, [1, 3]])  # jawOpen, browDown as they were
+    assert mapping["blink"]["held"] == 1 and np.median(weights[:, 2]) > 0.2  # the squint's baseline stays
+
+
+def test_a_blink_beside_a_frame_without_a_face_or_at_the_end_holds_the_neighbour_it_has() -> None:
+    values = np.array([0.2, 0.2, 0.8, 0.9, 0.3, np.nan, 0.7, 0.9])
+    held = effort.hold_across(values, [(2, 3), (6, 7)], pad=0)
+    np.testing.assert_allclose(held[[2, 3]], [0.2 + 0.1 / 3, 0.2 + 0.2 / 3])  # the line from 0.2 to 0.3
+    np.testing.assert_allclose(held[5:], values[5:])  # no face before, the track's end after: left as it is
+    np.testing.assert_allclose(effort.hold_across(np.array([0.2, 0.8, 0.9]), [(1, 2)], pad=0), [0.2, 0.2, 0.2])
+    blink = np.array([0.1, 0.1, 0.6, 0.6, np.nan, 0.6, 0.1, 0.1, 0.1, 0.1])
+    assert effort.blinks(blink, np.arange(10) / 25.0) == [(2, 3), (5, 5)]  # a frame without a face ends a closure
+    assert effort.blinks(blink, np.arange(10) / 2.0) == [(5, 5)]  # at 2 frames/s the first lasts 0.5 s: kept
