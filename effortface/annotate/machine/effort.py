@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from effortface.annotate.machine.landmarker import ARKIT_NAMES
+from effortface.annotate.machine.track import FOUR
 
 #: the mapping's name in the sidecar
 EFFORT_MAPPING = "effort v2"
@@ -53,8 +54,8 @@ BLINK_PAD = 1
 BLINK_SPAN_MAX_S = 1.0
 #: the fewest face frames in the rest phase that make a neutral reference
 MIN_NEUTRAL_FRAMES = 3
-#: our four blendshapes in track order (as machine.track.FOUR; repeated to keep this module light)
-NAMES = ("mouth_stretch", "mouth_open", "eye_squint", "brow_lower")
+#: our four blendshapes, in the track's column order
+NAMES = FOUR
 
 _INDEX = {a: i for i, a in enumerate(ARKIT_NAMES)}
 
