@@ -2,8 +2,10 @@
 
 :func:`preannotate_session` decodes the session's ``video.avi`` frame by frame in order, runs
 :class:`~effortface.annotate.machine.landmarker.FaceLandmarker` (MediaPipe's VIDEO mode: tracked from
-frame to frame), maps the 52 scores to our four blendshapes, calibrates them on the participant's
-human key-frames where there are some (:mod:`effortface.annotate.machine.mapping`) and writes
+frame to frame), maps the 52 scores to our four blendshapes (the effort mapping,
+:mod:`effortface.annotate.machine.effort`, and the learned one where it wins held out,
+:mod:`effortface.annotate.machine.learned`), calibrates them on the participant's human key-frames
+where there are some (:mod:`effortface.annotate.machine.mapping`) and writes
 ``machine/face_landmarker.csv`` with its sidecar (:mod:`effortface.annotate.machine.track`).
 Nothing is written until every frame is rated: a cancel, an error or Ctrl-C leaves the session as it was.
 """
