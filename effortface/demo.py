@@ -261,8 +261,8 @@ def rater_step(session: Path) -> str:
     Returns
     -------
     str
-        The face-found rate and, per blendshape, Pearson r of the machine's raw (uncalibrated) weights
-        against the humans' mean at their key-frames; or why the rater was skipped.
+        The face-found rate and, per blendshape, Pearson r of the machine's raw (uncalibrated) weights,
+        the effort mapping's, against the humans' mean at their key-frames; or why the rater was skipped.
     """
     import importlib.util
 
@@ -270,7 +270,8 @@ def rater_step(session: Path) -> str:
 
     if importlib.util.find_spec("ai_edge_litert") is None:
         return "skipped: the package ai-edge-litert is not installed (no wheel for this platform)"
-    from effortface.annotate.machine.mapping import default_mapping, human_keys, map_scores
+    from effortface.annotate.machine.effort import session_weights
+    from effortface.annotate.machine.mapping import human_keys
     from effortface.annotate.machine.preannotate import preannotate_session
     from effortface.annotate.machine.track import FOUR, machine_paths, read_machine_track
 
@@ -279,7 +280,7 @@ def rater_step(session: Path) -> str:
     track = read_machine_track(session)
     if track is None or track.t_s.size == 0:
         return f"{session.name}: no machine rating written"
-    raw = map_scores(track.scores, default_mapping(), FOUR)
+    raw, _ = session_weights(session, track.scores, track.t_s)
     idx, keyed = human_keys(session, np.asarray(track.frame), FOUR)
     parts = []
     for j, name in enumerate(FOUR):

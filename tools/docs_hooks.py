@@ -44,8 +44,9 @@ PARTS: dict[str, list[Any]] = {
                                                  "guide/interop.md"]),
                   ("Command line", "reference/cli.md"), "guide/formats.md", ("Design card", "DESIGN.md"),
                   "guide/sample-data.md", ("Errors", "reference/errors.md")],
-    "Explanation": ["guide/science-in-brief.md", ("The science", "SCIENCE.md"), ("Science notes", "SCIENCE_NOTES.md"), "guide/layout.md",
-                    ("Engine guide", "ENGINE.md"), "guide/reliability.md", "guide/app-lab-records.md",
+    "Explanation": ["guide/science-in-brief.md", ("The science", "SCIENCE.md"), ("Science notes", "SCIENCE_NOTES.md"),
+                    "guide/layout.md", ("Engine guide", "ENGINE.md"), "guide/machine-rater-effort-mapping.md",
+                    "guide/reliability.md", "guide/app-lab-records.md",
                     "guide/training-at-scale.md", "guide/scores-and-live-streams.md",
                     "guide/files-from-other-labs.md"],
 }

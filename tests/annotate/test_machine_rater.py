@@ -23,6 +23,7 @@ import pytest
 from effortface.annotate.keyframes import KeyframeTrack, RaterAnnotations
 from effortface.annotate.machine.landmarker import (ARKIT_NAMES, DEFAULT_MODEL, DEFAULT_MODEL_SHA256,
                                                     FaceLandmarker)
+from effortface.annotate.machine.effort import session_weights
 from effortface.annotate.machine.mapping import default_mapping, map_scores
 from effortface.annotate.machine.preannotate import frame_times_ms, preannotate_session
 from effortface.annotate.machine.track import (CSV_NAME, FOUR, MACHINE_DIR, SIDECAR_NAME, read_machine_track,
@@ -282,8 +283,9 @@ def test_preannotate_a_captured_real_face_session_matches_mediapipe(recorded: Pa
     side = track.sidecar
     assert side["model"]["sha256"] == DEFAULT_MODEL_SHA256 and side["calibration"]["kind"] == "raw: no human key-frames"
     assert side["frames_without_face"] == int((~track.face).sum()) > 0 and side["time_taken_s"] > 0
-    # raw mapping: the weights are the means of the ARKit columns the definitions name
-    np.testing.assert_allclose(track.weights, map_scores(track.scores, default_mapping(), FOUR), atol=2e-5)
+    # raw mapping: the effort mapping of the 52 scores (no keys: nothing learned), sidecar format 2
+    np.testing.assert_allclose(track.weights, session_weights(session, track.scores, track.t_s)[0], atol=2e-5)
+    assert side["format_version"] == 2 and side["mapping"]["kind"] == "effort v2"
 
 
 def test_calibration_is_fitted_on_the_human_keys(recorded: Path, tmp_path: Path) -> None:

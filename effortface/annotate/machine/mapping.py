@@ -15,7 +15,10 @@ eye_squint     eyeSquintLeft, eyeSquintRight                lower lids raised; n
 brow_lower     browDownLeft, browDownRight                  brows lowered; browInnerUp is its opposite
 ============== ============================================ ==============================================
 
-Left and right are averaged: our blendshapes are symmetric.
+Left and right are averaged: our blendshapes are symmetric. This is the definition mapping of sidecar
+format 1; ``effortface preannotate`` now rates with the effort mapping built on the same scores
+(:mod:`effortface.annotate.machine.effort`) and, where it wins held out, the learned one
+(:mod:`effortface.annotate.machine.learned`).
 
 **Calibration.** MediaPipe's scores are not the lab's ratings: a rater's "0.6 mouth open" is not a
 ``jawOpen`` of 0.6. Where humans keyed the participant, each blendshape gets a monotone (isotonic,

@@ -2,8 +2,10 @@
 
 :func:`preannotate_session` decodes the session's ``video.avi`` frame by frame in order, runs
 :class:`~effortface.annotate.machine.landmarker.FaceLandmarker` (MediaPipe's VIDEO mode: tracked from
-frame to frame), maps the 52 scores to our four blendshapes, calibrates them on the participant's
-human key-frames where there are some (:mod:`effortface.annotate.machine.mapping`) and writes
+frame to frame), maps the 52 scores to our four blendshapes (the effort mapping,
+:mod:`effortface.annotate.machine.effort`, and the learned one where it wins held out,
+:mod:`effortface.annotate.machine.learned`), calibrates them on the participant's human key-frames
+where there are some (:mod:`effortface.annotate.machine.mapping`) and writes
 ``machine/face_landmarker.csv`` with its sidecar (:mod:`effortface.annotate.machine.track`).
 Nothing is written until every frame is rated: a cancel, an error or Ctrl-C leaves the session as it was.
 """
@@ -20,12 +22,11 @@ from typing import Any
 import numpy as np
 
 from effortface.annotate.machine.landmarker import DEFAULT_MODEL, FaceLandmarker, file_sha256
-from effortface.annotate.machine.mapping import (Calibration, calibration_pairs, default_mapping, fit_calibration,
-                                                 map_scores)
-from effortface.annotate.machine.track import FOUR, MachineTrack, machine_paths, read_machine_track, \
-    write_machine_track
+from effortface.annotate.machine.learned import Mapper, lab_mapping
+from effortface.annotate.machine.mapping import Calibration, calibration_pairs, fit_calibration
+from effortface.annotate.machine.track import FOUR, SIDECAR_VERSION, MachineTrack, machine_paths, write_machine_track
 from effortface.core.session.folder import (SESSION_JSON, VIDEO_AVI, VIDEO_FRAMES_CSV, check_not_recording,
-                                             check_session, list_sessions, read_session_info)
+                                             check_session, read_session_info)
 from effortface.core.errors import UserError
 from effortface.core.jobs import Cancelled
 from effortface.core.version import __version__
@@ -146,32 +147,18 @@ def _runs(frames: np.ndarray) -> list[list[int]]:
     return runs
 
 
-def _sibling_tracks(session_dir: Path, participant: str) -> list[tuple[Path, np.ndarray, np.ndarray]]:
+def _sibling_tracks(session_dir: Path, participant: str, mapper: Mapper) -> list[tuple[Path, np.ndarray, np.ndarray]]:
     """(folder, frames, raw mapped scores) of the participant's other sessions already rated by the machine."""
-    out: list[tuple[Path, np.ndarray, np.ndarray]] = []
-    parent = session_dir.resolve().parent
-    try:
-        siblings = list_sessions(parent)
-    except UserError:
-        return out
-    mapping = default_mapping()
-    for other in siblings:
-        if other.resolve() == session_dir.resolve():
-            continue
-        try:
-            if read_session_info(other).participant.code != participant:
-                continue
-            track = read_machine_track(other)
-        except UserError:
-            continue
-        if track is not None:
-            out.append((other, track.frame, map_scores(track.scores, mapping, FOUR)))
-    return out
+    from effortface.annotate.machine.learned import lab_tracks
+
+    return [(other, track.frame, mapper(other, track.scores, track.t_s))
+            for other, code, track in lab_tracks(session_dir) if code == participant]
 
 
-def calibrate(session_dir: Path, participant: str, frames: np.ndarray, raw: np.ndarray) -> Calibration:
+def calibrate(session_dir: Path, participant: str, frames: np.ndarray, raw: np.ndarray,
+              mapper: Mapper) -> Calibration:
     """The participant's calibration from this session's keys and those of their other machine-rated sessions."""
-    sessions = [(session_dir, frames, raw), *_sibling_tracks(session_dir, participant)]
+    sessions = [(session_dir, frames, raw), *_sibling_tracks(session_dir, participant, mapper)]
     x, y = calibration_pairs(sessions, FOUR)
     return fit_calibration(participant, x, y, FOUR)
 
@@ -213,19 +200,18 @@ def preannotate_session(session_dir: Path, *, model_path: Path | None = None, fo
     face, scores = rate_video(folder / VIDEO_AVI, frame_times_s, landmarker, progress=progress, cancel=cancel)
     taken_s = time.perf_counter() - started
     frames = np.arange(len(frame_times_s))
-    mapping = default_mapping()
-    raw = map_scores(scores, mapping, FOUR)
     participant = read_session_info(folder).participant.code
-    calibration = calibrate(folder, participant, frames, raw)
+    raw, mapping, mapper = lab_mapping(folder, participant, scores, np.asarray(frame_times_s, dtype=float))
+    calibration = calibrate(folder, participant, frames, raw, mapper)
     weights = calibration.apply(raw, FOUR)
     sidecar = {
+        "format_version": SIDECAR_VERSION,
         "rater": "machine (MediaPipe Face Landmarker)",
         "engine": ENGINE,
         "model": {"file": model.name, "sha256": file_sha256(model), "shipped": model.resolve() == DEFAULT_MODEL,
                   "licence": "Apache-2.0 (Google MediaPipe)"},
         "software": _versions(),
-        "mapping": {"rule": "mean of the ARKit scores each blendshape's definition names (docs/SCIENCE.md)",
-                    "blendshapes": {n: list(mapping[n]) for n in FOUR}},
+        "mapping": mapping,
         "calibration": calibration.to_dict(),
         "frames": int(len(frames)),
         "frames_with_face": int(face.sum()),

@@ -39,8 +39,11 @@ HEADER = ("frame", "t_s", "face", *FOUR, *ARKIT_NAMES)
 #: largest difference (s) between a track's frame time and the session's video_frames.csv (the CSV
 #: holds 4 decimals)
 FRAME_TIME_TOLERANCE_S = 1e-3
+#: the sidecar's ``format_version``: 2 since the effort mapping (a sidecar without one is version 1:
+#: the four weights are the mean of the definition's ARKit scores); the CSV is the same in both
+SIDECAR_VERSION = 2
 
-__all__ = ["ARKIT_NAMES", "CSV_NAME", "FOUR", "MACHINE_DIR", "SIDECAR_NAME", "MachineTrack",
+__all__ = ["ARKIT_NAMES", "CSV_NAME", "FOUR", "MACHINE_DIR", "SIDECAR_NAME", "SIDECAR_VERSION", "MachineTrack",
            "read_machine_track", "write_machine_track", "machine_paths"]
 
 
