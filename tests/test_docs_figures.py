@@ -44,6 +44,7 @@ FIGURES = [
     ("guide/tutorial-train.md", r"`\./sample_sessions`: (?P<sessions>\d+) sessions of (?P<participants>\d+) participants"),
     ("guide/tutorial-key.md", r"the lab's `reliability/poses\.csv`: (?P<poses>\d+)\s+frames"),
     ("guide/reliability.md", r"\| 160 x 120, (?P<video_fps>[\d.]+) fps \(the sample lab\)"),
+    ("guide/machine-rater-effort-mapping.md", r"the sample lab's (?P<video_fps>[\d.]+) frames/s"),
 ]
 
 
