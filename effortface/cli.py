@@ -6,6 +6,8 @@ only the chosen one is imported, so ``effortface decode`` never pays for Qt or s
 its ``--help`` with where they are installed.
 A :class:`~effortface.core.errors.UserError` becomes one line on stderr and exit status 2; so does, as a
 last resort, an :class:`OSError` naming a path (a file or folder a command could not read or write).
+SIGTERM and SIGINT (Ctrl-C) end a command through its own cleanup (:mod:`effortface.core.stops`): one
+line and exit status 143 or 130, no staging folder or worker process left.
 A first argument that is neither a command, an option nor an existing folder is refused the same way.
 """
 
@@ -20,6 +22,7 @@ from typing import NoReturn
 
 from effortface.core.docs import DESIGN, SCIENCE, cite
 from effortface.core.errors import UserError
+from effortface.core.stops import Terminated, exit_status, stops_as_exceptions
 
 #: sub-command -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -42,6 +45,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "blender-addon": ("effortface.blender.commands.blender_addon", "build the Blender add-on's installable zip"),
     "demo": ("effortface.commands.demo", "the whole pipeline on the sample lab"),
 }
+
+
+#: commands that keep the default stops: the Qt application (its event loop runs no Python between events)
+_OWN_STOPS = frozenset({"app"})
 
 
 class _Parser(argparse.ArgumentParser):
@@ -120,7 +127,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     module = importlib.import_module(COMMANDS[command][0])
     ns = command_parser(command).parse_args(rest)
     try:
-        return int(module.run(ns) or 0)
+        if command in _OWN_STOPS:
+            return int(module.run(ns) or 0)
+        with stops_as_exceptions():
+            return int(module.run(ns) or 0)
     except UserError as exc:
         print(f"effortface {command}: error: {exc}", file=sys.stderr)
         return 2
@@ -130,6 +140,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"effortface {command}: error: {_os_error_paths(exc)}: expected a readable/writable path, "
               f"found {exc.strerror or type(exc).__name__}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         print(f"effortface {command}: interrupted", file=sys.stderr)
-        return 130
+        return exit_status(exc)
+    except Terminated as exc:
+        print(f"effortface {command}: {exc}; what it had not finished was not written", file=sys.stderr)
+        return exit_status(exc)
