@@ -14,6 +14,7 @@ A first argument that is neither a command, an option nor an existing folder is 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import sys
 from collections.abc import Sequence
@@ -124,13 +125,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     command = args[0] if args and args[0] in COMMANDS else "app"
     rest = args[1:] if args and args[0] in COMMANDS else args
-    module = importlib.import_module(COMMANDS[command][0])
-    ns = command_parser(command).parse_args(rest)
+    with contextlib.nullcontext() if command in _OWN_STOPS else stops_as_exceptions():
+        return _run(command, rest)
+
+
+def _run(command: str, rest: list[str]) -> int:
+    """Import, parse and run one command; its errors and stops as one line and an exit status."""
     try:
-        if command in _OWN_STOPS:
-            return int(module.run(ns) or 0)
-        with stops_as_exceptions():
-            return int(module.run(ns) or 0)
+        module = importlib.import_module(COMMANDS[command][0])
+        ns = command_parser(command).parse_args(rest)
+        return int(module.run(ns) or 0)
     except UserError as exc:
         print(f"effortface {command}: error: {exc}", file=sys.stderr)
         return 2

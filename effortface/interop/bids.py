@@ -49,6 +49,7 @@ from effortface.core.session.hr_csv import read_hr_csv
 from effortface.core.session.folder import EVENTS_CSV, HEART_RATE_CSV, list_sessions, parse_session_id, read_session
 from effortface.core.errors import UserError
 from effortface.core.fileio import atomic_write, atomic_write_text, check_apart, fsync_folder, read_json, write_json_atomic
+from effortface.core.stops import stops_deferred
 from effortface.core.version import __version__
 from effortface.train.dataset import MAX_HR_GAP_S, WORK_CSV
 
@@ -316,9 +317,10 @@ def export_bids(sessions_dir: str | os.PathLike, out_dir: str | os.PathLike, *, 
         for folder in folders:
             export_session(folder, staging, bids_label(read_session(folder).participant.code), lab)
         _write_top(staging, participants, name, lab)
-        if out.is_dir():
-            out.rmdir()  # the empty folder given (checked above)
-        os.rename(staging, out)
+        with stops_deferred():  # a SIGTERM here waits for the rename: a dataset whole, or the folder as it was
+            if out.is_dir():
+                out.rmdir()  # the empty folder given (checked above)
+            os.rename(staging, out)
         fsync_folder(out.parent)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
