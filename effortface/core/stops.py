@@ -75,15 +75,16 @@ def _handler(signum: int, _frame: FrameType | None) -> None:
 def stops_as_exceptions() -> Iterator[None]:
     """Within the block, SIGTERM raises :class:`Terminated` and SIGINT :class:`KeyboardInterrupt`, once.
 
-    The previous handlers are put back when the block ends. Outside the main thread it changes nothing.
+    A signal the process ignores (SIG_IGN) stays ignored. The previous handlers are put back when the block ends. Outside the main thread it changes nothing.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = {s: signal.getsignal(s) for s in STOP_SIGNALS}
+    # a signal ignored on purpose (a command started with ``cmd &`` by a shell ignores SIGINT) stays ignored
+    previous = {s: h for s in STOP_SIGNALS if (h := signal.getsignal(s)) is not signal.SIG_IGN}
     was = (_STATE.installed, _STATE.stopping, _STATE.pending)
     _STATE.installed, _STATE.stopping, _STATE.pending = True, False, None
-    for s in STOP_SIGNALS:
+    for s in previous:
         signal.signal(s, _handler)
     try:
         yield
