@@ -197,6 +197,12 @@ def _temp_written(path: Path, write: Callable[[IO[bytes]], Any]) -> Path:
     return tmp
 
 
+def _writer(content: bytes | str) -> Callable[[IO[bytes]], Any]:
+    """A ``write(fh)`` for :func:`atomic_write` of ``content`` (``str`` as UTF-8)."""
+    data = content.encode("utf-8") if isinstance(content, str) else content
+    return lambda fh: fh.write(data)
+
+
 def atomic_write_together(contents: Mapping[str | os.PathLike[str], bytes | str]) -> list[Path]:
     """Replace several files together or not at all (a CSV and its sidecar, corrections and ratings).
 
@@ -225,8 +231,7 @@ def atomic_write_together(contents: Mapping[str | os.PathLike[str], bytes | str]
     temps: list[tuple[Path, Path]] = []
     try:
         for target, content in contents.items():
-            data = content.encode("utf-8") if isinstance(content, str) else content
-            temps.append((_temp_written(Path(target), lambda fh, data=data: fh.write(data)), Path(target)))
+            temps.append((_temp_written(Path(target), _writer(content)), Path(target)))
         with stops_deferred():
             for tmp, target in temps:
                 with naming(target):
