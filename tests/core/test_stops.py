@@ -2,9 +2,9 @@
 
 The main test sends SIGTERM to the real ``train``, ``export bids`` and ``preannotate --workers 2``
 on a copy of sample-lab sessions at 10 seeded random moments each, and checks after each stop: one
-line and exit status 143 (or 0 when the command had finished; a stop in the interpreter's start-up,
-before any effortface code runs, ends it by the default action with nothing written), no staging
-folder or temporary file,
+line and exit status 143 (or 0 when the command had finished; a stop in the interpreter's start-up
+or exit, outside the command's code, ends it by the default action), no staging folder or temporary
+file,
 no process of the command's session still running, and every output complete or absent.
 """
 
@@ -138,8 +138,8 @@ def _check_stop(code: int, err: str, left: dict[int, str], command: str) -> str:
     assert "Traceback" not in err, err
     if code == 0:
         return "finished"
-    if code == -signal.SIGTERM and not err:  # in the interpreter's start-up, before effortface's code ran
-        return "before start"
+    if code == -signal.SIGTERM and not err:  # in the interpreter's start-up or exit, outside the command
+        return "outside the command"
     lines = [line for line in err.splitlines() if line.strip()]
     assert code == 143 and lines and lines[-1] == (
         f"effortface {command}: stopped by SIGTERM; what it had not finished was not written"), (code, err)
@@ -212,7 +212,6 @@ def test_sigterm_at_random_moments_leaves_nothing_half_done(tmp_path) -> None:
             kind = _check_stop(code, err, left, command)
             assert not _staging(lab, tmp_path), _staging(lab, tmp_path)
             seen.append((command, delay_s, kind, outcome()))
-            assert kind != "before start" or seen[-1][3].startswith("absent"), seen[-1]
             for made in (tmp_path / "model", tmp_path / "ds", *(s / "machine" for s in rated)):
                 shutil.rmtree(made, ignore_errors=True)  # the next moment starts from the same state
     print("\n".join(f"{c} SIGTERM at {d:5.2f} s: {k}, outputs {o}" for c, d, k, o in seen))

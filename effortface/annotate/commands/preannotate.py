@@ -13,6 +13,7 @@ until all its frames are rated, so Ctrl-C leaves no half-written file. See docs/
 from __future__ import annotations
 
 import argparse
+import concurrent.futures as cf
 import multiprocessing
 import os
 import sys
@@ -118,18 +119,28 @@ def _run_parallel(sessions: list[Path], model: Path | None, force: bool, workers
 
     failed = 0
     threads = max(1, (os.cpu_count() or 1) // workers)
-    pool = multiprocessing.get_context("spawn").Pool(workers, initializer=ignore_stops_in_worker)
+    pool = cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                                  initializer=ignore_stops_in_worker)
     try:
         with ProgressBar("preannotate") as bar:
-            tasks = [(s, model, force, threads) for s in sessions]
-            for done, (ok, line) in enumerate(pool.imap_unordered(_rate_one, tasks), start=1):
+            futures = [pool.submit(_rate_one, (s, model, force, threads)) for s in sessions]
+            for done, future in enumerate(cf.as_completed(futures), start=1):
                 bar(done / len(sessions), "sessions rated")
+                ok, line = future.result()
                 print(line if ok else f"effortface preannotate: error: {line}", file=sys.stdout if ok else sys.stderr)
                 failed += not ok
-        pool.close()
     except BaseException:
-        pool.terminate()  # SIGTERM to every worker, which cleans up its temporary files and exits
+        _end_workers(pool)
         raise
     finally:
-        pool.join()
+        pool.shutdown(wait=True)
     return 2 if failed else 0
+
+
+def _end_workers(pool: cf.ProcessPoolExecutor) -> None:
+    """SIGTERM to every worker (each removes its temporary files and exits), the sessions not started
+    cancelled; :meth:`~concurrent.futures.ProcessPoolExecutor.shutdown` then waits for them."""
+    for process in list((getattr(pool, "_processes", None) or {}).values()):  # terminate_workers() in 3.14
+        if process.is_alive():
+            process.terminate()
+    pool.shutdown(wait=False, cancel_futures=True)
