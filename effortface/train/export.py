@@ -437,8 +437,11 @@ def export_model(bundle: ModelBundle, face: FaceModelFit, out_dir: str | os.Path
 
     Raises
     ------
-    FileExistsError
-        If ``out_dir`` exists and ``force`` is False.
+    UserError
+        If ``out_dir`` exists and ``force`` is False (checked again just before the rename: a folder
+        that appeared during the fit is never replaced), or is not a folder ``force`` may replace.
+    OSError
+        A write that failed (a full disk...), naming ``out_dir``; nothing is left behind.
     ExportError
         If the runtime or the float64 graph fails its parity check (the target is left untouched).
         A float32 graph over its bound does not raise: the folder is written without ``face.onnx``
