@@ -98,18 +98,18 @@ def stops_as_exceptions() -> Iterator[None]:
 def stops_deferred() -> Iterator[None]:
     """A step that a stop must not cut in two: a stop arriving inside is raised when it ends.
 
-    If the step itself fails, its error is raised (the stop is still recorded: the command is
-    ending anyway).
+    The stop is raised even if the step failed (its error is the stop's context): the user asked
+    to stop, and the step's own cleanup has run.
     """
     _STATE.deferred += 1
     try:
         yield
     finally:
         _STATE.deferred -= 1
-    if not _STATE.deferred and _STATE.pending is not None and not _STATE.stopping:
-        signum, _STATE.pending = _STATE.pending, None
-        _STATE.stopping = True
-        raise _stop(signum)
+        if not _STATE.deferred and _STATE.pending is not None and not _STATE.stopping:
+            signum, _STATE.pending = _STATE.pending, None
+            _STATE.stopping = True
+            raise _stop(signum)  # noqa: B012 - the stop outranks the step's own error
 
 
 def ignore_stops_in_worker() -> None:

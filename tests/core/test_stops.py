@@ -49,6 +49,20 @@ def test_a_stop_inside_a_deferred_step_is_raised_at_its_end() -> None:
     assert done == ["renamed"] and err.value.code == 143 and str(err.value) == "stopped by SIGTERM"
 
 
+def test_a_stop_during_a_failing_deferred_step_is_still_raised() -> None:
+    with pytest.raises(stops.Terminated) as err, stops.stops_as_exceptions():
+        with stops.stops_deferred():
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(0.05)
+            raise OSError(28, "No space left on device")
+    assert isinstance(err.value.__context__, OSError)
+
+
+def test_without_handlers_a_deferred_step_changes_nothing() -> None:
+    with stops.stops_deferred():
+        pass  # the GUI, a library caller: nothing installed, nothing pending
+
+
 def test_after_the_first_stop_the_cleanup_is_not_cut(tmp_path) -> None:
     cleaned = []
     with pytest.raises(KeyboardInterrupt), stops.stops_as_exceptions():
