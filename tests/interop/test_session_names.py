@@ -72,3 +72,35 @@ def test_every_suffix_taken_is_one_line(tmp_path) -> None:
     with pytest.raises(UserError, match=rf"{base}: expected a free session folder name, found it and its "
                                         rf"suffixes up to {MAX_SESSION_SUFFIX} taken"):
         free_session_id(tmp_path, base)
+
+
+@pytest.mark.parametrize("fmt", ["xdf", "hr"])
+def test_a_sigterm_during_an_import_leaves_no_staging_folder(tmp_path, monkeypatch, capsys, fmt) -> None:
+    """SIGTERM (sent to this process) while the session's heart rate is being written: exit 143, one
+    line, and neither the staging folder ``.import-*.tmp`` nor a session folder is left."""
+    import os
+    import signal
+    import time
+
+    from effortface.core.session import folder as session_folder
+
+    real = session_folder.HrWriter.write
+
+    def write_then_stop(self, *args, **kwargs):
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(0.05)  # the handler runs here
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(session_folder.HrWriter, "write", write_then_stop)
+    out = tmp_path / "lab"
+    if fmt == "xdf":
+        args = ["import", "xdf", str(_xdf(tmp_path, 80)), "--out", str(out), "--participant", "P01"]
+    else:
+        csv_path = tmp_path / "hr.csv"
+        csv_path.write_text("time,hr\n" + "".join(f"2026-03-02T10:15:{k:02d},{80 + k % 5}\n" for k in range(30)))
+        args = ["import", "hr", str(csv_path), "--out", str(out), "--participant", "P01", "--sex", "female",
+                "--age", "30", "--height", "1.7", "--mass", "60", "--training-level", "5"]
+    assert main(args) == 143
+    assert capsys.readouterr().err.splitlines() == [
+        "effortface import: stopped by SIGTERM; what it had not finished was not written"]
+    assert not out.exists() or [p.name for p in out.iterdir() if p.name != "participants.tsv"] == []
