@@ -6,12 +6,15 @@ only the chosen one is imported, so ``effortface decode`` never pays for Qt or s
 its ``--help`` with where they are installed.
 A :class:`~effortface.core.errors.UserError` becomes one line on stderr and exit status 2; so does, as a
 last resort, an :class:`OSError` naming a path (a file or folder a command could not read or write).
+SIGTERM and SIGINT (Ctrl-C) end a command through its own cleanup (:mod:`effortface.core.stops`): one
+line and exit status 143 or 130, no staging folder or worker process left.
 A first argument that is neither a command, an option nor an existing folder is refused the same way.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import sys
 from collections.abc import Sequence
@@ -20,6 +23,7 @@ from typing import NoReturn
 
 from effortface.core.docs import DESIGN, SCIENCE, cite
 from effortface.core.errors import UserError
+from effortface.core.stops import Terminated, exit_status, stops_as_exceptions
 
 #: sub-command -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -42,6 +46,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "blender-addon": ("effortface.blender.commands.blender_addon", "build the Blender add-on's installable zip"),
     "demo": ("effortface.commands.demo", "the whole pipeline on the sample lab"),
 }
+
+
+#: commands that keep the default stops: the Qt application (its event loop runs no Python between events)
+_OWN_STOPS = frozenset({"app"})
 
 
 class _Parser(argparse.ArgumentParser):
@@ -117,9 +125,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     command = args[0] if args and args[0] in COMMANDS else "app"
     rest = args[1:] if args and args[0] in COMMANDS else args
-    module = importlib.import_module(COMMANDS[command][0])
-    ns = command_parser(command).parse_args(rest)
+    with contextlib.nullcontext() if command in _OWN_STOPS else stops_as_exceptions():
+        return _run(command, rest)
+
+
+def _run(command: str, rest: list[str]) -> int:
+    """Import, parse and run one command; its errors and stops as one line and an exit status."""
     try:
+        module = importlib.import_module(COMMANDS[command][0])
+        ns = command_parser(command).parse_args(rest)
         return int(module.run(ns) or 0)
     except UserError as exc:
         print(f"effortface {command}: error: {exc}", file=sys.stderr)
@@ -130,6 +144,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"effortface {command}: error: {_os_error_paths(exc)}: expected a readable/writable path, "
               f"found {exc.strerror or type(exc).__name__}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         print(f"effortface {command}: interrupted", file=sys.stderr)
-        return 130
+        return exit_status(exc)
+    except Terminated as exc:
+        print(f"effortface {command}: {exc}; what it had not finished was not written", file=sys.stderr)
+        return exit_status(exc)

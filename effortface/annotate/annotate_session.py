@@ -35,11 +35,12 @@ from effortface.annotate.keyframes import INTERPOLATIONS, Keyframe, KeyframeTrac
 from effortface.annotate.video_index import FrameTimes
 from effortface.core.errors import UserError
 from effortface.core.events import Emitter
+from effortface.core.fileio import atomic_write_together
 from effortface.core.locks import FileLock, LockedError, acquire_lock, describe_owner, lock_owner
 from effortface.core.session.folder import Session, check_not_recording, read_session
 
 if TYPE_CHECKING:
-    from effortface.annotate.reliability import Correction
+    from effortface.annotate.reliability import Correction, Rating
 
 ANNOTATIONS_DIR = "annotations"
 _RATER_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,31}")
@@ -646,12 +647,17 @@ class BlindRound:
 
     def _save(self) -> None:
         """Write this rater's own ratings atomically (temporary file, then replace)."""
-        from effortface.annotate.reliability import Rating, write_ratings
+        from effortface.annotate.reliability import write_ratings
 
-        mine = [Rating(p, self.rater, n, w) for (p, n), w in self.ratings.items() if (p, n) not in self.locked]
         tmp = self.path.with_name(f".{self.path.name}.tmp")
-        write_ratings(tmp, mine, overwrite=True)
+        write_ratings(tmp, self._mine(self.ratings), overwrite=True)
         os.replace(tmp, self.path)
+
+    def _mine(self, ratings: dict[tuple[str, str], float]) -> list[Rating]:
+        """This rater's own ratings (not those the lab's file holds) as Rating rows."""
+        from effortface.annotate.reliability import Rating
+
+        return [Rating(p, self.rater, n, w) for (p, n), w in ratings.items() if (p, n) not in self.locked]
 
     @property
     def corrections_path(self) -> Path:
@@ -688,7 +694,7 @@ class BlindRound:
             Before the round is finished (rate normally instead), for a rating the lab's ``ratings.csv``
             holds, an unknown pose or blendshape, a weight outside [0, 1], the same value, or no reason.
         """
-        from effortface.annotate.reliability import Correction, append_correction
+        from effortface.annotate.reliability import Correction, corrections_text, read_corrections, ratings_text
 
         if pose_id not in {p.pose_id for p in self.poses}:
             raise UserError(f"pose: expected one of the pose set, found {pose_id!r}")
@@ -711,7 +717,10 @@ class BlindRound:
         when = when_utc or datetime.datetime.now(datetime.timezone.utc)
         change = Correction(when.astimezone(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
                             pose_id, name, old, new, reason)
-        append_correction(self.corrections_path, change)
-        self.ratings[(pose_id, name)] = new
-        self._save()
+        ratings = dict(self.ratings) | {(pose_id, name): new}
+        # the log and the ratings together, or neither: a correction is never logged but not applied
+        atomic_write_together({self.corrections_path: corrections_text([*read_corrections(self.corrections_path),
+                                                                         change]),
+                               self.path: ratings_text(self._mine(ratings))})
+        self.ratings = ratings
         return change

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import io
 import itertools
 import math
 import os
@@ -22,7 +23,7 @@ from pathlib import Path
 from effortface.core import bounds
 from effortface.core.blendshapes import BlendshapeSet
 from effortface.core.errors import SessionFormatError, UserError, not_text_error
-from effortface.core.fileio import refuse_overwrite
+from effortface.core.fileio import atomic_write_text, refuse_overwrite
 
 POSES_HEADER = ("pose_id", "session_id", "frame", "t_s")
 RATINGS_HEADER = ("pose_id", "rater", "blendshape", "weight")
@@ -87,12 +88,31 @@ def read_corrections(path: str | os.PathLike) -> list[Correction]:
 def append_correction(path: str | os.PathLike, change: Correction) -> Path:
     """Add one correction to the log, rewriting it whole through a temporary file (atomic)."""
     path = Path(path)
-    rows = [*read_corrections(path), change]
-    tmp = path.with_name(f".{path.name}.tmp")
-    _write_csv(tmp, CORRECTIONS_HEADER, ((c.time_utc, c.pose_id, c.blendshape, f"{c.old:.4f}", f"{c.new:.4f}",
-                                          c.reason) for c in rows), overwrite=True)
-    os.replace(tmp, path)
-    return path
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return atomic_write_text(path, corrections_text([*read_corrections(path), change]))
+
+
+def corrections_text(corrections: Iterable[Correction]) -> str:
+    """A whole ``corrections_<rater>.csv`` (header and rows), to write atomically."""
+    return _csv_text(CORRECTIONS_HEADER, ((c.time_utc, c.pose_id, c.blendshape, f"{c.old:.4f}", f"{c.new:.4f}",
+                                           c.reason) for c in corrections))
+
+
+def ratings_text(ratings: Iterable[Rating]) -> str:
+    """A whole long-format ratings CSV (header and rows), to write atomically."""
+    return _csv_text(RATINGS_HEADER, _rating_rows(ratings))
+
+
+def _rating_rows(ratings: Iterable[Rating]) -> Iterable[tuple[str, str, str, str]]:
+    return ((r.pose_id, r.rater, r.blendshape, f"{r.weight:.4f}") for r in ratings)
+
+
+def _csv_text(header: tuple[str, ...], rows: Iterable[tuple]) -> str:
+    out = io.StringIO()
+    writer = csv.writer(out, lineterminator="\n")
+    writer.writerow(header)
+    writer.writerows(rows)
+    return out.getvalue()
 
 
 def _write_csv(path: Path, header: tuple[str, ...], rows: Iterable[tuple], overwrite: bool) -> Path:
@@ -190,8 +210,7 @@ def _check_pose_frame(path: Path, line: int, pose: Pose, frame_times_s: Sequence
 def write_ratings(path: str | os.PathLike, ratings: Iterable[Rating], *,
                   overwrite: bool = False) -> Path:
     """Write long-format ``ratings.csv``; FileExistsError if it exists and ``overwrite`` is False."""
-    rows = ((r.pose_id, r.rater, r.blendshape, f"{r.weight:.4f}") for r in ratings)
-    return _write_csv(Path(path), RATINGS_HEADER, rows, overwrite)
+    return _write_csv(Path(path), RATINGS_HEADER, _rating_rows(ratings), overwrite)
 
 
 def read_ratings(path: str | os.PathLike, blendshapes: BlendshapeSet | None = None) -> list[Rating]:

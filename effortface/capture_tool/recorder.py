@@ -52,6 +52,8 @@ from effortface.core.session.folder import (
     read_video_frames,
     recording_owner,
     video_problems,
+    ID_TAKEN_KEY,
+    free_session_id,
     make_session_id,
     read_session_info,
     utc_now_iso,
@@ -214,13 +216,16 @@ class Recorder:
         devices: dict[str, Any] = {"heart_rate": self.link.settings()}
         if self.camera is not None:
             devices["camera"] = self.camera.settings()
+        wanted = make_session_id(self.participant.code, now, self.label)
+        session_id = free_session_id(self.out_dir, wanted)  # a capture in the same second: a suffix, stated
         return SessionInfo(
-            session_id=make_session_id(self.participant.code, now, self.label),
+            session_id=session_id,
             participant=self.participant,
             devices=devices,
             complete=False,
             created_utc=utc_now_iso(),
             software={"name": "effortface", "version": __version__},
+            extra={ID_TAKEN_KEY: wanted} if session_id != wanted else {},
         )
 
     def mark(self, kind: str, label: str = "", value: str = "") -> float:

@@ -17,14 +17,14 @@ import os
 import re
 import secrets
 import stat
-import tempfile
 import time
 import zipfile
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import IO, Any
 
 from effortface.core.errors import UserError
+from effortface.core.stops import stops_deferred
 
 #: a temporary file of an atomic write older than this was left by a killed writer (no write takes so long)
 STALE_TMP_S = 300.0
@@ -160,6 +160,24 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[IO[bytes]], Any]
         and the previous file, if any, is left as it was.
     """
     path = Path(path)
+    tmp = _temp_written(path, write)
+    try:
+        os.replace(tmp, path)
+    except BaseException as exc:
+        tmp.unlink(missing_ok=True)
+        raise name_os_error(exc, path) if isinstance(exc, OSError) else exc
+    fsync_folder(path.parent)
+    return path
+
+
+def _temp_written(path: Path, write: Callable[[IO[bytes]], Any]) -> Path:
+    """A temporary file beside ``path`` holding what ``write`` wrote, fsynced (removed if that fails).
+
+    Raises
+    ------
+    OSError
+        Naming ``path`` (disk full, read-only folder...).
+    """
     remove_stale_temps(path)
     try:
         fd, tmp = _create_temp_beside(path)
@@ -171,14 +189,59 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[IO[bytes]], Any]
             write(fh)
             fh.flush()
             os.fsync(fh.fileno())
-        os.replace(tmp, path)
     except BaseException as exc:
         tmp.unlink(missing_ok=True)
         if isinstance(exc, OSError) and exc.errno is not None and exc.filename is None:  # ENOSPC...: name it
             raise OSError(exc.errno, exc.strerror, str(path)) from None
         raise
-    fsync_folder(path.parent)
-    return path
+    return tmp
+
+
+def _writer(content: bytes | str) -> Callable[[IO[bytes]], Any]:
+    """A ``write(fh)`` for :func:`atomic_write` of ``content`` (``str`` as UTF-8)."""
+    data = content.encode("utf-8") if isinstance(content, str) else content
+    return lambda fh: fh.write(data)
+
+
+def atomic_write_together(contents: Mapping[str | os.PathLike[str], bytes | str]) -> list[Path]:
+    """Replace several files together or not at all (a CSV and its sidecar, corrections and ratings).
+
+    Every new content is first written whole to a temporary file beside its target (fsynced); only
+    when all are written are they renamed into place, one after the other, with stops deferred
+    (:func:`effortface.core.stops.stops_deferred`), so a full disk or a SIGTERM leaves every target
+    as it was or every target new. (Renames in one folder do not need space; a rename that still
+    fails leaves the files already renamed new.)
+
+    Parameters
+    ----------
+    contents : mapping
+        Target path -> its new content (``str`` is written as UTF-8), in the order to rename them
+        (put last the file whose presence says the set is whole).
+
+    Returns
+    -------
+    list of Path
+        The targets.
+
+    Raises
+    ------
+    OSError
+        Naming the target whose write failed; then no target was changed.
+    """
+    temps: list[tuple[Path, Path]] = []
+    try:
+        for target, content in contents.items():
+            temps.append((_temp_written(Path(target), _writer(content)), Path(target)))
+        with stops_deferred():
+            for tmp, target in temps:
+                with naming(target):
+                    os.replace(tmp, target)
+    finally:
+        for tmp, _ in temps:
+            tmp.unlink(missing_ok=True)
+    for folder in dict.fromkeys(target.parent for _, target in temps):
+        fsync_folder(folder)
+    return [target for _, target in temps]
 
 
 #: fresh random names tried for a temporary file before giving up (a clash is already unlikely)
@@ -263,9 +326,14 @@ def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
     return atomic_write(path, lambda fh: fh.write(data))
 
 
+def json_text(data: Any) -> str:
+    """``data`` as the indented JSON every JSON file of the project is written in."""
+    return json.dumps(data, indent=2, sort_keys=False) + "\n"
+
+
 def write_json_atomic(path: str | os.PathLike[str], data: Any) -> Path:
     """Write ``data`` as indented JSON atomically (see :func:`atomic_write`)."""
-    return atomic_write_text(path, json.dumps(data, indent=2, sort_keys=False) + "\n")
+    return atomic_write_text(path, json_text(data))
 
 
 #: the largest JSON file a reader accepts (session, annotation, model and motion index files are kB)

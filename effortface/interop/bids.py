@@ -42,7 +42,6 @@ import dataclasses
 import datetime
 import gzip
 import io
-import json
 import os
 import re
 import secrets
@@ -57,6 +56,7 @@ from effortface.core.session.folder import EVENTS_CSV, HEART_RATE_CSV, list_sess
 from effortface.core.errors import UserError
 from effortface.core.participant import Participant
 from effortface.core.fileio import atomic_write, atomic_write_text, check_apart, fsync_folder, read_json, write_json_atomic
+from effortface.core.stops import stops_deferred
 from effortface.core.version import __version__
 from effortface.train.dataset import MAX_HR_GAP_S, WORK_CSV
 
@@ -487,9 +487,10 @@ def export_bids(sessions_dir: str | os.PathLike, out_dir: str | os.PathLike, *, 
             export_session(folder, staging, bids_label(records[folder].code), lab, ses=labels[folder], notes=notes)
         prefix = f"{Path(sessions_dir)}{os.sep}"  # the README names the lab's files from the lab folder
         _write_top(staging, records, labels, name, lab, [line.replace(prefix, "") for line in notes.omitted])
-        if out.is_dir():
-            out.rmdir()  # the empty folder given (checked above)
-        os.rename(staging, out)
+        with stops_deferred():  # a SIGTERM here waits for the rename: a dataset whole, or the folder as it was
+            if out.is_dir():
+                out.rmdir()  # the empty folder given (checked above)
+            os.rename(staging, out)
         fsync_folder(out.parent)
     finally:
         shutil.rmtree(staging, ignore_errors=True)

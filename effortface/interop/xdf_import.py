@@ -46,7 +46,8 @@ from effortface.capture_tool.importers.session import copy_video
 from effortface.core.hr_sample import HrSample
 from effortface.core.session.folder import (EVENTS_CSV, HEART_RATE_CSV, VIDEO_AVI, VIDEO_FRAMES_CSV, Event,
                                              EventWriter, FrameTimeWriter, HrWriter, Participant, SessionInfo,
-                                             create_session, make_session_id, utc_now_iso)
+                                             create_session, make_session_id, move_session_in,
+                                             utc_now_iso)
 from effortface.core.bounds import BOUNDS
 from effortface.core.errors import UserError
 from effortface.core.opencv import import_cv2
@@ -649,9 +650,6 @@ def import_xdf(path: str | os.PathLike, out_dir: str | os.PathLike, participant:
                        software={"name": "effortface", "version": __version__},
                        extra={"lsl": {"clock_offset_s": t0, "imported_from": path.name,
                                       "streams": [_field(s, "name") for s in used]}})
-    final = Path(out_dir) / info.session_id
-    if final.exists():
-        raise FileExistsError(f"{final}: exists; a session folder is never reused")
     staging = Path(out_dir) / f".import-{secrets.token_hex(6)}.tmp"
     Path(out_dir).mkdir(parents=True, exist_ok=True)
     try:
@@ -672,7 +670,7 @@ def import_xdf(path: str | os.PathLike, out_dir: str | os.PathLike, participant:
             writer.close()
         info.complete = True
         info.save(folder, overwrite=True)
-        os.rename(folder, final)  # the session appears whole or not at all
+        final = move_session_in(folder, out_dir, info)  # whole or not at all, suffixed if its id is taken
         fsync_folder(out_dir)
     finally:
         shutil.rmtree(staging, ignore_errors=True)

@@ -50,7 +50,8 @@ from onnx import TensorProto, helper, numpy_helper
 
 from effortface.core.blendshapes import BlendshapeSet
 from effortface.core.errors import UserError
-from effortface.core.fileio import check_apart, refuse_overwrite
+from effortface.core.fileio import check_apart, naming
+from effortface.core.stops import stops_deferred
 from effortface.synth.bundle import ModelBundle, default_physiology, read_bundle, write_bundle
 from effortface.synth.face import (FEATURE_NAMES, REST_FEATURES, REST_MAX_NHR, REST_MAX_W_PER_KG, RestAnchor,
                                    rest_anchor)
@@ -436,16 +437,26 @@ def export_model(bundle: ModelBundle, face: FaceModelFit, out_dir: str | os.Path
 
     Raises
     ------
-    FileExistsError
-        If ``out_dir`` exists and ``force`` is False.
+    UserError
+        If ``out_dir`` exists and ``force`` is False (checked again just before the rename: a folder
+        that appeared during the fit is never replaced), or is not a folder ``force`` may replace.
+    OSError
+        A write that failed (a full disk...), naming ``out_dir``; nothing is left behind.
     ExportError
         If the runtime or the float64 graph fails its parity check (the target is left untouched).
         A float32 graph over its bound does not raise: the folder is written without ``face.onnx``
         and ``metrics["engine_export"]`` says why (:func:`engine_export_refusal`).
     """
-    out = refuse_overwrite(out_dir, overwrite=force, what="model folder", hint=" (use --force)")
-    check_model_target(out, force=force, inputs=inputs)
-    out.parent.mkdir(parents=True, exist_ok=True)
+    out = check_model_target(out_dir, force=force, inputs=inputs)  # again: --out may have appeared meanwhile
+    with naming(out):  # a full disk names the model folder, not "file system"
+        out.parent.mkdir(parents=True, exist_ok=True)
+        _build_and_swap(bundle, face, out, force=force, card=card)
+    return out
+
+
+def _build_and_swap(bundle: ModelBundle, face: FaceModelFit, out: Path, *, force: bool,
+                    card: str | None) -> None:
+    """Build the model folder in a staging folder beside ``out``, then rename it into place."""
     # a fresh private folder (mode 0700, unpredictable name, created by us): a planted file or link
     # at a guessable name can neither redirect the write nor be deleted in our place
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
@@ -465,10 +476,10 @@ def export_model(bundle: ModelBundle, face: FaceModelFit, out_dir: str | os.Path
         write_bundle(bundle, tmp, overwrite=True)  # again, now with the parity figures
         (tmp / MODEL_CARD).write_text(card or model_card(bundle), encoding="utf-8")
         tmp.chmod(0o777 & ~_umask())  # mkdtemp's 0700 was for the build; the model is an ordinary folder
-        _swap_into_place(tmp, out)
+        with stops_deferred():  # a SIGTERM here waits until the old model is removed or restored
+            _swap_into_place(tmp, out, force=force)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    return out
 
 
 #: key of ``model.json`` metrics stating the float32 engine file's outcome (:func:`engine_export_result`)
@@ -576,22 +587,36 @@ def _umask() -> int:
     return mask
 
 
-def _swap_into_place(tmp: Path, out: Path) -> None:
+def _swap_into_place(tmp: Path, out: Path, *, force: bool = True) -> None:
     """Rename the finished folder over the target (the old one removed only after).
 
-    The old folder moves into a fresh private folder first (never to a guessable name).
+    The old folder moves into a fresh private folder first (never to a guessable name). Without
+    ``force`` a target that appeared since the start (another program, a second train) is never
+    replaced: a :class:`UserError` names it, and the rename itself refuses a folder that appears in
+    the last instant (it replaces only an empty one).
+
+    Raises
+    ------
+    UserError
+        Without ``force``, when ``out`` exists.
     """
+    if not force and (out.exists() or out.is_symlink()):
+        raise UserError(f"--out {out}: expected a new model folder, found one appeared during the training "
+                        "(made by another program?); nothing written (pass --force to replace it)")
     trash = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.parent))
     old = trash / out.name
-    if out.exists():
-        os.replace(out, old)
     try:
-        os.replace(tmp, out)
-    except BaseException:
-        if old.exists():
-            os.replace(old, out)  # the previous model stays where it was
-        raise
-    shutil.rmtree(trash, ignore_errors=True)
+        if out.exists():
+            os.replace(out, old)
+        try:
+            os.replace(tmp, out)
+        except BaseException:
+            if old.exists():
+                os.replace(old, out)  # the previous model stays where it was
+            raise
+    finally:
+        if out.exists() or not old.exists():  # else the previous model could not be put back: keep it there
+            shutil.rmtree(trash, ignore_errors=True)
 
 
 # --------------------------------------------------------------------------- model card

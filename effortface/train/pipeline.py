@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import datetime as _dt
 import math
+import shutil
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -454,6 +455,9 @@ def export_outcome(outcome: TrainingOutcome, out: str | Path, *, force: bool = F
                                                 else o.label_note or None))
     except Exception as exc:  # noqa: BLE001 - any failure of the figures; the model stays
         not_written.append(f"report ({model_dir / REPORT_DIR}: {type(exc).__name__}: {exc})")
+    except BaseException:  # a stop (SIGTERM, Ctrl-C): the model is whole, a half report is removed
+        shutil.rmtree(model_dir / REPORT_DIR, ignore_errors=True)
+        raise
     progress(1.0, "done")
     return ExportedModel(model_dir, report, bundle.metrics, not_written)
 

@@ -509,3 +509,23 @@ def test_a_finished_rating_is_corrected_with_a_reason_and_the_report_recomputes(
     assert log[0] == "time_utc,pose_id,blendshape,old,new,reason" and log[1].endswith(f",{pose},mouth_open,0.3000,0.9000,typo")
     assert panel.spins["mouth_open"].value() == pytest.approx(0.9)
     assert panel.report.overall.disagreement_pct != before  # recomputed
+
+
+def test_a_correction_on_a_full_disk_is_stated_and_changes_nothing(qtbot, stage: QtAnnotateStage, lab: Path,
+                                                                   monkeypatch) -> None:
+    """Issue 37: the correction's log and ratings are written together; a full disk is one status line
+    naming the file (it was an unhandled error, with the correction logged but not applied)."""
+    from tests.annotate.test_outputs_together import fill_the_disk_on
+
+    panel = _finish_the_round_as_r4(qtbot, stage)
+    panel.poses.setCurrentCell(0, 0)
+    ratings = lab / "reliability" / "ratings_R4.csv"
+    before = ratings.read_bytes()
+    fill_the_disk_on(monkeypatch, ratings.name)
+    panel.correct_shape.setCurrentText("mouth_open")
+    panel.correct_value.setValue(0.9)
+    qtbot.keyClicks(panel.correct_reason, "typo")
+    qtbot.mouseClick(panel.correct_button, Left)
+    assert panel.status.text() == (f"{ratings}: could not save the correction (No space left on device); "
+                                   "nothing was logged or changed")
+    assert ratings.read_bytes() == before and not (lab / "reliability" / "corrections_R4.csv").exists()

@@ -118,7 +118,7 @@ def test_model_json_has_gamma_numbers_and_parity(model_dir):
 
 def test_existing_folder_needs_force(fitted, model_dir):
     before = (model_dir / "svr.npz").read_bytes()
-    with pytest.raises(FileExistsError, match="refusing to overwrite"):
+    with pytest.raises(UserError, match=r"expected a new model folder, found an existing one \(pass --force"):
         export_model(_bundle(fitted), fitted[0], model_dir)
     assert (model_dir / "svr.npz").read_bytes() == before
 
@@ -306,3 +306,49 @@ def test_an_ill_conditioned_landmark_case_exports_within_1e_4(tmp_path):
     result = json.loads((out / "model.json").read_text())["metrics"]["engine_export"]
     assert result["status"] == "written" and result["max_abs_diff_vs_runtime"] <= 1e-4
     assert (out / FACE_ONNX).is_file()
+
+
+def test_an_out_that_appeared_during_the_fit_is_one_line_not_a_traceback(fitted, tmp_path):
+    """Issue 37: ``train --out M`` checked M at the start; M made by another program during the fit
+    was a bare FileExistsError (a traceback) after the whole fit. Now one UserError line naming --out."""
+    out = tmp_path / "m"
+    out.mkdir()
+    (out / "theirs.txt").write_text("another program's file")
+    with pytest.raises(UserError, match=r"^--out .*m: expected a new model folder, found an existing one"):
+        export_model(_bundle(fitted), fitted[0], out)
+    assert [p.name for p in out.iterdir()] == ["theirs.txt"] and not list(tmp_path.glob(".m.*"))
+
+
+def test_an_out_that_appears_during_the_export_is_never_replaced(fitted, tmp_path, monkeypatch):
+    """An empty folder appearing while the export builds (after every early check) was silently
+    replaced by the rename; now it is refused, named, and the staging folder removed."""
+    out = tmp_path / "m"
+    real = export.check_parity
+
+    def parity_then_someone_creates_out(*args, **kwargs):
+        out.mkdir()
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(export, "check_parity", parity_then_someone_creates_out)
+    with pytest.raises(UserError, match=r"found one appeared during the training .*nothing written"):
+        export_model(_bundle(fitted), fitted[0], out)
+    assert out.is_dir() and not any(out.iterdir())
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m"]
+
+
+def test_a_full_disk_names_the_model_folder(fitted, tmp_path, monkeypatch):
+    """Issue 37: a full disk during the export said "file system: ... No space left on device"; the
+    error now names --out, and neither a staging folder nor a model is left."""
+    import errno
+
+    from effortface.cli import _os_error_paths
+
+    def disk_full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device")  # what a write on a full disk raises
+
+    monkeypatch.setattr(export.onnx, "save", disk_full)
+    out = tmp_path / "m"
+    with pytest.raises(OSError) as err:
+        export_model(_bundle(fitted), fitted[0], out)
+    assert err.value.errno == errno.ENOSPC and _os_error_paths(err.value) == str(out)
+    assert list(tmp_path.iterdir()) == []

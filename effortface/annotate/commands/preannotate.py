@@ -58,17 +58,21 @@ def _check_args(args: argparse.Namespace) -> tuple[list[Path], Path | None]:
     return sessions, model
 
 
-def _rate_one(session: Path, model: Path | None, force: bool, threads: int) -> str:
-    """Worker: rate one session; the line to print."""
+def _rate_one(task: tuple[Path, Path | None, bool, int]) -> tuple[bool, str]:
+    """Worker: rate one session; (True, the line to print) or (False, the error's line)."""
     from effortface.annotate.machine.preannotate import preannotate_session
     from effortface.annotate.machine.track import read_machine_track
 
-    out = preannotate_session(session, model_path=model, force=force, num_threads=threads)
-    track = read_machine_track(session)
+    session, model, force, threads = task
+    try:
+        out = preannotate_session(session, model_path=model, force=force, num_threads=threads)
+        track = read_machine_track(session)
+    except UserError as exc:
+        return False, str(exc)
     n = 0 if track is None else len(track.frame)
     found = 0 if track is None else int(track.face.sum())
     taken = None if track is None else track.sidecar.get("time_taken_s")
-    return f"wrote {out}: {n} frames, a face on {found} ({taken} s)"
+    return True, f"wrote {out}: {n} frames, a face on {found} ({taken} s)"
 
 
 def run(args: argparse.Namespace) -> int:
@@ -106,18 +110,37 @@ def _run_serial(sessions: list[Path], model: Path | None, force: bool) -> int:
 
 
 def _run_parallel(sessions: list[Path], model: Path | None, force: bool, workers: int) -> int:
-    """Sessions in worker processes (spawned: no fork of the interpreters' threads), a bar over sessions."""
+    """Sessions in worker processes (spawned: no fork of the interpreters' threads), a bar over sessions.
+
+    A stop (Ctrl-C, SIGTERM) ends the workers before the command returns (each worker's unfinished
+    session is left as it was: its files are written together at its end, or not at all).
+    """
+    from effortface.core.stops import ignore_stops_in_worker
+
     failed = 0
     threads = max(1, (os.cpu_count() or 1) // workers)
-    context = multiprocessing.get_context("spawn")
-    with cf.ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool, \
-            ProgressBar("preannotate") as bar:
-        futures = {pool.submit(_rate_one, s, model, force, threads): s for s in sessions}
-        for done, future in enumerate(cf.as_completed(futures), start=1):
-            bar(done / len(sessions), "sessions rated")
-            try:
-                print(future.result())
-            except UserError as exc:
-                print(f"effortface preannotate: error: {exc}", file=sys.stderr)
-                failed += 1
+    pool = cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                                  initializer=ignore_stops_in_worker)
+    try:
+        with ProgressBar("preannotate") as bar:
+            futures = [pool.submit(_rate_one, (s, model, force, threads)) for s in sessions]
+            for done, future in enumerate(cf.as_completed(futures), start=1):
+                bar(done / len(sessions), "sessions rated")
+                ok, line = future.result()
+                print(line if ok else f"effortface preannotate: error: {line}", file=sys.stdout if ok else sys.stderr)
+                failed += not ok
+    except BaseException:
+        _end_workers(pool)
+        raise
+    finally:
+        pool.shutdown(wait=True)
     return 2 if failed else 0
+
+
+def _end_workers(pool: cf.ProcessPoolExecutor) -> None:
+    """SIGTERM to every worker (each removes its temporary files and exits), the sessions not started
+    cancelled; :meth:`~concurrent.futures.ProcessPoolExecutor.shutdown` then waits for them."""
+    for process in list((getattr(pool, "_processes", None) or {}).values()):  # terminate_workers() in 3.14
+        if process.is_alive():
+            process.terminate()
+    pool.shutdown(wait=False, cancel_futures=True)

@@ -411,6 +411,10 @@ class QtReliabilityPanel(QtWidgets.QWidget):
         except UserError as exc:
             self.status.setText(str(exc))
             return
+        except OSError as exc:  # a full disk...: the log and the ratings are both as they were
+            self.status.setText(f"{exc.filename}: could not save the correction ({exc.strerror or exc}); "
+                                "nothing was logged or changed")
+            return
         self.correct_reason.clear()
         self._show_pose(row)
         self.refresh_report()

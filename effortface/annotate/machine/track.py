@@ -27,7 +27,7 @@ import numpy as np
 from effortface.annotate.machine.landmarker import ARKIT_NAMES
 from effortface.core import bounds
 from effortface.core.errors import SessionFormatError, UserError, not_text_error
-from effortface.core.fileio import atomic_write_text, check_regular_file, read_json, write_json_atomic
+from effortface.core.fileio import atomic_write_together, check_regular_file, json_text, read_json
 from effortface.core.session.folder import VIDEO_FRAMES_CSV, read_video_frames
 
 MACHINE_DIR = "machine"
@@ -109,8 +109,9 @@ def _csv_text(track: MachineTrack) -> str:
 def write_machine_track(session_dir: Path, track: MachineTrack, *, force: bool = False) -> Path:
     """Write ``machine/face_landmarker.csv`` and its sidecar atomically; return the CSV path.
 
-    The sidecar is written first and the CSV last, each through a temporary file renamed into
-    place: the CSV exists only once both are whole.
+    Both are written whole to temporary files first, then renamed into place together, the CSV
+    last (:func:`~effortface.core.fileio.atomic_write_together`): a full disk or a stop leaves the
+    previous pair (or none), never a new sidecar beside an old CSV.
 
     Raises
     ------
@@ -121,9 +122,7 @@ def write_machine_track(session_dir: Path, track: MachineTrack, *, force: bool =
     if csv_path.exists() and not force:
         raise UserError(f"{csv_path}: expected no machine rating yet, found one exists (use --force to replace it)")
     csv_path.parent.mkdir(exist_ok=True)
-    text = _csv_text(track)
-    write_json_atomic(sidecar_path, track.sidecar)
-    atomic_write_text(csv_path, text)
+    atomic_write_together({sidecar_path: json_text(track.sidecar), csv_path: _csv_text(track)})
     return csv_path
 
 

@@ -31,7 +31,7 @@ from effortface.capture_tool.participants import HISTORY_TSV, REGISTRY_TSV, part
 from effortface.capture_tool.plan import PlanRunner, read_plan
 from effortface.capture_tool.protocols import PROTOCOLS, check_protocol
 from effortface.capture_tool.recorder import Recorder
-from effortface.core.session.folder import Participant
+from effortface.core.session.folder import Participant, id_taken_note
 
 STATUS_INTERVAL_S = 5.0
 
@@ -125,6 +125,8 @@ def run(args: argparse.Namespace) -> int:
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
     path = _start(recorder, args.out)
     print(path, flush=True)
+    if (note := id_taken_note(path)) is not None:
+        print(f"effortface capture: {note}", file=sys.stderr, flush=True)
     if recorder.lsl is not None:
         print(f"LSL: publishing HeartRate and Markers streams, source id {recorder.lsl.source_id}",
               file=sys.stderr, flush=True)

@@ -19,6 +19,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import datetime as _dt
+import errno
 import os
 import re
 from collections.abc import Iterable
@@ -84,6 +85,79 @@ def parse_session_id(session_id: str) -> tuple[str, _dt.datetime, str | None]:
             f"session id: expected <code>_<YYYYmmdd-HHMMSS>[_<label>], found {session_id!r}"
         )
     return m["code"], _dt.datetime.strptime(m["stamp"], _STAMP_FMT), m["label"]
+
+
+#: the highest suffix tried for a session id already taken (``_2`` up to ``_99``)
+MAX_SESSION_SUFFIX = 99
+#: ``session.json`` key naming the session id a suffixed session wanted (the folder that existed)
+ID_TAKEN_KEY = "session_id_taken"
+
+
+def free_session_id(out_dir: str | os.PathLike, session_id: str) -> str:
+    """``session_id``, or its first suffixed form with no folder in ``out_dir`` when a folder has it.
+
+    Two sessions of one participant started in the same second (two imports, two captures) want the
+    same folder: the second gets ``_2`` (``P01_20260112-093000_2``), or ``-2`` after its label
+    (``P01_20260112-093000_bike-2``), then 3, 4...: a valid session id either way.
+
+    Raises
+    ------
+    UserError
+        When the id and its :data:`MAX_SESSION_SUFFIX` suffixed forms are all taken.
+    """
+    out = Path(out_dir)
+    if not _taken(out / session_id):
+        return session_id
+    code, when, label = parse_session_id(session_id)
+    for n in range(2, MAX_SESSION_SUFFIX + 1):
+        tail = f"-{n}" if label else str(n)
+        candidate = make_session_id(code, when, f"{(label or '')[:32 - len(tail)]}{tail}")
+        if not _taken(out / candidate):
+            return candidate
+    raise UserError(f"{out / session_id}: expected a free session folder name, found it and its suffixes up to "
+                    f"{MAX_SESSION_SUFFIX} taken")
+
+
+def _taken(path: Path) -> bool:
+    return path.exists() or path.is_symlink()
+
+
+def move_session_in(folder: str | os.PathLike, out_dir: str | os.PathLike, info: SessionInfo) -> Path:
+    """Rename a finished session folder (built in a staging folder) into ``out_dir`` under a free id.
+
+    When ``info.session_id`` is taken, or taken while renaming (another import the same second), the
+    session gets :func:`free_session_id`'s suffix, its ``session.json`` saying so (:data:`ID_TAKEN_KEY`)
+    before it appears; a folder is never replaced.
+
+    Returns
+    -------
+    Path
+        The session folder in ``out_dir``.
+    """
+    out, wanted = Path(out_dir), info.extra.get(ID_TAKEN_KEY, info.session_id)
+    while True:
+        sid = free_session_id(out, info.session_id)
+        if sid != info.session_id:
+            info.session_id = sid
+            info.extra[ID_TAKEN_KEY] = wanted
+            info.save(folder, overwrite=True)
+        try:
+            os.rename(folder, out / sid)  # refused (ENOTEMPTY/EEXIST) if another session took the name meanwhile
+        except OSError as exc:
+            if exc.errno not in (errno.EEXIST, errno.ENOTEMPTY):
+                raise
+            continue
+        return out / sid
+
+
+def id_taken_note(folder: str | os.PathLike) -> str | None:
+    """The line stating a session's suffix (:func:`move_session_in`), or None when it has its own id."""
+    info = read_session_info(folder)
+    wanted = info.extra.get(ID_TAKEN_KEY)
+    if not isinstance(wanted, str):
+        return None
+    return (f"note: a session folder {wanted} exists already (a session of {info.participant.code} started "
+            f"the same second): this one is {info.session_id}")
 
 
 # ---------------------------------------------------------------------------------- session.json

@@ -12,9 +12,10 @@ session is written, so one bad file leaves nothing written.
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
-from effortface.core.session.folder import Participant
+from effortface.core.session.folder import Participant, id_taken_note
 from effortface.core.errors import UserError
 from effortface.interop.xdf_import import import_xdf
 
@@ -85,8 +86,16 @@ def run(args: argparse.Namespace) -> int:
                         mocap_stream=args.mocap_stream, video=args.video, video_stream=args.video_stream,
                         video_offset_s=args.video_offset, label=args.label, hr_json_key=args.hr_json_key,
                         rr_json_key=args.rr_json_key, keep_ecg=args.keep_ecg)
+    _state_suffix(folder)
     print(folder)
     return 0
+
+
+def _state_suffix(folder: Path) -> None:
+    """Say on stderr that the session got a suffix because its folder name was taken."""
+    note = id_taken_note(folder)
+    if note is not None:
+        print(f"effortface import: {note}", file=sys.stderr)
 
 
 def _run_hr(args: argparse.Namespace) -> int:
