@@ -26,6 +26,9 @@ from pathlib import Path
 from effortface.core.errors import UserError
 from effortface.capture_tool.captures import read_timed_capture
 
+#: seconds a reader that closed the port in mid-play has to open it again before the replay ends
+READER_RETURN_S = 2.0
+
 
 @dataclasses.dataclass(frozen=True)
 class TimedChunk:
@@ -89,6 +92,8 @@ class PtyReplay:
         self.path: str = os.ttyname(slave)
         os.close(slave)  # the master now sees POLLHUP until a reader opens the slave
         self._stop = threading.Event()
+        #: True when :meth:`play` ended early because the reader closed the port for good
+        self.reader_left = False
         self.bytes_written = 0
         self.write_times: list[tuple[float, int]] = []
 
@@ -115,7 +120,9 @@ class PtyReplay:
                 break
             if self._stop.wait(max(0.0, t0 + chunk.t_s / self.speed - time.monotonic())):
                 break
-            self._write_all(chunk.data)
+            if not self._write_all(chunk.data):
+                self.reader_left = True  # the reader closed the port and did not come back: it is done
+                break
             self.write_times.append((time.monotonic(), i))
         if self.unplug_after_s is not None and not self._stop.is_set():
             self._stop.wait(max(0.0, t0 + self.unplug_after_s / self.speed - time.monotonic()))
@@ -147,13 +154,30 @@ class PtyReplay:
             time.sleep(0.005)
         return True
 
-    def _write_all(self, data: bytes) -> None:
-        """Write all of ``data`` to the master (the tty may accept it in pieces)."""
+    def _write_all(self, data: bytes) -> bool:
+        """Write all of ``data`` to the master (the tty may accept it in pieces); False when the reader
+        closed the port and no program opened it again within :data:`READER_RETURN_S` (a write with
+        no reader would block for ever once the tty's buffer is full), or on :meth:`stop`."""
         view = memoryview(data)
         while view:
+            if not self._writable():
+                return False
             n = os.write(self._master, view)
             self.bytes_written += n
             view = view[n:]
+        return True
+
+    def _writable(self) -> bool:
+        """Wait until the master takes bytes; False on :meth:`stop` or a reader gone for good."""
+        p = select.poll()
+        p.register(self._master, select.POLLOUT | select.POLLHUP)
+        while not self._stop.is_set():
+            events = dict(p.poll(50)).get(self._master, 0)
+            if events & select.POLLHUP and not self.wait_for_reader(READER_RETURN_S):
+                return False
+            if events & select.POLLOUT and not events & select.POLLHUP:
+                return True
+        return False
 
     def hold(self, timeout_s: float | None = None) -> None:
         """Keep the (now silent) port open until the reader closes it, :meth:`stop`, or timeout."""

@@ -108,3 +108,23 @@ def test_replay_rejects_bad_input(tmp_path) -> None:
         open_pty_replay(tmp_path)
     with pytest.raises(UserError, match="--speed: expected a number above 0"):
         PtyReplay([], speed=-1)
+
+
+def test_play_ends_when_the_reader_leaves_in_mid_play() -> None:
+    """A reader that closes the port before the recording ends (a capture stopped early) ends the
+    replay: with no reader the pseudo-terminal's buffer fills and a write would block for ever."""
+    rp = PtyReplay([TimedChunk(i * 0.001, b"x" * 200) for i in range(2000)])  # 400 kB over 2 s
+    done = threading.Event()
+
+    def _run() -> None:
+        rp.wait_for_reader(5)
+        rp.play()
+        rp.hold(timeout_s=30)
+        done.set()
+
+    threading.Thread(target=_run, daemon=True).start()
+    with serial.Serial(rp.path, timeout=1.0) as ser:
+        assert len(ser.read(400)) == 400
+    assert done.wait(20), "replay went on writing to a port nobody reads"
+    assert rp.reader_left and rp.bytes_written < 2000 * 200
+    rp.close()

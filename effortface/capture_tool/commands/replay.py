@@ -2,8 +2,8 @@
 
 The first stdout line is the pseudo-terminal path (flushed at once, so a script can read it);
 replay starts when a program opens that path and ends when the recording has been played and the
-reader closes the port (or ``--unplug-after`` pulls it, or Ctrl-C / SIGTERM). Stopped by SIGTERM
-it exits quietly with status 0 (a stop asked for is not an error).
+reader closes the port (or ``--unplug-after`` pulls it, or Ctrl-C / SIGTERM; a reader that closes the
+port in mid-play and does not open it again within 2 s ends it too). Stopped by SIGTERM it exits quietly with status 0 (a stop asked for is not an error).
 """
 
 from __future__ import annotations
@@ -43,7 +43,10 @@ def run(args: argparse.Namespace) -> int:
             print(f"effortface replay: no program opened {replay.path} within {args.wait:g} s", file=sys.stderr)
             return 1
         n = replay.play()
-        if not replay.stopped:
+        if replay.reader_left:
+            print(f"effortface replay: the reader closed {replay.path} after {n} bytes; replay ended",
+                  file=sys.stderr, flush=True)
+        elif not replay.stopped:
             print(f"replayed {n} bytes", file=sys.stderr, flush=True)
         replay.hold()
     except KeyboardInterrupt:
