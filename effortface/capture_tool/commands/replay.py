@@ -3,7 +3,8 @@
 The first stdout line is the pseudo-terminal path (flushed at once, so a script can read it);
 replay starts when a program opens that path and ends when the recording has been played and the
 reader closes the port (or ``--unplug-after`` pulls it, or Ctrl-C / SIGTERM; a reader that closes the
-port in mid-play and does not open it again within 2 s ends it too). Stopped by SIGTERM it exits quietly with status 0 (a stop asked for is not an error).
+port in mid-play and does not open it again within 2 s ends it too). Stopped by SIGTERM it exits quietly with status 0 (a stop asked for is not an
+error).
 """
 
 from __future__ import annotations
