@@ -365,11 +365,14 @@ class Recorder:
                                        "incomplete: run 'effortface recover' on it once there is room")
 
     def _warnings(self) -> list[str]:
-        """Soft problems worth a line: a port that delivered no valid heart-rate sample."""
+        """Soft problems worth a line: a video file replayed slower than real time, a port that
+        delivered no valid heart-rate sample."""
+        lag = self.camera.lag_note() if self.camera is not None else None
+        out = [lag] if lag else []
         st = self.link.decoder.stats
         if st.samples - st.invalid_samples > 0 or self.link.fault:
-            return []
-        return [f"{self.link.port}: delivered no valid heart-rate sample ({st.bytes_in} bytes, {st.frames_ok} "
+            return out
+        return out + [f"{self.link.port}: delivered no valid heart-rate sample ({st.bytes_in} bytes, {st.frames_ok} "
                 f"frames decoded, {st.frames_bad} bad, {st.invalid_samples} invalid samples): check --protocol "
                 "and the strap's contact"]
 
