@@ -348,7 +348,7 @@ class OneEuroSmoother:
         alpha = self._alpha(self.MIN_CUTOFF + self.BETA * np.abs(self._dx))
         self._x = values if self._x is None else alpha * values + (1 - alpha) * self._x
         self._x_raw = values
-        return self._x / scale
+        return np.asarray(self._x / scale)
 
 
 def as_rgb(image: np.ndarray) -> np.ndarray:
@@ -553,7 +553,7 @@ class FaceLandmarker:
         points = landmarks[BLENDSHAPE_LANDMARKS, :2] * np.array([frame_w, frame_h])
         self._bs.set_tensor(self._bs_in, points[None].astype(np.float32))
         self._bs.invoke()
-        return self._bs.get_tensor(self._bs_out).astype(np.float64).copy()
+        return np.array(self._bs.get_tensor(self._bs_out), dtype=np.float64)
 
     @staticmethod
     def _tracking_rect(landmarks: np.ndarray, frame_w: int, frame_h: int) -> Rect:
@@ -585,7 +585,7 @@ def _warp(rgb: np.ndarray, src: np.ndarray, size: int, *, border_zero: bool) -> 
     dst = np.array([[0, size], [0, 0], [size, 0], [size, size]], np.float32)
     inverse = np.linalg.inv(cv2.getPerspectiveTransform(np.asarray(src, np.float32), dst))
     if size not in _GRIDS:
-        _GRIDS[size] = tuple(np.mgrid[0:size, 0:size].astype(np.float64))  # type: ignore[assignment]
+        _GRIDS[size] = tuple(np.mgrid[0:size, 0:size].astype(np.float64))
     ys, xs = _GRIDS[size]
     w = inverse[2, 0] * xs + inverse[2, 1] * ys + inverse[2, 2]
     scale = np.divide(INTER_TAB_SIZE, w, out=np.zeros_like(w), where=w != 0)
