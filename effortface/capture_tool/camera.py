@@ -54,7 +54,7 @@ FLUSH_EVERY_S = 0.5
 #: the video and the frame table are fsynced this often (a power cut loses at most this much)
 SYNC_EVERY_S = 1.0
 #: a video file replayed this much later than its own timing is reported (:meth:`CameraSource.lag_note`)
-LAG_NOTE_S = 0.5
+LAG_NOTE_S = 1.0
 
 
 def _cv2() -> Any:
@@ -243,9 +243,11 @@ class CameraSource:
         """
         if isinstance(self.source, int) or (self.late_frames == 0 and self.lag_s <= LAG_NOTE_S):
             return None
-        return (f"--video {self.source}: could not keep up in real time ({self.width}x{self.height} at "
-                f"{self.fps:g} fps; a frame came up to {self.lag_s:.1f} s late): {self.late_frames} frames due "
-                f"by the stop were not recorded (dropped)")
+        head = (f"--video {self.source}: could not keep up in real time ({self.width}x{self.height} at "
+                f"{self.fps:g} fps; a frame came up to {self.lag_s:.1f} s late)")
+        if self.late_frames == 0:
+            return f"{head}: every frame recorded, stamped when it was read"
+        return f"{head}: {self.late_frames} frames due by the stop were not recorded (dropped)"
 
     def _offer(self, frame: Any, t_s: float) -> None:
         """Queue a frame for the writer, or drop and count it when the writer is behind."""
