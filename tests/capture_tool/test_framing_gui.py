@@ -27,3 +27,17 @@ def test_a_small_face_gets_a_banner_and_a_framed_one_clears_it(qtbot, window, tm
     stage.preflight.set_choice(video_file=framed)
     qtbot.waitUntil(lambda: stage.banner_text() == "", timeout=15_000)
     assert "face found: " in stage.preflight.camera_status.text()
+
+
+def test_while_recording_the_framing_is_the_last_banner(qtbot, window) -> None:
+    """A sampler's look that finds the face too small is said, below a lost strap or camera."""
+    from effortface.core.framing import Framing
+
+    stage = window.stages["capture"]
+    small = Framing(0.14, False, 120.0)
+    stage._update_banner("connected", camera_ended=False, contact_ok=True, framing=small)
+    assert stage.banner_text() == "Camera: move the camera closer: the face is 14 % of the frame; the rater needs 25 %."
+    stage._update_banner("reconnecting", camera_ended=False, contact_ok=True, framing=small)
+    assert stage.banner_text().startswith("Strap lost")
+    stage._update_banner("connected", camera_ended=False, contact_ok=True, framing=Framing(0.4, True, 120.0))
+    assert stage.banner_text() == ""
