@@ -565,7 +565,6 @@ class FaceLandmarker:
 
 #: OpenCV 4's bilinear warp of 8-bit images works on 1/32 pixel steps (``INTER_BITS`` 5)
 INTER_TAB_SIZE = 32
-_GRIDS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
 
 def _warp(rgb: np.ndarray, src: np.ndarray, size: int, *, border_zero: bool) -> np.ndarray:
@@ -583,16 +582,15 @@ def _warp(rgb: np.ndarray, src: np.ndarray, size: int, *, border_zero: bool) -> 
     """
     cv2 = _cv2()
     dst = np.array([[0, size], [0, 0], [size, 0], [size, size]], np.float32)
-    inverse = np.linalg.inv(cv2.getPerspectiveTransform(np.asarray(src, np.float32), dst))
-    if size not in _GRIDS:
-        _GRIDS[size] = tuple(np.mgrid[0:size, 0:size].astype(np.float64))
-    ys, xs = _GRIDS[size]
-    w = inverse[2, 0] * xs + inverse[2, 1] * ys + inverse[2, 2]
-    scale = np.divide(INTER_TAB_SIZE, w, out=np.zeros_like(w), where=w != 0)
-    limit = float(2**31 - 1)
-    fx = np.rint(np.clip((inverse[0, 0] * xs + inverse[0, 1] * ys + inverse[0, 2]) * scale, -limit, limit)).astype(np.int64)
-    fy = np.rint(np.clip((inverse[1, 0] * xs + inverse[1, 1] * ys + inverse[1, 2]) * scale, -limit, limit)).astype(np.int64)
-    whole = np.stack([np.clip(fx >> 5, -32768, 32767), np.clip(fy >> 5, -32768, 32767)], axis=-1).astype(np.int16)
+    m = np.linalg.inv(cv2.getPerspectiveTransform(np.asarray(src, np.float32), dst))
+    steps = np.arange(size, dtype=np.float64)
+    xs, ys = steps[None, :], steps[:, None]  # broadcast: each product is one row or one column
+    scale = INTER_TAB_SIZE / (m[2, 0] * xs + (m[2, 1] * ys + m[2, 2]))
+    fx = np.rint((m[0, 0] * xs + (m[0, 1] * ys + m[0, 2])) * scale).astype(np.int32)
+    fy = np.rint((m[1, 0] * xs + (m[1, 1] * ys + m[1, 2])) * scale).astype(np.int32)
+    whole = np.empty((size, size, 2), np.int16)
+    np.clip(fx >> 5, -32768, 32767, out=whole[:, :, 0], casting="unsafe")
+    np.clip(fy >> 5, -32768, 32767, out=whole[:, :, 1], casting="unsafe")
     fraction = ((fy & 31) * INTER_TAB_SIZE + (fx & 31)).astype(np.uint16)
     border = cv2.BORDER_CONSTANT if border_zero else cv2.BORDER_REPLICATE
     warped = cv2.remap(rgb, whole, fraction, cv2.INTER_LINEAR, borderMode=border, borderValue=0)
