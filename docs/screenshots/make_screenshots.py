@@ -4,7 +4,8 @@
 
 Writes ``<name>_<w>x<h>.png`` at 1280x800 and 1920x1080 into this folder (or ``--out``), replacing
 the previous ones (that is what the script is for; each path is printed). Groups (``--only``, default
-all): ``app`` (the main window as it opens), ``capture`` (``before``, ``during``, ``strap_lost``,
+all): ``app`` (the main window as it opens), ``capture`` (``before``, ``framing`` (the camera check's banner
+on a GRID talking face shrunk to 14 % of the frame height, ``tests/data/video``), ``during``, ``strap_lost``,
 ``after`` (Stop: the last recording's summary and plot, the strap plugged back in on its own small
 live plot): P01's
 ANT+ serial log replayed on a pseudo-terminal, the session video played as the camera, recorded into
@@ -169,6 +170,13 @@ def shoot_capture(tmp: Path, out: Path) -> None:
             _wait(15, lambda: stage.settled() and stage.live.hr_label.value.text() != "--")
             _wait(2)
             grab(window, "capture_before", out)
+            # the camera check on a face too small for the machine rater (a real GRID talker at 14 %): its banner
+            stage.preflight.set_choice(video_file=small_face_video(tmp / "small_face.avi"))
+            if not _wait(20, lambda: stage.banner_text().startswith("Camera: move the camera closer")):
+                raise RuntimeError(f"no framing banner: {stage.banner_text()!r}")
+            grab(window, "capture_framing", out)
+            stage.preflight.set_choice(video_file=session / "video.avi")
+            _wait(20, lambda: not stage.banner_text().startswith("Camera: "))
             _record(stage)
             grab(window, "capture_during", out)
             _wait(30, lambda: stage.session.recorder.link.state == "reconnecting")
@@ -217,6 +225,30 @@ def shoot_participant(lab: Path, tmp: Path, out: Path) -> None:
         form.code.setText("P01")
         stage.clear_banner()
         grab(window, "capture_participant_record", out)
+
+
+def small_face_video(path: Path, share: float = 0.14) -> Path:
+    """The GRID talking face of tests/data/video shrunk so that it fills ``share`` of the frame's height."""
+    import numpy as np
+
+    from effortface.capture_tool.framing_sampler import check_camera_framing
+    from effortface.core.opencv import import_cv2
+
+    cv2 = import_cv2()
+    cap = cv2.VideoCapture(str(ROOT / "tests" / "data" / "video" / "grid_sbwe5n.mpg"))
+    frames = [frame for ok, frame in iter(cap.read, (False, None)) if ok][:25]
+    cap.release()
+    scale = share / (check_camera_framing(frames[0]).face_share or 1.0)
+    h, w = frames[0].shape[:2]
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 25.0, (w, h))
+    for frame in frames:
+        small = cv2.resize(frame, (round(w * scale), round(h * scale)), interpolation=cv2.INTER_AREA)
+        canvas = np.full_like(frame, 40)
+        top, left = (h - small.shape[0]) // 2, (w - small.shape[1]) // 2
+        canvas[top:top + small.shape[0], left:left + small.shape[1]] = small
+        writer.write(canvas)
+    writer.release()
+    return path
 
 
 def _choose_devices(stage: QtWidgets.QWidget, port: str, video: Path) -> None:

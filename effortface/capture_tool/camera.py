@@ -4,7 +4,9 @@ to an MJPG ``video.avi`` with one ``frame,t_s`` row per written frame in ``video
 Two threads: the grabber stamps each frame with the session clock the moment it arrives and puts
 it in a bounded queue; the writer encodes and appends. When the writer cannot keep up, the queue is
 full and the grabber drops the frame and counts it (``dropped``), so the timing of the frames that
-are kept is never distorted. OpenCV is imported inside functions (it is heavy).
+are kept is never distorted. A video file gives every frame from the first, none skipped (its
+grabber waits for the writer instead); frames it had not reached by the stop because it fell behind
+real time are counted as dropped and said (:meth:`CameraSource.lag_note`). OpenCV is imported inside functions (it is heavy).
 
 Every frame reaches the OS as it is written (:mod:`~effortface.capture_tool.avi_writer`), the frame
 table at least every :data:`FLUSH_EVERY_S`, and both are fsynced every :data:`SYNC_EVERY_S`, so a
@@ -51,6 +53,8 @@ FIRST_GROWTH_FRAMES = 300
 FLUSH_EVERY_S = 0.5
 #: the video and the frame table are fsynced this often (a power cut loses at most this much)
 SYNC_EVERY_S = 1.0
+#: a video file replayed this much later than its own timing is reported (:meth:`CameraSource.lag_note`)
+LAG_NOTE_S = 1.0
 
 
 def _cv2() -> Any:
@@ -83,8 +87,8 @@ def open_capture(source: int | str | os.PathLike) -> Any:
     cap = cv2.VideoCapture(str(path))
     if not cap.isOpened() or not cap.read()[0]:
         raise UserError(f"--video {path}: expected a video OpenCV can decode, found an unreadable file")
-    cap.set(cv2.CAP_PROP_POS_FRAMES, 0)
-    return cap
+    cap.release()  # opened again, not seeked back: a seek to frame 0 lands on frame 12 of an MPEG-1 file
+    return cv2.VideoCapture(str(path))
 
 
 class CameraSource:
@@ -93,7 +97,7 @@ class CameraSource:
     Parameters
     ----------
     source : int or path-like
-        Camera index, or a video file played at its own frame rate (for tests and demos).
+        Camera index, or a video file played at its own frame rate, every frame from the first (tests, demos).
     clock : callable
         Session clock in seconds.
     queue_frames : int
@@ -104,8 +108,12 @@ class CameraSource:
     Attributes
     ----------
     frames_written, dropped : int
-        Frames handed to the writer, and frames not recorded (the writer could not keep up, or
-        the video stopped on a fault).
+        Frames handed to the writer, and frames not recorded (the writer could not keep up, the
+        video stopped on a fault, or a video file's frames were due by the stop but not reached).
+    late_frames : int
+        Of ``dropped``: a video file's frames due by the stop that decoding had not reached.
+    lag_s : float
+        A video file: how late (seconds) its latest-replayed frame came against the file's timing.
     fault : str or None
         Why the video stopped early: one line naming the file.
     write_failed : bool
@@ -134,6 +142,8 @@ class CameraSource:
         self.frames_written = 0
         self.grabbed = 0
         self.dropped = 0
+        self.late_frames = 0
+        self.lag_s = 0.0
         self.latest_frame: Any = None  # newest grabbed frame (a reference, for previews)
         self.ended = False
         self._cap = open_capture(source)
@@ -172,23 +182,72 @@ class CameraSource:
             self._threads.append(t)
 
     def _grab_loop(self) -> None:
-        is_file = not isinstance(self.source, int)
+        if isinstance(self.source, int):
+            self._grab_camera()
+        else:
+            self._grab_file()
+        self._queue.put(_STOP)
+
+    def _grab_camera(self) -> None:
+        """A camera's frames as they come; a frame the writer has no room for is dropped and counted."""
+        while not self._stop.is_set():
+            ok, frame = self._cap.read()
+            t_s = self.clock()
+            if not ok:
+                self.ended = True
+                break
+            self._offer(frame, t_s)
+
+    def _grab_file(self) -> None:
+        """Every frame of the file from the first, in order, each no earlier than its time in the file.
+
+        No frame is skipped: a writer behind holds the reading back (the queue waits). When decoding
+        and writing are slower than real time the replay falls behind: the worst lateness is
+        :attr:`lag_s`, and the frames that were due by the stop but not reached are counted in
+        :attr:`late_frames` (and in :attr:`dropped`).
+        """
         t_start = time.monotonic()
         n = 0
         while not self._stop.is_set():
-            if is_file and self._stop.wait(max(0.0, t_start + n / self.fps - time.monotonic())):
+            if self._stop.wait(max(0.0, t_start + n / self.fps - time.monotonic())):
                 break
             ok, frame = self._cap.read()
             t_s = self.clock()
             if not ok:
-                if is_file and self.loop and n > 0:
-                    self._cap.set(_cv2().CAP_PROP_POS_FRAMES, 0)
+                if self.loop and n > 0:
+                    self._cap.release()
+                    self._cap = open_capture(self.source)  # opened again: a seek to 0 may miss the first frames
                     continue
                 self.ended = True
-                break
+                return
+            self.lag_s = max(self.lag_s, time.monotonic() - (t_start + n / self.fps))
             n += 1
-            self._offer(frame, t_s)
-        self._queue.put(_STOP)
+            self.grabbed += 1
+            self.latest_frame = frame
+            self._queue.put((frame, t_s))  # waits while the writer is behind: a file's frames are never skipped
+        self._count_late(t_start, n)
+
+    def _count_late(self, t_start: float, n_read: int) -> None:
+        """At a stop before the file's end: the frames due by now that were not read count as dropped."""
+        due = math.floor((time.monotonic() - t_start) * self.fps) + 1
+        total = int(self._cap.get(_cv2().CAP_PROP_FRAME_COUNT) or 0)
+        if total > 0 and not self.loop:
+            due = min(due, total)
+        self.late_frames = max(0, due - n_read)
+        self.dropped += self.late_frames
+
+    def lag_note(self) -> str | None:
+        """One line when a video file could not be replayed in real time (None when it kept up).
+
+        It names the file, the frames due by the stop that were not recorded (dropped) and the worst lateness.
+        """
+        if isinstance(self.source, int) or (self.late_frames == 0 and self.lag_s <= LAG_NOTE_S):
+            return None
+        head = (f"--video {self.source}: could not keep up in real time ({self.width}x{self.height} at "
+                f"{self.fps:g} fps; a frame came up to {self.lag_s:.1f} s late)")
+        if self.late_frames == 0:
+            return f"{head}: every frame recorded, stamped when it was read"
+        return f"{head}: {self.late_frames} frames due by the stop were not recorded (dropped)"
 
     def _offer(self, frame: Any, t_s: float) -> None:
         """Queue a frame for the writer, or drop and count it when the writer is behind."""

@@ -25,6 +25,8 @@ from typing import Any
 
 from effortface.core.version import __version__
 from effortface.capture_tool.camera import CameraSource, index_video, rewrite_video
+from effortface.capture_tool.framing_sampler import FramingSampler
+from effortface.core.framing import Framing
 from effortface.core.errors import SessionFormatError
 from effortface.core.fileio import not_a_file
 from effortface.core.locks import FileLock
@@ -76,6 +78,7 @@ class RecorderStatus:
     rr_ms: float | None
     link_state: str
     fault: str | None = None  # the first fault (one line naming the file), if any
+    framing: Framing | None = None  # the framing sampler's last look at the camera (None: none yet)
 
 
 def device_startup_frames(protocol: str, port: str) -> list[bytes]:
@@ -119,6 +122,10 @@ class Recorder:
     lsl : bool
         Also publish the strap and the events as LSL streams (:mod:`effortface.capture_tool.lsl`);
         the LSL clock offset goes into ``session.json`` under ``lsl``.
+    framing : bool
+        With video, look at the face's framing about twice a second in a thread of its own
+        (:class:`~effortface.capture_tool.framing_sampler.FramingSampler`): :attr:`framing`, and
+        ``framing`` in :meth:`status`.
     """
 
     def __init__(
@@ -131,8 +138,11 @@ class Recorder:
         label: str | None = None,
         device: str | None = None,
         lsl: bool = False,
+        framing: bool = True,
     ) -> None:
         self.out_dir = Path(out_dir)
+        self._framing_wanted = framing
+        self.framing: FramingSampler | None = None
         self._lsl_wanted = lsl
         self.lsl: Any = None  # an LslPublisher once started with lsl=True
         self.participant = participant
@@ -210,6 +220,10 @@ class Recorder:
         self.link.start(self.path / SERIAL_DIR / f"{self.link.device}.serlog")
         if self.camera is not None:
             self.camera.start(self.path / VIDEO_AVI, self.path / VIDEO_FRAMES_CSV)
+            if self._framing_wanted:
+                camera = self.camera
+                self.framing = FramingSampler(lambda: camera.latest_frame)
+                self.framing.start()
 
     def _new_info(self) -> SessionInfo:
         now = _dt.datetime.now()
@@ -312,6 +326,7 @@ class Recorder:
             rr_ms=last.rr_ms[-1] if last and last.rr_ms else None,
             link_state=self.link.state,
             fault=next(iter(self.faults), None),
+            framing=self.framing.latest if self.framing is not None else None,
         )
 
     def stop(self) -> Path:
@@ -340,6 +355,8 @@ class Recorder:
     def _stop_devices(self) -> None:
         """Stop camera and link, write what is queued, close the files."""
         self.mark("sync", "session_stop", utc_now_iso())
+        if self.framing is not None:
+            self.framing.stop()
         if self.camera is not None:
             self.camera.stop()
         self.link.stop()
@@ -370,11 +387,14 @@ class Recorder:
                                        "incomplete: run 'effortface recover' on it once there is room")
 
     def _warnings(self) -> list[str]:
-        """Soft problems worth a line: a port that delivered no valid heart-rate sample."""
+        """Soft problems worth a line: a video file replayed slower than real time, a port that
+        delivered no valid heart-rate sample."""
+        lag = self.camera.lag_note() if self.camera is not None else None
+        out = [lag] if lag else []
         st = self.link.decoder.stats
         if st.samples - st.invalid_samples > 0 or self.link.fault:
-            return []
-        return [f"{self.link.port}: delivered no valid heart-rate sample ({st.bytes_in} bytes, {st.frames_ok} "
+            return out
+        return out + [f"{self.link.port}: delivered no valid heart-rate sample ({st.bytes_in} bytes, {st.frames_ok} "
                 f"frames decoded, {st.frames_bad} bad, {st.invalid_samples} invalid samples): check --protocol "
                 "and the strap's contact"]
 
@@ -388,6 +408,7 @@ class Recorder:
             "serial_reconnects": self.link.reconnects,
             "video_frames": cam.frames_written if cam else 0,
             "dropped_frames": cam.dropped if cam else 0,
+            **({"framing": self.framing.summary()} if self.framing is not None else {}),
             **({"warnings": self.warnings} if self.warnings else {}),
         }
 

@@ -7,7 +7,9 @@ a face, time taken). The model is the shipped MediaPipe Face Landmarker bundle, 
 nothing is downloaded. Every session is checked before any is rated: one that is being recorded, left
 incomplete, has no video or already has a machine rating (without ``--force``) is refused in one line
 (exit 2). Several sessions are rated in parallel with ``--workers N``. Nothing is written for a session
-until all its frames are rated, so Ctrl-C leaves no half-written file. See docs/guide/machine-rater.md.
+until all its frames are rated, so Ctrl-C leaves no half-written file. A session with a face on fewer
+than half its frames ends with a warning line naming the likely cause (the face too small, the video
+too dark, or no face) and exit status 1. See docs/guide/machine-rater.md.
 """
 
 from __future__ import annotations
@@ -76,7 +78,8 @@ def _rate_one(task: tuple[Path, Path | None, bool, int]) -> tuple[bool, str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Check every session, rate them, print one line each; 2 when one failed."""
+    """Check every session, rate them, print one line each; 2 when one failed, else 1 when one has a
+    face on fewer than half its frames (a warning line each), else 0."""
     sessions, model = _check_args(args)
     if len(sessions) == 1 or args.workers == 1:
         return _run_serial(sessions, model, args.force)
@@ -89,6 +92,7 @@ def _run_serial(sessions: list[Path], model: Path | None, force: bool) -> int:
     from effortface.annotate.machine.track import read_machine_track
 
     failed = 0
+    rated: list[Path] = []
     for session in sessions:
         error: UserError | None = None
         with ProgressBar(session.name[:32]) as bar:
@@ -106,7 +110,25 @@ def _run_serial(sessions: list[Path], model: Path | None, force: bool) -> int:
         assert track is not None
         print(f"wrote {out}: {len(track.frame)} frames, a face on {int(track.face.sum())} "
               f"({track.sidecar.get('time_taken_s')} s)")
-    return 2 if failed else 0
+        rated.append(session)
+    warned = _warn_coverage(rated)
+    return 2 if failed else warned
+
+
+def _warn_coverage(sessions: list[Path]) -> int:
+    """A warning line for each rated session with a face on fewer than half its frames, naming the
+    likely cause (:mod:`effortface.annotate.machine.face_coverage`); 1 when there was one, else 0."""
+    from effortface.annotate.machine.face_coverage import coverage_warning
+    from effortface.annotate.machine.track import read_machine_track
+
+    warned = 0
+    for session in sessions:
+        track = read_machine_track(session)
+        line = None if track is None else coverage_warning(session, track)
+        if line is not None:
+            print(f"warning: {line}", file=sys.stderr)
+            warned += 1
+    return 1 if warned else 0
 
 
 def _run_parallel(sessions: list[Path], model: Path | None, force: bool, workers: int) -> int:
@@ -118,23 +140,27 @@ def _run_parallel(sessions: list[Path], model: Path | None, force: bool, workers
     from effortface.core.stops import ignore_stops_in_worker
 
     failed = 0
+    rated: list[Path] = []
     threads = max(1, (os.cpu_count() or 1) // workers)
     pool = cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
                                   initializer=ignore_stops_in_worker)
     try:
         with ProgressBar("preannotate") as bar:
-            futures = [pool.submit(_rate_one, (s, model, force, threads)) for s in sessions]
+            futures = {pool.submit(_rate_one, (s, model, force, threads)): s for s in sessions}
             for done, future in enumerate(cf.as_completed(futures), start=1):
                 bar(done / len(sessions), "sessions rated")
                 ok, line = future.result()
                 print(line if ok else f"effortface preannotate: error: {line}", file=sys.stdout if ok else sys.stderr)
                 failed += not ok
+                if ok:
+                    rated.append(futures[future])
     except BaseException:
         _end_workers(pool)
         raise
     finally:
         pool.shutdown(wait=True)
-    return 2 if failed else 0
+    warned = _warn_coverage(rated)
+    return 2 if failed else warned
 
 
 def _end_workers(pool: cf.ProcessPoolExecutor) -> None:

@@ -1,7 +1,8 @@
 """The machine rater: MediaPipe's Face Landmarker on every recorded frame (``effortface preannotate``).
 
 - :mod:`~effortface.annotate.machine.landmarker`: the pipeline (detector, landmarks, blendshapes) on
-  the bundle's ``.tflite`` models with ``ai-edge-litert``.
+  the bundle's ``.tflite`` models with ``ai-edge-litert`` (:mod:`effortface.core.face_landmarker`,
+  which Capture's framing check runs too).
 - :mod:`~effortface.annotate.machine.track`: the files (``machine/face_landmarker.csv`` and its sidecar).
 - :mod:`~effortface.annotate.machine.mapping`: the definition mapping (52 scores -> our four
   blendshapes, the mean of the ARKit scores each names), and the isotonic calibration.

@@ -12,7 +12,12 @@ changed record, is saved once the recording has started. A capture that received
 status 1. A fault (a file that cannot be written: disk full, file-size limit) is one line on stderr
 naming the file as soon as it happens; a failed write stops the capture, which then leaves the
 session incomplete for ``effortface recover`` and exits with status 2 (the video stopping early
-on a nearly full disk only degrades it: the heart rate goes on).
+on a nearly full disk only degrades it: the heart rate goes on). With video, the face's framing for
+the machine rater is checked about twice a second off the recording path
+(:mod:`effortface.capture_tool.framing_sampler`): a ``camera:`` line on stderr at the first look and
+whenever it changes ("move the camera closer: the face is 14 % of the frame; the rater needs 25 %").
+A ``--video`` file is recorded from its first frame, every frame; one that cannot be replayed in real
+time ends with a warning counting the frames it dropped.
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ from pathlib import Path
 
 from effortface.core.docs import DESIGN
 from effortface.core.errors import UserError
+from effortface.core.framing import Framing
 from effortface.capture_tool.participants import HISTORY_TSV, REGISTRY_TSV, participant_options, resolve_participant, save_participant
 from effortface.capture_tool.plan import PlanRunner, read_plan
 from effortface.capture_tool.protocols import PROTOCOLS, check_protocol
@@ -51,7 +57,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--protocol", help=f"with --port: one of {', '.join(sorted(PROTOCOLS))}")
     video = parser.add_mutually_exclusive_group()
     video.add_argument("--camera", type=int, metavar="N", help="camera index")
-    video.add_argument("--video", metavar="FILE", help="a video file played at its real rate (tests, demos)")
+    video.add_argument("--video", metavar="FILE", help="a video file played at its real rate, every frame from the first (tests, demos)")
     video.add_argument("--no-video", action="store_true", help="record the strap only")
     parser.add_argument("--participant", required=True, metavar="CODE", help="participant code such as P01 (never a name)")
     parser.add_argument("--age", type=float)
@@ -164,6 +170,24 @@ def _report(recorder: Recorder, path: Path, said: list[str], args: argparse.Name
     return 2 if recorder.faults else 0
 
 
+def _face_share(framing: Framing | None) -> str:
+    """The status line's face size: ``  face 34 %``, ``  face none``, or nothing before the first look."""
+    if framing is None:
+        return ""
+    return "  face none" if framing.face_share is None else f"  face {100 * framing.face_share:.0f} %"
+
+
+def _say_framing(recorder: Recorder, said: list[str]) -> None:
+    """The camera's framing for the machine rater, one line on stderr at the first look and whenever
+    its verdict changes (framed, too small, too dark, no face); ``said`` holds the last verdict."""
+    sampler = recorder.framing
+    framing = sampler.latest if sampler is not None else None
+    if framing is None or (said and said[-1] == framing.cause):
+        return
+    print(f"camera: {framing.line()}", file=sys.stderr, flush=True)
+    said.append(framing.cause)
+
+
 def _say_new_faults(recorder: Recorder, said: list[str]) -> None:
     """Print each fault not in ``said`` (then add it): one line naming the file, as soon as it appears."""
     for line in recorder.faults:
@@ -217,9 +241,11 @@ def _wait(recorder: Recorder, stop: threading.Event, duration_s: float | None, s
     printing faults at once and a status line now and then."""
     deadline = None if duration_s is None else time.monotonic() + duration_s
     next_status = time.monotonic() + STATUS_INTERVAL_S
+    framing_said: list[str] = []
     while not stop.is_set():
         now = time.monotonic()
         _say_new_faults(recorder, said)
+        _say_framing(recorder, framing_said)
         if plan is not None:
             plan.step(recorder.clock())
         if (deadline is not None and now >= deadline) or recorder.failed:
@@ -228,6 +254,6 @@ def _wait(recorder: Recorder, stop: threading.Event, duration_s: float | None, s
             s = recorder.status()
             print(f"{s.elapsed_s:7.1f} s  HR {s.hr_bpm or '-'}  samples {s.samples}  frames {s.frames} "
                   f"dropped {s.dropped_frames}  link {s.link_state}" + (" (video stopped)" if recorder.camera and
-                  recorder.camera.fault else ""), file=sys.stderr, flush=True)
+                  recorder.camera.fault else "") + _face_share(s.framing), file=sys.stderr, flush=True)
             next_status = now + STATUS_INTERVAL_S
         stop.wait(0.1 if deadline is None else min(0.1, max(0.0, deadline - now)))

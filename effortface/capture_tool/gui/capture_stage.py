@@ -20,6 +20,7 @@ import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from effortface.core.errors import UserError
+from effortface.core.framing import Framing
 from effortface.capture_tool.capture_session import (BUSY_STATES, CaptureSession, DeviceChoice, HrRow,
                                                       LiveUpdate, format_elapsed)
 from effortface.capture_tool.corrections import CORRECTION_KIND
@@ -78,6 +79,12 @@ def app_words(text: str) -> str:
     return text
 
 
+def framing_banner(framing: Framing) -> str:
+    """The banner for a face the machine rater may miss: ``Camera: move the camera closer: the face is 14 %
+    of the frame; the rater needs 25 %`` (or no face found, and whether the image is dark)."""
+    return f"Camera: {framing.line()}."
+
+
 def tanaka_hr_max(age: float) -> float:
     """Age-predicted maximal HR, Tanaka 2001: ``208 - 0.7 age`` (SCIENCE.md section 3)."""
     return 208.0 - 0.7 * age
@@ -126,6 +133,7 @@ class QtCaptureStage(QtWidgets.QWidget):
         self.session = session
         self._banner_reason = ""
         self._strap_banner = ""  # the strap's banner shown now (it goes when its cause does)
+        self._framing_banner = ""  # the camera check's framing banner shown now (likewise)
         self._plot_is_monitor = False  # the HR plot shows the strap watched before Record (not a recording)
         self._contact_lost = 0
         self._contact_ok = True
@@ -281,6 +289,7 @@ class QtCaptureStage(QtWidgets.QWidget):
         self.form.changed.connect(self._clear_refusal)
         self.recovery_bar.recover.connect(self.session.recover_in_background)
         self.preflight.camera_frame.connect(self._show_camera_check)
+        self.preflight.camera_framing.connect(self._show_camera_framing)
         self.preflight.strap_ready.connect(self._watch_strap)
         self.preflight.strap_changed.connect(self._show_strap)
         s = self.session
@@ -299,6 +308,20 @@ class QtCaptureStage(QtWidgets.QWidget):
         if not self.session.recording:
             caption = "camera check: first frame (live video starts with Record)" if frame is not None else ""
             self.live.set_frame(frame, caption)
+
+    def _show_camera_framing(self, framing: Framing | None) -> None:
+        """Before recording, a banner when the camera check's face is missing or too small for the machine
+        rater (it goes when the framing is fixed or the camera changes)."""
+        if self.session.recording or self._busy:
+            return
+        text = framing_banner(framing) if framing is not None and not framing.ok else ""
+        if text:
+            self._framing_banner = text
+            self.show_banner(text, "warn")
+        elif self._framing_banner:
+            if self.banner_text() == self._framing_banner:
+                self.clear_banner()
+            self._framing_banner = ""
 
     def _clear_refusal(self) -> None:
         """A 'Record refused' banner goes once its cause does (the form says what is still needed)."""
@@ -553,7 +576,7 @@ class QtCaptureStage(QtWidgets.QWidget):
             "contact": "-" if not live else ("yes" if self._contact_ok else "NO"),
             "bad": f"{update.frames_bad} / {status.bad_bytes} B", "frames": status.frames,
             "dropped": status.dropped_frames, "size": format_bytes(status.bytes_on_disk)})
-        self._update_banner(status.link_state, update.camera_ended, self._contact_ok, status.fault)
+        self._update_banner(status.link_state, update.camera_ended, self._contact_ok, status.fault, status.framing)
 
     def _show_strap(self, view: StrapView) -> None:
         """Before Record, the strap's one status: its banner (cleared when its cause goes) and HR readout."""
@@ -648,9 +671,9 @@ class QtCaptureStage(QtWidgets.QWidget):
             self.event_list.scrollToBottom()
 
     def _update_banner(self, link_state: str, camera_ended: bool, contact_ok: bool,
-                       fault: str | None = None) -> None:
+                       fault: str | None = None, framing: Framing | None = None) -> None:
         """Show the most urgent problem (a fault: a file that cannot be written; strap lost, camera
-        stopped, no contact) or clear."""
+        stopped, no contact; the face not framed for the machine rater) or clear."""
         if fault:
             reason = f"{fault}. Stop the recording and free some disk space."
         elif link_state == "reconnecting":
@@ -659,6 +682,8 @@ class QtCaptureStage(QtWidgets.QWidget):
             reason = "The camera stopped delivering frames. The heart-rate recording goes on."
         elif not contact_ok:
             reason = "No skin contact: the strap reports no heart rate (check the strap is moist and tight)."
+        elif framing is not None and not framing.ok:
+            reason = framing_banner(framing)
         else:
             reason = ""
         if reason != self._banner_reason:

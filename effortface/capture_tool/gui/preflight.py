@@ -14,6 +14,8 @@ from typing import Any
 from PySide6 import QtCore, QtWidgets
 
 from effortface.capture_tool.capture_session import DeviceChoice
+from effortface.core.errors import UserError
+from effortface.core.framing import Framing
 from effortface.capture_tool.gui.detect import detect_protocol, read_first_bytes
 from effortface.core.jobs import JobResult, Jobs
 from effortface.capture_tool.protocols import PROTOCOLS
@@ -34,13 +36,14 @@ def check_strap(port: str) -> str:
     return f"{port} opens"
 
 
-def check_camera(camera: int | str) -> tuple[str, Any]:
-    """Open a camera or video file, grab one frame, release it (blocking).
+def check_camera(camera: int | str) -> tuple[str, Any, Framing | None]:
+    """Open a camera or video file, grab one frame, release it, and check the face's framing (blocking).
 
     Returns
     -------
-    (str, ndarray or None)
-        A 'WIDTHxHEIGHT' note and the first frame (BGR) for the preview.
+    (str, ndarray or None, Framing or None)
+        A 'WIDTHxHEIGHT' note (with the framing's line), the first frame (BGR) for the preview, and
+        its framing for the machine rater (None without a frame, or where the face detector cannot run).
 
     Raises
     ------
@@ -48,14 +51,21 @@ def check_camera(camera: int | str) -> tuple[str, Any]:
         If it cannot be opened.
     """
     from effortface.capture_tool.camera import open_capture
+    from effortface.capture_tool.framing_sampler import check_camera_framing
 
     cap = open_capture(camera)
     try:
         ok, frame = cap.read()
-        h, w = frame.shape[:2] if ok else (0, 0)
-        return f"{w}x{h}", frame if ok else None
     finally:
         cap.release()
+    if not ok:
+        return "0x0", None, None
+    h, w = frame.shape[:2]
+    try:
+        framing: Framing | None = check_camera_framing(frame)
+    except UserError:  # no ai-edge-litert here: the camera is fine, its framing unknown
+        framing = None
+    return (f"{w}x{h}" + (f"; {framing.line()}" if framing is not None else "")), frame, framing
 
 
 def found_ports() -> list[str]:
@@ -106,6 +116,8 @@ class QtPreflight(QtWidgets.QGroupBox):
 
     #: the first frame of the chosen camera, for a preview before recording
     camera_frame = QtCore.Signal(object)
+    #: the camera check's framing for the machine rater (:class:`~effortface.core.framing.Framing`, or None)
+    camera_framing = QtCore.Signal(object)
     #: the chosen strap port opens: (port, protocol), to watch its live heart rate ('' : none opens)
     strap_ready = QtCore.Signal(str, str)
     #: the strap's one status changed (:class:`~effortface.capture_tool.strap_status.StrapView`)
@@ -250,6 +262,7 @@ class QtPreflight(QtWidgets.QGroupBox):
         if self.camera.currentText() == NO_VIDEO:
             self._show("camera", OFF, "no video: chosen (heart rate and events only)")
             self.camera_frame.emit(None)
+            self.camera_framing.emit(None)
         elif self._check_one("camera", choice.camera, "no video file chosen"):
             self.jobs.submit("camera", check_camera, choice.camera, done=self._camera_checked)
 
@@ -259,6 +272,7 @@ class QtPreflight(QtWidgets.QGroupBox):
             self._show(name, MISSING, none_text)
             if name == "camera":
                 self.camera_frame.emit(None)
+                self.camera_framing.emit(None)
             return False
         self._show(name, CHECKING, str(target))
         return True
@@ -329,10 +343,12 @@ class QtPreflight(QtWidgets.QGroupBox):
         if result.error is not None:
             self._show_result("camera", result)
             self.camera_frame.emit(None)
+            self.camera_framing.emit(None)
             return
-        note, frame = result.value
+        note, frame, framing = result.value
         self._show("camera", READY, note)
         self.camera_frame.emit(frame)
+        self.camera_framing.emit(framing)
 
     def _protocol_detected(self, result: JobResult) -> None:
         self.detect_button.setEnabled(True)
