@@ -152,9 +152,9 @@ def _check_stop(code: int, err: str, left: dict[int, str], command: str) -> str:
     assert "Traceback" not in err, err
     if code == 0:
         return "finished"
-    if code == -signal.SIGTERM and not err:  # in the interpreter's start-up or exit, outside the command
-        return "outside the command"
     lines = [line for line in err.splitlines() if line.strip()]
+    if code == -signal.SIGTERM and (not lines or lines[-1].endswith("100% done")):
+        return "outside the command"  # in the interpreter's start-up, or its exit after the work was done
     assert code == 143 and lines and lines[-1] == (
         f"effortface {command}: stopped by SIGTERM; what it had not finished was not written"), (code, err)
     return "stopped"
