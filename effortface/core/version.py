@@ -1,3 +1,3 @@
 """The one version string of effortface (read by pyproject.toml, session.json and model bundles)."""
 
-__version__ = "0.5.0"
+__version__ = "0.6.0"
