@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import hashlib
 import math
 import os
 import sys
@@ -180,15 +179,6 @@ def litert_interpreter() -> Any:
         raise UserError("the machine rater: expected the package ai-edge-litert (wheels for Linux x86_64/"
                         "aarch64, macOS arm64, Windows AMD64), found it is not installed on this platform") from exc
     return Interpreter
-
-
-def file_sha256(path: Path) -> str:
-    """The sha256 of a file, hex."""
-    digest = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 #: the most a ``.task`` bundle may hold once uncompressed (the shipped one: 3.8 MB)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import hashlib
 import itertools
 import json
 import os
@@ -28,6 +29,15 @@ from effortface.core.stops import stops_deferred
 
 #: a temporary file of an atomic write older than this was left by a killed writer (no write takes so long)
 STALE_TMP_S = 300.0
+
+
+def file_sha256(path: str | os.PathLike[str]) -> str:
+    """The SHA-256 of a file's bytes, hex (read in 1 MiB blocks)."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
 
 
 def name_os_error(exc: OSError, path: str | os.PathLike[str]) -> OSError:

@@ -12,7 +12,6 @@ no session.
 from __future__ import annotations
 
 import datetime as dt
-import hashlib
 import math
 import os
 import secrets
@@ -26,17 +25,8 @@ from effortface.core.opencv import import_cv2, index_video
 from effortface.core.session.folder import (EVENTS_CSV, HEART_RATE_CSV, VIDEO_AVI, VIDEO_FRAMES_CSV, EventWriter,
                                              FrameTimeWriter, HrWriter, Participant, SessionInfo, create_session,
                                              make_session_id, utc_now_iso)
-from effortface.core.fileio import fsync_folder
+from effortface.core.fileio import file_sha256, fsync_folder
 from effortface.core.version import __version__
-
-
-def sha256(path: Path) -> str:
-    """Hex SHA-256 of a file."""
-    digest = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def start_text(when: dt.datetime | None) -> str | None:
@@ -113,7 +103,7 @@ def flash_offset(video: Path, flash_at_s: float) -> float:
 
 def import_info(rec: HrRecording) -> dict[str, object]:
     """The ``import`` block of ``session.json``."""
-    return {"file": rec.path.name, "format": rec.kind, "sha256": sha256(rec.path),
+    return {"file": rec.path.name, "format": rec.kind, "sha256": file_sha256(rec.path),
             "start_time": start_text(rec.start_utc),
             "start_time_zone": "UTC" if rec.start_utc is not None and rec.start_utc.tzinfo else "unknown (device local time)",
             "samples": len(rec.t_s), "rr_kept": rec.has_rr, "laps": rec.laps}
