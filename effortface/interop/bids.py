@@ -52,7 +52,8 @@ from pathlib import Path
 import numpy as np
 
 from effortface.core.session.hr_csv import read_hr_csv
-from effortface.core.session.folder import EVENTS_CSV, HEART_RATE_CSV, list_sessions, parse_session_id, read_session
+from effortface.core.session.folder import (EVENTS_CSV, HEART_RATE_CSV, list_sessions, parse_session_id, read_events,
+                                            read_session)
 from effortface.core.errors import UserError
 from effortface.core.participant import Participant
 from effortface.core.fileio import atomic_write, atomic_write_text, check_apart, fsync_folder, read_json, write_json_atomic
@@ -197,18 +198,18 @@ def _write_physio(stem: Path, columns: dict[str, str], t_s: np.ndarray, table: n
 
 
 def _events(folder: Path) -> list[list[str]]:
-    """``onset, duration, trial_type, value`` rows of events.csv (phases get their duration)."""
-    with open(folder / EVENTS_CSV, newline="", encoding="utf-8") as fh:
-        rows = list(csv.DictReader(fh))
+    """``onset, duration, trial_type, value`` rows of events.csv (phases get their duration), read by
+    the session's checked reader (:func:`~effortface.core.session.folder.read_events`)."""
+    events = read_events(folder / EVENTS_CSV)
     out = []
-    for i, r in enumerate(rows):
+    for i, e in enumerate(events):
         duration = "n/a"
-        if r["kind"] == "phase_start":
-            end = next((float(e["t_s"]) for e in rows[i + 1:] if e["kind"] in ("phase_end", "phase_start")), None)
-            duration = f"{end - float(r['t_s']):.4f}" if end is not None else "n/a"
-        label = _NOT_IN_A_CELL.sub(" ", r["label"]).strip()
-        trial = f"{r['kind']}:{label}" if label else r["kind"]
-        out.append([f"{float(r['t_s']):.4f}", duration, bids_text(trial), bids_text(r["value"] or "")])
+        if e.kind == "phase_start":
+            end = next((n.t_s for n in events[i + 1:] if n.kind in ("phase_end", "phase_start")), None)
+            duration = f"{end - e.t_s:.4f}" if end is not None else "n/a"
+        label = _NOT_IN_A_CELL.sub(" ", e.label).strip()
+        trial = f"{e.kind}:{label}" if label else e.kind
+        out.append([f"{e.t_s:.4f}", duration, bids_text(trial), bids_text(e.value or "")])
     return out
 
 

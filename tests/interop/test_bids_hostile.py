@@ -68,3 +68,17 @@ def test_a_failed_export_leaves_nothing_that_looks_like_a_dataset(tmp_path, caps
     err = capsys.readouterr().err
     assert "heart_rate.csv" in err and len(err.splitlines()) == 1
     assert sorted(p.name for p in tmp_path.iterdir()) == ["lab"]  # no dataset, no hidden staging folder
+
+
+@pytest.mark.parametrize("bad_row", ["abc,marker,go,", "1e300,marker,go,"])
+def test_a_damaged_events_csv_is_one_line_naming_file_and_line(tmp_path, capsys, bad_row) -> None:
+    """events.csv is read by the session's checked reader: a time that is not a number or is outside
+    the bounds names the file and line (the export read it with float() and gave a traceback)."""
+    lab = _lab(tmp_path)
+    events = lab / SESSIONS[0] / "events.csv"
+    lines = events.read_text(encoding="utf-8").splitlines()
+    events.write_text("\n".join([*lines[:2], bad_row, *lines[2:]]) + "\n", encoding="utf-8")
+    assert main(["export", "bids", str(lab), "--out", str(tmp_path / "ds")]) == 2
+    (err,) = capsys.readouterr().err.strip().splitlines()
+    assert f"{events}: line 3: expected t_s,kind,label,value" in err, err
+    assert not (tmp_path / "ds").exists()
