@@ -13,7 +13,6 @@ import pytest
 from effortface.cli import main
 from effortface.core.errors import UserError
 from effortface.synth.bundle import read_bundle, write_bundle
-from tests.synth.test_bundle import make_bundle
 
 ROOT = Path(__file__).resolve().parents[2]
 CLIP = ROOT / "tests" / "data" / "motion" / "amp_humanoid_run.npz"
@@ -21,7 +20,7 @@ BIG = 10 ** 400
 
 
 @pytest.fixture(scope="module")
-def model(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def model(tmp_path_factory: pytest.TempPathFactory, make_bundle) -> Path:
     """A bundle from real fits, with a rest anchor as train writes it."""
     out = tmp_path_factory.mktemp("model") / "m"
     write_bundle(make_bundle(), out)
