@@ -34,7 +34,7 @@ ADDON_FILES = ("blender_manifest.toml", "__init__.py", "bake.py", "ui.py")
 RUNTIME_MODULES = (
     "effortface", "effortface._moved",
     "effortface.core", "effortface.core.blendshapes", "effortface.core.bounds", "effortface.core.errors",
-    "effortface.core.fileio", "effortface.core.participant", "effortface.core.version",
+    "effortface.core.fileio", "effortface.core.participant", "effortface.core.stops", "effortface.core.version",
     "effortface.runtime",
     "effortface.synth", "effortface.synth.bundle", "effortface.synth.curves_io", "effortface.synth.energy",
     "effortface.synth.face", "effortface.synth.iir", "effortface.synth.motion", "effortface.synth.npzio",

@@ -21,7 +21,6 @@ from effortface.core import bounds
 from effortface.core.errors import UserError
 from effortface.core.fileio import read_json
 from effortface.synth.motion import check_parents
-from effortface.synth.motion_csv import SKELETON_SUFFIX
 
 TABLES_CSV = Path(__file__).with_name("data") / "segment_inertia_tables.csv"
 
@@ -617,6 +616,8 @@ def _frame_joints(names: Sequence[str], resolved: Mapping[str, tuple[tuple[int, 
         ends = resolved[seg][0] + resolved[seg][1]
         joint = lowest_common_ancestor(ends, parents)
         if joint < 0:
+            from effortface.synth.motion_csv import SKELETON_SUFFIX  # the runtime does not load it otherwise
+
             csv_hint = (f"a joint-positions CSV needs its skeleton file {Path(source).stem}{SKELETON_SUFFIX} "
                         f"beside it (or a '# parents:' comment)" if str(source).lower().endswith(".csv")
                         else "the skeleton needs one tree")
