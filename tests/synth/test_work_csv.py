@@ -38,7 +38,7 @@ HOSTILE = {
     "empty": (b"", r"expected a header with columns t_s,w_per_kg,p_per_kg, found 'an empty file'"),
     "no_rows": (b"t_s,w_per_kg,p_per_kg\n", r"expected rows of t_s,w_per_kg,p_per_kg, found none"),
     "field_over_csv_limit": (b"t_s,w_per_kg,p_per_kg\n0,1,\"" + b"9" * 200_000 + b"\"\n",
-                             r"expected CSV text, found unreadable CSV \(field larger than field limit"),
+                             r"expected CSV fields of at most 131072 characters, found a longer one"),
 }
 
 
