@@ -299,7 +299,11 @@ def test_json_readers_raise_only_user_errors_on_any_field_value(workdir: Path, n
     original = _original(workdir, name)
     doc = json.loads(original)
     where = data.draw(st.sampled_from(_paths(doc)), label="field")
-    changed = _replace(doc, where, data.draw(JSON_VALUES, label="value"))
+    _read_changed(workdir, name, original, _replace(doc, where, data.draw(JSON_VALUES, label="value")))
+
+
+def _read_changed(workdir: Path, name: str, original: bytes, changed: object) -> None:
+    """Write ``changed`` over the file ``name``, read it (only UserErrors), put the original back."""
     path = workdir / name
     try:
         path.write_text(json.dumps(changed))
@@ -320,10 +324,4 @@ def test_json_sections_raise_only_user_errors_on_any_value(workdir: Path, name: 
     doc = json.loads(original)
     inside = [p for p in _paths(doc) if p and p[0] in SECTIONS[name]]
     where = data.draw(st.sampled_from(inside), label="field")
-    changed = _replace(doc, where, data.draw(JSON_VALUES, label="value"))
-    path = workdir / name
-    try:
-        path.write_text(json.dumps(changed))
-        _only_user_errors(lambda: READERS[name](path))
-    finally:
-        path.write_bytes(original)
+    _read_changed(workdir, name, original, _replace(doc, where, data.draw(JSON_VALUES, label="value")))
