@@ -49,6 +49,7 @@ def test_record_stays_in_sight_and_the_summary_stays_after_stop(qtbot, stage, si
     thread = start_replay_thread(replay)
     assert _in_sight(stage.record_button) and stage.record_button.text().endswith("Stop")
     qtbot.waitUntil(lambda: stage.live.n_samples() >= 8, timeout=15_000)
+    assert not stage.live.monitor_box.isVisible()  # while recording, the strap is in the big plot only
     stage.phases.marker_text.setText("water")
     stage.phases.pick("treadmill_run", speed_m_s=3.6, grade_pct=1.0)  # its parameters make the log taller
     path = _stop(qtbot, stage)
@@ -63,7 +64,6 @@ def test_record_stays_in_sight_and_the_summary_stays_after_stop(qtbot, stage, si
     assert "No sync test" not in stage.banner_text()
     # the strap is watched again: its readout goes on, the recording's plot and summary stay
     qtbot.waitUntil(lambda: stage.session.watching(replay.path), timeout=10_000)
-    assert not stage.live.monitor_box.isVisible()  # until the strap is watched again
     qtbot.waitUntil(lambda: stage.live.n_monitor_samples() >= 2, timeout=10_000)
     qtbot.wait(1000)
     assert stage.summary.isVisible() and stage.live.n_samples() == recorded
