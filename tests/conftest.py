@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import datetime as _dt
 import os
 import signal
 from collections.abc import Callable
@@ -226,3 +227,26 @@ def make_session() -> Callable[..., Path]:
 def spy_on_jobs() -> Callable[[pytest.MonkeyPatch], dict[str, int]]:
     """``spy_on_jobs(monkeypatch)``: count the calls of each one-job function; returns the counts."""
     return _spy_on_jobs
+
+
+#: the one second every ``now()`` returns under :func:`freeze_now`
+FROZEN_SECOND = _dt.datetime(2026, 3, 2, 10, 15, 7)
+
+
+class _FrozenClock:
+    """A ``datetime`` module as a frozen module sees it: every ``now()`` in :data:`FROZEN_SECOND`."""
+
+    class datetime(_dt.datetime):
+        @classmethod
+        def now(cls, tz=None):
+            return FROZEN_SECOND
+
+
+@pytest.fixture
+def freeze_now(monkeypatch: pytest.MonkeyPatch) -> Callable[[Any], _dt.datetime]:
+    """``freeze_now(module)``: the module's ``_dt`` (its ``datetime`` import) says the same second for
+    every ``now()`` (two sessions started in the same second); returns that second."""
+    def freeze(module: Any) -> _dt.datetime:
+        monkeypatch.setattr(module, "_dt", _FrozenClock)
+        return FROZEN_SECOND
+    return freeze

@@ -8,7 +8,6 @@ label), ``session.json`` records the id it wanted, and a stderr line says so; no
 from __future__ import annotations
 
 import csv
-import datetime as dt
 import json
 from pathlib import Path
 
@@ -23,17 +22,6 @@ from effortface.interop import xdf_import
 from .xdf_writer import XdfStream, write_xdf
 
 T0 = 5000.0
-SECOND = dt.datetime(2026, 3, 2, 10, 15, 7)
-
-
-class _FrozenClock:
-    """``datetime`` as the importer (or the recorder) sees it: every ``now()`` in the same second."""
-
-    class datetime(dt.datetime):
-        @classmethod
-        def now(cls, tz=None):
-            return SECOND
-
 
 def _xdf(tmp_path: Path, hr: float) -> Path:
     stream = XdfStream("Polar", "HeartRate", [("hr_bpm", "bpm"), ("rr_ms", "ms")], [T0 + k for k in range(20)],
@@ -42,8 +30,8 @@ def _xdf(tmp_path: Path, hr: float) -> Path:
 
 
 @pytest.mark.parametrize("label", [None, "bike"])
-def test_two_imports_in_the_same_second_get_a_stated_suffix(tmp_path, monkeypatch, capsys, label) -> None:
-    monkeypatch.setattr(xdf_import, "_dt", _FrozenClock)
+def test_two_imports_in_the_same_second_get_a_stated_suffix(tmp_path, freeze_now, capsys, label) -> None:
+    freeze_now(xdf_import)
     out = tmp_path / "lab"
     extra = ["--label", label] if label else []
     first, second, third = (_xdf(tmp_path, hr) for hr in (80, 90, 100))

@@ -12,6 +12,7 @@ window adds too, so they work from every stage while recording.
 from __future__ import annotations
 
 import functools
+import html
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -29,7 +30,7 @@ from effortface.capture_tool.gui.participant_form import QtParticipantForm
 from effortface.capture_tool.gui.phases import PHASE_TITLES, QtPhasePanel, catalog_models
 from effortface.capture_tool.gui.preflight import QtPreflight
 from effortface.capture_tool.monitor import MonitorStats
-from effortface.core.session.folder import EVENTS_CSV, Event, read_events
+from effortface.core.session.folder import EVENTS_CSV, Event, id_taken_note, read_events, read_session_info
 from effortface.capture_tool.strap_status import StrapView, plain_link_error
 
 __all__ = ["CaptureSession", "QtCaptureStage"]
@@ -77,6 +78,40 @@ def app_words(text: str) -> str:
     for option, words in _OPTION_WORDS:
         text = text.replace(option, words)
     return text
+
+
+def saved_notes(folder: Path) -> list[str]:
+    """What the after-Stop summary says beyond the counts, from the saved ``session.json``.
+
+    A suffixed session id (another session of the participant started the same second) and, with
+    video, how often the framing check found the face framed for the machine rater.
+
+    Parameters
+    ----------
+    folder : Path
+        The session folder just saved.
+
+    Returns
+    -------
+    list of str
+        Plain lines (no markup); empty when there is nothing to say or ``session.json`` cannot be read.
+    """
+    try:
+        taken = id_taken_note(folder)
+        framing = read_session_info(folder).extra.get("stats", {}).get("framing")
+    except (UserError, OSError, AttributeError):
+        return []
+    taken = taken.removeprefix("note: ") if taken else ""
+    lines = [taken[:1].upper() + taken[1:]] if taken else []
+    if isinstance(framing, dict) and framing.get("error"):
+        lines.append(f"Camera framing not checked: {framing['error']}")
+    elif isinstance(framing, dict) and framing.get("samples"):
+        n, framed = int(framing["samples"]), int(framing.get("framed", 0))
+        line = f"Camera: the face was framed for the machine rater in {framed} of {n} looks"
+        if framed * 2 < n and framing.get("last"):
+            line += f" (last look: {framing['last']})"
+        lines.append(line)
+    return lines
 
 
 def framing_banner(framing: Framing) -> str:
@@ -785,6 +820,7 @@ class QtCaptureStage(QtWidgets.QWidget):
                          f"· {video}")
         lines.append(f"{len(events)} event{'s' * (len(events) != 1)} logged ({phases} phase"
                      f"{'s' * (phases != 1)}): listed under Recorded events, drawn on the plot")
+        lines += [html.escape(line) for line in (saved_notes(path) if path is not None else [])]
         self.summary_text.setText("<br>".join(lines))
         self.summary_text.setToolTip(str(path) if path else "")
         if not has_video:
