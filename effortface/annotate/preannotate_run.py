@@ -3,7 +3,9 @@ the background, with progress and cancel (:class:`effortface.core.jobs.Jobs`).
 
 Each session is rated by :func:`effortface.annotate.machine.preannotate.preannotate_session` in turn;
 a cancel stops the session under way, which writes nothing (the sessions finished before it keep
-their tracks). A session that has a machine track already is left alone unless ``force``.
+their tracks). A session that has a machine track already is left alone unless ``force``. The sessions
+rated before the run's last are then mapped and calibrated again from their stored scores, so that each
+sees every track of the run.
 """
 
 from __future__ import annotations
@@ -78,6 +80,7 @@ class PreannotateRun:
         written: list[Path] = []
         skipped: list[Path] = []
         failed: list[tuple[Path, str]] = []
+        rated: list[Path] = []
         for i, folder in enumerate(sessions):
             job.check("pre-annotate cancelled")
             if has_track(folder) and not force:
@@ -88,9 +91,27 @@ class PreannotateRun:
                 job.report((i + done / max(total, 1)) / len(sessions), f"{name}: frame {done} of {total}")
             try:
                 written.append(rate(folder, force=force, progress=progress, cancel=lambda: job.cancel_requested))
+                rated.append(folder)
             except (UserError, OSError) as exc:
                 failed.append((folder, str(exc)))
+        if self._rate is None:
+            self._map_again(job, rated[:-1], failed)
         return PreannotateOutcome(written, skipped, failed)
+
+    @staticmethod
+    def _map_again(job: Job, sessions: list[Path], failed: list[tuple[Path, str]]) -> None:
+        """Map and calibrate the sessions rated before the run's last again, now that every track of the
+        run is on disk (:func:`~effortface.annotate.machine.preannotate.remap_session`)."""
+        from effortface.annotate.machine.preannotate import remap_session
+        from effortface.core.errors import UserError
+
+        for k, folder in enumerate(sessions):
+            job.check("pre-annotate cancelled")
+            job.report(k / len(sessions), f"{folder.name}: mapping again with the run's tracks")
+            try:
+                remap_session(folder)
+            except (UserError, OSError) as exc:
+                failed.append((folder, str(exc)))
 
     def _done(self, result: JobResult) -> None:
         if result.cancelled:

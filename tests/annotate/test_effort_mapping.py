@@ -140,22 +140,29 @@ def _key(session: Path, rater: str, curves: dict[str, np.ndarray], every: int = 
     RaterAnnotations(rater, session.name, tracks=tracks).save(session / "annotations" / f"{rater}.json")
 
 
-def test_the_learned_mapping_is_used_only_where_it_wins_held_out(rated: dict[str, Path], tmp_path: Path) -> None:
-    """A lab whose raters key mouth_open as the clips' mouthLowerDown (not jawOpen, the definition's),
-    and eye_squint as the effort mapping's own: learned wins for mouth_open only, and the sidecar says so."""
+def _keyed_lab(rated: dict[str, Path], lab: Path, *, unrated: bool = False) -> list[Path]:
+    """Copies of the clips keyed by a lab whose raters key mouth_open as the clips' mouthLowerDown (not
+    jawOpen, the definition's) and eye_squint as the effort mapping's own; ``unrated``: tracks removed."""
     import shutil
 
-    lab = tmp_path / "lab"
-    lab.mkdir()
     sessions = []
-    for name, session in rated.items():
+    for session in rated.values():
         copy = lab / session.name
         shutil.copytree(session, copy)
         track = read_machine_track(copy)
         assert track is not None
         lower = _mean(track.scores, "mouthLowerDownLeft", "mouthLowerDownRight")
         _key(copy, "R1", {"mouth_open": 1.5 * lower, "eye_squint": track.weights[:, 2]})
+        if unrated:
+            shutil.rmtree(copy / "machine")
         sessions.append(copy)
+    return sessions
+
+
+def test_the_learned_mapping_is_used_only_where_it_wins_held_out(rated: dict[str, Path], tmp_path: Path) -> None:
+    """A lab whose raters key mouth_open as the clips' mouthLowerDown (not jawOpen, the definition's),
+    and eye_squint as the effort mapping's own: learned wins for mouth_open only, and the sidecar says so."""
+    sessions = _keyed_lab(rated, tmp_path / "lab")
     assert main(["preannotate", "--force", *map(str, sessions)]) == 0
     side = json.loads((sessions[0] / "machine" / "face_landmarker.json").read_text())
     mapping = side["mapping"]
@@ -170,6 +177,68 @@ def test_the_learned_mapping_is_used_only_where_it_wins_held_out(rated: dict[str
     # the session is rated by the regressor fitted on the other participants (its own keys never seen)
     mine = report["mouth_open"]["per_participant"][side["calibration"]["participant"]]
     assert report["mouth_open"]["this_participant_heldout_r"] == mine["learned_r"]
+
+
+def _sidecar_and_weights(session: Path) -> tuple[dict, np.ndarray]:
+    track = read_machine_track(session)
+    assert track is not None
+    return track.sidecar, track.weights
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_lab_rated_for_the_first_time_maps_every_session_with_the_whole_run(
+        rated: dict[str, Path], tmp_path: Path, capsys, workers: int) -> None:
+    """One run on a keyed lab with no machine track yet equals a run then a second ``--force`` run: the
+    sessions rated before the others are mapped again at the end (the first one saw no other track)."""
+    once = _keyed_lab(rated, tmp_path / "once", unrated=True)
+    assert main(["preannotate", *map(str, once), "--workers", str(workers)]) == 0
+    out = capsys.readouterr().out
+    again = [line for line in out.splitlines() if line.startswith("mapped again: ")]
+    # serial: the last one rated saw every track already; side by side, the last to finish may have too
+    assert len(again) == 3 if workers == 1 else 3 <= len(again) <= 4
+    twice = _keyed_lab(rated, tmp_path / "twice", unrated=True)
+    for args in ([], ["--force"]):
+        assert main(["preannotate", *args, *map(str, twice)]) == 0
+    for a, b in zip(once, twice):
+        (side_a, w_a), (side_b, w_b) = _sidecar_and_weights(a), _sidecar_and_weights(b)
+        assert side_a["mapping"]["used"] == side_b["mapping"]["used"]
+        assert side_a["mapping"]["used"]["mouth_open"] == "learned"
+        report = side_a["mapping"]["learned"]["blendshapes"]["mouth_open"]
+        assert report["participants_scored"] == 4
+        assert report["heldout_r_learned"] == pytest.approx(
+            side_b["mapping"]["learned"]["blendshapes"]["mouth_open"]["heldout_r_learned"], abs=2e-3)
+        assert side_a["calibration"]["participant"] == side_b["calibration"]["participant"]
+        np.testing.assert_allclose(w_a, w_b, atol=5e-3, equal_nan=True)  # the CSV's 6 digits, refitted
+        assert side_a["frames"] == side_b["frames"] and side_a["model"] == side_b["model"]
+    # a second pass changes nothing: nothing is written again
+    before = [(s / "machine" / "face_landmarker.csv").stat().st_mtime_ns for s in once]
+    from effortface.annotate.machine.preannotate import remap_session
+    assert not any(remap_session(s) for s in once)
+    assert [(s / "machine" / "face_landmarker.csv").stat().st_mtime_ns for s in once] == before
+
+
+def test_the_annotate_stages_run_maps_the_earlier_sessions_again(rated: dict[str, Path], tmp_path: Path) -> None:
+    """The Annotate stage's background run (Qt-free) also maps the sessions rated before its last again."""
+    import time
+
+    from effortface.annotate.preannotate_run import PreannotateRun
+
+    sessions = _keyed_lab(rated, tmp_path / "lab", unrated=True)
+    run, outcome = PreannotateRun(), []
+    run.finished.connect(lambda text, is_error, value: outcome.append((text, is_error, value)))
+    try:
+        run.start(sessions)
+        deadline = time.monotonic() + 300
+        while not outcome and time.monotonic() < deadline:
+            run.poll()
+            time.sleep(0.05)
+    finally:
+        run.shutdown()
+    assert outcome and outcome[0][:2] == ("pre-annotate: 4 sessions rated", False)
+    for session in sessions:  # the first rated saw no other track when it was rated
+        side, _ = _sidecar_and_weights(session)
+        assert side["mapping"]["learned"]["blendshapes"]["mouth_open"]["participants_scored"] == 4
+        assert side["mapping"]["used"]["mouth_open"] == "learned"
 
 
 def test_without_three_keyed_participants_nothing_is_learned(rated: dict[str, Path]) -> None:

@@ -4,14 +4,13 @@ from __future__ import annotations
 
 from effortface.capture_tool.recorder import Recorder
 from effortface.core.session.folder import ID_TAKEN_KEY, Participant, read_session
-from tests.interop.test_session_names import _FrozenClock
 
 
-def test_a_capture_in_the_same_second_as_another_gets_a_suffix(tmp_path, monkeypatch) -> None:
+def test_a_capture_in_the_same_second_as_another_gets_a_suffix(tmp_path, freeze_now) -> None:
     """The recorder (capture, the Capture stage) takes the first free id too, and records the one it wanted."""
     from effortface.capture_tool import recorder
 
-    monkeypatch.setattr(recorder, "_dt", _FrozenClock)
+    freeze_now(recorder)
     out = tmp_path / "lab"
     first = Recorder(out, Participant("P01"), "loop://", "lines")
     first.start()

@@ -9,7 +9,9 @@ incomplete, has no video or already has a machine rating (without ``--force``) i
 (exit 2). Several sessions are rated in parallel with ``--workers N``. Nothing is written for a session
 until all its frames are rated, so Ctrl-C leaves no half-written file. A session with a face on fewer
 than half its frames ends with a warning line naming the likely cause (the face too small, the video
-too dark, or no face) and exit status 1. See docs/guide/machine-rater.md.
+too dark, or no face) and exit status 1. When several sessions are rated, those rated before the others
+are mapped and calibrated again at the end from their stored scores, so that each sees every track of the
+run (the learned mapping and the calibration use the lab's other tracks). See docs/guide/machine-rater.md.
 """
 
 from __future__ import annotations
@@ -111,8 +113,32 @@ def _run_serial(sessions: list[Path], model: Path | None, force: bool) -> int:
         print(f"wrote {out}: {len(track.frame)} frames, a face on {int(track.face.sum())} "
               f"({track.sidecar.get('time_taken_s')} s)")
         rated.append(session)
+    failed += _map_again(rated[:-1])  # the last one rated saw every track of the run
     warned = _warn_coverage(rated)
     return 2 if failed else warned
+
+
+def _map_again(sessions: list[Path]) -> int:
+    """Map and calibrate ``sessions`` again now that every track of the run is on disk (a session rated
+    before the others did not see them: :func:`~effortface.annotate.machine.preannotate.remap_session`);
+    a line for each one that changed; returns the number that failed (one line each)."""
+    from effortface.annotate.machine.preannotate import remap_session
+
+    lines, failed = [], 0
+    if not sessions:
+        return 0
+    with ProgressBar("mapping again") as bar:
+        for done, session in enumerate(sessions, start=1):
+            try:
+                if remap_session(session):
+                    lines.append(f"mapped again: {session}: its mapping and calibration now see every track of this run")
+            except UserError as exc:
+                lines.append(f"effortface preannotate: error: {exc}")
+                failed += 1
+            bar(done / len(sessions), "sessions mapped with the run's tracks")
+    for line in lines:
+        print(line, file=sys.stderr if line.startswith("effortface preannotate: error") else sys.stdout)
+    return failed
 
 
 def _warn_coverage(sessions: list[Path]) -> int:
@@ -159,6 +185,7 @@ def _run_parallel(sessions: list[Path], model: Path | None, force: bool, workers
         raise
     finally:
         pool.shutdown(wait=True)
+    failed += _map_again(rated)  # rated side by side: none saw the tracks written after it started
     warned = _warn_coverage(rated)
     return 2 if failed else warned
 

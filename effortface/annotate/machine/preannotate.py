@@ -12,7 +12,9 @@ Nothing is written until every frame is rated: a cancel, an error or Ctrl-C leav
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.metadata
+import json
 import os
 import time
 from collections.abc import Callable
@@ -24,10 +26,12 @@ import numpy as np
 from effortface.annotate.machine.landmarker import DEFAULT_MODEL, FaceLandmarker, file_sha256
 from effortface.annotate.machine.learned import Mapper, lab_mapping
 from effortface.annotate.machine.mapping import Calibration, calibration_pairs, fit_calibration
-from effortface.annotate.machine.track import FOUR, SIDECAR_VERSION, MachineTrack, machine_paths, write_machine_track
+from effortface.annotate.machine.track import (FOUR, SIDECAR_VERSION, MachineTrack, machine_paths, read_machine_track,
+                                               write_machine_track)
 from effortface.core.session.folder import (SESSION_JSON, VIDEO_AVI, VIDEO_FRAMES_CSV, check_not_recording,
                                              check_session, read_session_info)
 from effortface.core.errors import UserError
+from effortface.core.fileio import json_text
 from effortface.core.jobs import Cancelled
 from effortface.core.version import __version__
 
@@ -163,6 +167,65 @@ def calibrate(session_dir: Path, participant: str, frames: np.ndarray, raw: np.n
     return fit_calibration(participant, x, y, FOUR)
 
 
+def map_scores(session_dir: Path, frames: np.ndarray, t_s: np.ndarray,
+               scores: np.ndarray) -> tuple[np.ndarray, dict[str, Any], Calibration]:
+    """A session's four weights from its 52 scores: the lab's mapping, then the participant's calibration.
+
+    Both look at the lab's other machine tracks as they are on disk now (:func:`lab_mapping`, :func:`calibrate`).
+
+    Returns
+    -------
+    weights : numpy.ndarray
+        (n, 4) in :data:`FOUR` order, NaN where no face.
+    mapping : dict
+        The sidecar's ``mapping`` block.
+    calibration : Calibration
+        The participant's calibration (the sidecar's ``calibration`` block is its ``to_dict()``).
+    """
+    participant = read_session_info(session_dir).participant.code
+    raw, mapping, mapper = lab_mapping(Path(session_dir), participant, scores, t_s)
+    calibration = calibrate(Path(session_dir), participant, frames, raw, mapper)
+    return calibration.apply(raw, FOUR), mapping, calibration
+
+
+def remap_session(session_dir: Path) -> bool:
+    """Map and calibrate a machine-rated session again from its stored scores; True when that changed it.
+
+    A session rated before the others of the same run did not see their tracks: its learned mapping and
+    its participant's calibration are fitted again with every track now beside it (what a second
+    ``preannotate --force`` gives, without rating the video again; the scores are those of the CSV, to
+    6 significant digits). The track is rewritten (both files together) only when its ``mapping`` or
+    ``calibration`` block changes; the rest of its sidecar is kept.
+
+    Raises
+    ------
+    UserError
+        When the session has no machine track, or it cannot be read (one line naming the file).
+    """
+    folder = Path(session_dir)
+    track = read_machine_track(folder)
+    if track is None:
+        raise UserError(f"{machine_paths(folder)[0]}: expected a machine rating to map again, found none")
+    weights, mapping, calibration = map_scores(folder, track.frame, track.t_s, track.scores)
+    new = {**track.sidecar, "mapping": mapping, "calibration": calibration.to_dict()}
+    if _as_json(new) == _as_json(track.sidecar):
+        return False
+    write_machine_track(folder, dataclasses.replace(track, weights=weights, sidecar=new), force=True)
+    return True
+
+
+def _as_json(value: Any) -> str:
+    """``value`` as the sidecar file holds it (tuples as lists, keys sorted), numbers to 4 decimals: for
+    comparing (the scores read back from the CSV have 6 significant digits)."""
+    def rounded(v: Any) -> Any:
+        if isinstance(v, float):
+            return round(v, 4)
+        if isinstance(v, dict):
+            return {k: rounded(x) for k, x in v.items()}
+        return [rounded(x) for x in v] if isinstance(v, list) else v
+    return json.dumps(rounded(json.loads(json_text(value))), sort_keys=True)
+
+
 def preannotate_session(session_dir: Path, *, model_path: Path | None = None, force: bool = False,
                         progress: Callable[[int, int], None] | None = None,
                         cancel: Callable[[], bool] | None = None, num_threads: int | None = None) -> Path:
@@ -200,10 +263,7 @@ def preannotate_session(session_dir: Path, *, model_path: Path | None = None, fo
     face, scores = rate_video(folder / VIDEO_AVI, frame_times_s, landmarker, progress=progress, cancel=cancel)
     taken_s = time.perf_counter() - started
     frames = np.arange(len(frame_times_s))
-    participant = read_session_info(folder).participant.code
-    raw, mapping, mapper = lab_mapping(folder, participant, scores, np.asarray(frame_times_s, dtype=float))
-    calibration = calibrate(folder, participant, frames, raw, mapper)
-    weights = calibration.apply(raw, FOUR)
+    weights, mapping, calibration = map_scores(folder, frames, np.asarray(frame_times_s, dtype=float), scores)
     sidecar = {
         "format_version": SIDECAR_VERSION,
         "rater": "machine (MediaPipe Face Landmarker)",
@@ -228,4 +288,4 @@ def preannotate_session(session_dir: Path, *, model_path: Path | None = None, fo
     return write_machine_track(folder, track, force=force)
 
 
-__all__ = ["preannotate_session", "check_rateable", "rate_video", "calibrate"]
+__all__ = ["preannotate_session", "check_rateable", "rate_video", "calibrate", "map_scores", "remap_session"]
