@@ -11,7 +11,8 @@ named as heart rate); a single value outside that range is never a valid sample.
 time stamp form one ``heart_rate.csv`` row, as ``capture --lsl`` publishes them. Every marker stream
 (type ``Markers`` or ``StringMarker``; effortface's JSON markers keep their kind, label and value,
 other strings become ``marker`` events, with every channel of a multi-channel marker kept), an optional ``EffortWork`` stream (-> ``work.csv``), an optional
-mocap stream (channels ``<joint>_x``, ``_y``, ``_z`` -> ``motion/mocap.csv``, a joint-positions CSV),
+mocap stream (channels ``<joint>_x``, ``_y``, ``_z`` -> ``motion/mocap.csv``, a joint-positions CSV
+attached at its own time in ``motion/motion.json``, as ``effortface motion attach --offset`` does),
 and a video file given beside it with its frame times: a stream with one sample per frame
 (``--video-stream``), or the LSL time of its first frame (``--video-offset``) and its frame rate.
 
@@ -528,8 +529,20 @@ def _write_work(path: Path, folder: Path, stream: XdfStream, t0: float) -> None:
     atomic_write_text(folder / "work.csv", "\n".join(lines) + "\n")
 
 
-def _write_mocap(path: Path, folder: Path, stream: XdfStream, t0: float) -> None:
-    from effortface.synth.motion_csv import csv_header
+#: the name of the joint-positions clip a mocap stream becomes in the session's ``motion/``
+MOCAP_CSV = "mocap.csv"
+
+
+#: ``session.json``'s ``lsl`` key saying where the imported mocap clip's skeleton tree came from
+MOCAP_TREE_KEY = "mocap_skeleton"
+
+
+def _write_mocap(path: Path, staging: Path, stream: XdfStream, t0: float,
+                 skeleton: Path | None) -> tuple[Path, float, str]:
+    """The mocap stream as a joint-positions CSV in ``staging`` (session times) with its skeleton file:
+    ``skeleton``'s tree, or (an XDF stream carries none) the first joint the parent of every other one.
+    Returns the CSV, the session time of its first frame and where the tree came from."""
+    from effortface.synth.motion_csv import csv_header, read_skeleton, skeleton_beside
 
     labels = channel_labels(stream)
     joints = [lab[:-2] for lab in labels[::3]]
@@ -537,10 +550,43 @@ def _write_mocap(path: Path, folder: Path, stream: XdfStream, t0: float) -> None
         raise XdfImportError(f"{path}: mocap stream {_field(stream, 'name')!r}: expected channel labels "
                              f"<joint>_x, <joint>_y, <joint>_z, found {labels[:6]}")
     stamps, values = _samples(stream)
-    (folder / "motion").mkdir(exist_ok=True)
+    if len(stamps) < 2:
+        raise XdfImportError(f"{path}: mocap stream {_field(stream, 'name')!r}: expected at least 2 frames, "
+                             f"found {len(stamps)}")
     rows = [",".join(csv_header(joints))] + [",".join(f"{x:.9g}" for x in [t - t0, *v])
                                              for t, v in zip(stamps, np.asarray(values, float))]
-    atomic_write_text(folder / "motion" / "mocap.csv", "\n".join(rows) + "\n")
+    clip = staging / MOCAP_CSV
+    atomic_write_text(clip, "\n".join(rows) + "\n")
+    if skeleton is None:
+        tree: dict[str, Any] = {"joints": joints, "parents": [-1] + [0] * (len(joints) - 1)}
+        origin = f"none in the stream: {joints[0]} taken as the parent of every other joint"
+    else:
+        given = read_skeleton(skeleton)
+        if given["joints"] != joints:
+            raise XdfImportError(f"--mocap-skeleton {skeleton}: expected the {len(joints)} joints of mocap stream "
+                                 f"{_field(stream, 'name')!r} in its channel order ({', '.join(joints[:4])}...), "
+                                 f"found {', '.join(given['joints'][:4])}... ({len(given['joints'])} joints)")
+        tree = {"joints": joints, "parents": [int(p) for p in given["parents"]]}
+        if given["rest_positions_m"] is not None:
+            tree["rest_positions_m"] = np.round(given["rest_positions_m"], 6).tolist()
+        origin = f"--mocap-skeleton {skeleton.name}"
+    atomic_write_text(skeleton_beside(clip), json.dumps(tree, indent=2) + "\n")
+    return clip, float(stamps[0] - t0), origin
+
+
+def _attach_mocap(path: Path, folder: Path, stream: XdfStream, clip: Path, offset_s: float) -> None:
+    """Attach the mocap clip to the (complete) staged session at its own time (``motion/mocap.csv`` and
+    ``motion/motion.json``, as ``effortface motion attach --offset``): its work is then derived like
+    any attached clip's. A clip that cannot be read as a body (joints mapped to segments, human ranges)
+    is one line naming the XDF file and the stream."""
+    from effortface.synth.attach import attach_clip
+
+    try:
+        attach_clip(folder, clip, offset_s=offset_s)
+    except UserError as exc:
+        where = f"{path}: mocap stream {_field(stream, 'name')!r}"
+        raise XdfImportError(str(exc).replace(str(clip), where, 1) if str(clip) in str(exc)
+                             else f"{where}: {exc}") from None
 
 
 def _write_ecg(path: Path, folder: Path, stream: XdfStream, t0: float, info: SessionInfo) -> None:
@@ -583,7 +629,8 @@ def import_xdf(path: str | os.PathLike, out_dir: str | os.PathLike, participant:
                work_stream: str | None = None, mocap_stream: str | None = None,
                video: str | os.PathLike | None = None, video_stream: str | None = None,
                video_offset_s: float | None = None, label: str | None = None,
-               hr_json_key: str | None = None, rr_json_key: str | None = None, keep_ecg: bool = False) -> Path:
+               hr_json_key: str | None = None, rr_json_key: str | None = None, keep_ecg: bool = False,
+               mocap_skeleton: str | os.PathLike | None = None) -> Path:
     """Turn an XDF recording into a new session folder in ``out_dir``; return it.
 
     Parameters
@@ -612,6 +659,10 @@ def import_xdf(path: str | os.PathLike, out_dir: str | os.PathLike, participant:
     keep_ecg : bool
         Copy an ECG stream (a Polar H10's) into the session as ``ecg.csv`` (``t_s,ecg``, its unit in
         ``session.json``); without it an ECG stream is never taken as heart rate.
+    mocap_skeleton : path-like, optional
+        A skeleton file (``{"joints": [...], "parents": [...]}``, the stream's joints in its channel
+        order) giving the mocap clip's tree; without it the first joint is the parent of every other
+        one (an XDF stream carries no tree), said in ``session.json`` (``lsl.mocap_skeleton``).
 
     Raises
     ------
@@ -658,8 +709,10 @@ def import_xdf(path: str | os.PathLike, out_dir: str | os.PathLike, participant:
         _write_rows(EventWriter(folder / EVENTS_CSV), events)
         if work is not None:
             _write_work(path, folder, work, t0)
-        if mocap is not None:
-            _write_mocap(path, folder, mocap, t0)
+        skeleton = Path(mocap_skeleton) if mocap_skeleton is not None else None
+        clip = _write_mocap(path, staging, mocap, t0, skeleton) if mocap is not None else None
+        if clip is not None:
+            info.extra["lsl"][MOCAP_TREE_KEY] = clip[2]
         for stream in ecg:
             _write_ecg(path, folder, stream, t0, info)
         if video_path is not None and frames is not None:
@@ -670,6 +723,8 @@ def import_xdf(path: str | os.PathLike, out_dir: str | os.PathLike, participant:
             writer.close()
         info.complete = True
         info.save(folder, overwrite=True)
+        if clip is not None and mocap is not None:
+            _attach_mocap(path, folder, mocap, clip[0], clip[1])
         final = move_session_in(folder, out_dir, info)  # whole or not at all, suffixed if its id is taken
         fsync_folder(out_dir)
     finally:

@@ -152,17 +152,85 @@ def test_not_an_xdf_file(tmp_path):
 
 
 def test_mocap_stream_becomes_motion_csv(tmp_path, shared_data):
+    """The stream becomes motion/mocap.csv, attached at its own time (motion.json), so `effortface work`
+    derives the session's work from it with nothing else to do."""
     from effortface.synth.motion import read_motion
+    from effortface.synth.work import read_motion_index
 
-    clip = read_motion(shared_data / "motion/cmu_13_29_squats_120fps.bvh").slice_s(0, 1)
+    clip = read_motion(shared_data / "motion/cmu_13_29_squats_120fps.bvh").slice_s(0, 5)
     labels = [(f"{j}_{a}", "m") for j in clip.joint_names for a in "xyz"]
-    stamps = [LSL_T0 + t for t in clip.t_s]
+    stamps = [LSL_T0 + 30.0 + t for t in clip.t_s]  # the take starts 30 s into the recording
     mocap = XdfStream("Vicon", "MoCap", labels, stamps, clip.positions_m.reshape(clip.n_frames, -1).tolist(),
                       srate_hz=clip.fps)
     streams = [s for s in session_streams(SAMPLE / SESSION) if s.type == "HeartRate"] + [mocap]
     xdf = write_xdf(tmp_path / "m.xdf", streams)
-    out = _effortface("import", "xdf", xdf, "--out", tmp_path / "s", "--participant", "P06", "--mocap-stream", "Vicon")
+    out = _effortface("import", "xdf", xdf, "--out", tmp_path / "s", "--participant", "P06", "--mocap-stream", "Vicon",
+                      "--mass", "70", "--sex", "male")
     assert out.returncode == 0, out.stderr
-    motion = read_motion(Path(out.stdout.strip()) / "motion" / "mocap.csv")
+    assert out.stderr.strip() == (f"effortface import: note: mocap stream 'Vicon': skeleton tree none in the stream: "
+                                  f"{clip.joint_names[0]} taken as the parent of every other joint "
+                                  "(--mocap-skeleton FILE gives the real one)")
+    session = Path(out.stdout.strip())
+    motion = read_motion(session / "motion" / "mocap.csv")
     assert motion.joint_names == clip.joint_names and motion.fps == pytest.approx(clip.fps, rel=1e-3)
     np.testing.assert_allclose(motion.positions_m, clip.positions_m, atol=1e-5)   # float32 in the XDF
+    (entry,) = read_motion_index(session / "motion" / "motion.json")
+    clock_offset_s = json.loads((session / "session.json").read_text())["lsl"]["clock_offset_s"]
+    assert entry["path"] == "mocap.csv" and entry["aligned"] == "offset"
+    assert entry["offset_s"] == pytest.approx(LSL_T0 + 30.0 - clock_offset_s, abs=1e-3)
+    assert entry["duration_s"] == pytest.approx(5.0, abs=0.02)
+    work = _effortface("work", session)
+    assert work.returncode == 0, work.stderr
+    rows = np.genfromtxt(session / "work.csv", delimiter=",", names=True)
+    during = (rows["t_s"] >= entry["offset_s"]) & (rows["t_s"] <= entry["offset_s"] + 5.0)
+    assert during.any() and np.nanmax(rows["w_per_kg"][during]) > 0  # the squats' work, at their time
+
+
+def test_a_mocap_skeleton_gives_the_clips_tree(tmp_path, shared_data):
+    """--mocap-skeleton: the tree travels with the clip into motion/; joints not the stream's, or the
+    option without --mocap-stream, are one line each (exit 2, nothing written)."""
+    from effortface.synth.motion import read_motion
+
+    clip = read_motion(shared_data / "motion/cmu_13_29_squats_120fps.bvh").slice_s(0, 1)
+    labels = [(f"{j}_{a}", "m") for j in clip.joint_names for a in "xyz"]
+    mocap = XdfStream("Vicon", "MoCap", labels, [LSL_T0 + t for t in clip.t_s],
+                      clip.positions_m.reshape(clip.n_frames, -1).tolist(), srate_hz=clip.fps)
+    xdf = write_xdf(tmp_path / "m.xdf", [s for s in session_streams(SAMPLE / SESSION) if s.type == "HeartRate"]
+                    + [mocap])
+    tree = tmp_path / "tree.json"
+    tree.write_text(json.dumps({"joints": list(clip.joint_names), "parents": [int(p) for p in clip.parents]}))
+    base = ["import", "xdf", xdf, "--out", tmp_path / "s", "--participant", "P06", "--mocap-stream", "Vicon"]
+    out = _effortface(*base, "--mocap-skeleton", tree)
+    assert out.returncode == 0 and out.stderr == "", out.stderr
+    session = Path(out.stdout.strip())
+    assert read_motion(session / "motion" / "mocap.csv").parents.tolist() == [int(p) for p in clip.parents]
+    assert json.loads((session / "session.json").read_text())["lsl"]["mocap_skeleton"] == "--mocap-skeleton tree.json"
+    wrong = tmp_path / "wrong.json"
+    wrong.write_text(json.dumps({"joints": list(clip.joint_names[::-1]), "parents": [-1] * len(clip.joint_names)}))
+    for extra, expected in (
+            (["--mocap-skeleton", wrong], f"--mocap-skeleton {wrong}: expected the {len(clip.joint_names)} joints of mocap "
+                                          f"stream 'Vicon' in its channel order"),
+            (["--mocap-skeleton", tmp_path / "none.json"], f"{tmp_path / 'none.json'}: expected a skeleton file")):
+        bad = _effortface(*base[:3], "--out", tmp_path / "bad", *base[5:], *extra)
+        assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and expected in bad.stderr, bad.stderr
+    assert not (tmp_path / "bad").exists() or not any((tmp_path / "bad").iterdir())
+    alone = _effortface("import", "xdf", xdf, "--out", tmp_path / "bad", "--participant", "P06",
+                        "--mocap-skeleton", tree)
+    assert alone.returncode == 2 and "--mocap-skeleton: expected with --mocap-stream, found without it" in alone.stderr
+
+
+def test_a_mocap_stream_that_is_no_body_is_one_line_and_writes_nothing(tmp_path):
+    """Markers no segment can be found for: refused in one line naming the XDF and the stream."""
+    labels = [(f"M{k:02d}_{a}", "m") for k in range(5) for a in "xyz"]
+    stamps = [LSL_T0 + k / 100 for k in range(200)]
+    values = [[0.1 * k, 0.0, 1.0 + 0.01 * (f % 7)] for f in range(200) for k in range(5)]
+    mocap = XdfStream("Markers3D", "MoCap", labels, stamps,
+                      [sum(values[f * 5:(f + 1) * 5], []) for f in range(200)], srate_hz=100.0)
+    streams = [s for s in session_streams(SAMPLE / SESSION) if s.type == "HeartRate"] + [mocap]
+    xdf = write_xdf(tmp_path / "m.xdf", streams)
+    out = _effortface("import", "xdf", xdf, "--out", tmp_path / "s", "--participant", "P06",
+                      "--mocap-stream", "Markers3D")
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    (line,) = out.stderr.strip().splitlines()
+    assert line.startswith(f"effortface import: error: {xdf}: mocap stream 'Markers3D'") and "expected" in line, line
+    assert not (tmp_path / "s").exists() or not any((tmp_path / "s").iterdir())

@@ -15,9 +15,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from effortface.core.session.folder import Participant, id_taken_note
+from effortface.core.session.folder import Participant, id_taken_note, read_session_info
 from effortface.core.errors import UserError
-from effortface.interop.xdf_import import import_xdf
+from effortface.interop.xdf_import import MOCAP_TREE_KEY, import_xdf
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -33,7 +33,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--marker-stream", action="append", default=[], metavar="NAME|TYPE",
                         help="xdf: marker stream (repeatable; default: every stream of type Markers or StringMarker)")
     parser.add_argument("--work-stream", metavar="NAME|TYPE", help="xdf: EffortWork stream -> work.csv")
-    parser.add_argument("--mocap-stream", metavar="NAME|TYPE", help="xdf: mocap stream -> motion/mocap.csv")
+    parser.add_argument("--mocap-stream", metavar="NAME|TYPE",
+                        help="xdf: mocap stream -> motion/mocap.csv, attached at its own time (motion.json)")
+    parser.add_argument("--mocap-skeleton", metavar="JSON",
+                        help="xdf: the mocap clip's skeleton tree ({\"joints\": [...], \"parents\": [...]}, the "
+                             "stream's joints in order); default: the first joint is the parent of every other one")
     parser.add_argument("--hr-json-key", metavar="PATH",
                         help="xdf: key path of the heart rate (bpm) in a stream of JSON text, e.g. hr or data.hr "
                              "(default: a top-level key named hr, heart_rate, bpm...)")
@@ -76,6 +80,8 @@ def run(args: argparse.Namespace) -> int:
     for option in ("time_col", "hr_col", "rr_col"):
         if getattr(args, option) is not None:
             raise UserError(f"--{option.replace('_', '-')}: only for 'import hr', found with 'import xdf'")
+    if args.mocap_skeleton is not None and args.mocap_stream is None:
+        raise UserError("--mocap-skeleton: expected with --mocap-stream, found without it")
     try:
         participant = Participant(code=args.participant, sex=args.sex, age=args.age, height_m=args.height,
                                   mass_kg=args.mass, training_level=args.training_level)
@@ -85,8 +91,12 @@ def run(args: argparse.Namespace) -> int:
                         marker_streams=args.marker_stream, work_stream=args.work_stream,
                         mocap_stream=args.mocap_stream, video=args.video, video_stream=args.video_stream,
                         video_offset_s=args.video_offset, label=args.label, hr_json_key=args.hr_json_key,
-                        rr_json_key=args.rr_json_key, keep_ecg=args.keep_ecg)
+                        rr_json_key=args.rr_json_key, keep_ecg=args.keep_ecg, mocap_skeleton=args.mocap_skeleton)
     _state_suffix(folder)
+    if args.mocap_stream is not None and args.mocap_skeleton is None:
+        tree = read_session_info(folder).extra["lsl"][MOCAP_TREE_KEY]
+        print(f"effortface import: note: mocap stream {args.mocap_stream!r}: skeleton tree {tree} "
+              "(--mocap-skeleton FILE gives the real one)", file=sys.stderr)
     print(folder)
     return 0
 
@@ -103,7 +113,8 @@ def _run_hr(args: argparse.Namespace) -> int:
     from effortface.capture_tool.participants import participant_options
     from effortface.capture_tool.importers.session import import_hr_files
 
-    for option in ("hr_stream", "work_stream", "mocap_stream", "video_stream", "hr_json_key", "rr_json_key"):
+    for option in ("hr_stream", "work_stream", "mocap_stream", "mocap_skeleton", "video_stream", "hr_json_key",
+                   "rr_json_key"):
         if getattr(args, option) is not None:
             raise UserError(f"--{option.replace('_', '-')}: only for 'import xdf', found with 'import hr'")
     if args.keep_ecg:
