@@ -30,6 +30,7 @@ PATH_WORDS = {"docs", "effortface", "synth", "interop", "train", "capture_tool",
 DATING_WORDS = {"new", "change", "now"}
 #: start of README lines the new layout made false -> where the guide says what is true now
 SUPERSEDED = {
+    "`motion/mocap.csv`, and `--video FILE` with `--video-stream NAME`": "guide/interop.md (the mocap clip attached)",
     "`video.avi` (MJPG, written through OpenCV's own MJPEG writer": "guide/capture.md (its own streaming AVI writer)",
     "A `session.json` written before this table with an age": "guide/capture.md (an age outside 10-100)",
     "naming the field. The folder holds": "guide/capture.md",
