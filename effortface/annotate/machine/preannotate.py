@@ -167,8 +167,8 @@ def calibrate(session_dir: Path, participant: str, frames: np.ndarray, raw: np.n
     return fit_calibration(participant, x, y, FOUR)
 
 
-def map_scores(session_dir: Path, frames: np.ndarray, t_s: np.ndarray,
-               scores: np.ndarray) -> tuple[np.ndarray, dict[str, Any], Calibration]:
+def mapped_weights(session_dir: Path, frames: np.ndarray, t_s: np.ndarray,
+                   scores: np.ndarray) -> tuple[np.ndarray, dict[str, Any], Calibration]:
     """A session's four weights from its 52 scores: the lab's mapping, then the participant's calibration.
 
     Both look at the lab's other machine tracks as they are on disk now (:func:`lab_mapping`, :func:`calibrate`).
@@ -206,7 +206,7 @@ def remap_session(session_dir: Path) -> bool:
     track = read_machine_track(folder)
     if track is None:
         raise UserError(f"{machine_paths(folder)[0]}: expected a machine rating to map again, found none")
-    weights, mapping, calibration = map_scores(folder, track.frame, track.t_s, track.scores)
+    weights, mapping, calibration = mapped_weights(folder, track.frame, track.t_s, track.scores)
     new = {**track.sidecar, "mapping": mapping, "calibration": calibration.to_dict()}
     if _as_json(new) == _as_json(track.sidecar):
         return False
@@ -263,7 +263,7 @@ def preannotate_session(session_dir: Path, *, model_path: Path | None = None, fo
     face, scores = rate_video(folder / VIDEO_AVI, frame_times_s, landmarker, progress=progress, cancel=cancel)
     taken_s = time.perf_counter() - started
     frames = np.arange(len(frame_times_s))
-    weights, mapping, calibration = map_scores(folder, frames, np.asarray(frame_times_s, dtype=float), scores)
+    weights, mapping, calibration = mapped_weights(folder, frames, np.asarray(frame_times_s, dtype=float), scores)
     sidecar = {
         "format_version": SIDECAR_VERSION,
         "rater": "machine (MediaPipe Face Landmarker)",
@@ -288,4 +288,4 @@ def preannotate_session(session_dir: Path, *, model_path: Path | None = None, fo
     return write_machine_track(folder, track, force=force)
 
 
-__all__ = ["preannotate_session", "check_rateable", "rate_video", "calibrate", "map_scores", "remap_session"]
+__all__ = ["preannotate_session", "check_rateable", "rate_video", "calibrate", "mapped_weights", "remap_session"]
