@@ -52,7 +52,7 @@ from effortface.core.session.folder import (EVENTS_CSV, HEART_RATE_CSV, VIDEO_AV
 from effortface.core.bounds import BOUNDS
 from effortface.core.errors import UserError
 from effortface.core.opencv import import_cv2
-from effortface.core.fileio import atomic_write_text, fsync_folder
+from effortface.core.fileio import atomic_write_text, fsync_folder, json_text
 from effortface.core.physio_limits import IMPORT_HR_BPM
 from effortface.core.version import __version__
 
@@ -570,23 +570,27 @@ def _write_mocap(path: Path, staging: Path, stream: XdfStream, t0: float,
         if given["rest_positions_m"] is not None:
             tree["rest_positions_m"] = np.round(given["rest_positions_m"], 6).tolist()
         origin = f"--mocap-skeleton {skeleton.name}"
-    atomic_write_text(skeleton_beside(clip), json.dumps(tree, indent=2) + "\n")
+    atomic_write_text(skeleton_beside(clip), json_text(tree))
     return clip, float(stamps[0] - t0), origin
 
 
-def _attach_mocap(path: Path, folder: Path, stream: XdfStream, clip: Path, offset_s: float) -> None:
+def _attach_mocap(path: Path, folder: Path, stream: XdfStream, clip: Path, offset_s: float,
+                  skeleton: Path | None) -> None:
     """Attach the mocap clip to the (complete) staged session at its own time (``motion/mocap.csv`` and
     ``motion/motion.json``, as ``effortface motion attach --offset``): its work is then derived like
     any attached clip's. A clip that cannot be read as a body (joints mapped to segments, human ranges)
     is one line naming the XDF file and the stream."""
     from effortface.synth.attach import attach_clip
 
+    from effortface.synth.motion_csv import skeleton_beside
+
     try:
         attach_clip(folder, clip, offset_s=offset_s)
-    except UserError as exc:
+    except UserError as exc:  # named as the user knows them, not by their staging copies
         where = f"{path}: mocap stream {_field(stream, 'name')!r}"
-        raise XdfImportError(str(exc).replace(str(clip), where, 1) if str(clip) in str(exc)
-                             else f"{where}: {exc}") from None
+        tree = f"--mocap-skeleton {skeleton}" if skeleton is not None else f"{where} (its default tree)"
+        message = str(exc).replace(str(skeleton_beside(clip)), tree).replace(str(clip), where)
+        raise XdfImportError(message if where in message or tree in message else f"{where}: {message}") from None
 
 
 def _write_ecg(path: Path, folder: Path, stream: XdfStream, t0: float, info: SessionInfo) -> None:
@@ -724,7 +728,7 @@ def import_xdf(path: str | os.PathLike, out_dir: str | os.PathLike, participant:
         info.complete = True
         info.save(folder, overwrite=True)
         if clip is not None and mocap is not None:
-            _attach_mocap(path, folder, mocap, clip[0], clip[1])
+            _attach_mocap(path, folder, mocap, clip[0], clip[1], skeleton)
         final = move_session_in(folder, out_dir, info)  # whole or not at all, suffixed if its id is taken
         fsync_folder(out_dir)
     finally:

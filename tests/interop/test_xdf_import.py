@@ -207,12 +207,17 @@ def test_a_mocap_skeleton_gives_the_clips_tree(tmp_path, shared_data):
     assert json.loads((session / "session.json").read_text())["lsl"]["mocap_skeleton"] == "--mocap-skeleton tree.json"
     wrong = tmp_path / "wrong.json"
     wrong.write_text(json.dumps({"joints": list(clip.joint_names[::-1]), "parents": [-1] * len(clip.joint_names)}))
+    backwards = tmp_path / "backwards.json"  # a parent listed after its child
+    backwards.write_text(json.dumps({"joints": list(clip.joint_names),
+                                     "parents": [1] + [-1] * (len(clip.joint_names) - 1)}))
     for extra, expected in (
+            (["--mocap-skeleton", backwards], f"--mocap-skeleton {backwards}"),
             (["--mocap-skeleton", wrong], f"--mocap-skeleton {wrong}: expected the {len(clip.joint_names)} joints of mocap "
                                           f"stream 'Vicon' in its channel order"),
             (["--mocap-skeleton", tmp_path / "none.json"], f"{tmp_path / 'none.json'}: expected a skeleton file")):
         bad = _effortface(*base[:3], "--out", tmp_path / "bad", *base[5:], *extra)
         assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and expected in bad.stderr, bad.stderr
+        assert ".import-" not in bad.stderr  # never the staging copy's name
     assert not (tmp_path / "bad").exists() or not any((tmp_path / "bad").iterdir())
     alone = _effortface("import", "xdf", xdf, "--out", tmp_path / "bad", "--participant", "P06",
                         "--mocap-skeleton", tree)
