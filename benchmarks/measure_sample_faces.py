@@ -35,14 +35,12 @@ if str(ROOT) not in sys.path:
 from effortface.annotate.keyframes import read_annotations  # noqa: E402
 
 from effortface.core.blendshapes import DEFAULT_SET  # noqa: E402
+from effortface.core.face_landmarker import DEFAULT_MODEL as SHIPPED_MODEL  # noqa: E402
 
 ARKIT = {"mouth_stretch": ("mouthStretchLeft", "mouthStretchRight"), "mouth_open": ("jawOpen",),
          "eye_squint": ("eyeSquintLeft", "eyeSquintRight"), "brow_lower": ("browDownLeft", "browDownRight")}
-#: the bundle the package ships (effortface.annotate.machine), else ``../shared/models`` beside the checkout
-DEFAULT_MODEL = next((p for p in (ROOT / "effortface" / "annotate" / "machine" / "data" / "face_landmarker.task",
-                                  ROOT.parent / "shared" / "models" / "face_landmarker.task",
-                                  ROOT.parent.parent / "shared" / "models" / "face_landmarker.task") if p.is_file()),
-                     ROOT.parent / "shared" / "models" / "face_landmarker.task")
+#: the bundle the package ships (it moved with the engine to effortface.core: one path, the engine's)
+DEFAULT_MODEL = SHIPPED_MODEL
 
 
 def _landmarker(model: Path):

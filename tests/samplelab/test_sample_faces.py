@@ -28,7 +28,9 @@ SESSIONS = sorted(p for p in LAB.iterdir() if (p / "video.avi").is_file())
 
 @pytest.fixture(scope="module")
 def landmarker():
-    return measure._landmarker(measure.DEFAULT_MODEL)
+    detector = measure._landmarker(measure.DEFAULT_MODEL)
+    yield detector
+    detector.close()  # not left to the interpreter's exit, where MediaPipe's __del__ fails noisily
 
 
 @pytest.mark.slow
